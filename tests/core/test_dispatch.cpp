@@ -1,0 +1,44 @@
+// The dispatch layer runs one CANOPY_HD functor on TBB and, where a GPU exists, as a CUDA kernel.
+#include <gtest/gtest.h>
+
+#include <atomic>
+
+#include "canopy/device.h"
+#include "canopy/parallel.h"
+#include "saxpy.h"
+
+namespace {
+std::vector<float> ramp(size_t n, float scale) {
+  std::vector<float> v(n);
+  for (size_t i = 0; i < n; ++i) v[i] = scale * float(i % 1000) - 3.0f;
+  return v;
+}
+}  // namespace
+
+TEST(Dispatch, CpuParallelForVisitsEveryIndexOnce) {
+  const int64_t n = 1'000'003;
+  std::vector<std::atomic<int>> hits(n);
+  canopy::parallelFor(n, [&](int64_t i) { hits[i]++; });
+  for (int64_t i = 0; i < n; ++i) ASSERT_EQ(hits[i].load(), 1) << i;
+}
+
+TEST(Dispatch, CpuSaxpyMatchesSerial) {
+  const size_t n = 100'000;
+  auto x = ramp(n, 0.5f), y = ramp(n, -0.25f), ref = y;
+  canopy::parallelFor(int64_t(n), Saxpy{2.5f, x.data(), y.data()});
+  canopy::serialFor(int64_t(n), Saxpy{2.5f, x.data(), ref.data()});
+  EXPECT_EQ(y, ref);
+}
+
+TEST(Dispatch, cuda_SaxpyMatchesCpu) {
+  if (canopy::cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA GPU";
+#ifdef CANOPY_HAS_CUDA
+  const size_t n = 1'000'000;
+  auto x = ramp(n, 0.5f), y = ramp(n, -0.25f), ref = y;
+  saxpyCuda(2.5f, x, y);
+  canopy::serialFor(int64_t(n), Saxpy{2.5f, x.data(), ref.data()});
+  // Inputs are small multiples of 1/4, so a*x+y is exact in fp32 with or without FMA contraction:
+  // the GPU must agree bit for bit.
+  EXPECT_EQ(y, ref);
+#endif
+}
