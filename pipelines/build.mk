@@ -1,0 +1,78 @@
+# build.mk: the targets of pipelines/Makefile, run inside an output directory (make -C OUT -f
+# build.mk ...). Sources are found through vpath, so every output lands in the current directory.
+PIPELINES ?= $(patsubst %/,%,$(dir $(abspath $(lastword $(MAKEFILE_LIST)))))
+include $(PIPELINES)/canopy.mk
+
+# Small defaults so that every target also runs on a CPU-only machine in minutes.
+RESOLUTION ?= 64
+PLAY_SIZE ?= 512x512
+PLAY_FLAGS = --size $(PLAY_SIZE)
+
+.PHONY: demo plants scene forest sweep
+.DEFAULT_GOAL := demo
+
+# --- demo: the built-in sample plant, end to end, to a PNG ------------------------------------
+demo: sample.png
+sample.glb:
+	$(CANOPY_VOXELIZE) $(CANOPY_QUIET) --write-sample $@
+
+# --- plants: every mesh in PLANTS -------------------------------------------------------------
+PLANTS ?= .
+PLANT_MESHES := $(sort $(wildcard $(addprefix $(PLANTS)/*.,glb gltf obj ply)))
+PLANT_NAMES := $(basename $(notdir $(PLANT_MESHES)))
+vpath %.glb $(PLANTS)
+vpath %.gltf $(PLANTS)
+vpath %.obj $(PLANTS)
+vpath %.ply $(PLANTS)
+plants: $(addsuffix .canopy,$(PLANT_NAMES))
+
+# --- scene: a glTF scene whose nodes share meshes ----------------------------------------------
+# Each distinct mesh is voxelised (in its own model space), lit and compressed once; the instance
+# list comes from the glTF's nodes; the coarse scene lattice is solved over all instances.
+SCENE ?=
+SCENE_NAME := $(basename $(notdir $(SCENE)))
+ifneq ($(SCENE),)
+scene: $(SCENE_NAME).canopy
+$(SCENE_NAME).scene.json: $(SCENE)
+	$(LAUNCH) $(CANOPY_VOXELIZE) $(CANOPY_QUIET) $< --instances $@ --model-pattern '$(SCENE_NAME).mesh{N}.density.vdb'
+# The models the scene names, as make variables (regenerated when the instance list changes).
+$(SCENE_NAME).models.mk: $(SCENE_NAME).scene.json $(PIPELINES)/scene_models.py
+	python3 $(PIPELINES)/scene_models.py $< --light-suffix .light.chaar --makefile $@
+ifeq ($(filter scene,$(MAKECMDGOALS)),scene)
+include $(SCENE_NAME).models.mk
+endif
+$(SCENE_NAME).mesh%.density.vdb: $(SCENE)
+	$(LAUNCH) $(CANOPY_VOXELIZE) $(CANOPY_QUIET) --resolution $(RESOLUTION) --supersample $(SUPERSAMPLE) \
+	  $(VOXELIZE_FLAGS) $< --mesh $* -o $@
+$(SCENE_NAME).lit.scene.json: $(SCENE_NAME).scene.json $(PIPELINES)/scene_models.py
+	python3 $(PIPELINES)/scene_models.py $< --light-suffix .light.chaar --write-json $@
+$(SCENE_NAME).scenelight.vdb: $(SCENE_NAME).lit.scene.json $(SCENE_DENSITIES)
+	$(LAUNCH_GPU) $(CANOPY_LBSOLVE) $(CANOPY_QUIET) --device $(DEVICE) --scene $< -o $@
+$(SCENE_NAME).canopy: $(SCENE_NAME).lit.scene.json $(SCENE_DENSITIES) $(SCENE_LIGHTS) $(SCENE_NAME).scenelight.vdb
+	$(LAUNCH) $(CANOPY_OCTREEPACK) $(CANOPY_QUIET) $(PACK_FLAGS) --scene $< \
+	  --scene-light $(SCENE_NAME).scenelight.vdb -o $@
+endif
+
+# --- forest: scatter the plants, pack, render a short flight ------------------------------------
+FOREST_N ?= 400
+FOREST_SEED ?= 1
+FOREST_RADIUS ?= 40
+FOREST_PLANTS ?= $(filter-out %.draco,$(PLANT_NAMES))
+FOREST_FRAMES ?= 24
+forest: forest/f_0000.png
+forest.scene.json: $(PIPELINES)/scatter.py
+	python3 $(PIPELINES)/scatter.py -o $@ --count $(FOREST_N) --seed $(FOREST_SEED) --radius $(FOREST_RADIUS) \
+	  $(foreach p,$(FOREST_PLANTS),--model $(p)=$(p).density.vdb:$(p).light.chaar)
+forest.canopy: forest.scene.json $(foreach p,$(FOREST_PLANTS),$(p).density.vdb $(p).light.chaar)
+	$(LAUNCH) $(CANOPY_OCTREEPACK) $(CANOPY_QUIET) $(PACK_FLAGS) --scene $< -o $@
+forest/f_0000.png: forest.canopy
+	@mkdir -p forest
+	$(LAUNCH_GPU) $(CANOPY_PLAY) $(CANOPY_QUIET) --device $(DEVICE) $(PLAY_FLAGS) --frames $(FOREST_FRAMES) \
+	  --camera orbit:elevation=15,distance=$(FOREST_RADIUS),turns=0.25 $< -o forest/f_%04d.png
+
+# --- sweep: compression threshold comparison for one plant --------------------------------------
+SWEEP_PLANT ?= $(firstword $(PLANT_NAMES))
+SWEEP_THRESHOLDS ?= 0,0.001,0.003,0.01,0.03
+sweep: $(SWEEP_PLANT).sweep.png
+$(SWEEP_PLANT).sweep.png: $(SWEEP_PLANT).light.vdb
+	$(LAUNCH) $(CANOPY_HAAR) $(CANOPY_QUIET) sweep $< --thresholds $(SWEEP_THRESHOLDS) -o $(SWEEP_PLANT).sweep

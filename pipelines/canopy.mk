@@ -1,0 +1,71 @@
+# canopy.mk: pattern rules that chain the Canopy tools. Include it from your own Makefile:
+#
+#   CANOPY_BIN := /opt/canopy/bin          # where canopy-* live (empty: found on PATH)
+#   include /path/to/canopy/pipelines/canopy.mk
+#   all: oak.canopy pine.canopy            # oak.glb -> oak.density.vdb -> oak.light.vdb
+#                                          #   -> oak.light.chaar -> oak.canopy
+#
+# Every tool writes its output atomically (temporary file + rename), so a killed build never
+# leaves a half-written target that make would take as up to date, and the same inputs and options
+# give the same bytes. Override any variable below on the command line (make RESOLUTION=64 ...).
+
+# --- tools -----------------------------------------------------------------------------------
+CANOPY_BIN ?=
+canopy_tool = $(if $(CANOPY_BIN),$(CANOPY_BIN)/)canopy-$(1)
+CANOPY_VOXELIZE ?= $(call canopy_tool,voxelize)
+CANOPY_LBSOLVE ?= $(call canopy_tool,lbsolve)
+CANOPY_HAAR ?= $(call canopy_tool,haar)
+CANOPY_OCTREEPACK ?= $(call canopy_tool,octreepack)
+CANOPY_PLAY ?= $(call canopy_tool,play)
+
+# --- launcher: a prefix for every tool invocation (empty: run locally) -----------------------
+# e.g. LAUNCH='srun -N1 -n1' runs each step as a Slurm job step. GPU tools (lbsolve, play) add
+# GPU_LAUNCH_FLAGS after the launcher; set GPU_LAUNCH_FLAGS= on a cluster without GPUs.
+LAUNCH ?=
+GPU_LAUNCH_FLAGS ?= --gres=gpu:1
+LAUNCH_GPU ?= $(LAUNCH)$(if $(strip $(LAUNCH)), $(GPU_LAUNCH_FLAGS))
+
+# --- options ---------------------------------------------------------------------------------
+# lattice cells per axis, and fine sub-cells per lattice cell per axis (voxelize)
+RESOLUTION ?= 128
+SUPERSAMPLE ?= 8
+# auto | cpu | cuda | cuda:N (lbsolve, play)
+DEVICE ?= auto
+VOXELIZE_FLAGS ?=
+LBSOLVE_FLAGS ?=
+# the compression dial: --max-error E (guaranteed max abs error) or --threshold T
+HAAR_ERROR ?= --max-error 0.01
+HAAR_FLAGS ?=
+PACK_FLAGS ?=
+PLAY_FLAGS ?= --size 512x512
+CANOPY_QUIET ?= --quiet
+
+# --- rules -----------------------------------------------------------------------------------
+canopy_voxelize_cmd = $(LAUNCH) $(CANOPY_VOXELIZE) $(CANOPY_QUIET) --resolution $(RESOLUTION) \
+  --supersample $(SUPERSAMPLE) $(VOXELIZE_FLAGS) $< -o $@
+
+%.density.vdb: %.glb
+	$(canopy_voxelize_cmd)
+%.density.vdb: %.gltf
+	$(canopy_voxelize_cmd)
+%.density.vdb: %.obj
+	$(canopy_voxelize_cmd)
+%.density.vdb: %.ply
+	$(canopy_voxelize_cmd)
+
+%.light.vdb: %.density.vdb
+	$(LAUNCH_GPU) $(CANOPY_LBSOLVE) $(CANOPY_QUIET) --device $(DEVICE) $(LBSOLVE_FLAGS) $< -o $@
+
+%.light.chaar: %.light.vdb
+	$(LAUNCH) $(CANOPY_HAAR) $(CANOPY_QUIET) $(HAAR_ERROR) $(HAAR_FLAGS) $< -o $@
+
+# One plant: its lattice and its compressed lighting in one streamable file.
+%.canopy: %.density.vdb %.light.chaar
+	$(LAUNCH) $(CANOPY_OCTREEPACK) $(CANOPY_QUIET) $(PACK_FLAGS) $^ -o $@
+
+# A still of a packed plant or scene.
+%.png: %.canopy
+	$(LAUNCH_GPU) $(CANOPY_PLAY) $(CANOPY_QUIET) --device $(DEVICE) $(PLAY_FLAGS) $< -o $@
+
+# Keep the intermediate files of the chain (make would otherwise delete them).
+.PRECIOUS: %.density.vdb %.light.vdb %.light.chaar %.canopy
