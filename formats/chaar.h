@@ -29,6 +29,7 @@
 #include <string>
 #include <vector>
 
+#include "canopy/errors.h"
 #include "formats/haar_view.h"
 
 namespace canopy::haar {

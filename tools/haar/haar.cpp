@@ -285,7 +285,7 @@ nlohmann::json chaarInfo(const std::string& input) {
   nlohmann::json meta = nlohmann::json::parse(d.meta, nullptr, /*allow_exceptions=*/false);
   nlohmann::json rep = {
       {"file", input},
-      {"version", std::to_string(h.versionMajor) + "." + std::to_string(h.versionMinor)},
+      {"format_version", std::to_string(h.versionMajor) + "." + std::to_string(h.versionMinor)},
       {"bytes", h.fileSize},
       {"precision", precisionName(d.precision())},
       {"lattice_min", {h.latticeMin[0], h.latticeMin[1], h.latticeMin[2]}},
@@ -298,7 +298,7 @@ nlohmann::json chaarInfo(const std::string& input) {
       {"index_to_model", std::vector<double>(h.indexToModel, h.indexToModel + 16)},
       {"meta", meta.is_discarded() ? nlohmann::json(d.meta) : meta},
       {"bases", nlohmann::json::array()}};
-  logInfo(input + ": .chaar " + rep["version"].get<std::string>() + ", " + precisionName(d.precision()) + ", " +
+  logInfo(input + ": .chaar " + rep["format_version"].get<std::string>() + ", " + precisionName(d.precision()) + ", " +
           std::to_string(h.baseCount) + " bases, lattice " + std::to_string(h.latticeMax[0] - h.latticeMin[0] + 1) +
           "x" + std::to_string(h.latticeMax[1] - h.latticeMin[1] + 1) + "x" +
           std::to_string(h.latticeMax[2] - h.latticeMin[2] + 1) + ", " + std::to_string(h.slotCount) +
