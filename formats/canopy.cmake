@@ -1,0 +1,5 @@
+# canopy_file: the .canopy reader (formats/canopy_file.{h,cpp}). No OpenVDB, so it compiles fast,
+# can be sanitized (tests compile canopy_file.cpp into themselves) and fuzzed.
+add_library(canopy_file STATIC ${CMAKE_CURRENT_LIST_DIR}/canopy_file.cpp)
+target_include_directories(canopy_file PUBLIC ${CMAKE_CURRENT_LIST_DIR}/..)
+target_link_libraries(canopy_file PUBLIC canopy_core PRIVATE canopy_warnings)
