@@ -61,7 +61,8 @@ CanopyFile& CanopyFile::operator=(CanopyFile&& o) noexcept {
     if (fd_ >= 0) ::close(fd_);
     path_ = std::move(o.path_);
     fd_ = std::exchange(o.fd_, -1);
-    memory_ = std::move(o.memory_);
+    memory_ = o.memory_;
+    memorySize_ = o.memorySize_;
     resident_ = std::move(o.resident_);
     header_ = o.header_;
     sections_ = std::move(o.sections_);
@@ -83,9 +84,9 @@ CanopyFile::~CanopyFile() {
 
 void CanopyFile::readAt(uint64_t offset, void* dst, size_t bytes) const {
   if (fd_ < 0) {
-    if (offset > memory_.size() || bytes > memory_.size() - offset)
-      bad(path_, "truncated: needs bytes up to " + u64s(offset + bytes) + ", file has " + u64s(memory_.size()));
-    std::memcpy(dst, memory_.data() + offset, bytes);
+    if (offset > memorySize_ || bytes > memorySize_ - offset)
+      bad(path_, "truncated: needs bytes up to " + u64s(offset + bytes) + ", file has " + u64s(memorySize_));
+    if (bytes) std::memcpy(dst, memory_ + offset, bytes);
     return;
   }
   auto* out = static_cast<unsigned char*>(dst);
@@ -117,8 +118,8 @@ CanopyFile CanopyFile::open(const std::string& path) {
 CanopyFile CanopyFile::fromMemory(const void* data, size_t size, const std::string& name) {
   CanopyFile f;
   f.path_ = name;
-  const auto* p = static_cast<const unsigned char*>(data);
-  f.memory_.assign(p, p + size);
+  f.memory_ = static_cast<const unsigned char*>(data);
+  f.memorySize_ = size;
   f.parseResident(size);
   return f;
 }
@@ -179,6 +180,22 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
     if (crc32(0, resident_.data() + s.offset, size_t(s.bytes)) != s.crc) bad(P, name + " checksum mismatch");
     for (size_t j = 0; j < i; ++j)
       if (sections_[j].kind == s.kind) bad(P, "duplicate " + name);
+  }
+  // Bytes of the resident part outside the header, the table and the sections must be zero (no CRC
+  // covers them, so anything else there is corruption).
+  {
+    std::vector<std::pair<uint64_t, uint64_t>> used{{0, tableEnd}};
+    for (const CanopySection& s : sections_) used.emplace_back(s.offset, s.offset + s.bytes);
+    std::sort(used.begin(), used.end());
+    uint64_t at = 0;
+    for (const auto& [b, e] : used) {
+      if (b < at) bad(P, "sections overlap");
+      for (uint64_t i = at; i < b; ++i)
+        if (resident_[size_t(i)] != 0) bad(P, "non-zero padding at offset " + u64s(i));
+      at = e;
+    }
+    for (uint64_t i = at; i < resident_.size(); ++i)
+      if (resident_[size_t(i)] != 0) bad(P, "non-zero padding at offset " + u64s(i));
   }
   auto require = [&](CanopySectionKind k, uint32_t itemBytes) -> const CanopySection& {
     const CanopySection* s = findSection(k);

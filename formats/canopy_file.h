@@ -382,7 +382,8 @@ class CanopyFile {
   // Reads and validates the resident part of `path` (header, section table and every section's CRC,
   // every node pointer and page-table entry in range); pages are read on demand with readPage().
   static CanopyFile open(const std::string& path);
-  // The same from a whole file image in memory (tests, fuzzer); `name` labels errors.
+  // The same from a whole file image in memory (tests, fuzzer); `name` labels errors. The image is
+  // not copied: it must outlive the CanopyFile (readPage reads from it).
   static CanopyFile fromMemory(const void* data, size_t size, const std::string& name = "<memory>");
 
   CanopyFile(CanopyFile&&) noexcept;
@@ -426,7 +427,8 @@ class CanopyFile {
 
   std::string path_;
   int fd_ = -1;                          // file mode
-  std::vector<unsigned char> memory_;    // memory mode (whole image)
+  const unsigned char* memory_ = nullptr;  // memory mode (whole image, not owned)
+  size_t memorySize_ = 0;
   std::vector<unsigned char> resident_;
   CanopyFileHeader header_{};
   std::vector<CanopySection> sections_;
