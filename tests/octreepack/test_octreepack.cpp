@@ -18,6 +18,7 @@
 #include <openvdb/openvdb.h>
 
 #include "canopy/atomic_file.h"
+#include "canopy/hash.h"
 #include "formats/canopy_file.h"
 #include "formats/lattice_vdb.h"
 #include "tests/octreepack/packed_sampler.h"
@@ -76,15 +77,18 @@ void writeSourceVdb(const std::string& path, const op::ModelSource& s) {
   canopy::vdbio::writeVdb(path, {density, wood, albedo});
 }
 
-std::string packPlant(const op::ModelSource& s, const std::string& stem) {
-  const std::string vdb = tmpDir() + "/" + stem + ".density.vdb";
-  const std::string out = tmpDir() + "/" + stem + ".canopy";
-  writeSourceVdb(vdb, s);
+std::string packVdb(const std::string& vdb, const std::string& out) {
   op::OctreepackOptions o;
   o.inputs = {vdb};
   o.output = out;
   op::octreepack(o);
   return out;
+}
+
+std::string packPlant(const op::ModelSource& s, const std::string& stem) {
+  const std::string vdb = tmpDir() + "/" + stem + ".density.vdb";
+  writeSourceVdb(vdb, s);
+  return packVdb(vdb, tmpDir() + "/" + stem + ".canopy");
 }
 
 std::vector<unsigned char> bytesOf(const std::string& p) { return canopy::readFile(p); }
@@ -140,7 +144,9 @@ TEST(Octreepack, UnoccupiedCellsAreEmpty) {
   for (int k = 0; k < 40; k += 3)
     for (int j = 0; j < 40; ++j)
       for (int i = 0; i < 40; ++i)
-        if (!occ[size_t(i + 40 * (j + 40 * k))]) ASSERT_EQ(S.sampleLattice(0, float(i - 3), float(j - 3), float(k - 3)).density, 0.0f);
+        if (!occ[size_t(i + 40 * (j + 40 * k))]) {
+          ASSERT_EQ(S.sampleLattice(0, float(i - 3), float(j - 3), float(k - 3)).density, 0.0f);
+        }
 }
 
 // Trilinear sampling between cell centres, including across brick boundaries (the border voxels),
@@ -233,7 +239,7 @@ TEST(Octreepack, UniformRegionsBecomeConstantNodes) {
 
 TEST(Octreepack, PackingTwiceGivesIdenticalBytesWhateverTheCellOrder) {
   const std::string a = plantFile();
-  const std::string b = packPlant(plant(), "plant_again");
+  const std::string b = packVdb(tmpDir() + "/plant.density.vdb", tmpDir() + "/plant_again.canopy");
   EXPECT_EQ(bytesOf(a), bytesOf(b));
   op::ModelSource shuffled = plant();
   std::mt19937 rng(3);

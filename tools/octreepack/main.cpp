@@ -20,6 +20,7 @@ int main(int argc, char** argv) {
   app.add_option("--scene-light", o.sceneLight, "Coarse scene lighting lattice (VDB, lbsolve --scene)");
   app.add_option("--scene-light-grid", o.sceneLightGrid, "Float grid name in --scene-light")->capture_default_str();
   app.add_flag("--ignore-light", o.ignoreLight, "Pack density only, even where a .chaar is given");
+  app.fallthrough();  // (inherited by the subcommands) `info FILE --json` works too
   std::string infoPath, verifyPath;
   CLI::App* info = app.add_subcommand("info", "Print models, levels, node/brick/page counts and bytes per section");
   info->add_option("file", infoPath, "FILE.canopy")->required();
