@@ -361,3 +361,31 @@ TEST(OctreepackCli, NonFiniteDensityIsRejected) {
   EXPECT_EQ(run("'" + dir + "/nan.density.vdb' -o '" + dir + "/nan.canopy'"), 3);
   EXPECT_FALSE(exists(dir + "/nan.canopy"));
 }
+
+// The forest path: pipelines/scatter.py -> scene JSON -> canopy-octreepack --scene -> verify.
+TEST(OctreepackCli, ScatteredForestOf400InstancesPacks) {
+  const std::string dir = tmpDir();
+  writeSourceVdb(dir + "/fa.density.vdb", syntheticPlant(24, 0, "fa", 0));
+  writeSourceVdb(dir + "/fb.density.vdb", syntheticPlant(16, 0, "fb", 0));
+  const std::string scatter = "python3 '" + std::string(CANOPY_SOURCE_DIR) + "/pipelines/scatter.py' --count 400 --seed 5 --radius 30 --model fa='" +
+                              dir + "/fa.density.vdb' --model fb='" + dir + "/fb.density.vdb' -o ";
+  ASSERT_EQ(std::system((scatter + "'" + dir + "/forest.scene.json' 2>/dev/null").c_str()), 0);
+  ASSERT_EQ(std::system((scatter + "'" + dir + "/forest2.scene.json' 2>/dev/null").c_str()), 0);
+  EXPECT_EQ(bytesOf(dir + "/forest.scene.json"), bytesOf(dir + "/forest2.scene.json"));  // deterministic
+  EXPECT_EQ(run("--scene '" + dir + "/forest.scene.json' -o '" + dir + "/forest.canopy'"), 0);
+  EXPECT_EQ(run("verify '" + dir + "/forest.canopy'"), 0);
+  CanopyFile f = CanopyFile::open(dir + "/forest.canopy");
+  EXPECT_EQ(f.instanceCount(), 400u);
+  EXPECT_EQ(f.modelCount(), 2u);
+  uint32_t perModel[2] = {0, 0};
+  for (uint32_t i = 0; i < f.instanceCount(); ++i) {
+    const auto& in = f.instance(i);
+    ++perModel[in.model];
+    const float x = in.modelToWorld[3], z = in.modelToWorld[11];
+    ASSERT_LE(x * x + z * z, 30.0f * 30.0f + 1e-3f);
+    const float s = in.modelToWorld[5];  // uniform scale (the yaw keeps the y axis)
+    ASSERT_NEAR(in.modelToWorld[0] * in.modelToWorld[0] + in.modelToWorld[2] * in.modelToWorld[2], s * s, 1e-4f);
+  }
+  EXPECT_GT(perModel[0], 150u);
+  EXPECT_GT(perModel[1], 150u);
+}
