@@ -389,3 +389,33 @@ TEST(OctreepackCli, ScatteredForestOf400InstancesPacks) {
   EXPECT_GT(perModel[0], 150u);
   EXPECT_GT(perModel[1], 150u);
 }
+
+#ifdef CANOPY_HAS_CUDA
+#include "canopy/device.h"
+#include "tests/octreepack/sample_cuda.h"
+#endif
+
+// The GPU path runs the same CANOPY_HD descent and brick sampling as the CPU reference: on a GPU
+// host every sample must agree (same float operations; FMA contraction may differ: 1e-5).
+TEST(OctreepackSample, CudaMatchesCpuReference) {
+#ifndef CANOPY_HAS_CUDA
+  GTEST_SKIP() << "CPU-only build";
+#else
+  if (canopy::cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA device";
+  CanopyFile f = CanopyFile::open(plantFile());
+  PackedSampler S(f);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> U(0.0f, 1.0f);
+  std::vector<float> pts(3 * 50000);
+  for (float& p : pts) p = U(rng);
+  for (uint32_t level : {0u, 1u, 2u, 3u}) {
+    const std::vector<CanopySample> gpu = op::testing::sampleOnCuda(f, 0, pts, level);
+    for (size_t i = 0; i < gpu.size(); ++i) {
+      const CanopySample c = S.sampleUnit(0, &pts[3 * i], level);
+      ASSERT_NEAR(gpu[i].density, c.density, 1e-5f) << "level " << level << " point " << i;
+      for (int a = 0; a < 3; ++a) ASSERT_NEAR(gpu[i].albedo[a], c.albedo[a], 1e-5f);
+      ASSERT_NEAR(gpu[i].wood, c.wood, 1e-5f);
+    }
+  }
+#endif
+}
