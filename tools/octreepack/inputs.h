@@ -1,0 +1,38 @@
+// inputs.h: canopy-octreepack's inputs -> plain structures (the only OpenVDB code of the tool).
+//   readDensityVdb:     a canopy-voxelize lattice (grids density, wood, albedo; §0 metadata)
+//   readSceneJson:      a scene instance list (docs/scene-json.md)
+//   readSceneLightVdb:  the coarse scene lighting lattice (lbsolve --scene), one float grid
+// Every failure is a canopy::Error naming the file.
+#pragma once
+#include <array>
+#include <string>
+#include <vector>
+
+#include "formats/canopy_file.h"
+#include "tools/octreepack/octree_build.h"
+
+namespace canopy::octreepack {
+
+ModelSource readDensityVdb(const std::string& path, const std::string& name);
+
+struct SceneDesc {
+  struct Model {
+    std::string name, density, light;  // paths resolved against the JSON file's folder
+  };
+  struct Instance {
+    uint32_t model;
+    std::array<double, 12> modelToWorld;  // 3x4 row-major
+  };
+  std::vector<Model> models;
+  std::vector<Instance> instances;
+};
+SceneDesc readSceneJson(const std::string& path);
+
+struct SceneLightSource {
+  CanopySceneLight header{};
+  std::vector<float> values;
+  std::string sourceLabel;
+};
+SceneLightSource readSceneLightVdb(const std::string& path, const std::string& gridName);
+
+}  // namespace canopy::octreepack
