@@ -122,7 +122,7 @@ TEST_F(VoxelizeCli, BadInputsFailCleanly) {
        },
        "inf.glb", "", 3, "inf.glb"},
       {"NaN vertex in OBJ", [](const std::string& d) { writeText(d + "/nan.obj", "v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n"); },
-       "nan.obj", "", 3, "nan.obj"},
+       "nan.obj", "", 3, "nan.obj: vertex 3 has a NaN"},
       {"zero triangles",
        [](const std::string& d) { writeBytes(d + "/zero.glb", toGlb(triangleGltf(oneTriangle(), {}))); },
        "zero.glb", "", 3, "zero.glb"},
@@ -146,7 +146,7 @@ TEST_F(VoxelizeCli, BadInputsFailCleanly) {
     const std::string out = dir + "/out.vdb";
     std::remove(out.c_str());
     const std::string outArg = c.extra.find("-o ") == std::string::npos ? " -o '" + out + "'" : "";
-    const RunResult r = run("'" + input + "' -r 16" + outArg + " " + c.extra, dir);
+    const RunResult r = run("'" + input + "' -q -r 16" + outArg + " " + c.extra, dir);
     EXPECT_EQ(r.code, c.code) << r.err;
     EXPECT_NE(r.err.find("canopy-voxelize: error: "), std::string::npos) << r.err;
     EXPECT_NE(r.err.find(c.mustName), std::string::npos) << r.err;
