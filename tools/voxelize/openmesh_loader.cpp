@@ -8,6 +8,7 @@
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 
 #include <algorithm>
+#include <cstdlib>
 #include <cmath>
 #include <fstream>
 #include <map>
@@ -32,6 +33,7 @@ using OmMesh = OpenMesh::TriMesh_ArrayKernelT<OmTraits>;
 struct ObjMaterials {
   std::vector<std::string> names;        // in order of first use; [0] = "default"
   std::vector<int> triangleMaterial;     // one per predicted triangle
+  long nonFiniteVertex = -1;             // 1-based index of the first `v` with NaN/inf, or -1
 };
 
 ObjMaterials scanObjMaterials(const std::string& path) {
@@ -39,10 +41,24 @@ ObjMaterials scanObjMaterials(const std::string& path) {
   m.names.push_back("default");
   std::map<std::string, int> index{{"default", 0}};
   int current = 0;
+  long vertices = 0;
   std::ifstream in(path);
   std::string line;
   while (std::getline(in, line)) {
     if (line.size() < 2) continue;
+    if (line[0] == 'v' && (line[1] == ' ' || line[1] == '\t')) {
+      // OpenMesh silently drops vertices it cannot parse ("nan", "inf"): catch them here.
+      ++vertices;
+      const char* p = line.c_str() + 2;
+      for (int k = 0; k < 3 && m.nonFiniteVertex < 0; ++k) {
+        char* end = nullptr;
+        const double v = std::strtod(p, &end);
+        if (end == p) break;
+        if (!std::isfinite(v)) m.nonFiniteVertex = vertices;
+        p = end;
+      }
+      continue;
+    }
     if (line.compare(0, 7, "usemtl ") == 0) {
       std::string n = line.substr(7);
       while (!n.empty() && (n.back() == '\r' || n.back() == ' ')) n.pop_back();
@@ -106,6 +122,9 @@ Mesh loadWithOpenMesh(const std::string& path) {
   bool byOrder = false;
   if (ext == "obj") {
     objMat = scanObjMaterials(path);
+    if (objMat.nonFiniteVertex > 0)
+      throw invalidInput(path + ": vertex " + std::to_string(objMat.nonFiniteVertex) +
+                         " has a NaN or infinite coordinate");
     byOrder = objMat.triangleMaterial.size() == om.n_faces();
     if (!byOrder && objMat.names.size() > 1)
       logWarn(path + ": OBJ material runs do not match the faces OpenMesh read; materials ignored");
