@@ -385,3 +385,31 @@ TEST(Solver, APlantCastsIndirectShadow) {
   for (const auto& s : r)
     for (float v : s.values) ASSERT_GE(v, 0.f);
 }
+
+// The CPU solver updates runs of 8 same-kind nodes with updateLanes<8>; the GPU runs
+// updateNode (= updateLanes<1>) per thread. Both must give the same bits, node by node, on a
+// lattice mixing empty, leaf and wood nodes, after several steps.
+TEST(Collide, EightLaneAndOneLaneUpdatesAreBitIdentical) {
+  const int n = 21;  // not a multiple of 8: exercises the per-node tail too
+  const fixtures::Plant plant = fixtures::makePlant(n, 5);
+  const DenseLattice L = fixtures::denseOf(n, n, n, plant.density, plant.wood);
+  SolveSpec s;
+  s.omega = makeOmegaSet(0.109, 0.891, -0.12);
+  s.boundary[0] = 1.f, s.boundary[3] = 0.5f, s.boundary[9] = 0.25f;
+  s.maxIterations = 9;
+  const SolveResult solver = runSolves(L, {s}, Device())[0];  // 8-lane path where possible
+
+  std::vector<float> a(size_t(kQ) * L.dims.count()), b(a.size());
+  for (int z = 0; z < n; ++z)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x) {
+        initNode(L.dims, s.boundary, a.data(), x, y, z);
+        initNode(L.dims, s.boundary, b.data(), x, y, z);
+      }
+  for (int t = 0; t < 9; ++t) {
+    stepLattice(s.omega, L.dims, L.coded, a, b);  // updateNode only
+    std::swap(a, b);
+  }
+  for (int64_t i = 0; i < L.dims.count(); ++i)
+    ASSERT_EQ(solver.values[size_t(i)], nodeTotal(a.data(), L.dims.count(), i)) << i;
+}

@@ -42,6 +42,13 @@ std::array<int, 3> canonical(std::array<int, 3> f) {
 
 TEST(LatticeDirs, TableInvariants) {
   using namespace canopy::lattice;
+  // The documented order (lattice_dirs.h): other tools name B00..B18 by it.
+  const int table[19][3] = {{0, 0, 0},  {1, 0, 0},   {-1, 0, 0}, {0, 1, 0},  {0, -1, 0},
+                            {0, 0, 1},  {0, 0, -1},  {1, 1, 0},  {-1, -1, 0}, {1, -1, 0},
+                            {-1, 1, 0}, {1, 0, 1},   {-1, 0, -1}, {1, 0, -1}, {-1, 0, 1},
+                            {0, 1, 1},  {0, -1, -1}, {0, 1, -1}, {0, -1, 1}};
+  for (int m = 0; m < kQ; ++m)
+    for (int a = 0; a < 3; ++a) EXPECT_EQ(dir(m, a), table[m][a]) << m << " " << a;
   EXPECT_EQ(dir(0, 0) | dir(0, 1) | dir(0, 2), 0);
   float wsum = 0;
   std::set<std::array<int, 3>> seen;

@@ -39,54 +39,89 @@ struct Dims {
   }
 };
 
-// One node's collision: out_i = max(0, f_i + rho * sum_j Omega_ij f_j), f_0 zeroed first at leaf
-// nodes. `coded` is rho (leaf/empty) or -rho (wood). f is modified (f_0 zeroing). For rho == 0 the
-// matrix product is skipped; the result is bit-identical to the general path (f + 0 * x == f for
-// finite x and f >= 0). Sums run over j in ascending order on both backends, so CPU and CUDA (built
-// without FMA contraction, see solve_cuda.cu) produce the same bits.
-CANOPY_HD CANOPY_FORCEINLINE void collide(const OmegaSet& om, float coded, float f[kQ], float out[kQ]) {
-  const bool wood = coded < 0.f;
-  const float rho = wood ? -coded : coded;
-  if (!wood) f[0] = 0.f;  // absorbed light leaves the visible spectrum (listing 5.1, line 25)
-  if (rho == 0.f) {
+// The collision of L nodes of the same kind (all leaf/empty, or all wood), one per lane:
+//   out_i = max(0, f_i + rho * sum_j Omega_ij f_j),  f_0 zeroed first at leaf nodes.
+// f is modified (f_0 zeroing). Every lane computes the same IEEE operations in the same order
+// (j ascending) whatever L is: L = 1 on the GPU (one thread per node), L = 8 on the CPU (the
+// compiler vectorises across lanes), so both backends produce the same bits (solve_cuda.cu is
+// built without FMA contraction). When every lane has rho == 0 the product is skipped; that is
+// bit-identical to the general path (f + 0 * x == f for finite x and f >= 0).
+template <int L>
+CANOPY_HD CANOPY_FORCEINLINE void collideLanes(const OmegaSet& om, bool wood, const float rho[L],
+                                               float f[kQ][L], float out[kQ][L]) {
+  if (!wood) {
+    for (int l = 0; l < L; ++l) f[0][l] = 0.f;  // absorbed light leaves the visible spectrum
+  }
+  bool empty = true;
+  for (int l = 0; l < L; ++l) empty = empty && rho[l] == 0.f;
+  if (empty) {
     CANOPY_UNROLL
-    for (int i = 0; i < kQ; ++i) out[i] = f[i];
+    for (int i = 0; i < kQ; ++i)
+      for (int l = 0; l < L; ++l) out[i][l] = f[i][l];
     return;
   }
   const float(*col)[kQ] = om.col[wood ? 1 : 0];
-  float acc[kQ];
-  CANOPY_UNROLL
-  for (int i = 0; i < kQ; ++i) acc[i] = 0.f;
-  CANOPY_UNROLL
-  for (int j = 0; j < kQ; ++j) {
-    const float fj = f[j];
-    CANOPY_UNROLL
-    for (int i = 0; i < kQ; ++i) acc[i] += col[j][i] * fj;
-  }
   CANOPY_UNROLL
   for (int i = 0; i < kQ; ++i) {
-    const float v = f[i] + rho * acc[i];
-    out[i] = v > 0.f ? v : 0.f;
+    float acc[L];
+    for (int l = 0; l < L; ++l) acc[l] = 0.f;
+    CANOPY_UNROLL
+    for (int j = 0; j < kQ; ++j) {
+      const float c = col[j][i];
+      for (int l = 0; l < L; ++l) acc[l] += c * f[j][l];
+    }
+    for (int l = 0; l < L; ++l) {
+      const float v = f[i][l] + rho[l] * acc[l];
+      out[i][l] = v > 0.f ? v : 0.f;
+    }
   }
 }
 
-// The push update of node (x, y, z) (listing 5.2): load its 19 arriving values from `in`, collide,
-// and write value m to the neighbour r + c_m in `out` if that neighbour is interior. Every node,
-// boundary included, is a source; only interior nodes are targets, and each (target, m) pair has
-// exactly one source, so the update is race-free with separate in/out buffers (ping-pong).
-CANOPY_HD CANOPY_FORCEINLINE void updateNode(const OmegaSet& om, const Dims& d, const float* coded,
-                                             const float* in, float* out, int x, int y, int z) {
+// One node's collision; `coded` is rho (leaf/empty) or -rho (wood).
+CANOPY_HD CANOPY_FORCEINLINE void collide(const OmegaSet& om, float coded, float f[kQ], float out[kQ]) {
+  const bool wood = coded < 0.f;
+  const float rho[1] = {wood ? -coded : coded};
+  float fl[kQ][1], ol[kQ][1];
+  CANOPY_UNROLL
+  for (int m = 0; m < kQ; ++m) fl[m][0] = f[m];
+  collideLanes<1>(om, wood, rho, fl, ol);
+  CANOPY_UNROLL
+  for (int m = 0; m < kQ; ++m) f[m] = fl[m][0], out[m] = ol[m][0];
+}
+
+// The push update of L consecutive nodes (x .. x+L-1, y, z) of the same kind (listing 5.2): load
+// their 19 arriving values from `in`, collide, and write value m to the neighbour r + c_m in `out`
+// if that neighbour is interior. Every node, boundary included, is a source; only interior nodes
+// are targets, and each (target, m) pair has exactly one source, so the update is race-free with
+// separate in/out buffers (ping-pong). Precondition: all L nodes are wood, or none is.
+template <int L>
+CANOPY_HD CANOPY_FORCEINLINE void updateLanes(const OmegaSet& om, const Dims& d, const float* coded,
+                                              const float* in, float* out, int x, int y, int z) {
   const int64_t n = d.count();
   const int64_t idx = d.index(x, y, z);
-  float f[kQ], post[kQ];
+  float f[kQ][L], post[kQ][L], rho[L];
+  const bool wood = coded[idx] < 0.f;
+  for (int l = 0; l < L; ++l) rho[l] = wood ? -coded[idx + l] : coded[idx + l];
   CANOPY_UNROLL
-  for (int m = 0; m < kQ; ++m) f[m] = in[m * n + idx];
-  collide(om, coded[idx], f, post);
+  for (int m = 0; m < kQ; ++m)
+    for (int l = 0; l < L; ++l) f[m][l] = in[m * n + idx + l];
+  collideLanes<L>(om, wood, rho, f, post);
   CANOPY_UNROLL
   for (int m = 0; m < kQ; ++m) {
-    const int tx = x + lattice::dir(m, 0), ty = y + lattice::dir(m, 1), tz = z + lattice::dir(m, 2);
-    if (d.interior(tx, ty, tz)) out[m * n + d.index(tx, ty, tz)] = post[m];
+    const int ty = y + lattice::dir(m, 1), tz = z + lattice::dir(m, 2);
+    if (ty < 1 || tz < 1 || ty > d.ny - 2 || tz > d.nz - 2) continue;
+    const int dx = lattice::dir(m, 0);
+    const int64_t target = d.index(x + dx, ty, tz);
+    for (int l = 0; l < L; ++l) {
+      const int tx = x + l + dx;
+      if (tx >= 1 && tx <= d.nx - 2) out[m * n + target + l] = post[m][l];
+    }
   }
+}
+
+CANOPY_HD CANOPY_FORCEINLINE void updateNode(const OmegaSet& om, const Dims& d, const float* coded,
+                                             const float* in, float* out, int x, int y, int z) {
+  updateLanes<1>(om, d, coded, in, out, x, y, z);
 }
 
 // Initial state of node idx for a solve: boundary nodes hold the fixed boundary values, interior
