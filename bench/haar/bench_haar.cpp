@@ -19,6 +19,8 @@
 #include <string>
 #include <vector>
 
+#include "canopy/atomic_file.h"
+#include "canopy/cli.h"
 #include "canopy/errors.h"
 #include "haar.h"
 #include "../../tests/haar/synthetic_light.h"

@@ -269,8 +269,8 @@ TEST(HaarTool, SweepWritesTablePlotAndJson) {
 }
 
 // Writes the input of the frozen file tests/haar/data/small_v1_0.chaar (see data/README.md):
-//   CANOPY_HAAR_FIXTURE=small.light.vdb test_haar_tool --gtest_also_run_disabled_tests \
-//     --gtest_filter=*WriteFrozenFixtureInput
+//   CANOPY_HAAR_FIXTURE=small.light.vdb test_haar_tool --gtest_also_run_disabled_tests
+//       --gtest_filter=*WriteFrozenFixtureInput
 TEST(HaarTool, DISABLED_WriteFrozenFixtureInput) {
   const char* path = std::getenv("CANOPY_HAAR_FIXTURE");
   ASSERT_NE(path, nullptr);
