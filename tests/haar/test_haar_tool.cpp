@@ -23,13 +23,20 @@ namespace {
 
 const std::string kTool = std::string(CANOPY_BINARY_DIR) + "/bin/canopy-haar";
 
+// One scratch directory per test process, removed at exit.
+struct ScratchDir {
+  fs::path path;
+  ScratchDir() : path(fs::temp_directory_path() / ("canopy_haar_" + std::to_string(getpid()))) {
+    fs::create_directories(path);
+  }
+  ~ScratchDir() {
+    std::error_code ec;
+    fs::remove_all(path, ec);
+  }
+};
 fs::path tempDir() {
-  static fs::path d = [] {
-    fs::path p = fs::temp_directory_path() / ("canopy_haar_" + std::to_string(getpid()));
-    fs::create_directories(p);
-    return p;
-  }();
-  return d;
+  static ScratchDir d;
+  return d.path;
 }
 
 std::string slurp(const fs::path& p) {
