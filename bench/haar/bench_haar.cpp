@@ -142,9 +142,9 @@ int main(int argc, char** argv) {
       zfpExceeded |= z.maxError > E;
       // Second comparison: the largest ZFP tolerance whose volume RMS is <= Haar's.
       const double haarRms = rmsOf(best, g);
-      double tlo = E * 1e-4, thi = E;
+      double tlo = E * 1e-4, thi = 100 * E;
       ZfpResult zr = zfpChannelwise(g, light.rgb, tlo);
-      for (int it = 0; it < 14; ++it) {
+      for (int it = 0; it < 20; ++it) {
         const double mid = std::sqrt(tlo * thi);
         const ZfpResult t = zfpChannelwise(g, light.rgb, mid);
         if (std::sqrt(t.sumSq / (3.0 * double(g.cells))) <= haarRms) {
