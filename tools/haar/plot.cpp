@@ -114,13 +114,19 @@ void ticks(const Axis& a, std::vector<double>& major, std::vector<std::string>& 
         if (v > a.lo && v < a.hi) minor.push_back(v);
       }
     }
-    if (major.size() < 2) {  // less than a decade: label minor ticks 2..9 too
-      for (double v : minor) {
-        major.push_back(v);
-        std::snprintf(buf, sizeof buf, "%.3g", std::pow(10.0, v));
+    if (major.size() < 3) {  // about a decade or less: nice linear steps in value space
+      major.clear();
+      labels.clear();
+      minor.clear();
+      const double vlo = std::pow(10.0, a.lo), vhi = std::pow(10.0, a.hi);
+      const double raw = (vhi - vlo) / 6, mag = std::pow(10.0, std::floor(std::log10(raw)));
+      const double step = raw / mag < 2 ? 2 * mag : raw / mag < 5 ? 5 * mag : 10 * mag;
+      for (double v = std::ceil(vlo / step) * step; v <= vhi; v += step) {
+        if (v <= 0) continue;
+        major.push_back(std::log10(v));
+        std::snprintf(buf, sizeof buf, "%g", v);
         labels.push_back(buf);
       }
-      minor.clear();
     }
   } else {
     const double span = a.hi - a.lo;
@@ -233,7 +239,7 @@ void writePlotPng(const std::string& path, const PlotSpec& spec) {
     for (size_t i = 0; i < pts.size(); ++i) {
       if (!inside(pts[i].first, pts[i].second)) continue;
       if (s.markers) cv.disc(pts[i].first, pts[i].second, s.width + 2, s.color);
-      if (!labs[i].empty()) cv.text(pts[i].first + 8, pts[i].second - 18, labs[i], s.color, 2);
+      if (!labs[i].empty()) cv.text(pts[i].first + 10, pts[i].second - 24, labs[i], s.color, 2);
     }
   }
   // Legend.
