@@ -67,7 +67,8 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
     if (o.inputs.size() > 2) throw usageError("one plant takes PLANT.density.vdb and at most one PLANT.light.chaar");
     std::string light;
     if (o.inputs.size() == 2) {
-      if (!endsWith(o.inputs[1], ".chaar")) throw usageError(o.inputs[1] + ": the second input must be a .chaar lighting file");
+      if (!endsWith(o.inputs[1], ".chaar") && !endsWith(o.inputs[1], ".vdb"))
+        throw usageError(o.inputs[1] + ": the second input must be lighting: PLANT.light.chaar (canopy-haar) or PLANT.light.vdb (canopy-lbsolve)");
       light = o.inputs[1];
     }
     modelsIn.push_back({stemOf(o.inputs[0]), o.inputs[0], light});
@@ -77,7 +78,7 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
     requireReadableFile(m.density);
     if (!m.light.empty() && !o.ignoreLight) {
       requireReadableFile(m.light);
-      lightUnsupported(m.light);
+      if (endsWith(m.light, ".chaar")) lightUnsupported(m.light);
     }
   }
 
@@ -88,10 +89,17 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
   for (size_t i = 0; i < modelsIn.size(); ++i) {
     logInfo("octreepack: model " + std::to_string(i) + " '" + modelsIn[i].name + "' from " + modelsIn[i].density);
     ModelSource src = readDensityVdb(modelsIn[i].density, modelsIn[i].name);
-    built.push_back(buildOctree(src, modelsIn[i].density));
-    sources.push_back({{"name", modelsIn[i].name}, {"density", src.sourceLabel}});
+    nlohmann::json source = {{"name", modelsIn[i].name}, {"density", src.sourceLabel}};
+    LightFn light;
+    if (!modelsIn[i].light.empty() && !o.ignoreLight) {  // .chaar was refused above: this is an lbsolve VDB
+      LightVdb lv = readLightVdb(modelsIn[i].light);
+      light = std::move(lv.fn);
+      source["light"] = lv.sourceLabel;
+    }
+    built.push_back(buildOctree(src, modelsIn[i].density, light));
+    sources.push_back(source);
   }
-  for (auto& b : built) w.models.push_back({b.record, &b.tiles, &b.bricks});
+  for (auto& b : built) w.models.push_back({b.record, &b.tiles, &b.bricks, &b.light});
   w.instances = instances;
   meta["models"] = sources;
   if (!o.sceneLight.empty()) {
