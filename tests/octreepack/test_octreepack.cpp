@@ -391,36 +391,6 @@ TEST(OctreepackCli, ScatteredForestOf400InstancesPacks) {
   EXPECT_GT(perModel[1], 150u);
 }
 
-#ifdef CANOPY_HAS_CUDA
-#include "canopy/device.h"
-#include "tests/octreepack/sample_cuda.h"
-#endif
-
-// The GPU path runs the same CANOPY_HD descent and brick sampling as the CPU reference: on a GPU
-// host every sample must agree (same float operations; FMA contraction may differ: 1e-5).
-TEST(OctreepackSample, CudaMatchesCpuReference) {
-#ifndef CANOPY_HAS_CUDA
-  GTEST_SKIP() << "CPU-only build";
-#else
-  if (canopy::cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA device";
-  CanopyFile f = CanopyFile::open(plantFile());
-  PackedSampler S(f);
-  std::mt19937 rng(11);
-  std::uniform_real_distribution<float> U(0.0f, 1.0f);
-  std::vector<float> pts(3 * 50000);
-  for (float& p : pts) p = U(rng);
-  for (uint32_t level : {0u, 1u, 2u, 3u}) {
-    const std::vector<CanopySample> gpu = op::testing::sampleOnCuda(f, 0, pts, level);
-    for (size_t i = 0; i < gpu.size(); ++i) {
-      const CanopySample c = S.sampleUnit(0, &pts[3 * i], level);
-      ASSERT_NEAR(gpu[i].density, c.density, 1e-5f) << "level " << level << " point " << i;
-      for (int a = 0; a < 3; ++a) ASSERT_NEAR(gpu[i].albedo[a], c.albedo[a], 1e-5f);
-      ASSERT_NEAR(gpu[i].wood, c.wood, 1e-5f);
-    }
-  }
-#endif
-}
-
 // ---- lighting -------------------------------------------------------------------------------------
 namespace {
 // A fully occupied cube (every block present at every level, random densities: no constant nodes).
@@ -536,3 +506,52 @@ TEST(OctreepackLight, LbsolveLightVdbPacksThroughTheCli) {
       }
   EXPECT_GT(checked, 50u);
 }
+
+#ifdef CANOPY_HAS_CUDA
+#include "canopy/device.h"
+#include "tests/octreepack/sample_cuda.h"
+#endif
+
+// The GPU path runs the same CANOPY_HD descent and brick sampling as the CPU reference: on a GPU
+// host every sample must agree (same float operations; FMA contraction may differ: 1e-5).
+TEST(OctreepackSample, CudaMatchesCpuReference) {
+#ifndef CANOPY_HAS_CUDA
+  GTEST_SKIP() << "CPU-only build";
+#else
+  if (canopy::cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA device";
+  CanopyFile f = CanopyFile::open(plantFile());
+  PackedSampler S(f);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> U(0.0f, 1.0f);
+  std::vector<float> pts(3 * 50000);
+  for (float& p : pts) p = U(rng);
+  for (uint32_t level : {0u, 1u, 2u, 3u}) {
+    const std::vector<CanopySample> gpu = op::testing::sampleOnCuda(f, 0, pts, level);
+    ASSERT_EQ(gpu.size(), pts.size() / 3);
+    for (size_t i = 0; i < gpu.size(); ++i) {
+      const CanopySample c = S.sampleUnit(0, &pts[3 * i], level);
+      ASSERT_NEAR(gpu[i].density, c.density, 1e-5f) << "level " << level << " point " << i;
+      for (int a = 0; a < 3; ++a) ASSERT_NEAR(gpu[i].albedo[a], c.albedo[a], 1e-5f);
+      ASSERT_NEAR(gpu[i].wood, c.wood, 1e-5f);
+    }
+  }
+  // Lighting on the device (float16 decode + trilinear) vs the host, on a lit dense cube.
+  const op::BuiltModel m = op::buildOctree(denseCube(32), "cube", op::testing::analyticLight);
+  canopy::CanopyWriteInput in;
+  in.models.push_back({m.record, &m.tiles, &m.bricks, &m.light});
+  const std::vector<unsigned char> bytes = canopy::writeCanopyBytes(std::move(in));
+  CanopyFile lit = CanopyFile::fromMemory(bytes.data(), bytes.size(), "cube.canopy");
+  std::vector<float> rgb;
+  op::testing::sampleOnCuda(lit, 0, pts, 2, &rgb, 9);
+  for (size_t i = 0; i < pts.size() / 3; i += 7) {
+    const canopy::CanopyLookup r = lit.descend(0, pts[3 * i], pts[3 * i + 1], pts[3 * i + 2], 2);
+    if (r.node.brick == canopy::kCanopyNone) continue;
+    const auto page = lit.readPage(canopy::canopyLightPage(lit.model(0), r.node.brick, lit.header().lightItemsPerPage));
+    float ref[3];
+    canopy::canopySampleLight(canopy::canopyLightInPage(page.data(), r.node.brick % lit.header().lightItemsPerPage), 9, r.local[0],
+                              r.local[1], r.local[2], ref);
+    for (int ch = 0; ch < 3; ++ch) ASSERT_NEAR(rgb[3 * i + ch], ref[ch], 1e-5f);
+  }
+#endif
+}
+
