@@ -35,7 +35,6 @@ std::string stemOf(const std::string& path) {
 
 nlohmann::json octreepack(const OctreepackOptions& o) {
   const auto t0 = std::chrono::steady_clock::now();
-  if (o.output.empty()) throw usageError("no output: give -o OUT.canopy");
   struct ModelIn {
     std::string name, density, light;
   };
@@ -74,6 +73,7 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
     modelsIn.push_back({stemOf(o.inputs[0]), o.inputs[0], light});
     instances.push_back(identityInstance(0));
   }
+  if (o.output.empty()) throw usageError("no output: give -o OUT.canopy");
   for (const auto& m : modelsIn) {
     requireReadableFile(m.density);
     if (!m.light.empty() && !o.ignoreLight) {
@@ -86,6 +86,7 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
   std::vector<BuiltModel> built;
   built.reserve(modelsIn.size());
   nlohmann::json sources = nlohmann::json::array();
+  Progress progress("octreepack models", int64_t(modelsIn.size()));
   for (size_t i = 0; i < modelsIn.size(); ++i) {
     logInfo("octreepack: model " + std::to_string(i) + " '" + modelsIn[i].name + "' from " + modelsIn[i].density);
     ModelSource src = readDensityVdb(modelsIn[i].density, modelsIn[i].name);
@@ -98,6 +99,7 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
     }
     built.push_back(buildOctree(src, modelsIn[i].density, light));
     sources.push_back(source);
+    progress.add();
   }
   for (auto& b : built) w.models.push_back({b.record, &b.tiles, &b.bricks, &b.light});
   w.instances = instances;
@@ -109,6 +111,7 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
     w.sceneLightValues = std::move(sl.values);
     meta["scene_light"] = sl.sourceLabel;
   }
+  progress.done();
   w.metadata = meta.dump();
   const CanopyWriteStats stats = writeCanopyFile(o.output, std::move(w));
 
@@ -200,7 +203,7 @@ std::string formatInfo(const nlohmann::json& j) {
     o << "model '" << m["name"].get<std::string>() << "': depth " << m["depth"].get<uint32_t>() << " (" << m["root_cells"].get<uint32_t>()
       << " cells/axis), " << m["nodes"].get<uint64_t>() << " nodes, " << m["bricks"].get<uint64_t>() << " bricks in "
       << m["brick_pages"].get<uint64_t>() << " pages, " << m["instances"].get<uint64_t>() << " instances, light: "
-      << (m["has_light"].get<bool>() ? "yes" : "no") << "\n";
+      << (m["has_light"].get<bool>() ? "yes (" + std::to_string(m["light_pages"].get<uint64_t>()) + " pages)" : std::string("no")) << "\n";
     for (const auto& l : m["levels"])
       o << "  level " << l["level"].get<uint32_t>() << " (voxel = " << l["voxel_cells"].get<uint32_t>() << " cells): "
         << l["bricks"].get<uint64_t>() << " bricks, " << l["constant_nodes"].get<uint64_t>() << " constant, "
