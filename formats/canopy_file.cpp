@@ -148,12 +148,14 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
   if (h.fileBytes != fileBytes)
     bad(P, fileBytes < h.fileBytes ? "truncated: header says " + u64s(h.fileBytes) + " bytes, file has " + u64s(fileBytes)
                                    : "trailing bytes: header says " + u64s(h.fileBytes) + " bytes, file has " + u64s(fileBytes));
-  if (h.pageBytes < 4096 || (h.pageBytes & (h.pageBytes - 1)) != 0 || h.pageBytes > (1u << 26))
-    bad(P, "page size " + u64s(h.pageBytes) + " is not a power of two in [4096, 64 MiB]");
+  if (h.pageBytes < 32768 || (h.pageBytes & (h.pageBytes - 1)) != 0 || h.pageBytes > (1u << 26))
+    bad(P, "page size " + u64s(h.pageBytes) + " is not a power of two in [32 KiB, 64 MiB]");
   if (h.brickVoxels != kCanopyBrickVoxels || h.brickBytes != kCanopyBrickBytes)
     bad(P, "unsupported brick geometry (" + u64s(h.brickVoxels) + " voxels, " + u64s(h.brickBytes) + " bytes)");
   if (h.bricksPerPage != (h.pageBytes - sizeof(CanopyPageHeader)) / h.brickBytes)
     bad(P, "bricksPerPage " + u64s(h.bricksPerPage) + " inconsistent with the page size");
+  if (h.lightItemBytes != kCanopyLightItemBytes || h.lightItemsPerPage != (h.pageBytes - sizeof(CanopyPageHeader)) / h.lightItemBytes)
+    bad(P, "unsupported light item geometry (" + u64s(h.lightItemBytes) + " bytes, " + u64s(h.lightItemsPerPage) + " per page)");
   if (h.pagesOffset != h.residentBytes || h.pagesOffset % h.pageBytes != 0 || h.pagesOffset > fileBytes)
     bad(P, "pages offset " + u64s(h.pagesOffset) + " invalid");
   if ((fileBytes - h.pagesOffset) / h.pageBytes != h.pageCount || (fileBytes - h.pagesOffset) % h.pageBytes != 0)
@@ -250,7 +252,11 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
     if (M.brickPageCount != (uint64_t(M.brickCount) + bpp - 1) / bpp ||
         uint64_t(M.firstBrickPage) + M.brickPageCount > h.pageCount)
       bad(P, name + " brick pages out of range");
-    if (uint64_t(M.firstLightPage) + M.lightPageCount > h.pageCount) bad(P, name + " light pages out of range");
+    const uint64_t lpp = h.lightItemsPerPage;
+    const bool lit = (M.flags & kCanopyModelHasLight) != 0;
+    if ((lit ? M.lightCount != M.brickCount : M.lightCount != 0) || M.lightPageCount != (uint64_t(M.lightCount) + lpp - 1) / lpp ||
+        uint64_t(M.firstLightPage) + M.lightPageCount > h.pageCount)
+      bad(P, name + " light items or pages out of range");
     // Every tile must be reached exactly once from the root, at a level < depth: no cycles, no
     // shared or orphan tiles, every brick id in range.
     std::vector<unsigned char> seen(M.tileCount, 0);
@@ -275,6 +281,19 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
     for (uint32_t t = 0; t < M.tileCount; ++t)
       if (!seen[t]) bad(P, name + ": tile " + u64s(t) + " is not reachable from the root");
   }
+  // Every page belongs to exactly one model range (brick or light): no page is shared or orphaned.
+  {
+    std::vector<unsigned char> owner(h.pageCount, 0);
+    for (const CanopyModel& M : models_)
+      for (auto [first, count] : {std::pair<uint32_t, uint32_t>{M.firstBrickPage, M.brickPageCount}, {M.firstLightPage, M.lightPageCount}})
+        for (uint32_t p = first; p < first + count; ++p) {
+          if (owner[p]) bad(P, "page " + u64s(p) + " is claimed by two model ranges");
+          owner[p] = 1;
+        }
+    if (h.minor <= kCanopyMinor)  // a newer minor may add page kinds outside the model ranges
+      for (uint32_t p = 0; p < h.pageCount; ++p)
+        if (!owner[p]) bad(P, "page " + u64s(p) + " belongs to no model");
+  }
   for (uint32_t i = 0; i < instances_.size(); ++i)
     if (instances_[i].model >= models_.size()) bad(P, "instance " + u64s(i) + " names model " + u64s(instances_[i].model) + " out of range");
 
@@ -294,6 +313,10 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
         bad(P, name + ": brick range does not match its model");
     } else if (e.kind == uint32_t(CanopyPageKind::Light)) {
       if (i < M.firstLightPage || i >= M.firstLightPage + M.lightPageCount) bad(P, name + ": light page outside its model's range");
+      const uint32_t first = (i - M.firstLightPage) * h.lightItemsPerPage;
+      const uint32_t count = std::min<uint32_t>(h.lightItemsPerPage, M.lightCount - first);
+      if (e.firstItem != first || e.itemCount != count || e.payloadBytes != count * h.lightItemBytes)
+        bad(P, name + ": light item range does not match its model");
     } else if (h.minor <= kCanopyMinor || h.major < kCanopyMajor) {
       bad(P, name + ": unknown page kind " + u64s(e.kind));
     }

@@ -9,7 +9,8 @@
 //
 //   0                 CanopyFileHeader           128 B   magic "CANOPYPK", major.minor, sizes, CRCs
 //   128               CanopySection[n]           32 B each: kind, offset, bytes, item size/count, CRC
-//   (64-aligned)      sections, in this order, each starting on a 64-byte boundary, zero padded:
+//   (64-aligned)      sections (written in this order; found through the table), each on a
+//                     64-byte boundary, zero padding between them:
 //                       Models      CanopyModel[modelCount]         512 B each
 //                       Instances   CanopyInstance[instanceCount]    64 B each
 //                       NodeTiles   CanopyNode[8 * tiles]            16 B each (2x2x2 tiles)
@@ -20,7 +21,8 @@
 //   fileBytes         end of file (== pagesOffset + pageCount * pageBytes; nothing may follow)
 //
 //   resident part = [0, pagesOffset): header, section table, every section. All node tiles are
-//   resident (16 B per node: ~0.3% of a plant's bytes); bricks and light live in pages.
+//   resident (16 B per node; the whole resident part measured 0.1-0.7% of a file); bricks and
+//   light live in pages.
 //
 // Octree of one model (thesis §5.1): the root covers lattice cells [octreeOrigin, octreeOrigin +
 // rootCells) on each axis, rootCells = brickSize * 2^depth; level 0 is the root, level `depth` the
@@ -48,10 +50,19 @@
 // pages hold its coarse levels. The page CRC covers the whole page with the crc field read as 0; the
 // page table repeats each page's header fields and CRC so a reader can check a page it just read.
 //
-// Light pages (kind Light) are reserved in 1.0: the layout of their items (per-brick 19-base
-// lighting re-encoded from the .chaar Haar bricks, coarser levels from the Haar averages) is defined
-// in minor version 1.1. A 1.0 writer emits none (model.lightCount == 0, CanopyModelFlags::HasLight
-// clear); a 1.0 reader checks their header and CRC like any page and ignores their content.
+// Light pages (kind Light) carry the model's pre-filtered LB lighting, one light item per brick
+// (light item b belongs to brick b; model.lightCount is 0 or brickCount). A light item holds the 19
+// base solutions (B00 ambient, B01..B18) x RGB on a 4^3 grid over its node (each light voxel two
+// brick voxels wide: lighting is smooth, and half resolution makes an item 3x, not 24x, a density
+// brick) plus a one-voxel border (6^3 stored), as IEEE float16: half values[19][3][216], sample
+// (x,y,z) at index x + 6 (y + 6 z), x = 0 and 5 the borders; 24624 B. Light page p of a model holds
+// items [p * lightItemsPerPage, ...) (2 per page). Light levels are the Haar averages (box filter):
+// the finest light grid (2 cells per voxel) is the mean of the source lighting over its 2x2x2
+// lattice cells; each coarser grid is the mean of the 2x2x2 voxels below it that lie in occupied
+// blocks. Border voxels come from the neighbouring block of the same level, or repeat the edge voxel
+// where that block is empty. A constant node has no light item: use its nearest brick ancestor's.
+// A model without lighting (density only) has no light pages; the player then shows direct and
+// ambient light.
 //
 // Checksums: CRC-32 (zlib polynomial, canopy::crc32) of the header bytes [0, 124), of the section
 // table, of every section, and of every page. A reader rejects bad magic, a newer major version,
@@ -61,6 +72,7 @@
 // optional sections/page kinds that older readers may ignore.
 #pragma once
 #include <math.h>
+#include <string.h>
 
 #include <cstddef>
 #include <cstdint>
@@ -78,13 +90,19 @@ namespace canopy {
 constexpr char kCanopyMagic[8] = {'C', 'A', 'N', 'O', 'P', 'Y', 'P', 'K'};
 constexpr uint16_t kCanopyMajor = 1;
 constexpr uint16_t kCanopyMinor = 0;
-constexpr uint32_t kCanopyPageBytes = 65536;   // page size (a power of two, >= 4096)
+constexpr uint32_t kCanopyPageBytes = 65536;   // page size written (readers accept powers of two >= 32 KiB)
 constexpr uint32_t kCanopySectionAlign = 64;   // every section starts on a 64-byte boundary
 constexpr uint32_t kCanopyBrickSize = 8;       // interior voxels per axis
 constexpr uint32_t kCanopyBrickBorder = 1;     // border voxels on every side
 constexpr uint32_t kCanopyBrickVoxels = kCanopyBrickSize + 2 * kCanopyBrickBorder;  // 10 per axis
 constexpr uint32_t kCanopyBrickVoxelCount = kCanopyBrickVoxels * kCanopyBrickVoxels * kCanopyBrickVoxels;
 constexpr uint32_t kCanopyBrickBytes = kCanopyBrickVoxelCount * 8;  // float + uint32 per voxel
+constexpr uint32_t kCanopyLightBases = 19;     // B00 (ambient) .. B18
+constexpr uint32_t kCanopyLightSize = 4;       // interior light voxels per axis (2 brick voxels each)
+constexpr uint32_t kCanopyLightVoxels = kCanopyLightSize + 2;  // 6 with the border
+constexpr uint32_t kCanopyLightVoxelCount = kCanopyLightVoxels * kCanopyLightVoxels * kCanopyLightVoxels;
+constexpr uint32_t kCanopyLightChannels = kCanopyLightBases * 3;  // 57 planes per item
+constexpr uint32_t kCanopyLightItemBytes = kCanopyLightChannels * kCanopyLightVoxelCount * 2;  // 24624
 constexpr uint32_t kCanopyMaxDepth = 15;       // levels 0..15: up to 8 * 2^15 cells per axis
 constexpr uint32_t kCanopyNone = 0xFFFFFFFFu;  // "no child tile" / "no brick"
 
@@ -109,7 +127,9 @@ struct CanopyFileHeader {          // offset
   uint32_t brickBytes;             //  68  bytes per brick (8000)
   uint32_t bricksPerPage;          //  72  floor((pageBytes - 32) / brickBytes) = 8
   uint32_t flags;                  //  76  0 in 1.0
-  uint8_t reserved[44];            //  80  zero
+  uint32_t lightItemBytes;         //  80  bytes per light item (24624)
+  uint32_t lightItemsPerPage;      //  84  floor((pageBytes - 32) / lightItemBytes) = 2
+  uint8_t reserved[36];            //  88  zero
   uint32_t headerCrc;              // 124  CRC-32 of bytes [0, 124)
 };
 static_assert(sizeof(CanopyFileHeader) == 128, "CanopyFileHeader layout");
@@ -163,7 +183,7 @@ struct CanopyModel {               // offset
   uint32_t brickCount;             // 220
   uint32_t firstBrickPage;         // 224
   uint32_t brickPageCount;         // 228  == ceil(brickCount / bricksPerPage)
-  uint32_t lightCount;             // 232  light items (0 in 1.0)
+  uint32_t lightCount;             // 232  light items: 0 (density only) or brickCount
   uint32_t firstLightPage;         // 236
   uint32_t lightPageCount;         // 240
   uint32_t flags;                  // 244  CanopyModelFlags
@@ -191,9 +211,9 @@ struct CanopyPageHeader {          // offset
   uint32_t kind;                   //   4  CanopyPageKind
   uint32_t pageIndex;              //   8  this page's index (a misplaced page is detected)
   uint32_t model;                  //  12
-  uint32_t firstItem;              //  16  first brick id (model-relative) in the page
-  uint32_t itemCount;              //  20  bricks in the page (1..bricksPerPage)
-  uint32_t payloadBytes;           //  24  itemCount * brickBytes
+  uint32_t firstItem;              //  16  first brick / light item id (model-relative) in the page
+  uint32_t itemCount;              //  20  items in the page (1..bricksPerPage or lightItemsPerPage)
+  uint32_t payloadBytes;           //  24  itemCount * brickBytes (or lightItemBytes)
   uint32_t crc;                    //  28  CRC-32 of the whole page with these 4 bytes read as 0
 };
 static_assert(sizeof(CanopyPageHeader) == 32, "CanopyPageHeader layout");
@@ -311,6 +331,82 @@ CANOPY_HD inline CanopySample canopySampleBrick(CanopyBrickView b, float lx, flo
   return s;
 }
 
+// IEEE 754 binary16 -> float (light items).
+CANOPY_HD CANOPY_FORCEINLINE float canopyHalfToFloat(uint16_t h) {
+  const uint32_t sign = uint32_t(h & 0x8000u) << 16;
+  const uint32_t exp = (h >> 10) & 0x1Fu;
+  const uint32_t man = h & 0x3FFu;
+  uint32_t bits;
+  if (exp == 0) {  // zero or subnormal: man * 2^-24
+    const float v = float(man) * (1.0f / 16777216.0f);
+    return sign ? -v : v;
+  } else if (exp == 31) {
+    bits = sign | 0x7F800000u | (man << 13);
+  } else {
+    bits = sign | ((exp + 112u) << 23) | (man << 13);
+  }
+  float f;
+  memcpy(&f, &bits, 4);
+  return f;
+}
+
+// The light item `slot` (= item id % lightItemsPerPage) of a light page image.
+CANOPY_HD CANOPY_FORCEINLINE const uint16_t* canopyLightInPage(const void* page, uint32_t slot) {
+  return reinterpret_cast<const uint16_t*>(static_cast<const unsigned char*>(page) + sizeof(CanopyPageHeader) +
+                                           size_t(slot) * kCanopyLightItemBytes);
+}
+
+// Trilinear sample of base `base` (0..18) of a light item at node-local l in [0,1]^3, RGB into rgb.
+CANOPY_HD inline void canopySampleLight(const uint16_t* item, uint32_t base, float lx, float ly, float lz, float rgb[3]) {
+  const float l[3] = {lx, ly, lz};
+  int i0[3];
+  float f[3];
+  for (int a = 0; a < 3; ++a) {
+    float t = l[a] * float(kCanopyLightSize) + 0.5f;  // light voxel centres (i + 0.5) / 4 -> index i + 1
+    const float hi = float(kCanopyLightVoxels - 1) - 1e-6f;
+    t = t < 0.0f ? 0.0f : (t > hi ? hi : t);
+    const float fl = floorf(t);
+    i0[a] = int(fl);
+    f[a] = t - fl;
+  }
+  for (int ch = 0; ch < 3; ++ch) {
+    const uint16_t* plane = item + size_t(base * 3 + ch) * kCanopyLightVoxelCount;
+    float v = 0.0f;
+    for (int c = 0; c < 8; ++c) {
+      const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+      const float wt = (dx ? f[0] : 1.0f - f[0]) * (dy ? f[1] : 1.0f - f[1]) * (dz ? f[2] : 1.0f - f[2]);
+      if (wt == 0.0f) continue;
+      v += wt * canopyHalfToFloat(plane[(i0[0] + dx) + kCanopyLightVoxels * ((i0[1] + dy) + kCanopyLightVoxels * (i0[2] + dz))]);
+    }
+    rgb[ch] = v;
+  }
+}
+
+// float -> IEEE binary16, round to nearest even; values beyond the half range become +-65504
+// (lighting is never infinite), NaN stays NaN. Host only (the writer).
+inline uint16_t canopyFloatToHalf(float f) {
+  uint32_t x;
+  memcpy(&x, &f, 4);
+  const uint16_t sign = uint16_t((x >> 16) & 0x8000u);
+  const uint32_t absx = x & 0x7FFFFFFFu;
+  if (absx > 0x7F800000u) return uint16_t(sign | 0x7E00u);          // NaN
+  if (absx >= 0x477FF000u) return uint16_t(sign | 0x7BFFu);         // >= 65520 rounds past max: clamp
+  if (absx < 0x38800000u) {                                         // subnormal half (or zero)
+    if (absx < 0x33000000u) return sign;                            // < 2^-25: rounds to 0
+    const uint32_t e = absx >> 23;                                  // 102..112
+    const uint32_t m = (absx & 0x7FFFFFu) | 0x800000u;
+    const uint32_t shift = 126 - e;                                 // value / 2^-24 = m >> shift
+    uint32_t h = m >> shift;
+    const uint32_t rem = m & ((1u << shift) - 1), halfway = 1u << (shift - 1);
+    if (rem > halfway || (rem == halfway && (h & 1u))) ++h;
+    return uint16_t(sign | h);
+  }
+  uint32_t h = ((absx >> 13) - (112u << 10));
+  const uint32_t rem = absx & 0x1FFFu;
+  if (rem > 0x1000u || (rem == 0x1000u && (h & 1u))) ++h;
+  return uint16_t(sign | h);
+}
+
 // The result of descending the octree to a point.
 struct CanopyLookup {
   CanopyNode node;       // the node reached
@@ -370,6 +466,10 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyBrickPage(const CanopyModel& m, uint
 }
 CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyBrickSlot(uint32_t brick, uint32_t bricksPerPage) {
   return brick % bricksPerPage;
+}
+// Which page holds light item `item` (== the brick id) of a model (model.lightCount > 0).
+CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyLightPage(const CanopyModel& m, uint32_t item, uint32_t lightItemsPerPage) {
+  return m.firstLightPage + item / lightItemsPerPage;
 }
 
 // ------------------------------------------------------------------------------------------------

@@ -27,6 +27,7 @@ struct Layout {
 Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vector<unsigned char>&)>& emitPage) {
   const uint32_t pageBytes = kCanopyPageBytes;
   const uint32_t perPage = (pageBytes - uint32_t(sizeof(CanopyPageHeader))) / kCanopyBrickBytes;
+  const uint32_t lightPerPage = (pageBytes - uint32_t(sizeof(CanopyPageHeader))) / kCanopyLightItemBytes;
   Layout L;
   // Model ranges.
   std::vector<CanopyModel> models;
@@ -42,10 +43,14 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
     m.firstBrickPage = page;
     m.brickPageCount = (m.brickCount + perPage - 1) / perPage;
     page += m.brickPageCount;
-    m.lightCount = 0;
+    const bool lit = wm.light && !wm.light->empty();
+    if (lit && (m.lightCount != m.brickCount || wm.light->size() * 2 != size_t(m.lightCount) * kCanopyLightItemBytes))
+      throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has inconsistent light items");
+    m.lightCount = lit ? m.lightCount : 0;
     m.firstLightPage = page;
-    m.lightPageCount = 0;
-    m.flags &= ~uint32_t(kCanopyModelHasLight);
+    m.lightPageCount = (m.lightCount + lightPerPage - 1) / lightPerPage;
+    page += m.lightPageCount;
+    m.flags = lit ? (m.flags | kCanopyModelHasLight) : (m.flags & ~uint32_t(kCanopyModelHasLight));
     models.push_back(m);
   }
   for (const CanopyInstance& inst : in.instances)
@@ -53,25 +58,32 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
 
   // Page table (and page images through emitPage).
   std::vector<unsigned char> img(pageBytes);
+  auto addPage = [&](CanopyPageKind kind, uint32_t index, uint32_t model, uint32_t first, uint32_t count, uint32_t itemBytes,
+                     const unsigned char* items) {
+    std::fill(img.begin(), img.end(), 0);
+    CanopyPageHeader h{};
+    std::memcpy(h.magic, kCanopyPageMagic, 4);
+    h.kind = uint32_t(kind);
+    h.pageIndex = index;
+    h.model = model;
+    h.firstItem = first;
+    h.itemCount = count;
+    h.payloadBytes = count * itemBytes;
+    std::memcpy(img.data() + sizeof h, items + size_t(first) * itemBytes, h.payloadBytes);
+    std::memcpy(img.data(), &h, sizeof h);
+    h.crc = canopyPageCrc(img.data(), pageBytes);
+    std::memcpy(img.data(), &h, sizeof h);
+    L.pages.push_back(h);
+    if (emitPage) emitPage(h.pageIndex, img);
+  };
   for (uint32_t mi = 0; mi < models.size(); ++mi) {
     const CanopyModel& m = models[mi];
-    for (uint32_t p = 0; p < m.brickPageCount; ++p) {
-      std::fill(img.begin(), img.end(), 0);
-      CanopyPageHeader h{};
-      std::memcpy(h.magic, kCanopyPageMagic, 4);
-      h.kind = uint32_t(CanopyPageKind::Brick);
-      h.pageIndex = m.firstBrickPage + p;
-      h.model = mi;
-      h.firstItem = p * perPage;
-      h.itemCount = std::min(perPage, m.brickCount - h.firstItem);
-      h.payloadBytes = h.itemCount * kCanopyBrickBytes;
-      std::memcpy(img.data() + sizeof h, in.models[mi].bricks->data() + size_t(h.firstItem) * kCanopyBrickBytes, h.payloadBytes);
-      std::memcpy(img.data(), &h, sizeof h);
-      h.crc = canopyPageCrc(img.data(), pageBytes);
-      std::memcpy(img.data(), &h, sizeof h);
-      L.pages.push_back(h);
-      if (emitPage) emitPage(h.pageIndex, img);
-    }
+    for (uint32_t p = 0; p < m.brickPageCount; ++p)
+      addPage(CanopyPageKind::Brick, m.firstBrickPage + p, mi, p * perPage, std::min(perPage, m.brickCount - p * perPage),
+              kCanopyBrickBytes, in.models[mi].bricks->data());
+    for (uint32_t p = 0; p < m.lightPageCount; ++p)
+      addPage(CanopyPageKind::Light, m.firstLightPage + p, mi, p * lightPerPage, std::min(lightPerPage, m.lightCount - p * lightPerPage),
+              kCanopyLightItemBytes, reinterpret_cast<const unsigned char*>(in.models[mi].light->data()));
   }
 
   // Resident sections.
@@ -143,6 +155,8 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
   h.brickVoxels = kCanopyBrickVoxels;
   h.brickBytes = kCanopyBrickBytes;
   h.bricksPerPage = perPage;
+  h.lightItemBytes = kCanopyLightItemBytes;
+  h.lightItemsPerPage = lightPerPage;
   h.headerCrc = crc32(0, &h, offsetof(CanopyFileHeader, headerCrc));
   std::memcpy(L.resident.data(), &h, sizeof h);
 

@@ -18,6 +18,7 @@ struct CanopyWriteModel {
   CanopyModel record{};                  // firstTile / firstBrickPage / ... are filled by the writer
   const std::vector<CanopyNode>* tiles = nullptr;      // 8 per tile
   const std::vector<unsigned char>* bricks = nullptr;  // record.brickCount * kCanopyBrickBytes
+  const std::vector<uint16_t>* light = nullptr;        // null/empty (density only) or record.lightCount items
 };
 
 struct CanopyWriteInput {

@@ -7,6 +7,7 @@
 // synthetic plants (tests/octreepack/synthetic.h: a leafy shell with holes, a trunk and a uniform
 // core) at 128, 192 and 256 cells. Forest: pipelines/scatter.py places N (default 400) instances of
 // those plants on a 60 m disk; the scene is packed with canopy-octreepack's core in-process.
+// A last row packs the largest plant with 19-base lighting (analytic field, in-process).
 // Reference in the same run: the bytes of the source density VDBs (OpenVDB, zlib-compressed) next
 // to the .canopy, i.e. what streaming-ready layout costs over the compact interchange file.
 #include <chrono>
@@ -23,6 +24,8 @@
 #include "canopy/cli.h"
 #include "formats/lattice_vdb.h"
 #include "tests/octreepack/synthetic.h"
+#include "formats/canopy_write.h"
+#include "tools/octreepack/inputs.h"
 #include "tools/octreepack/octreepack.h"
 
 namespace op = canopy::octreepack;
@@ -122,6 +125,22 @@ int main(int argc, char** argv) {
     o.scene = scene;
     o.output = work + "/forest.canopy";
     rows.push_back(pack("forest (" + std::to_string(instances) + " instances)", o, vdbTotal));
+
+    // Lighting: the largest plant again with 19-base lighting from an analytic field (in-process
+    // build + write: the lbsolve light VDB reader only adds its grid lookups to this).
+    {
+      const std::string p = plants.back();
+      op::ModelSource src = op::readDensityVdb(p, "lit");
+      const auto t0 = std::chrono::steady_clock::now();
+      const op::BuiltModel m = op::buildOctree(src, p, op::testing::analyticLight);
+      canopy::CanopyWriteInput in;
+      in.models.push_back({m.record, &m.tiles, &m.bricks, &m.light});
+      in.instances.push_back(canopy::CanopyInstance{});
+      const std::string out = work + "/lit.canopy";
+      const canopy::CanopyWriteStats st = canopy::writeCanopyFile(out, std::move(in));
+      rows.push_back({p.substr(p.find_last_of('/') + 1) + " + light (19 bases)", m.occupiedCells, 1, fileBytes(p), st.fileBytes,
+                      st.residentBytes, m.record.brickCount, st.pageCount, canopy::secondsSince(t0)});
+    }
 
     std::ostringstream md;
     md << "| input | occupied cells | instances | source VDB bytes | .canopy bytes | .canopy / VDB | resident bytes | resident % | bricks | pages | pack s |\n"

@@ -33,6 +33,18 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         volatile float d = canopy::canopySampleBrick(canopy::canopyBrickInPage(page.data(), canopy::canopyBrickSlot(r.node.brick, bpp)),
                                                      r.local[0], r.local[1], r.local[2]).density;
         (void)d;
+        if (M.lightCount == 0) continue;
+        const uint32_t lpp = f.header().lightItemsPerPage;
+        try {
+          f.readPage(canopy::canopyLightPage(M, r.node.brick, lpp), page.data());
+        } catch (const canopy::Error&) {
+          continue;
+        }
+        float rgb[3];
+        canopy::canopySampleLight(canopy::canopyLightInPage(page.data(), r.node.brick % lpp), uint32_t(k) % canopy::kCanopyLightBases,
+                                  r.local[0], r.local[1], r.local[2], rgb);
+        volatile float l = rgb[0] + rgb[1] + rgb[2];
+        (void)l;
       }
     }
   } catch (const canopy::Error&) {

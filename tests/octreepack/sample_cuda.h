@@ -7,9 +7,10 @@
 
 namespace canopy::octreepack::testing {
 
-// Uploads the model's tiles and all its brick pages, samples each unit-space point (xyz triples)
-// at maxLevel, returns the samples.
+// Uploads the model's tiles and all its brick (and light) pages, samples each unit-space point
+// (xyz triples) at maxLevel, returns the samples; with `lightRgb`, also base `lightBase` of the
+// lighting (3 floats per point; 0 where the node has no brick or the model no light).
 std::vector<CanopySample> sampleOnCuda(const CanopyFile& file, uint32_t model, const std::vector<float>& points,
-                                       uint32_t maxLevel);
+                                       uint32_t maxLevel, std::vector<float>* lightRgb = nullptr, uint32_t lightBase = 0);
 
 }  // namespace canopy::octreepack::testing

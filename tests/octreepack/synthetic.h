@@ -61,4 +61,11 @@ inline ModelSource syntheticPlant(int edge, int32_t origin, const char* name = "
   return s;
 }
 
+// An analytic lighting field: smooth in space, distinct per base and channel.
+inline void analyticLight(int32_t i, int32_t j, int32_t k, float* out) {
+  for (uint32_t b = 0; b < kCanopyLightBases; ++b)
+    for (int c = 0; c < 3; ++c)
+      out[3 * b + c] = 0.1f * float(b + 1) + 0.03f * float(c) + 0.01f * float(i) - 0.004f * float(j) + 0.002f * float(k * k % 17);
+}
+
 }  // namespace canopy::octreepack::testing

@@ -25,17 +25,22 @@ namespace {
 
 const std::string kFrozen = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v1.0.canopy";
 
-// The frozen file's content: a 20-cell synthetic plant (depth 2), two instances.
+// The frozen file's content: a 20-cell synthetic plant (depth 2, density only) and an 8-cell one
+// with analytic lighting (depth 0), three instances.
 std::vector<unsigned char> smallFileBytes() {
   const op::ModelSource src = op::testing::syntheticPlant(20, 2, "frozen", 0);
   const op::BuiltModel m = op::buildOctree(src, "frozen");
+  const op::BuiltModel lit = op::buildOctree(op::testing::syntheticPlant(8, 0, "lit", 0), "lit", op::testing::analyticLight);
   CanopyWriteInput in;
-  in.models.push_back({m.record, &m.tiles, &m.bricks});
+  in.models.push_back({m.record, &m.tiles, &m.bricks, nullptr});
+  in.models.push_back({lit.record, &lit.tiles, &lit.bricks, &lit.light});
   CanopyInstance a{}, b{};
   a.modelToWorld[0] = a.modelToWorld[5] = a.modelToWorld[10] = 1.0f;
   b = a;
   b.modelToWorld[3] = 4.0f;
-  in.instances = {a, b};
+  CanopyInstance c = a;
+  c.model = 1;
+  in.instances = {a, b, c};
   in.metadata = R"({"tool":"test_canopy_file","note":"frozen .canopy 1.0"})";
   return writeCanopyBytes(std::move(in));
 }
@@ -65,8 +70,11 @@ TEST(CanopyFile, FrozenSmallFileStillReads) {
   CanopyFile f = CanopyFile::open(kFrozen);
   EXPECT_EQ(f.header().major, 1);
   EXPECT_EQ(f.header().minor, 0);
-  ASSERT_EQ(f.modelCount(), 1u);
-  ASSERT_EQ(f.instanceCount(), 2u);
+  ASSERT_EQ(f.modelCount(), 2u);
+  ASSERT_EQ(f.instanceCount(), 3u);
+  EXPECT_EQ(f.model(0).lightCount, 0u);
+  EXPECT_EQ(f.model(1).lightCount, f.model(1).brickCount);
+  EXPECT_EQ(f.instance(2).model, 1u);
   EXPECT_FLOAT_EQ(f.instance(1).modelToWorld[3], 4.0f);
   EXPECT_EQ(std::string(f.model(0).name), "frozen");
   EXPECT_EQ(f.model(0).depth, 2u);
@@ -80,6 +88,25 @@ TEST(CanopyFile, FrozenSmallFileStillReads) {
     ASSERT_NEAR(v.albedo[1], c.albedo[1], 0.5 / 255 + 1e-6);
   }
   for (uint32_t i = 0; i < f.pageCount(); ++i) EXPECT_NO_THROW(f.readPage(i));
+  // The lit model's root light item: voxel centres hold the mean of the analytic light over 2x2x2
+  // cells (float16: relative error <= 2^-11).
+  const CanopyModel& L = f.model(1);
+  ASSERT_EQ(L.depth, 0u);
+  const auto page = f.readPage(canopyLightPage(L, 0, f.header().lightItemsPerPage));
+  const uint16_t* item = canopyLightInPage(page.data(), 0);
+  float tmp[kCanopyLightChannels];
+  for (uint32_t base : {0u, 7u, 18u})
+    for (int z = 0; z < 4; ++z)
+      for (int x = 0; x < 4; ++x) {
+        double ref[3] = {0, 0, 0};
+        for (int s = 0; s < 8; ++s) {
+          op::testing::analyticLight(L.latticeMin[0] + 2 * x + (s & 1), L.latticeMin[1] + 2 + ((s >> 1) & 1), L.latticeMin[2] + 2 * z + (s >> 2), tmp);
+          for (int ch = 0; ch < 3; ++ch) ref[ch] += tmp[3 * base + ch] / 8.0;
+        }
+        float rgb[3];
+        canopySampleLight(item, base, (float(x) + 0.5f) / 4, 1.5f / 4, (float(z) + 0.5f) / 4, rgb);
+        for (int ch = 0; ch < 3; ++ch) ASSERT_NEAR(rgb[ch], ref[ch], std::abs(ref[ch]) * 0.0005 + 1e-6) << base << " " << x << " " << z;
+      }
   // The writer still produces exactly these bytes.
   EXPECT_EQ(readFile(kFrozen), smallFileBytes()) << "the .canopy layout changed: bump the version";
 }
@@ -140,7 +167,7 @@ TEST(CanopyFile, FlippedBytesAreCaught) {
   std::vector<size_t> positions;
   for (size_t i = 0; i < good.size(); ++i) {
     const bool inPageHeader = i >= h.pagesOffset && (i - h.pagesOffset) % h.pageBytes < sizeof(CanopyPageHeader);
-    if (i < tableEnd || inPageHeader || (i < h.pagesOffset && i % 11 == 0) || (i >= h.pagesOffset && i % 29 == 0))
+    if (i < tableEnd || inPageHeader || (i < h.pagesOffset && i % 11 == 0) || (i >= h.pagesOffset && i % 61 == 0))
       positions.push_back(i);
   }
   size_t pageFlips = 0;

@@ -20,6 +20,7 @@
 #include "canopy/atomic_file.h"
 #include "canopy/hash.h"
 #include "formats/canopy_file.h"
+#include "formats/canopy_write.h"
 #include "formats/lattice_vdb.h"
 #include "tests/octreepack/packed_sampler.h"
 #include "tests/octreepack/synthetic.h"
@@ -390,6 +391,122 @@ TEST(OctreepackCli, ScatteredForestOf400InstancesPacks) {
   EXPECT_GT(perModel[1], 150u);
 }
 
+// ---- lighting -------------------------------------------------------------------------------------
+namespace {
+// A fully occupied cube (every block present at every level, random densities: no constant nodes).
+op::ModelSource denseCube(int edge) {
+  op::ModelSource s;
+  s.name = "cube";
+  for (int a = 0; a < 3; ++a) s.latticeMin[a] = -2, s.latticeMax[a] = edge - 3;
+  for (int k = 0; k < edge; ++k)
+    for (int j = 0; j < edge; ++j)
+      for (int i = 0; i < edge; ++i) {
+        const uint32_t h = op::testing::mix32(uint32_t(i + 97 * j + 9973 * k));
+        s.cells.push_back({{i - 2, j - 2, k - 2}, 0.1f + 0.8f * op::testing::unit(h), 0.0f, {0.2f, 0.5f, 0.1f}});
+      }
+  return s;
+}
+}  // namespace
+
+// Light levels are the Haar averages of the source lighting: a light voxel of level d (2^(depth-d+1)
+// cells wide) holds the mean of the source over its cells (float16: relative error <= 2^-11).
+TEST(OctreepackLight, LightLevelsAreBoxFiltersOfTheSourceLighting) {
+  const op::ModelSource src = denseCube(32);
+  const op::BuiltModel m = op::buildOctree(src, "cube", op::testing::analyticLight);
+  canopy::CanopyWriteInput in;
+  in.models.push_back({m.record, &m.tiles, &m.bricks, &m.light});
+  in.instances.push_back(canopy::CanopyInstance{});
+  const std::vector<unsigned char> bytes = canopy::writeCanopyBytes(std::move(in));
+  CanopyFile f = CanopyFile::fromMemory(bytes.data(), bytes.size(), "cube.canopy");
+  const canopy::CanopyModel& M = f.model(0);
+  ASSERT_EQ(M.depth, 2u);
+  ASSERT_EQ(M.lightCount, M.brickCount);
+  std::mt19937 rng(5);
+  float tmp[canopy::kCanopyLightChannels];
+  for (uint32_t level = 0; level <= M.depth; ++level) {
+    const int cellsPerVoxel = 2 << (M.depth - level);
+    const int voxels = 32 / cellsPerVoxel;  // light voxels per axis over the occupied cube
+    for (int n = 0; n < 40; ++n) {
+      const int g[3] = {int(rng() % uint32_t(voxels)), int(rng() % uint32_t(voxels)), int(rng() % uint32_t(voxels))};
+      const uint32_t base = rng() % canopy::kCanopyLightBases;
+      double ref[3] = {0, 0, 0};
+      const int c = cellsPerVoxel;
+      for (int z = 0; z < c; ++z)
+        for (int y = 0; y < c; ++y)
+          for (int x = 0; x < c; ++x) {
+            op::testing::analyticLight(-2 + g[0] * c + x, -2 + g[1] * c + y, -2 + g[2] * c + z, tmp);
+            for (int ch = 0; ch < 3; ++ch) ref[ch] += tmp[3 * base + ch];
+          }
+      const float u[3] = {(float(g[0]) + 0.5f) * float(c) / float(M.rootCells), (float(g[1]) + 0.5f) * float(c) / float(M.rootCells),
+                          (float(g[2]) + 0.5f) * float(c) / float(M.rootCells)};
+      const canopy::CanopyLookup r = f.descend(0, u[0], u[1], u[2], level);
+      ASSERT_EQ(r.level, level);
+      ASSERT_NE(r.node.brick, canopy::kCanopyNone);
+      const auto page = f.readPage(canopy::canopyLightPage(M, r.node.brick, f.header().lightItemsPerPage));
+      float rgb[3];
+      canopy::canopySampleLight(canopy::canopyLightInPage(page.data(), r.node.brick % f.header().lightItemsPerPage), base, r.local[0],
+                                r.local[1], r.local[2], rgb);
+      for (int ch = 0; ch < 3; ++ch) {
+        const double want = ref[ch] / double(c * c * c);
+        ASSERT_NEAR(rgb[ch], want, std::abs(want) * 6e-4 + 1e-5) << "level " << level << " base " << base;
+      }
+    }
+  }
+}
+
+// An lbsolve-style light VDB (19 Vec3 grids B00..B18) packs through the CLI; samples at light
+// voxel centres of the finest level equal the 2x2x2 mean of the grids' values.
+TEST(OctreepackLight, LbsolveLightVdbPacksThroughTheCli) {
+  const std::string dir = tmpDir();
+  const op::ModelSource src = syntheticPlant(16, 0, "litcli", 0);
+  writeSourceVdb(dir + "/litcli.density.vdb", src);
+  openvdb::GridPtrVec grids;
+  float tmp[canopy::kCanopyLightChannels];
+  for (uint32_t b = 0; b < canopy::kCanopyLightBases; ++b) {
+    auto g = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
+    char name[8];
+    std::snprintf(name, sizeof name, "B%02u", b);
+    g->setName(name);
+    auto acc = g->getAccessor();
+    for (int k = 0; k < 16; ++k)
+      for (int j = 0; j < 16; ++j)
+        for (int i = 0; i < 16; ++i) {
+          op::testing::analyticLight(i, j, k, tmp);
+          acc.setValue(openvdb::Coord(i, j, k), openvdb::Vec3s(tmp[3 * b], tmp[3 * b + 1], tmp[3 * b + 2]));
+        }
+    grids.push_back(g);
+  }
+  canopy::vdbio::writeVdb(dir + "/litcli.light.vdb", grids);
+  const std::string out = dir + "/litcli.canopy";
+  ASSERT_EQ(run("'" + dir + "/litcli.density.vdb' '" + dir + "/litcli.light.vdb' -o '" + out + "'"), 0);
+  ASSERT_EQ(run("verify '" + out + "'"), 0);
+  CanopyFile f = CanopyFile::open(out);
+  const canopy::CanopyModel& M = f.model(0);
+  ASSERT_TRUE(M.flags & canopy::kCanopyModelHasLight);
+  ASSERT_EQ(M.lightCount, M.brickCount);
+  ASSERT_EQ(M.depth, 1u);
+  size_t checked = 0;
+  for (int z = 0; z < 8; ++z)
+    for (int y = 0; y < 8; ++y)
+      for (int x = 0; x < 8; ++x) {  // finest light voxels (2 cells) over the 16^3 lattice
+        const float u[3] = {(2.0f * float(x) + 1.0f) / 16.0f, (2.0f * float(y) + 1.0f) / 16.0f, (2.0f * float(z) + 1.0f) / 16.0f};
+        const canopy::CanopyLookup r = f.descend(0, u[0], u[1], u[2], M.depth);
+        if (r.level != M.depth || r.node.brick == canopy::kCanopyNone) continue;
+        double ref[3] = {0, 0, 0};
+        for (int s = 0; s < 8; ++s) {
+          op::testing::analyticLight(2 * x + (s & 1), 2 * y + ((s >> 1) & 1), 2 * z + (s >> 2), tmp);
+          for (int ch = 0; ch < 3; ++ch) ref[ch] += tmp[3 * 4 + ch] / 8.0;
+        }
+        const auto page = f.readPage(canopy::canopyLightPage(M, r.node.brick, f.header().lightItemsPerPage));
+        float rgb[3];
+        canopy::canopySampleLight(canopy::canopyLightInPage(page.data(), r.node.brick % f.header().lightItemsPerPage), 4, r.local[0],
+                                  r.local[1], r.local[2], rgb);
+        for (int ch = 0; ch < 3; ++ch) ASSERT_NEAR(rgb[ch], ref[ch], std::abs(ref[ch]) * 6e-4 + 1e-5);
+        ++checked;
+      }
+  EXPECT_GT(checked, 50u);
+}
+
 #ifdef CANOPY_HAS_CUDA
 #include "canopy/device.h"
 #include "tests/octreepack/sample_cuda.h"
@@ -410,6 +527,7 @@ TEST(OctreepackSample, CudaMatchesCpuReference) {
   for (float& p : pts) p = U(rng);
   for (uint32_t level : {0u, 1u, 2u, 3u}) {
     const std::vector<CanopySample> gpu = op::testing::sampleOnCuda(f, 0, pts, level);
+    ASSERT_EQ(gpu.size(), pts.size() / 3);
     for (size_t i = 0; i < gpu.size(); ++i) {
       const CanopySample c = S.sampleUnit(0, &pts[3 * i], level);
       ASSERT_NEAR(gpu[i].density, c.density, 1e-5f) << "level " << level << " point " << i;
@@ -417,5 +535,23 @@ TEST(OctreepackSample, CudaMatchesCpuReference) {
       ASSERT_NEAR(gpu[i].wood, c.wood, 1e-5f);
     }
   }
+  // Lighting on the device (float16 decode + trilinear) vs the host, on a lit dense cube.
+  const op::BuiltModel m = op::buildOctree(denseCube(32), "cube", op::testing::analyticLight);
+  canopy::CanopyWriteInput in;
+  in.models.push_back({m.record, &m.tiles, &m.bricks, &m.light});
+  const std::vector<unsigned char> bytes = canopy::writeCanopyBytes(std::move(in));
+  CanopyFile lit = CanopyFile::fromMemory(bytes.data(), bytes.size(), "cube.canopy");
+  std::vector<float> rgb;
+  op::testing::sampleOnCuda(lit, 0, pts, 2, &rgb, 9);
+  for (size_t i = 0; i < pts.size() / 3; i += 7) {
+    const canopy::CanopyLookup r = lit.descend(0, pts[3 * i], pts[3 * i + 1], pts[3 * i + 2], 2);
+    if (r.node.brick == canopy::kCanopyNone) continue;
+    const auto page = lit.readPage(canopy::canopyLightPage(lit.model(0), r.node.brick, lit.header().lightItemsPerPage));
+    float ref[3];
+    canopy::canopySampleLight(canopy::canopyLightInPage(page.data(), r.node.brick % lit.header().lightItemsPerPage), 9, r.local[0],
+                              r.local[1], r.local[2], ref);
+    for (int ch = 0; ch < 3; ++ch) ASSERT_NEAR(rgb[3 * i + ch], ref[ch], 1e-5f);
+  }
 #endif
 }
+

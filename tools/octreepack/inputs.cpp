@@ -2,6 +2,7 @@
 #include "tools/octreepack/inputs.h"
 
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <sstream>
 
@@ -76,6 +77,28 @@ ModelSource readDensityVdb(const std::string& path, const std::string& name) {
     }
   }
   return src;
+}
+
+LightVdb readLightVdb(const std::string& path) {
+  vdbio::VdbFile file = vdbio::readVdb(path);
+  std::vector<openvdb::Vec3SGrid::ConstPtr> grids;
+  for (uint32_t b = 0; b < kCanopyLightBases; ++b) {
+    char name[8];
+    std::snprintf(name, sizeof name, "B%02u", b);
+    grids.push_back(file.require<openvdb::Vec3SGrid>(name));
+  }
+  LightVdb out;
+  out.sourceLabel = vdbio::describeSource(path);
+  // Tree::getValue on a const tree is thread-safe (no accessor cache): the builder calls this from
+  // several threads.
+  out.fn = [grids](int32_t i, int32_t j, int32_t k, float* o) {
+    const openvdb::Coord ijk(i, j, k);
+    for (size_t b = 0; b < grids.size(); ++b) {
+      const openvdb::Vec3s v = grids[b]->tree().getValue(ijk);
+      o[3 * b] = v[0], o[3 * b + 1] = v[1], o[3 * b + 2] = v[2];
+    }
+  };
+  return out;
 }
 
 SceneDesc readSceneJson(const std::string& path) {

@@ -15,6 +15,14 @@ namespace canopy::octreepack {
 
 ModelSource readDensityVdb(const std::string& path, const std::string& name);
 
+// The uncompressed lighting of canopy-lbsolve (19 Vec3 grids B00..B18, lattice index space) as a
+// LightFn (trilinear-free: the value stored at each cell; the grids' background elsewhere).
+struct LightVdb {
+  LightFn fn;
+  std::string sourceLabel;
+};
+LightVdb readLightVdb(const std::string& path);
+
 struct SceneDesc {
   struct Model {
     std::string name, density, light;  // paths resolved against the JSON file's folder

@@ -7,14 +7,14 @@
 int main(int argc, char** argv) {
   canopy::Tool tool("canopy-octreepack",
                     "Packs density lattices (and scene instances) into one streamable .canopy file.\n"
-                    "  canopy-octreepack PLANT.density.vdb [PLANT.light.chaar] -o PLANT.canopy\n"
+                    "  canopy-octreepack PLANT.density.vdb [PLANT.light.chaar|PLANT.light.vdb] -o PLANT.canopy\n"
                     "  canopy-octreepack --scene SCENE.json -o SCENE.canopy\n"
                     "  canopy-octreepack info FILE.canopy [--json]\n"
                     "  canopy-octreepack verify FILE.canopy",
                     /*withDevice=*/false);
   CLI::App& app = tool.app();
   canopy::octreepack::OctreepackOptions o;
-  app.add_option("inputs", o.inputs, "PLANT.density.vdb [PLANT.light.chaar]");
+  app.add_option("inputs", o.inputs, "PLANT.density.vdb [PLANT.light.chaar | PLANT.light.vdb]");
   app.add_option("-o,--output", o.output, "Output .canopy file");
   app.add_option("--scene", o.scene, "Scene instance list (SCENE.json, docs/scene-json.md)");
   app.add_option("--scene-light", o.sceneLight, "Coarse scene lighting lattice (VDB, lbsolve --scene)");

@@ -176,6 +176,138 @@ Level coarserLevel(const Level& child) {
   return P;
 }
 
+// Light grid of one block (kCanopyLightSize^3 voxels, each 2 block voxels wide), 57 planes.
+constexpr int kL = int(kCanopyLightSize);  // 4
+constexpr int kLV = kL * kL * kL;           // 64
+constexpr int kCh = int(kCanopyLightChannels);
+struct LightBlock {
+  float v[kCh][kLV];
+  bool avail[kLV];
+};
+inline int lightIndex(int x, int y, int z) { return x + kL * (y + kL * z); }
+
+// Fills unavailable voxels (no occupied block below them) with the mean of the available ones.
+void fillUnavailable(LightBlock& b) {
+  int n = 0;
+  double mean[kCh] = {};
+  for (int i = 0; i < kLV; ++i)
+    if (b.avail[i]) {
+      ++n;
+      for (int c = 0; c < kCh; ++c) mean[c] += b.v[c][i];
+    }
+  for (int i = 0; i < kLV; ++i)
+    if (!b.avail[i])
+      for (int c = 0; c < kCh; ++c) b.v[c][i] = n ? float(mean[c] / n) : 0.0f;
+}
+
+// Light levels aligned with the density levels (lights[d].blocks[i] belongs to levels[d].keys[i]),
+// then one light item per brick.
+void buildLight(const ModelSource& src, const std::string& what, const LightFn& light, const std::vector<Level>& levels,
+                const std::vector<std::pair<uint32_t, uint64_t>>& bricks, std::vector<uint16_t>& out) {
+  const size_t depth = levels.size() - 1;
+  std::vector<std::vector<LightBlock>> lights(levels.size());
+  // Finest: the mean of the source over each light voxel's 2x2x2 lattice cells.
+  lights[depth].resize(levels[depth].keys.size());
+  parallelFor(int64_t(levels[depth].keys.size()), [&](int64_t bi) {
+    uint32_t k[3];
+    unpackKey(levels[depth].keys[size_t(bi)], k);
+    LightBlock& lb = lights[depth][size_t(bi)];
+    float tmp[kCh];
+    for (int z = 0; z < kL; ++z)
+      for (int y = 0; y < kL; ++y)
+        for (int x = 0; x < kL; ++x) {
+          double sum[kCh] = {};
+          for (int s = 0; s < 8; ++s) {
+            const int32_t i = src.latticeMin[0] + int32_t(kB * k[0]) + 2 * x + (s & 1);
+            const int32_t j = src.latticeMin[1] + int32_t(kB * k[1]) + 2 * y + ((s >> 1) & 1);
+            const int32_t kk = src.latticeMin[2] + int32_t(kB * k[2]) + 2 * z + (s >> 2);
+            light(i, j, kk, tmp);
+            for (int c = 0; c < kCh; ++c) {
+              if (!std::isfinite(tmp[c]))
+                throw invalidInput(what + ": lighting is not finite at cell (" + std::to_string(i) + "," + std::to_string(j) + "," +
+                                   std::to_string(kk) + ")");
+              sum[c] += tmp[c];
+            }
+          }
+          const int li = lightIndex(x, y, z);
+          for (int c = 0; c < kCh; ++c) lb.v[c][li] = float(sum[c] / 8.0);
+          lb.avail[li] = true;
+        }
+  });
+  // Coarser: the mean of the available 2x2x2 voxels below.
+  for (int d = int(depth) - 1; d >= 0; --d) {
+    const Level& L = levels[size_t(d)];
+    const Level& C = levels[size_t(d) + 1];
+    lights[size_t(d)].resize(L.keys.size());
+    parallelFor(int64_t(L.keys.size()), [&](int64_t bi) {
+      uint32_t k[3];
+      unpackKey(L.keys[size_t(bi)], k);
+      LightBlock& lb = lights[size_t(d)][size_t(bi)];
+      for (int z = 0; z < kL; ++z)
+        for (int y = 0; y < kL; ++y)
+          for (int x = 0; x < kL; ++x) {
+            const int li = lightIndex(x, y, z);
+            const auto it = C.index.find(packKey(2 * k[0] + uint32_t(x >> 1), 2 * k[1] + uint32_t(y >> 1), 2 * k[2] + uint32_t(z >> 1)));
+            lb.avail[li] = false;
+            if (it == C.index.end()) continue;
+            const LightBlock& cb = lights[size_t(d) + 1][it->second];
+            double sum[kCh] = {};
+            int n = 0;
+            for (int s = 0; s < 8; ++s) {
+              const int ci = lightIndex((2 * x + (s & 1)) & 3, (2 * y + ((s >> 1) & 1)) & 3, (2 * z + (s >> 2)) & 3);
+              if (!cb.avail[ci]) continue;
+              ++n;
+              for (int c = 0; c < kCh; ++c) sum[c] += cb.v[c][ci];
+            }
+            if (n == 0) continue;
+            for (int c = 0; c < kCh; ++c) lb.v[c][li] = float(sum[c] / n);
+            lb.avail[li] = true;
+          }
+    });
+    // Availability is decided from the level below before any filling (filled values are not
+    // "available" for the level above).
+  }
+  // Items: interior + border (neighbour block of the same level, else the edge voxel repeated).
+  // The fill of unavailable voxels happens on copies so that avail flags above stay exact.
+  out.assign(bricks.size() * size_t(kCh) * kCanopyLightVoxelCount, 0);
+  parallelFor(int64_t(bricks.size()), [&](int64_t bi) {
+    const uint32_t level = bricks[size_t(bi)].first;
+    const uint64_t key = bricks[size_t(bi)].second;
+    const Level& L = levels[level];
+    uint32_t k[3];
+    unpackKey(key, k);
+    const int64_t blocksPerAxis = int64_t(1) << level;
+    std::vector<LightBlock> nb(27);  // ~400 KB: on the heap, not a worker thread's stack
+    bool has[27];
+    for (int i = 0; i < 27; ++i) {
+      const int64_t x = int64_t(k[0]) + i % 3 - 1, y = int64_t(k[1]) + (i / 3) % 3 - 1, z = int64_t(k[2]) + i / 9 - 1;
+      const bool inside = x >= 0 && y >= 0 && z >= 0 && x < blocksPerAxis && y < blocksPerAxis && z < blocksPerAxis;
+      has[i] = false;
+      if (!inside) continue;
+      auto it = L.index.find(packKey(uint32_t(x), uint32_t(y), uint32_t(z)));
+      if (it == L.index.end()) continue;
+      has[i] = true;
+      nb[i] = lights[level][it->second];
+      fillUnavailable(nb[i]);
+    }
+    uint16_t* item = out.data() + size_t(bi) * size_t(kCh) * kCanopyLightVoxelCount;
+    for (int z = 0; z < int(kCanopyLightVoxels); ++z)
+      for (int y = 0; y < int(kCanopyLightVoxels); ++y)
+        for (int x = 0; x < int(kCanopyLightVoxels); ++x) {
+          int v[3] = {x - 1, y - 1, z - 1};
+          int n = 0;
+          for (int a = 0, mul = 1; a < 3; ++a, mul *= 3) n += ((v[a] < 0 ? -1 : (v[a] >= kL ? 1 : 0)) + 1) * mul;
+          if (!has[n]) {  // repeat this block's edge voxel
+            n = 13;
+            for (int a = 0; a < 3; ++a) v[a] = std::min(std::max(v[a], 0), kL - 1);
+          }
+          const int li = lightIndex((v[0] + kL) % kL, (v[1] + kL) % kL, (v[2] + kL) % kL);
+          const size_t si = size_t(x) + kCanopyLightVoxels * (size_t(y) + kCanopyLightVoxels * size_t(z));
+          for (int c = 0; c < kCh; ++c) item[size_t(c) * kCanopyLightVoxelCount + si] = canopyFloatToHalf(nb[n].v[c][li]);
+        }
+  });
+}
+
 }  // namespace
 
 uint32_t depthForCells(int64_t maxDim) {
@@ -184,7 +316,7 @@ uint32_t depthForCells(int64_t maxDim) {
   return depth;
 }
 
-BuiltModel buildOctree(const ModelSource& src, const std::string& what) {
+BuiltModel buildOctree(const ModelSource& src, const std::string& what, const LightFn& light) {
   checkSource(src, what);
   int64_t maxDim = 0;
   for (int a = 0; a < 3; ++a) maxDim = std::max<int64_t>(maxDim, int64_t(src.latticeMax[a]) - src.latticeMin[a] + 1);
@@ -223,7 +355,7 @@ BuiltModel buildOctree(const ModelSource& src, const std::string& what) {
     uint32_t level;
     uint64_t key;
   };
-  std::vector<BrickRef> bricks;
+  std::vector<BrickRef> bricks;  // in brick id order
   std::vector<Pending> queue{{0, packKey(0, 0, 0), -1}};
   for (size_t qi = 0; qi < queue.size(); ++qi) {
     const Pending p = queue[qi];
@@ -290,6 +422,14 @@ BuiltModel buildOctree(const ModelSource& src, const std::string& what) {
           }
         }
   });
+  if (light) {
+    std::vector<std::pair<uint32_t, uint64_t>> refs;
+    refs.reserve(bricks.size());
+    for (const BrickRef& b : bricks) refs.emplace_back(b.level, b.key);
+    buildLight(src, what, light, levels, refs, out.light);
+    M.lightCount = M.brickCount;
+    M.flags |= kCanopyModelHasLight;
+  }
   return out;
 }
 

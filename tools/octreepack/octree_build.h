@@ -13,6 +13,7 @@
 // to fine, children in order c.
 #pragma once
 #include <array>
+#include <functional>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -38,17 +39,24 @@ struct ModelSource {
   std::vector<SourceCell> cells;                // occupied cells, any order, inside the lattice
 };
 
+// A model's lighting at one lattice cell (cell centre): 19 bases x RGB, out[3 * base + channel].
+// Called concurrently from several threads.
+using LightFn = std::function<void(int32_t i, int32_t j, int32_t k, float* out)>;
+
 struct BuiltModel {
   CanopyModel record{};                         // firstTile/firstBrickPage etc. set by the writer
   std::vector<CanopyNode> tiles;                // 8 per tile, model-relative child indices
   std::vector<unsigned char> bricks;            // brickCount * kCanopyBrickBytes
+  std::vector<uint16_t> light;                  // empty, or brickCount light items (canopy_file.h)
   std::string sourceLabel;
   uint64_t occupiedCells = 0;
 };
 
 // Validates the source (finite values, density >= 0, cells inside the lattice, no duplicates,
-// lattice not absurd) and builds its octree. Throws canopy::Error(InvalidInput) naming `what`.
-BuiltModel buildOctree(const ModelSource& src, const std::string& what);
+// lattice not absurd) and builds its octree; with `light`, also one light item per brick (light
+// levels = Haar averages of the lighting, layout in canopy_file.h). Throws
+// canopy::Error(InvalidInput) naming `what` (also for non-finite lighting).
+BuiltModel buildOctree(const ModelSource& src, const std::string& what, const LightFn& light = nullptr);
 
 // Helpers shared with the tests: the finest level that covers `maxDim` cells per axis.
 uint32_t depthForCells(int64_t maxDim);

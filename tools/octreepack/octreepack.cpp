@@ -35,7 +35,6 @@ std::string stemOf(const std::string& path) {
 
 nlohmann::json octreepack(const OctreepackOptions& o) {
   const auto t0 = std::chrono::steady_clock::now();
-  if (o.output.empty()) throw usageError("no output: give -o OUT.canopy");
   struct ModelIn {
     std::string name, density, light;
   };
@@ -67,17 +66,19 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
     if (o.inputs.size() > 2) throw usageError("one plant takes PLANT.density.vdb and at most one PLANT.light.chaar");
     std::string light;
     if (o.inputs.size() == 2) {
-      if (!endsWith(o.inputs[1], ".chaar")) throw usageError(o.inputs[1] + ": the second input must be a .chaar lighting file");
+      if (!endsWith(o.inputs[1], ".chaar") && !endsWith(o.inputs[1], ".vdb"))
+        throw usageError(o.inputs[1] + ": the second input must be lighting: PLANT.light.chaar (canopy-haar) or PLANT.light.vdb (canopy-lbsolve)");
       light = o.inputs[1];
     }
     modelsIn.push_back({stemOf(o.inputs[0]), o.inputs[0], light});
     instances.push_back(identityInstance(0));
   }
+  if (o.output.empty()) throw usageError("no output: give -o OUT.canopy");
   for (const auto& m : modelsIn) {
     requireReadableFile(m.density);
     if (!m.light.empty() && !o.ignoreLight) {
       requireReadableFile(m.light);
-      lightUnsupported(m.light);
+      if (endsWith(m.light, ".chaar")) lightUnsupported(m.light);
     }
   }
 
@@ -85,13 +86,22 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
   std::vector<BuiltModel> built;
   built.reserve(modelsIn.size());
   nlohmann::json sources = nlohmann::json::array();
+  Progress progress("octreepack models", int64_t(modelsIn.size()));
   for (size_t i = 0; i < modelsIn.size(); ++i) {
     logInfo("octreepack: model " + std::to_string(i) + " '" + modelsIn[i].name + "' from " + modelsIn[i].density);
     ModelSource src = readDensityVdb(modelsIn[i].density, modelsIn[i].name);
-    built.push_back(buildOctree(src, modelsIn[i].density));
-    sources.push_back({{"name", modelsIn[i].name}, {"density", src.sourceLabel}});
+    nlohmann::json source = {{"name", modelsIn[i].name}, {"density", src.sourceLabel}};
+    LightFn light;
+    if (!modelsIn[i].light.empty() && !o.ignoreLight) {  // .chaar was refused above: this is an lbsolve VDB
+      LightVdb lv = readLightVdb(modelsIn[i].light);
+      light = std::move(lv.fn);
+      source["light"] = lv.sourceLabel;
+    }
+    built.push_back(buildOctree(src, modelsIn[i].density, light));
+    sources.push_back(source);
+    progress.add();
   }
-  for (auto& b : built) w.models.push_back({b.record, &b.tiles, &b.bricks});
+  for (auto& b : built) w.models.push_back({b.record, &b.tiles, &b.bricks, &b.light});
   w.instances = instances;
   meta["models"] = sources;
   if (!o.sceneLight.empty()) {
@@ -101,6 +111,7 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
     w.sceneLightValues = std::move(sl.values);
     meta["scene_light"] = sl.sourceLabel;
   }
+  progress.done();
   w.metadata = meta.dump();
   const CanopyWriteStats stats = writeCanopyFile(o.output, std::move(w));
 
@@ -192,7 +203,7 @@ std::string formatInfo(const nlohmann::json& j) {
     o << "model '" << m["name"].get<std::string>() << "': depth " << m["depth"].get<uint32_t>() << " (" << m["root_cells"].get<uint32_t>()
       << " cells/axis), " << m["nodes"].get<uint64_t>() << " nodes, " << m["bricks"].get<uint64_t>() << " bricks in "
       << m["brick_pages"].get<uint64_t>() << " pages, " << m["instances"].get<uint64_t>() << " instances, light: "
-      << (m["has_light"].get<bool>() ? "yes" : "no") << "\n";
+      << (m["has_light"].get<bool>() ? "yes (" + std::to_string(m["light_pages"].get<uint64_t>()) + " pages)" : std::string("no")) << "\n";
     for (const auto& l : m["levels"])
       o << "  level " << l["level"].get<uint32_t>() << " (voxel = " << l["voxel_cells"].get<uint32_t>() << " cells): "
         << l["bricks"].get<uint64_t>() << " bricks, " << l["constant_nodes"].get<uint64_t>() << " constant, "
