@@ -267,7 +267,8 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
       streamer.beginPass(stamp);
       backend->render(scene, shade, fs.camera, stamp);
       missing = streamer.endPass(stamp);
-      if (!o.converge || missing == 0) break;
+      const bool complete = o.converge || (o.warmStart && f == 0);
+      if (!complete || missing == 0) break;
       streamer.waitLoader();
     }
     frameMs.push_back(1000.0 * secondsSince(tf));
