@@ -23,8 +23,9 @@
 //      instance's scale). Front to back: C += T alpha c, T *= 1 - alpha; stop at T < kStopT.
 //   5. Shading of a sample: albedo * (sun * Tshadow + indirect). Tshadow is a shadow cone towards
 //      the sun through every instance (the same lock-step march without shading, its footprint
-//      starting at the primary cone's and widening by shadowAperture per unit length). indirect is
-//      the LB seam, see indirectLight().
+//      starting at the primary cone's and widening by shadowAperture per unit length), traced
+//      once per shadow interval (about a voxel of the primary cone) and reused by the samples in
+//      it. indirect is the LB seam, see indirectLight().
 //   6. Streaming: bricks live in pages. A brick whose page is resident (pageSlot[page] >= 0) is
 //      sampled and its slot's use stamp set; a missing page has its want stamp set and the sample
 //      falls back to coarser data: a resident ancestor brick up to kFallbackLevels above, else the
@@ -104,7 +105,7 @@ constexpr int kHitCapacity = 16;        // instances pending or active along one
 constexpr uint32_t kFallbackLevels = 3;  // a missing brick may use a resident ancestor this much coarser
 constexpr float kMaxConstantCells = 4.0f;  // a uniform non-empty node is shaded at least every 4 cells
 constexpr float kStopT = 1e-3f;          // early stop: opacity above 0.999
-constexpr float kShadowStopT = 1e-3f;
+constexpr float kShadowStopT = 1e-2f;  // a shadow cone stops once 99% of the sun is blocked
 constexpr float kMinContribution = 1e-5f;  // samples below this (T * alpha) are not shaded
 
 struct ModelView {
@@ -328,7 +329,7 @@ CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m,
 // The segment of instance `inst` at ray position t (world), the cone footprint there being
 // `footprint` (world units). tout is the end of the instance's box interval.
 CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView& inst, V3 o, V3 dir, float t,
-                                         float tout, float footprint) {
+                                         float tout, float footprint, bool shading) {
   const ModelView& m = s.models[inst.model];
   const V3 uo = applyPoint(inst.worldToUnit, o);
   const V3 ud = applyVector(inst.worldToUnit, dir);
@@ -348,7 +349,7 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
     g.k = s.shade.sigma * c.density * cellsPerWorld;
     g.albedo[0] = c.albedo[0], g.albedo[1] = c.albedo[1], g.albedo[2] = c.albedo[2];
     float tEnd = tExit;
-    if (c.density > 0.0f) {
+    if (shading && c.density > 0.0f) {  // a shadow cone integrates it in one go
       const float maxLen = kMaxConstantCells / cellsPerWorld;
       tEnd = tEnd < t + maxLen ? tEnd : t + maxLen;
     }
@@ -515,7 +516,7 @@ CANOPY_HD inline float shadowTransmittance(const SceneView& s, V3 p, float footp
         continue;
       }
       active = true;
-      const Segment g = instanceSegment(s, s.instances[hit.instance], p, d, t, hit.tout, footprint0 + t * s.shade.shadowAperture);
+      const Segment g = instanceSegment(s, s.instances[hit.instance], p, d, t, hit.tout, footprint0 + t * s.shade.shadowAperture, false);
       k += g.k;
       next = g.tEnd < next ? g.tEnd : next;
     }
@@ -542,6 +543,7 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
   walkBegin(s, w, o, d, 0.0f, tMax);
   float t = 0.0f;
   float T = 1.0f;
+  float sunT = 1.0f, shadowT = -3.0e38f, shadowSpacing = 0.0f;
   while (true) {
     walkRetire(w, t);
     if (w.count == 0 && w.done) break;
@@ -550,6 +552,7 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
     Segment seg[kHitCapacity];
     bool active = false;
     const float footprint = t * pixelAngle;
+    float minCell = 3.0e38f;
     for (int h = 0; h < w.count; ++h) {
       const Hit& hit = w.hits[h];
       if (hit.tin > t) {
@@ -558,7 +561,8 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
         continue;
       }
       active = true;
-      seg[h] = instanceSegment(s, s.instances[hit.instance], o, d, t, hit.tout, footprint);
+      seg[h] = instanceSegment(s, s.instances[hit.instance], o, d, t, hit.tout, footprint, true);
+      minCell = s.instances[hit.instance].cellWorld < minCell ? s.instances[hit.instance].cellWorld : minCell;
       k += seg[h].k;
       next = seg[h].tEnd < next ? seg[h].tEnd : next;
     }
@@ -572,8 +576,15 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
     const float dt = next - t;
     const float alpha = 1.0f - expf(-k * dt);
     if (alpha > 0.0f && T * alpha > kMinContribution) {
-      const V3 p = o + d * (t + 0.5f * dt);
-      const float sunT = s.shade.shadows ? shadowTransmittance(s, p, footprint) : 1.0f;
+      const float tm = t + 0.5f * dt;
+      const V3 p = o + d * tm;
+      // One shadow cone per shadow interval: samples closer than about a voxel (1.5 cells of the
+      // nearest active instance, or two footprints) to the last shadow origin reuse its value.
+      if (s.shade.shadows && !(tm - shadowT < shadowSpacing)) {
+        sunT = shadowTransmittance(s, p, footprint);
+        shadowT = tm;
+        shadowSpacing = 2.0f * footprint > 1.5f * minCell ? 2.0f * footprint : 1.5f * minCell;
+      }
       for (int h = 0; h < w.count; ++h) {
         if (w.hits[h].tin > t || seg[h].k <= 0.0f) continue;
         float ind[3];

@@ -31,6 +31,8 @@ int main(int argc, char** argv) {
   bool noShadows = false;
   app.add_flag("--no-shadows", noShadows, "Direct sun without shadow cones");
   app.add_flag("--converge", o.converge, "Per frame, render passes until no loadable page is missing (reference quality)");
+  bool coldStart = false;
+  app.add_flag("--no-warm-start", coldStart, "Render the first frame in real-time mode too (node means until pages arrive)");
   app.add_option("--loader-threads", o.loaderThreads, "Page reader threads")->capture_default_str()->check(CLI::Range(1, 64));
 
   return tool.run(argc, argv, [&] {
@@ -41,6 +43,7 @@ int main(int argc, char** argv) {
     o.width = w;
     o.height = h;
     o.shadows = !noShadows;
+    o.warmStart = !coldStart;
     tool.report() = canopy::play::play(o, tool.device());
   });
 }

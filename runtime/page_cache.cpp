@@ -35,7 +35,7 @@ void PageCache::touch(uint32_t slot, uint32_t stamp) {
   pushFront(slot);
 }
 
-PageCache::Assignment PageCache::assign(uint32_t page, uint32_t stamp) {
+PageCache::Assignment PageCache::assign(uint32_t page, uint32_t protectSince) {
   Assignment a;
   if (table_[page] >= 0) {
     a.slot = table_[page];
@@ -46,7 +46,7 @@ PageCache::Assignment PageCache::assign(uint32_t page, uint32_t stamp) {
     s = free_.back();
     free_.pop_back();
   } else {
-    if (tail_ < 0 || slotStamp_[size_t(tail_)] == stamp) return a;  // all in use this frame
+    if (tail_ < 0 || slotStamp_[size_t(tail_)] >= protectSince) return a;  // all in use this frame
     s = uint32_t(tail_);
     unlink(s);
     a.evicted = slotPage_[s];
@@ -54,9 +54,7 @@ PageCache::Assignment PageCache::assign(uint32_t page, uint32_t stamp) {
     ++evictions_;
   }
   slotPage_[s] = page;
-  // a new page counts as used in the previous frame (it was asked for then): it goes to the front
-  // of the LRU list but may be evicted by a later load of this same frame if every slot is taken
-  slotStamp_[s] = stamp - 1;
+  slotStamp_[s] = protectSince;
   table_[page] = int32_t(s);
   pushFront(s);
   a.slot = int32_t(s);

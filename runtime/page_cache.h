@@ -2,8 +2,9 @@
 //
 // `slots` pool slots hold pages; table()[page] is the slot or -1. LRU order is an intrusive list
 // over slots: touch() moves a slot used in the current frame to the front; assign() takes a free
-// slot or evicts the tail (least recently used), but never a slot used in the current frame (then
-// the load is deferred: the page stays missing and is asked for again by a later frame). A page
+// slot or evicts the tail (least recently used), but never a slot used in the current frame, all
+// of whose passes count (then the load is deferred: the page stays missing and is asked for again
+// by a later frame). A page
 // found corrupt is marked bad and never cached or requested again.
 #pragma once
 #include <cstdint>
@@ -27,8 +28,10 @@ class PageCache {
     int32_t slot = -1;       // -1: deferred (every slot in use this frame)
     int64_t evicted = -1;    // the page that lost the slot, or -1
   };
-  // Gives `page` a slot (free or LRU) and updates the table; `stamp` is the current frame.
-  Assignment assign(uint32_t page, uint32_t stamp);
+  // Gives `page` a slot (free or LRU) and updates the table. Slots used at or after stamp
+  // `protectSince` (the current frame's first pass) are never evicted; the new page counts as used
+  // at protectSince (it was asked for by this frame or the one before).
+  Assignment assign(uint32_t page, uint32_t protectSince);
   uint64_t evictions() const { return evictions_; }
 
  private:

@@ -261,13 +261,18 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
     scene.setSun(fs.toSun);
     const auto tf = std::chrono::steady_clock::now();
     uint32_t missing = 0;
+    const uint32_t frameStart = stamp + 1;
     for (int pass = 0; pass < 64; ++pass) {
       ++stamp;
       ++passes;
-      streamer.beginPass(stamp);
+      const uint64_t loadedBefore = streamer.stats().pagesLoaded;
+      streamer.beginPass(frameStart);
       backend->render(scene, shade, fs.camera, stamp);
       missing = streamer.endPass(stamp);
-      if (!o.converge || missing == 0) break;
+      const bool complete = o.converge || (o.warmStart && f == 0);
+      if (!complete || missing == 0) break;
+      // the frame's pages do not all fit in the cache: nothing more can be installed
+      if (pass > 0 && streamer.stats().pagesLoaded == loadedBefore) break;
       streamer.waitLoader();
     }
     frameMs.push_back(1000.0 * secondsSince(tf));

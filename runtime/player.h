@@ -29,10 +29,13 @@ struct PlayOptions {
   float sunIntensity = 1.0f;
   float stepFactor = 0.5f;           // brick step, in voxels of the chosen level
   float lodBias = 0.0f;
-  float shadowAperture = 0.01f;      // shadow cone growth (radians)
+  float shadowAperture = 0.03f;      // shadow cone growth per unit length (soft shadows, coarser
+                                     // levels and longer steps far from the receiver)
   bool shadows = true;
   float background[3] = {0.60f, 0.72f, 0.85f};  // linear RGB behind the scene (PNG only)
   bool converge = false;             // per frame, render passes until no loadable page is missing
+  bool warmStart = true;             // the first frame converges (a complete first image), the
+                                     // rest are real-time (one pass, loads land in later frames)
   int loaderThreads = 2;
   uint32_t stagingPages = 256;       // pages read ahead per pass at most (16 MiB pinned)
 };

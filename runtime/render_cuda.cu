@@ -4,7 +4,8 @@
 // Uploads: the loader reads pages into pinned staging buffers; upload() copies a page into its slot
 // on the copy stream, setPageTable() copies the table after them on the same stream and records an
 // event that the compute stream waits on before the next kernel. A kernel therefore never sees a
-// table entry whose page is still in flight, and never waits for the disk.
+// table entry whose page is still in flight, and never waits for the disk; the host does not wait
+// for the copies either (they overlap the host's work until the kernel launch).
 #include <cstring>
 
 #include "canopy/parallel_cuda.cuh"
@@ -32,7 +33,7 @@ class CudaBackend final : public Backend {
     CANOPY_CUDA_CHECK(cudaSetDevice(device));
     CANOPY_CUDA_CHECK(cudaStreamCreateWithFlags(&compute_, cudaStreamNonBlocking));
     CANOPY_CUDA_CHECK(cudaStreamCreateWithFlags(&copy_, cudaStreamNonBlocking));
-    CANOPY_CUDA_CHECK(cudaEventCreateWithFlags(&uploaded_, cudaEventDisableTiming));
+    for (int i = 0; i < 2; ++i) CANOPY_CUDA_CHECK(cudaEventCreateWithFlags(&tableCopied_[i], cudaEventDisableTiming));
     // node tiles: every model's, resident (they are the cache's page table of bricks)
     size_t tiles = 0;
     for (size_t m = 0; m < scene.models.size(); ++m) tiles = std::max(tiles, size_t(scene.modelFirstTile[m] + scene.models[m].tileCount) * 8);
@@ -54,15 +55,17 @@ class CudaBackend final : public Backend {
     CANOPY_CUDA_CHECK(cudaMemset(table_.data(), 0xFF, table_.size() * sizeof(int32_t)));  // -1: missing
     CANOPY_CUDA_CHECK(cudaMemset(slotUsed_.data(), 0, slotUsed_.size() * sizeof(uint32_t)));
     CANOPY_CUDA_CHECK(cudaMemset(pageWanted_.data(), 0, pageWanted_.size() * sizeof(uint32_t)));
-    CANOPY_CUDA_CHECK(cudaMallocHost(&tableHost_, table_.size() * sizeof(int32_t)));
+    for (int i = 0; i < 2; ++i) CANOPY_CUDA_CHECK(cudaMallocHost(&tableHost_[i], table_.size() * sizeof(int32_t)));
     slots_ = slots;
   }
   ~CudaBackend() override {
     cudaStreamSynchronize(copy_);
     cudaStreamSynchronize(compute_);
     if (staging_) cudaFreeHost(staging_);
-    if (tableHost_) cudaFreeHost(tableHost_);
-    cudaEventDestroy(uploaded_);
+    for (int i = 0; i < 2; ++i) {
+      if (tableHost_[i]) cudaFreeHost(tableHost_[i]);
+      cudaEventDestroy(tableCopied_[i]);
+    }
     cudaStreamDestroy(copy_);
     cudaStreamDestroy(compute_);
   }
@@ -77,11 +80,14 @@ class CudaBackend final : public Backend {
     CANOPY_CUDA_CHECK(cudaMemcpyAsync(pool_.data() + size_t(slot) * pageBytes_, staged, pageBytes_, cudaMemcpyHostToDevice, copy_));
   }
   void setPageTable(const std::vector<int32_t>& table) override {
-    CANOPY_CUDA_CHECK(cudaStreamSynchronize(copy_));  // the pinned mirror may be rewritten now
-    std::memcpy(tableHost_, table.data(), table.size() * sizeof(int32_t));
-    CANOPY_CUDA_CHECK(cudaMemcpyAsync(table_.data(), tableHost_, table.size() * sizeof(int32_t), cudaMemcpyHostToDevice, copy_));
-    CANOPY_CUDA_CHECK(cudaEventRecord(uploaded_, copy_));
-    CANOPY_CUDA_CHECK(cudaStreamWaitEvent(compute_, uploaded_, 0));
+    // two pinned mirrors, alternating: the one rewritten now was copied two calls ago, a copy that
+    // a finished kernel has already waited for, so this never waits for the page uploads
+    mirror_ ^= 1;
+    CANOPY_CUDA_CHECK(cudaEventSynchronize(tableCopied_[mirror_]));
+    std::memcpy(tableHost_[mirror_], table.data(), table.size() * sizeof(int32_t));
+    CANOPY_CUDA_CHECK(cudaMemcpyAsync(table_.data(), tableHost_[mirror_], table.size() * sizeof(int32_t), cudaMemcpyHostToDevice, copy_));
+    CANOPY_CUDA_CHECK(cudaEventRecord(tableCopied_[mirror_], copy_));
+    CANOPY_CUDA_CHECK(cudaStreamWaitEvent(compute_, tableCopied_[mirror_], 0));
   }
   void waitUploads() override { CANOPY_CUDA_CHECK(cudaStreamSynchronize(copy_)); }
 
@@ -120,7 +126,8 @@ class CudaBackend final : public Backend {
  private:
   uint32_t pageBytes_, pageCount_, slots_ = 0;
   cudaStream_t compute_ = nullptr, copy_ = nullptr;
-  cudaEvent_t uploaded_ = nullptr;
+  cudaEvent_t tableCopied_[2] = {nullptr, nullptr};
+  int mirror_ = 0;
   cuda::DeviceBuffer<CanopyNode> tiles_;
   cuda::DeviceBuffer<ModelView> models_;
   cuda::DeviceBuffer<InstanceView> instances_;
@@ -131,7 +138,7 @@ class CudaBackend final : public Backend {
   cuda::DeviceBuffer<uint32_t> slotUsed_, pageWanted_;
   cuda::DeviceBuffer<float> image_;
   unsigned char* staging_ = nullptr;
-  int32_t* tableHost_ = nullptr;
+  int32_t* tableHost_[2] = {nullptr, nullptr};
 };
 
 }  // namespace

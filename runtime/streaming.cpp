@@ -67,7 +67,7 @@ bool Streamer::idle() {
   return todo_.empty() && busy_ == 0 && done_.empty();
 }
 
-void Streamer::beginPass(uint32_t stamp) {
+void Streamer::beginPass(uint32_t frameStart) {
   // staging buffers of the previous pass's uploads are free once the copies completed
   if (!uploadedBuffers_.empty()) {
     backend_.waitUploads();
@@ -91,7 +91,7 @@ void Streamer::beginPass(uint32_t stamp) {
       freeBuffers_.push_back(j.buffer);
       continue;
     }
-    const PageCache::Assignment a = cache_.assign(j.page, stamp);
+    const PageCache::Assignment a = cache_.assign(j.page, frameStart);
     if (a.slot < 0) {
       ++stats_.pagesDeferred;
       freeBuffers_.push_back(j.buffer);

@@ -40,8 +40,9 @@ class Streamer {
   Streamer(const Streamer&) = delete;
   Streamer& operator=(const Streamer&) = delete;
 
-  // Before a render pass with stamp `stamp`: installs finished loads and publishes the table.
-  void beginPass(uint32_t stamp);
+  // Before a render pass: installs finished loads and publishes the table. `frameStart` is the
+  // stamp of the current frame's first pass (pages used since then are not evicted).
+  void beginPass(uint32_t frameStart);
   // After the pass: LRU update and new requests. Returns the number of pages wanted this pass
   // that are missing and could still be loaded (0 = the pass was complete).
   uint32_t endPass(uint32_t stamp);

@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cstring>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -25,6 +26,7 @@
 #include "runtime/player.h"
 #include "runtime/scene.h"
 #include "tests/octreepack/synthetic.h"
+#include "bench/play/forest.h"
 #include "tests/play/scenes.h"
 
 namespace pl = canopy::play;
@@ -406,4 +408,49 @@ TEST(Render, SmallCacheStreamsAForestAndConvergesToTheFullCacheImage) {
   const std::vector<float> want = render(ref, &full);
   EXPECT_EQ(int(full["evictions"]), 0);
   EXPECT_LT(rms(last, want), 1e-6) << small.dump();
+}
+
+// ---------------------------------------------------------------------------------------------
+// The benchmark's scene generator (bench/play/forest.h), its CPU-side logic
+// ---------------------------------------------------------------------------------------------
+
+TEST(PlayBench, ScatterIsDeterministicAndPlacesEveryInstanceOnTheDisk) {
+  pl::bench::ScatterOptions so;
+  so.count = 400;
+  so.radius = 40;
+  const auto a = pl::bench::scatterInstances(so), b = pl::bench::scatterInstances(so);
+  ASSERT_EQ(a.size(), 400u);
+  std::vector<int> perModel(so.models, 0);
+  for (size_t i = 0; i < a.size(); ++i) {
+    EXPECT_EQ(std::memcmp(&a[i], &b[i], sizeof(a[i])), 0);
+    const float x = a[i].modelToWorld[3], y = a[i].modelToWorld[7], z = a[i].modelToWorld[11];
+    EXPECT_LE(x * x + z * z, so.radius * so.radius * 1.0001f);
+    EXPECT_EQ(y, 0.0f);
+    const float scale = std::sqrt(a[i].modelToWorld[0] * a[i].modelToWorld[0] + a[i].modelToWorld[8] * a[i].modelToWorld[8]);
+    EXPECT_GE(scale, so.scaleMin - 1e-5f);
+    EXPECT_LE(scale, so.scaleMax + 1e-5f);
+    ASSERT_LT(a[i].model, so.models);
+    ++perModel[a[i].model];
+  }
+  for (int n : perModel) EXPECT_GT(n, 100);  // every model used, roughly uniformly
+}
+
+TEST(PlayBench, A400InstanceForestRendersWithEveryInstanceInTheGrid) {
+  pl::bench::ScatterOptions so;
+  so.count = 400;
+  so.models = 2;
+  so.radius = 25;
+  const std::string p = pt::tmpDir("scenes") + "/forest400.canopy";
+  pt::writeScene(p, {pt::sphereModel(16, 6, 0.5f, 0.25f), pt::sphereModel(12, 4, 0.8f, 0.25f)}, pl::bench::scatterInstances(so));
+  const canopy::CanopyFile f = canopy::CanopyFile::open(p);
+  const pl::HostScene scene = pl::buildScene(f);
+  std::vector<int> seen(400, 0);
+  for (uint32_t id : scene.gridItems) seen[id] = 1;
+  for (int v : seen) EXPECT_EQ(v, 1);
+  pl::PlayOptions o = smallView(p, 48, 27);
+  o.camera = "orbit:elevation=35,turns=0";
+  const std::vector<float> img = render(o);
+  int covered = 0;
+  for (size_t i = 3; i < img.size(); i += 4) covered += img[i] > 0.5f;
+  EXPECT_GT(covered, 50);  // measured 110: 400 balls of 1.5-3 m on a 50 m disk seen from 30 m
 }

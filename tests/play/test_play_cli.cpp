@@ -100,7 +100,10 @@ TEST(PlayCli, ErrorsHaveDocumentedExitCodesAndLeaveNoOutput) {
   const std::vector<unsigned char> bytes = canopy::readFile(sceneFile());
   const std::string truncated = dir + "/truncated.canopy";
   canopy::writeFileAtomic(truncated, bytes.data(), bytes.size() / 2);
+  const std::string badPath = dir + "/bad-path.json";
+  std::ofstream(badPath) << R"({"keyframes":[{"frame":0,"position":[0,0,5]}]})";  // no target
   const std::vector<Case> cases = {
+      {"'" + sceneFile() + "' -o '" + out + "' --camera '" + badPath + "' --device cpu", 3, "target"},
       {"'" + dir + "/missing.canopy' -o '" + out + "' --device cpu", 2, "missing.canopy"},
       {"'" + truncated + "' -o '" + out + "' --device cpu", 3, "truncated.canopy"},
       {"'" + sceneFile() + "' -o '" + out + "' --size 40by30 --device cpu", 1, "--size"},

@@ -70,18 +70,22 @@ TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
 }
 
 // A quarter-size cache along a camera path through the forest (real-time mode: one pass per
-// frame, loads land between frames): the path completes; after warm-up (the last view held for 8
-// frames) the frame equals the converged full-cache GPU frame (RMS < 1e-3: the same data, the same
-// code, once the last view's pages are resident).
+// frame, loads land between frames): the path completes, pages are evicted; after warm-up (the
+// last view held for 8 frames) the frame equals the converged full-cache GPU frame (RMS < 1e-3:
+// the same data and code once the last view's pages are resident; the CPU twin of this test,
+// Render.SmallCacheStreamsAForestAndConvergesToTheFullCacheImage, measures 0).
 TEST(PlayCuda, cuda_QuarterCacheCameraPathMatchesFullCacheAfterWarmUp) {
   if (canopy::cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA device";
   const std::string p = forestFile();
   const canopy::CanopyFile f = canopy::CanopyFile::open(p);
   const double pageMb = double(f.pageCount()) * f.header().pageBytes / (1024.0 * 1024.0);
   const std::string path = pt::tmpDir("cuda") + "/path.json";
-  std::ofstream(path) << R"({"keyframes":[{"frame":0,"position":[-9,1.5,7],"target":[0,0,0],"fov":50},)"
-                      << R"({"frame":16,"position":[9,1.5,7],"target":[0,0,0],"fov":50},)"
-                      << R"({"frame":24,"position":[0,1.0,0],"target":[6,0,-3],"fov":50}]})";
+  // far -> through the forest among the trees (fine pages, more than the cache holds) -> far view
+  // on the other side, held from frame 24 (its coarse pages fit in a quarter of the cache)
+  std::ofstream(path) << R"({"keyframes":[{"frame":0,"position":[-20,6,16],"target":[0,0,0],"fov":50},)"
+                      << R"({"frame":8,"position":[-5,1.0,1.2],"target":[6,0,-3],"fov":50},)"
+                      << R"({"frame":16,"position":[5,1.0,1.2],"target":[-6,0,-3],"fov":50},)"
+                      << R"({"frame":24,"position":[20,6,16],"target":[0,0,0],"fov":50}]})";
   pl::PlayOptions o;
   o.input = p;
   o.width = 160;
@@ -93,6 +97,7 @@ TEST(PlayCuda, cuda_QuarterCacheCameraPathMatchesFullCacheAfterWarmUp) {
   const nlohmann::json r = pl::play(o, cuda(), &small);
   EXPECT_EQ(int(r["frames"]), 32);
   EXPECT_GT(int(r["pages_streamed"]), 0);
+  EXPECT_GT(int(r["evictions"]), 0) << r.dump();
   pl::PlayOptions ref = o;
   ref.cacheMb = pageMb * 2;
   ref.converge = true;
