@@ -65,12 +65,15 @@ int lines(const std::string& s) {
   return n;
 }
 
+// Each test gets its own scratch directory (CTest may run them in parallel).
 class VoxelizeCli : public ::testing::Test {
  protected:
-  static std::string dir;
-  static void SetUpTestSuite() { dir = scratchDir("voxelize_cli"); }
+  std::string dir;
+  void SetUp() override {
+    dir = scratchDir(std::string("voxelize_cli_") +
+                     ::testing::UnitTest::GetInstance()->current_test_info()->name());
+  }
 };
-std::string VoxelizeCli::dir;
 
 std::vector<float> oneTriangle(float bad = 0.f, bool useBad = false) {
   std::vector<float> p = {0, 0, 0, 1, 0, 0, 0, 1, 0.5f};
