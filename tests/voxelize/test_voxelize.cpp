@@ -402,3 +402,51 @@ TEST(VoxelizeAssets, GroveWholeSceneHoldsEveryInstance) {
   o.meshIndex = 1;
   EXPECT_EQ(voxelize(o).stats.inputTriangles, scene.meshes[1].triangles);
 }
+
+// The OpenMesh formats: the same unit cube as ASCII OFF, STL and PLY (with face colours) and as
+// an OBJ with two material runs.
+TEST(VoxelizeFormats, OffStlPlyObjLoad) {
+  const std::string dir = canopy::test::scratchDir("voxelize_formats");
+  const char* v[8] = {"0 0 0", "1 0 0", "1 1 0", "0 1 0", "0 0 1", "1 0 1", "1 1 1", "0 1 1"};
+  const int f[12][3] = {{0, 2, 1}, {0, 3, 2}, {4, 5, 6}, {4, 6, 7}, {0, 1, 5}, {0, 5, 4},
+                        {2, 3, 7}, {2, 7, 6}, {1, 2, 6}, {1, 6, 5}, {0, 4, 7}, {0, 7, 3}};
+  std::string off = "OFF\n8 12 0\n", ply, stl = "solid cube\n", obj;
+  for (auto s : v) off += std::string(s) + "\n";
+  for (auto& t : f) off += "3 " + std::to_string(t[0]) + " " + std::to_string(t[1]) + " " + std::to_string(t[2]) + "\n";
+  ply = "ply\nformat ascii 1.0\nelement vertex 8\nproperty float x\nproperty float y\nproperty float z\n"
+        "element face 12\nproperty list uchar int vertex_indices\nproperty uchar red\nproperty uchar green\n"
+        "property uchar blue\nend_header\n";
+  for (auto s : v) ply += std::string(s) + "\n";
+  for (auto& t : f) ply += "3 " + std::to_string(t[0]) + " " + std::to_string(t[1]) + " " + std::to_string(t[2]) + " 255 0 0\n";
+  for (auto& t : f) {
+    stl += "facet normal 0 0 0\nouter loop\n";
+    for (int k = 0; k < 3; ++k) stl += std::string("vertex ") + v[t[k]] + "\n";
+    stl += "endloop\nendfacet\n";
+  }
+  stl += "endsolid cube\n";
+  for (auto s : v) obj += std::string("v ") + s + "\n";
+  obj += "usemtl bark\n";
+  for (int i = 0; i < 12; ++i) {
+    if (i == 4) obj += "usemtl leaves\n";
+    obj += "f " + std::to_string(f[i][0] + 1) + " " + std::to_string(f[i][1] + 1) + " " + std::to_string(f[i][2] + 1) + "\n";
+  }
+  canopy::test::writeText(dir + "/cube.off", off);
+  canopy::test::writeText(dir + "/cube.ply", ply);
+  canopy::test::writeText(dir + "/cube.stl", stl);
+  canopy::test::writeText(dir + "/cube.obj", obj);
+  for (const char* ext : {"off", "ply", "stl", "obj"}) {
+    SCOPED_TRACE(ext);
+    const mesh::Mesh m = mesh::loadMesh(dir + "/cube." + ext);
+    EXPECT_EQ(m.triangles.size(), 12u);
+    VoxelizeOptions o = opts(16, 2);
+    o.input = dir + "/cube." + ext;
+    const VoxelizeResult r = voxelize(o);
+    EXPECT_GT(r.stats.occupiedCells, 50u);
+    if (std::string(ext) == "ply") {
+      ASSERT_TRUE(m.hasTriangleColors);
+      EXPECT_NEAR(r.cells[0].albedo[0], 1.0, 1e-6);  // red faces, linear
+      EXPECT_NEAR(r.cells[0].albedo[1], 0.0, 1e-6);
+    }
+    if (std::string(ext) == "obj") EXPECT_EQ(r.stats.woodTriangles, 4u);
+  }
+}

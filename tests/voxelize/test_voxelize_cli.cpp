@@ -65,17 +65,57 @@ int lines(const std::string& s) {
   return n;
 }
 
+// Each test gets its own scratch directory (CTest may run them in parallel).
 class VoxelizeCli : public ::testing::Test {
  protected:
-  static std::string dir;
-  static void SetUpTestSuite() { dir = scratchDir("voxelize_cli"); }
+  std::string dir;
+  void SetUp() override {
+    dir = scratchDir(std::string("voxelize_cli_") +
+                     ::testing::UnitTest::GetInstance()->current_test_info()->name());
+  }
 };
-std::string VoxelizeCli::dir;
 
 std::vector<float> oneTriangle(float bad = 0.f, bool useBad = false) {
   std::vector<float> p = {0, 0, 0, 1, 0, 0, 0, 1, 0.5f};
   if (useBad) p[4] = bad;
   return p;
+}
+
+// The sample plant as a .gltf with its buffer in sample.bin and its leaf texture either in
+// leaf.png (external) or inline as a data: URI (embedded). imageUri overrides the external name.
+void writeSampleGltf(const std::string& dir, const std::string& name, bool embedded,
+                     const std::string& imageUri = "leaf.png") {
+  const auto glb = canopy::samplePlantGlb();
+  uint32_t jsonLen, binLen;
+  std::memcpy(&jsonLen, glb.data() + 12, 4);
+  std::memcpy(&binLen, glb.data() + 20 + jsonLen, 4);
+  auto doc = nlohmann::json::parse(std::string(glb.begin() + 20, glb.begin() + 20 + jsonLen));
+  const std::vector<uint8_t> bin(glb.begin() + 28 + jsonLen, glb.begin() + 28 + jsonLen + binLen);
+  auto& image = doc["images"][0];
+  const auto& view = doc["bufferViews"][image["bufferView"].get<size_t>()];
+  const size_t off = view["byteOffset"], len = view["byteLength"];
+  const std::vector<uint8_t> png(bin.begin() + long(off), bin.begin() + long(off + len));
+  image.erase("bufferView");
+  image.erase("mimeType");
+  if (embedded) {
+    static const char* b64 = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    std::string enc;
+    for (size_t i = 0; i < png.size(); i += 3) {
+      const uint32_t v = uint32_t(png[i]) << 16 | (i + 1 < png.size() ? uint32_t(png[i + 1]) << 8 : 0) |
+                         (i + 2 < png.size() ? png[i + 2] : 0);
+      enc += b64[v >> 18 & 63];
+      enc += b64[v >> 12 & 63];
+      enc += i + 1 < png.size() ? b64[v >> 6 & 63] : '=';
+      enc += i + 2 < png.size() ? b64[v & 63] : '=';
+    }
+    image["uri"] = "data:image/png;base64," + enc;
+  } else {
+    image["uri"] = imageUri;
+    writeBytes(dir + "/leaf.png", png);
+  }
+  doc["buffers"][0]["uri"] = "sample.bin";
+  writeBytes(dir + "/sample.bin", bin);
+  writeText(dir + "/" + name, doc.dump());
 }
 
 }  // namespace
@@ -111,6 +151,9 @@ TEST_F(VoxelizeCli, BadInputsFailCleanly) {
          writeText(d + "/nobuf.gltf", g.doc.dump());
        },
        "nobuf.gltf", "", 2, "nobuf.gltf"},
+      {"gltf with missing image",
+       [](const std::string& d) { writeSampleGltf(d, "noimg.gltf", false, "missing.png"); }, "noimg.gltf", "", 2,
+       "noimg.gltf"},
       {"NaN vertex",
        [](const std::string& d) {
          writeBytes(d + "/nan.glb", toGlb(triangleGltf(oneTriangle(std::numeric_limits<float>::quiet_NaN(), true), {0, 1, 2})));
@@ -168,6 +211,25 @@ TEST_F(VoxelizeCli, OutputBytesAreIdenticalAcrossRuns) {
   const auto a = readBytes(dir + "/a.vdb"), b = readBytes(dir + "/b.vdb");
   ASSERT_GT(a.size(), 100u);
   EXPECT_EQ(a, b);
+}
+
+// The same plant as .glb (image in the binary chunk), .gltf + external .png, and .gltf with a
+// data: URI image gives the same lattice.
+TEST_F(VoxelizeCli, EmbeddedAndExternalImagesGiveTheSameLattice) {
+  writeBytes(dir + "/img.glb", canopy::samplePlantGlb());
+  writeSampleGltf(dir, "external.gltf", false);
+  writeSampleGltf(dir, "embedded.gltf", true);
+  double density[3];
+  const char* names[3] = {"img.glb", "external.gltf", "embedded.gltf"};
+  for (int i = 0; i < 3; ++i) {
+    const RunResult r = run("'" + dir + "/" + names[i] + "' -q -r 24 -o '" + dir + "/img.vdb' --json", dir);
+    ASSERT_EQ(r.code, 0) << names[i] << ": " << r.err;
+    const auto j = nlohmann::json::parse(r.out);
+    density[i] = j["total_density"];
+    EXPECT_GT(j["alpha_rejected"].get<int>(), 0) << names[i];
+  }
+  EXPECT_EQ(density[0], density[1]);
+  EXPECT_EQ(density[0], density[2]);
 }
 
 TEST_F(VoxelizeCli, JsonReportAndInfo) {

@@ -430,6 +430,9 @@ tinygltf::Model parseModel(const uint8_t* data, size_t size, bool binary, const 
     throw Error(io ? ExitCode::Io : ExitCode::InvalidInput,
                 name + ": invalid glTF (" + (e.empty() ? "unknown error" : e) + ")");
   }
+  // tinygltf only warns about an external image it cannot find; Canopy needs every image.
+  if (warn.find("ile not found") != std::string::npos)
+    throw ioError(name + ": a referenced file is missing (" + oneLine(warn) + ")");
   return model;
 }
 
