@@ -60,6 +60,13 @@ CANOPY_HD CANOPY_FORCEINLINE int popcount64(uint64_t v) {
 #endif
 }
 
+// Full unrolling of the sampler's fixed-size loops on the device keeps its small arrays in registers.
+#if defined(__CUDA_ARCH__)
+#define CANOPY_UNROLL _Pragma("unroll")
+#else
+#define CANOPY_UNROLL
+#endif
+
 // Rounded float arithmetic that a compiler may not fuse (device: __fmul_rn never becomes an FMA).
 CANOPY_HD CANOPY_FORCEINLINE float mulRn(float a, float b) {
 #if defined(__CUDA_ARCH__)
@@ -210,18 +217,24 @@ CANOPY_HD inline Rgb sampleBrick(const BrickRecord& rec, const Reader& read, int
   if (mask == 1u && !(rec.flags & BrickRecord::kRaw)) return read(rec.first);  // only the average
   Rgb v[2][2][2];  // [z][y][x]
   if (rec.flags & BrickRecord::kRaw) {
+    CANOPY_UNROLL
     for (int dz = 0; dz < 2; ++dz)
+      CANOPY_UNROLL
       for (int dy = 0; dy < 2; ++dy)
+        CANOPY_UNROLL
         for (int dx = 0; dx < 2; ++dx)
           v[dz][dy][dx] = brickCoef(mask, rec.first, read, brickIndex(lx + dx, ly + dy, lz + dz));
   } else {
+    CANOPY_UNROLL
     for (int kz = 0; kz < 4; ++kz) {
       if (!axisNeeds(kz, lz)) continue;
       Rgb w[2][2];  // [y][x]: x and y already unlifted, coefficient index kz along z
+      CANOPY_UNROLL
       for (int ky = 0; ky < 4; ++ky) {
         if (!axisNeeds(ky, ly)) continue;
         Rgb u[2];  // [x]: x unlifted, coefficient indices (ky, kz)
         if ((mask >> brickIndex(0, ky, kz)) & 0xfu) {
+          CANOPY_UNROLL
           for (int kx = 0; kx < 4; ++kx) {
             if (!axisNeeds(kx, lx)) continue;
             const Rgb c = brickCoef(mask, rec.first, read, brickIndex(kx, ky, kz));
@@ -231,20 +244,28 @@ CANOPY_HD inline Rgb sampleBrick(const BrickRecord& rec, const Reader& read, int
         } else {
           u[0] = u[1] = Rgb{};  // a row of zeros: unlifts to zeros
         }
+        CANOPY_UNROLL
         for (int dy = 0; dy < 2; ++dy)
+          CANOPY_UNROLL
           for (int dx = 0; dx < 2; ++dx) foldAxis(w[dy][dx], u[dx], ky, ly + dy);
       }
+      CANOPY_UNROLL
       for (int dz = 0; dz < 2; ++dz)
+        CANOPY_UNROLL
         for (int dy = 0; dy < 2; ++dy)
+          CANOPY_UNROLL
           for (int dx = 0; dx < 2; ++dx) foldAxis(v[dz][dy][dx], w[dy][dx], kz, lz + dz);
     }
   }
   float ch[2][2][2];
   Rgb out;
+  CANOPY_UNROLL
   for (int i = 0; i < 8; ++i) (&ch[0][0][0])[i] = (&v[0][0][0])[i].r;
   out.r = trilinear(ch, fx, fy, fz);
+  CANOPY_UNROLL
   for (int i = 0; i < 8; ++i) (&ch[0][0][0])[i] = (&v[0][0][0])[i].g;
   out.g = trilinear(ch, fx, fy, fz);
+  CANOPY_UNROLL
   for (int i = 0; i < 8; ++i) (&ch[0][0][0])[i] = (&v[0][0][0])[i].b;
   out.b = trilinear(ch, fx, fy, fz);
   return out;
