@@ -16,6 +16,7 @@
 #include <string>
 
 #include <openvdb/openvdb.h>
+#include <tbb/global_control.h>
 
 #include "canopy/atomic_file.h"
 #include "canopy/hash.h"
@@ -291,6 +292,24 @@ TEST(Octreepack, SceneJsonPacksModelsInstancesAndSceneLight) {
   PackedSampler S(f);
   const auto b = syntheticPlant(20, 5, "b", 0);
   for (const auto& c : b.cells) ASSERT_EQ(S.sampleLattice(1, float(c.ijk[0]), float(c.ijk[1]), float(c.ijk[2])).density, c.density);
+}
+
+// The parallel builder's bytes do not depend on the number of threads (lit, to cover the light
+// pyramid too).
+TEST(Octreepack, BytesDoNotDependOnTheThreadCount) {
+  auto packBytes = [] {
+    const op::BuiltModel m = op::buildOctree(syntheticPlant(40, -3, "threads"), "threads", op::testing::analyticLight);
+    canopy::CanopyWriteInput in;
+    in.models.push_back({m.record, &m.tiles, &m.bricks, &m.light});
+    return canopy::writeCanopyBytes(std::move(in));
+  };
+  const std::vector<unsigned char> parallel = packBytes();
+  std::vector<unsigned char> serial;
+  {
+    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    serial = packBytes();
+  }
+  EXPECT_EQ(parallel, serial);
 }
 
 // ---- CLI contract ---------------------------------------------------------------------------------
