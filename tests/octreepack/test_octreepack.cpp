@@ -312,6 +312,33 @@ TEST(Octreepack, BytesDoNotDependOnTheThreadCount) {
   EXPECT_EQ(parallel, serial);
 }
 
+// World -> octree unit space of an instance (what a player uses to start a ray in a model): the
+// model-space centre of a lattice cell, moved by the instance, maps back to that cell's unit point.
+TEST(Octreepack, WorldToUnitInvertsInstanceAndModelTransforms) {
+  CanopyFile f = CanopyFile::open(plantFile());
+  canopy::CanopyModel M = f.model(0);
+  canopy::CanopyInstance inst{};
+  const float yaw = 0.7f, s = 1.3f;
+  const float m[12] = {s * std::cos(yaw), 0, s * std::sin(yaw), 4.0f, 0, s, 0, -1.0f, -s * std::sin(yaw), 0, s * std::cos(yaw), 2.5f};
+  std::memcpy(inst.modelToWorld, m, sizeof m);
+  float w2u[12];
+  ASSERT_TRUE(canopy::canopyWorldToUnit(M, inst, w2u));
+  for (const auto& c : {plant().cells[0], plant().cells[1000], plant().cells.back()}) {
+    float pm[3];
+    for (int r = 0; r < 3; ++r)
+      pm[r] = float(M.indexToModel[4 * r] * c.ijk[0] + M.indexToModel[4 * r + 1] * c.ijk[1] + M.indexToModel[4 * r + 2] * c.ijk[2] +
+                    M.indexToModel[4 * r + 3]);
+    float pw[3], u[3], want[3];
+    canopy::canopyTransformPoint(inst.modelToWorld, pm, pw);
+    canopy::canopyTransformPoint(w2u, pw, u);
+    canopy::canopyLatticeToUnit(M.octreeOrigin, M.rootCells, float(c.ijk[0]), float(c.ijk[1]), float(c.ijk[2]), want);
+    for (int a = 0; a < 3; ++a) ASSERT_NEAR(u[a], want[a], 1e-5f);
+  }
+  canopy::CanopyInstance flat = inst;
+  flat.modelToWorld[5] = 0;  // singular
+  EXPECT_FALSE(canopy::canopyWorldToUnit(M, flat, w2u));
+}
+
 // ---- CLI contract ---------------------------------------------------------------------------------
 TEST(OctreepackCli, InfoAndVerifyOnAGoodFile) {
   const std::string f = plantFile();
