@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <utility>
 
@@ -44,6 +45,56 @@ const char* sectionName(uint32_t kind) {
 }
 
 }  // namespace
+
+bool canopyInvertAffine(const double m[12], double out[12]) {
+  const double a = m[0], b = m[1], c = m[2], d = m[4], e = m[5], f = m[6], g = m[8], h = m[9], i = m[10];
+  const double A = e * i - f * h, B = -(d * i - f * g), C = d * h - e * g;
+  const double det = a * A + b * B + c * C;
+  if (!(std::fabs(det) > 1e-300) || !std::isfinite(det)) return false;
+  const double inv[9] = {A / det, -(b * i - c * h) / det, (b * f - c * e) / det,
+                         B / det, (a * i - c * g) / det,  -(a * f - c * d) / det,
+                         C / det, -(a * h - b * g) / det, (a * e - b * d) / det};
+  for (int r = 0; r < 3; ++r) {
+    for (int k = 0; k < 3; ++k) out[4 * r + k] = inv[3 * r + k];
+    out[4 * r + 3] = -(inv[3 * r] * m[3] + inv[3 * r + 1] * m[7] + inv[3 * r + 2] * m[11]);
+  }
+  return true;
+}
+
+namespace {
+// out = a * b for 3x4 affine matrices.
+void composeAffine(const double a[12], const double b[12], double out[12]) {
+  for (int r = 0; r < 3; ++r)
+    for (int k = 0; k < 4; ++k)
+      out[4 * r + k] = a[4 * r] * b[k] + a[4 * r + 1] * b[4 + k] + a[4 * r + 2] * b[8 + k] + (k == 3 ? a[4 * r + 3] : 0.0);
+}
+bool modelToUnitD(const CanopyModel& M, double out[12]) {
+  double inv[12];
+  if (!canopyInvertAffine(M.indexToModel, inv)) return false;
+  // u = (p - origin + 0.5) / rootCells
+  const double s = 1.0 / double(M.rootCells);
+  double unit[12] = {s, 0, 0, (0.5 - M.octreeOrigin[0]) * s, 0, s, 0, (0.5 - M.octreeOrigin[1]) * s, 0, 0, s, (0.5 - M.octreeOrigin[2]) * s};
+  composeAffine(unit, inv, out);
+  return true;
+}
+}  // namespace
+
+bool canopyModelToUnit(const CanopyModel& M, float out[12]) {
+  double d[12];
+  if (!modelToUnitD(M, d)) return false;
+  for (int i = 0; i < 12; ++i) out[i] = float(d[i]);
+  return true;
+}
+
+bool canopyWorldToUnit(const CanopyModel& M, const CanopyInstance& inst, float out[12]) {
+  double mu[12], w[12], wi[12], d[12];
+  if (!modelToUnitD(M, mu)) return false;
+  for (int i = 0; i < 12; ++i) w[i] = inst.modelToWorld[i];
+  if (!canopyInvertAffine(w, wi)) return false;
+  composeAffine(mu, wi, d);
+  for (int i = 0; i < 12; ++i) out[i] = float(d[i]);
+  return true;
+}
 
 uint32_t canopyPageCrc(const void* page, uint32_t pageBytes) {
   const auto* p = static_cast<const unsigned char*>(page);
@@ -239,6 +290,8 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
     const CanopyModel& M = models_[m];
     const std::string name = "model " + std::to_string(m);
     if (M.name[sizeof M.name - 1] != 0) bad(P, name + " name is not NUL-terminated");
+    for (double v : M.indexToModel)
+      if (!std::isfinite(v)) bad(P, name + " has a non-finite transform");
     if (M.depth > kCanopyMaxDepth || M.brickSize != kCanopyBrickSize || M.brickBorder != kCanopyBrickBorder ||
         M.rootCells != (kCanopyBrickSize << M.depth))
       bad(P, name + " has an invalid octree geometry");
@@ -294,8 +347,11 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
       for (uint32_t p = 0; p < h.pageCount; ++p)
         if (!owner[p]) bad(P, "page " + u64s(p) + " belongs to no model");
   }
-  for (uint32_t i = 0; i < instances_.size(); ++i)
+  for (uint32_t i = 0; i < instances_.size(); ++i) {
     if (instances_[i].model >= models_.size()) bad(P, "instance " + u64s(i) + " names model " + u64s(instances_[i].model) + " out of range");
+    for (float v : instances_[i].modelToWorld)
+      if (!std::isfinite(v)) bad(P, "instance " + u64s(i) + " has a non-finite transform");
+  }
 
   // --- page table ----------------------------------------------------------------------------
   for (uint32_t i = 0; i < pages_.size(); ++i) {

@@ -460,6 +460,15 @@ CANOPY_HD CANOPY_FORCEINLINE void canopyLatticeToUnit(const int32_t origin[3], u
   u[2] = (pz - float(origin[2]) + 0.5f) * inv;
 }
 
+// p' = M p for a 3x4 row-major affine matrix (instances: model -> world; canopyModelToUnit).
+CANOPY_HD CANOPY_FORCEINLINE void canopyTransformPoint(const float m[12], const float p[3], float out[3]) {
+  for (int r = 0; r < 3; ++r) out[r] = m[4 * r] * p[0] + m[4 * r + 1] * p[1] + m[4 * r + 2] * p[2] + m[4 * r + 3];
+}
+// d' = M d (directions: no translation).
+CANOPY_HD CANOPY_FORCEINLINE void canopyTransformDirection(const float m[12], const float d[3], float out[3]) {
+  for (int r = 0; r < 3; ++r) out[r] = m[4 * r] * d[0] + m[4 * r + 1] * d[1] + m[4 * r + 2] * d[2];
+}
+
 // Which page holds brick `brick` of a model, and the slot in it.
 CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyBrickPage(const CanopyModel& m, uint32_t brick, uint32_t bricksPerPage) {
   return m.firstBrickPage + brick / bricksPerPage;
@@ -471,6 +480,15 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyBrickSlot(uint32_t brick, uint32_t b
 CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyLightPage(const CanopyModel& m, uint32_t item, uint32_t lightItemsPerPage) {
   return m.firstLightPage + item / lightItemsPerPage;
 }
+
+// Host-side matrix helpers (double precision, then rounded to float for the device).
+// The inverse of a 3x4 affine matrix; false if it is singular.
+bool canopyInvertAffine(const double m[12], double out[12]);
+// Model space -> octree unit space of model M (inverse of indexToModel, then the unit mapping);
+// false if indexToModel is singular.
+bool canopyModelToUnit(const CanopyModel& M, float out[12]);
+// World space -> octree unit space of an instance: canopyModelToUnit * inverse(modelToWorld).
+bool canopyWorldToUnit(const CanopyModel& M, const CanopyInstance& inst, float out[12]);
 
 // ------------------------------------------------------------------------------------------------
 // Host reader (formats/canopy_file.cpp; no OpenVDB). Every failure throws canopy::Error naming the

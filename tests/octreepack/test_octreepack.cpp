@@ -16,6 +16,7 @@
 #include <string>
 
 #include <openvdb/openvdb.h>
+#include <tbb/global_control.h>
 
 #include "canopy/atomic_file.h"
 #include "canopy/hash.h"
@@ -24,6 +25,7 @@
 #include "formats/lattice_vdb.h"
 #include "tests/octreepack/packed_sampler.h"
 #include "tests/octreepack/synthetic.h"
+#include "tools/octreepack/inputs.h"
 #include "tools/octreepack/octreepack.h"
 
 namespace op = canopy::octreepack;
@@ -293,6 +295,51 @@ TEST(Octreepack, SceneJsonPacksModelsInstancesAndSceneLight) {
   for (const auto& c : b.cells) ASSERT_EQ(S.sampleLattice(1, float(c.ijk[0]), float(c.ijk[1]), float(c.ijk[2])).density, c.density);
 }
 
+// The parallel builder's bytes do not depend on the number of threads (lit, to cover the light
+// pyramid too).
+TEST(Octreepack, BytesDoNotDependOnTheThreadCount) {
+  auto packBytes = [] {
+    const op::BuiltModel m = op::buildOctree(syntheticPlant(40, -3, "threads"), "threads", op::testing::analyticLight);
+    canopy::CanopyWriteInput in;
+    in.models.push_back({m.record, &m.tiles, &m.bricks, &m.light});
+    return canopy::writeCanopyBytes(std::move(in));
+  };
+  const std::vector<unsigned char> parallel = packBytes();
+  std::vector<unsigned char> serial;
+  {
+    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    serial = packBytes();
+  }
+  EXPECT_EQ(parallel, serial);
+}
+
+// World -> octree unit space of an instance (what a player uses to start a ray in a model): the
+// model-space centre of a lattice cell, moved by the instance, maps back to that cell's unit point.
+TEST(Octreepack, WorldToUnitInvertsInstanceAndModelTransforms) {
+  CanopyFile f = CanopyFile::open(plantFile());
+  canopy::CanopyModel M = f.model(0);
+  canopy::CanopyInstance inst{};
+  const float yaw = 0.7f, s = 1.3f;
+  const float m[12] = {s * std::cos(yaw), 0, s * std::sin(yaw), 4.0f, 0, s, 0, -1.0f, -s * std::sin(yaw), 0, s * std::cos(yaw), 2.5f};
+  std::memcpy(inst.modelToWorld, m, sizeof m);
+  float w2u[12];
+  ASSERT_TRUE(canopy::canopyWorldToUnit(M, inst, w2u));
+  for (const auto& c : {plant().cells[0], plant().cells[1000], plant().cells.back()}) {
+    float pm[3];
+    for (int r = 0; r < 3; ++r)
+      pm[r] = float(M.indexToModel[4 * r] * c.ijk[0] + M.indexToModel[4 * r + 1] * c.ijk[1] + M.indexToModel[4 * r + 2] * c.ijk[2] +
+                    M.indexToModel[4 * r + 3]);
+    float pw[3], u[3], want[3];
+    canopy::canopyTransformPoint(inst.modelToWorld, pm, pw);
+    canopy::canopyTransformPoint(w2u, pw, u);
+    canopy::canopyLatticeToUnit(M.octreeOrigin, M.rootCells, float(c.ijk[0]), float(c.ijk[1]), float(c.ijk[2]), want);
+    for (int a = 0; a < 3; ++a) ASSERT_NEAR(u[a], want[a], 1e-5f);
+  }
+  canopy::CanopyInstance flat = inst;
+  flat.modelToWorld[5] = 0;  // singular
+  EXPECT_FALSE(canopy::canopyWorldToUnit(M, flat, w2u));
+}
+
 // ---- CLI contract ---------------------------------------------------------------------------------
 TEST(OctreepackCli, InfoAndVerifyOnAGoodFile) {
   const std::string f = plantFile();
@@ -342,7 +389,8 @@ TEST(OctreepackCli, BadInputsFailCleanlyAndLeaveNoOutput) {
   std::ofstream(dir + "/not.vdb") << "this is not a vdb";
   EXPECT_EQ(run("'" + dir + "/not.vdb' -o '" + out + "'"), 3);
   std::ofstream(dir + "/p.light.chaar") << "x";
-  EXPECT_EQ(run("'" + dir + "/cli.density.vdb' '" + dir + "/p.light.chaar' -o '" + out + "'"), 5);
+  // Without the chaar decoder a .chaar is unsupported (5); with it, this one is corrupt (3).
+  EXPECT_EQ(run("'" + dir + "/cli.density.vdb' '" + dir + "/p.light.chaar' -o '" + out + "'"), op::chaarSupported() ? 3 : 5);
   EXPECT_EQ(run("--scene '" + std::string(CANOPY_SHARED_DIR) + "/assets/scenes/grove.glb' -o '" + out + "'"), 5);
   std::ofstream(dir + "/bad.scene.json") << R"({"canopy_scene": 1, "models": [{"density": "cli.density.vdb"}], "instances": [{"model": 3, "matrix": [1,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1]}]})";
   EXPECT_EQ(run("--scene '" + dir + "/bad.scene.json' -o '" + out + "'"), 3);
@@ -506,6 +554,65 @@ TEST(OctreepackLight, LbsolveLightVdbPacksThroughTheCli) {
       }
   EXPECT_GT(checked, 50u);
 }
+
+#if __has_include("formats/chaar.h")
+#include "formats/chaar.h"
+
+// .chaar lighting (canopy-haar's frozen test file) packed through the CLI: every finest light voxel
+// equals the mean of the chaar decoder's samples at its 2x2x2 lattice cells (0 outside the
+// lattice), within float16 (relative 2^-11).
+TEST(OctreepackLight, ChaarLightingEqualsTheDecoder) {
+  const std::string chaar = std::string(CANOPY_SOURCE_DIR) + "/tests/haar/data/small_v1_0.chaar";
+  const canopy::haar::ChaarData d = canopy::haar::readChaar(chaar);
+  const canopy::haar::ChaarView view = d.view();
+  op::ModelSource s;
+  s.name = "chaarlit";
+  for (int a = 0; a < 3; ++a) s.latticeMin[a] = d.header.latticeMin[a], s.latticeMax[a] = d.header.latticeMax[a];
+  for (int k = s.latticeMin[2]; k <= s.latticeMax[2]; ++k)
+    for (int j = s.latticeMin[1]; j <= s.latticeMax[1]; ++j)
+      for (int i = s.latticeMin[0]; i <= s.latticeMax[0]; ++i)
+        s.cells.push_back({{i, j, k}, 0.1f + 0.05f * float((i + 2 * j + 3 * k) & 7), 0.0f, {0.3f, 0.6f, 0.2f}});
+  const std::string dir = tmpDir();
+  writeSourceVdb(dir + "/chaarlit.density.vdb", s);
+  const std::string out = dir + "/chaarlit.canopy";
+  ASSERT_EQ(run("'" + dir + "/chaarlit.density.vdb' '" + chaar + "' -o '" + out + "'"), 0);
+  ASSERT_EQ(run("verify '" + out + "'"), 0);
+  CanopyFile f = CanopyFile::open(out);
+  const canopy::CanopyModel& M = f.model(0);
+  ASSERT_EQ(M.lightCount, M.brickCount);
+  auto decoded = [&](int base, int i, int j, int k, int ch) {
+    if (i < s.latticeMin[0] || j < s.latticeMin[1] || k < s.latticeMin[2] || i > s.latticeMax[0] || j > s.latticeMax[1] || k > s.latticeMax[2])
+      return 0.0f;
+    const canopy::haar::Rgb v = canopy::haar::chaarSample(view, base, float(i), float(j), float(k));
+    return ch == 0 ? v.r : (ch == 1 ? v.g : v.b);
+  };
+  size_t checked = 0;
+  const int n = int(M.rootCells / 2);
+  for (int z = 0; z < n; ++z)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x) {
+        const float u[3] = {(2.0f * float(x) + 1.0f) / float(M.rootCells), (2.0f * float(y) + 1.0f) / float(M.rootCells),
+                            (2.0f * float(z) + 1.0f) / float(M.rootCells)};
+        const canopy::CanopyLookup r = f.descend(0, u[0], u[1], u[2], M.depth);
+        if (r.level != M.depth || r.node.brick == canopy::kCanopyNone) continue;
+        const auto page = f.readPage(canopy::canopyLightPage(M, r.node.brick, f.header().lightItemsPerPage));
+        for (int base = 0; base < int(canopy::kCanopyLightBases); ++base) {
+          float rgb[3];
+          canopy::canopySampleLight(canopy::canopyLightInPage(page.data(), r.node.brick % f.header().lightItemsPerPage), uint32_t(base),
+                                    r.local[0], r.local[1], r.local[2], rgb);
+          for (int ch = 0; ch < 3; ++ch) {
+            double ref = 0;
+            for (int c = 0; c < 8; ++c)
+              ref += decoded(base, M.octreeOrigin[0] + 2 * x + (c & 1), M.octreeOrigin[1] + 2 * y + ((c >> 1) & 1),
+                             M.octreeOrigin[2] + 2 * z + (c >> 2), ch) / 8.0;
+            ASSERT_NEAR(rgb[ch], ref, std::abs(ref) * 6e-4 + 1e-6) << "base " << base << " voxel " << x << "," << y << "," << z;
+          }
+        }
+        ++checked;
+      }
+  EXPECT_GT(checked, 5u);
+}
+#endif
 
 #ifdef CANOPY_HAS_CUDA
 #include "canopy/device.h"

@@ -13,6 +13,13 @@
 #include "canopy/errors.h"
 #include "formats/lattice_vdb.h"
 
+#if __has_include("formats/chaar.h")  // the chaar decoder (canopy-haar's branch) is in this tree
+#include <memory>
+
+#include "formats/chaar.h"
+#define CANOPY_OCTREEPACK_HAS_CHAAR 1
+#endif
+
 namespace canopy::octreepack {
 namespace {
 
@@ -99,6 +106,45 @@ LightVdb readLightVdb(const std::string& path) {
     }
   };
   return out;
+}
+
+bool chaarSupported() {
+#ifdef CANOPY_OCTREEPACK_HAS_CHAAR
+  return true;
+#else
+  return false;
+#endif
+}
+
+LightVdb readChaarLight(const std::string& path, const ModelSource& model) {
+#ifdef CANOPY_OCTREEPACK_HAS_CHAAR
+  auto data = std::make_shared<haar::ChaarData>(haar::readChaar(path));
+  const haar::ChaarHeader& h = data->header;
+  if (h.baseCount != kCanopyLightBases)
+    throw invalidInput(path + ": has " + std::to_string(h.baseCount) + " bases, a plant's lighting has " +
+                       std::to_string(kCanopyLightBases));
+  for (int a = 0; a < 3; ++a)
+    if (h.latticeMin[a] != model.latticeMin[a] || h.latticeMax[a] != model.latticeMax[a])
+      throw invalidInput(path + ": its lattice differs from the density lattice of model '" + model.name + "'");
+  LightVdb out;
+  out.sourceLabel = vdbio::describeSource(path);
+  const haar::ChaarView view = data->view();
+  out.fn = [data, view](int32_t i, int32_t j, int32_t k, float* o) {
+    const int32_t p[3] = {i, j, k};
+    bool inside = true;
+    for (int a = 0; a < 3; ++a) inside = inside && p[a] >= view.latticeMin[a] && p[a] <= view.latticeMax[a];
+    for (uint32_t b = 0; b < kCanopyLightBases; ++b) {
+      haar::Rgb v;
+      if (inside) v = haar::chaarSample(view, int(b), float(i), float(j), float(k));
+      o[3 * b] = v.r, o[3 * b + 1] = v.g, o[3 * b + 2] = v.b;
+    }
+  };
+  return out;
+#else
+  (void)model;
+  throw unsupported(path + ": packing .chaar lighting needs the chaar decoder, which this build does not have yet; "
+                    "pass PLANT.light.vdb (canopy-lbsolve) instead, or --ignore-light to pack density only");
+#endif
 }
 
 SceneDesc readSceneJson(const std::string& path) {

@@ -23,6 +23,12 @@ struct LightVdb {
 };
 LightVdb readLightVdb(const std::string& path);
 
+// Compressed lighting from canopy-haar (.chaar, 19 bases) sampled through the chaar decoder at
+// every lattice cell (0 outside the lattice). Its lattice must equal `model`'s. Throws
+// Unsupported when this build has no chaar decoder (chaarSupported() == false).
+bool chaarSupported();
+LightVdb readChaarLight(const std::string& path, const ModelSource& model);
+
 struct SceneDesc {
   struct Model {
     std::string name, density, light;  // paths resolved against the JSON file's folder

@@ -26,10 +26,6 @@ std::string stemOf(const std::string& path) {
   return base;
 }
 
-[[noreturn]] void lightUnsupported(const std::string& chaar) {
-  throw unsupported(chaar + ": packing lighting (.chaar) needs the chaar decoder, which this build does not have yet; "
-                    "pass --ignore-light to pack density only");
-}
 
 }  // namespace
 
@@ -78,7 +74,9 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
     requireReadableFile(m.density);
     if (!m.light.empty() && !o.ignoreLight) {
       requireReadableFile(m.light);
-      if (endsWith(m.light, ".chaar")) lightUnsupported(m.light);
+      if (endsWith(m.light, ".chaar") && !chaarSupported())  // fail before any work
+        throw unsupported(m.light + ": packing .chaar lighting needs the chaar decoder, which this build does not have yet; "
+                          "pass PLANT.light.vdb (canopy-lbsolve) instead, or --ignore-light to pack density only");
     }
   }
 
@@ -92,8 +90,8 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
     ModelSource src = readDensityVdb(modelsIn[i].density, modelsIn[i].name);
     nlohmann::json source = {{"name", modelsIn[i].name}, {"density", src.sourceLabel}};
     LightFn light;
-    if (!modelsIn[i].light.empty() && !o.ignoreLight) {  // .chaar was refused above: this is an lbsolve VDB
-      LightVdb lv = readLightVdb(modelsIn[i].light);
+    if (!modelsIn[i].light.empty() && !o.ignoreLight) {
+      LightVdb lv = endsWith(modelsIn[i].light, ".chaar") ? readChaarLight(modelsIn[i].light, src) : readLightVdb(modelsIn[i].light);
       light = std::move(lv.fn);
       source["light"] = lv.sourceLabel;
     }
