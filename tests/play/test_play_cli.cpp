@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include "canopy/atomic_file.h"
+#include "canopy/device.h"
 #include "runtime/image_io.h"
 #include "tests/play/scenes.h"
 
@@ -87,6 +88,15 @@ TEST(PlayCli, WritesAnExrSequenceFromAPattern) {
   ASSERT_EQ(r.code, 0) << r.err;
   for (const char* f : {"/f_00.exr", "/f_01.exr", "/f_02.exr"}) EXPECT_TRUE(exists(dir + f)) << f;
   EXPECT_TRUE(r.err.empty()) << r.err;  // --quiet
+}
+
+TEST(PlayCli, GpuDeviceWithoutAGpuExitsUnsupported) {
+  if (canopy::cudaDeviceCount() > 0) GTEST_SKIP() << "a GPU is present";
+  const std::string out = pt::tmpDir("cli") + "/nogpu.png";
+  std::remove(out.c_str());
+  const CliRun r = run("'" + sceneFile() + "' -o '" + out + "' --size 8x8 --device cuda");
+  EXPECT_EQ(r.code, 5) << r.err;
+  EXPECT_FALSE(exists(out));
 }
 
 TEST(PlayCli, ErrorsHaveDocumentedExitCodesAndLeaveNoOutput) {
