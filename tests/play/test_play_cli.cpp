@@ -79,6 +79,10 @@ TEST(PlayCli, WritesAPngOfTheRequestedSizeThatIsNotBlank) {
   for (const char* k : {"frame_ms_median", "frame_ms_p95", "cache_hit_rate", "pages_streamed", "mb_streamed", "stream_mb_per_s"})
     EXPECT_TRUE(j.contains(k)) << k;
   EXPECT_NE(r.err.find("median"), std::string::npos) << r.err;  // the summary on stderr
+  // the same input gives the same bytes (a converged frame does not depend on loader timing)
+  const std::string again = pt::tmpDir("cli") + "/ball-again.png";
+  ASSERT_EQ(run("'" + sceneFile() + "' -o '" + again + "' --size 40x30 --device cpu --quiet").code, 0);
+  EXPECT_EQ(canopy::readFile(out), canopy::readFile(again));
 }
 
 TEST(PlayCli, WritesAnExrSequenceFromAPattern) {
