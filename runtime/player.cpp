@@ -225,8 +225,10 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
     frameFileName(o.output, 0, o.frames);  // validates the pattern before any work
   }
   if (!(o.cacheMb > 0.0) || o.cacheMb > 1.0e6) throw usageError("--cache-mb must be in (0, 1e6]");
+  for (float v : {o.sigma, o.stepFactor, o.ambient, o.sunIntensity, o.shadowAperture, o.lodBias})
+    if (!std::isfinite(v)) throw usageError("shading parameters must be finite");
   if (!(o.sigma >= 0.0f) || !(o.stepFactor > 0.01f) || !(o.ambient >= 0.0f) || !(o.sunIntensity >= 0.0f) || !(o.shadowAperture >= 0.0f))
-    throw usageError("shading parameters must be finite and non-negative (step factor > 0.01)");
+    throw usageError("--sigma, --ambient, --sun-intensity and --shadow-aperture must be >= 0 and --step > 0.01");
 
   const CanopyFile file = CanopyFile::open(o.input);
   HostScene scene = buildScene(file);

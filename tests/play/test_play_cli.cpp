@@ -124,6 +124,8 @@ TEST(PlayCli, ErrorsHaveDocumentedExitCodesAndLeaveNoOutput) {
       {"'" + sceneFile() + "' -o '" + dir + "/x.jpg' --device cpu", 1, ".png or .exr"},
       {"'" + sceneFile() + "' -o '" + out + "' --frames 3 --device cpu", 1, "pattern"},
       {"'" + sceneFile() + "' -o '" + out + "' --sun 1,2 --device cpu", 1, "--sun"},
+      {"'" + sceneFile() + "' -o '" + out + "' --lod-bias nan --device cpu", 1, "finite"},
+      {"'" + sceneFile() + "' -o '" + out + "' --step 0 --device cpu", 1, "--step"},
       {"'" + sceneFile() + "' -o '" + out + "' --camera orbit:zoom=2 --device cpu", 1, "zoom"},
       {"'" + sceneFile() + "' -o '" + dir + "/no-such-dir/x.png' --size 8x8 --device cpu", 2, "no-such-dir"},
       {"'" + sceneFile() + "' -o '" + out + "' --camera '" + dir + "/missing.json' --device cpu", 2, "missing.json"},
