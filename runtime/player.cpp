@@ -160,8 +160,8 @@ std::string frameFileName(const std::string& pattern, int frame, int frames) {
 }
 
 std::vector<FrameSetup> framePlan(const PlayOptions& o, const HostScene& scene) {
-  if (o.width < 1 || o.height < 1 || o.width > 16384 || o.height > 16384)
-    throw usageError("--size " + std::to_string(o.width) + "x" + std::to_string(o.height) + ": each side must be 1..16384");
+  if (o.width < 1 || o.height < 1 || o.width > 8192 || o.height > 8192)
+    throw usageError("--size " + std::to_string(o.width) + "x" + std::to_string(o.height) + ": each side must be 1..8192");
   if (o.frames < 1 || o.frames > 1000000) throw usageError("--frames must be 1..1000000");
   V3 centre = v3(0, 0, 0);
   float radius = 1.0f;
