@@ -6,6 +6,7 @@
 #include <ImfChannelList.h>
 #include <ImfFrameBuffer.h>
 #include <ImfHeader.h>
+#include <ImfInputFile.h>
 #include <ImfOutputFile.h>
 #include <half.h>
 
@@ -96,6 +97,26 @@ void writeImage(const std::string& path, const std::vector<float>& rgba, int wid
   if (e == ".exr") return writeExr(path, rgba, width, height);
   if (e == ".png") return writePng(path, rgba, width, height, bg);
   throw usageError(path + ": output must end in .png or .exr");
+}
+
+std::vector<float> readExrRgba(const std::string& path, int& width, int& height) {
+  try {
+    Imf::InputFile file(path.c_str());
+    const Imath::Box2i dw = file.header().dataWindow();
+    width = dw.max.x - dw.min.x + 1;
+    height = dw.max.y - dw.min.y + 1;
+    std::vector<float> px(size_t(width) * height * 4, 0.0f);
+    Imf::FrameBuffer fb;
+    const char* names[4] = {"R", "G", "B", "A"};
+    char* base = reinterpret_cast<char*>(px.data()) - (size_t(dw.min.x) + size_t(dw.min.y) * width) * sizeof(float) * 4;
+    for (int c = 0; c < 4; ++c)
+      fb.insert(names[c], Imf::Slice(Imf::FLOAT, base + c * sizeof(float), sizeof(float) * 4, sizeof(float) * 4 * width));
+    file.setFrameBuffer(fb);
+    file.readPixels(dw.min.y, dw.max.y);
+    return px;
+  } catch (const std::exception& e) {
+    throw invalidInput(path + ": cannot read EXR: " + e.what());
+  }
 }
 
 std::vector<unsigned char> readPngRgb(const std::string& path, int& width, int& height) {

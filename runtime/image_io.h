@@ -15,6 +15,9 @@ void writeImage(const std::string& path, const std::vector<float>& rgba, int wid
 // True for a name ending in .png or .exr (case-insensitive).
 bool isImageName(const std::string& path);
 
+// Reads an EXR back (tests): width * height RGBA floats.
+std::vector<float> readExrRgba(const std::string& path, int& width, int& height);
+
 // Reads an 8-bit PNG back (tests): width, height, RGB bytes.
 std::vector<unsigned char> readPngRgb(const std::string& path, int& width, int& height);
 

@@ -160,8 +160,8 @@ std::string frameFileName(const std::string& pattern, int frame, int frames) {
 }
 
 std::vector<FrameSetup> framePlan(const PlayOptions& o, const HostScene& scene) {
-  if (o.width < 1 || o.height < 1 || o.width > 16384 || o.height > 16384)
-    throw usageError("--size " + std::to_string(o.width) + "x" + std::to_string(o.height) + ": each side must be 1..16384");
+  if (o.width < 1 || o.height < 1 || o.width > 8192 || o.height > 8192)
+    throw usageError("--size " + std::to_string(o.width) + "x" + std::to_string(o.height) + ": each side must be 1..8192");
   if (o.frames < 1 || o.frames > 1000000) throw usageError("--frames must be 1..1000000");
   V3 centre = v3(0, 0, 0);
   float radius = 1.0f;
@@ -225,8 +225,10 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
     frameFileName(o.output, 0, o.frames);  // validates the pattern before any work
   }
   if (!(o.cacheMb > 0.0) || o.cacheMb > 1.0e6) throw usageError("--cache-mb must be in (0, 1e6]");
+  for (float v : {o.sigma, o.stepFactor, o.ambient, o.sunIntensity, o.shadowAperture, o.lodBias})
+    if (!std::isfinite(v)) throw usageError("shading parameters must be finite");
   if (!(o.sigma >= 0.0f) || !(o.stepFactor > 0.01f) || !(o.ambient >= 0.0f) || !(o.sunIntensity >= 0.0f) || !(o.shadowAperture >= 0.0f))
-    throw usageError("shading parameters must be finite and non-negative (step factor > 0.01)");
+    throw usageError("--sigma, --ambient, --sun-intensity and --shadow-aperture must be >= 0 and --step > 0.01");
 
   const CanopyFile file = CanopyFile::open(o.input);
   HostScene scene = buildScene(file);

@@ -57,6 +57,9 @@ class CudaBackend final : public Backend {
     CANOPY_CUDA_CHECK(cudaMemset(pageWanted_.data(), 0, pageWanted_.size() * sizeof(uint32_t)));
     for (int i = 0; i < 2; ++i) CANOPY_CUDA_CHECK(cudaMallocHost(&tableHost_[i], table_.size() * sizeof(int32_t)));
     slots_ = slots;
+    // the memsets and uploads above ran on the legacy default stream, which the non-blocking
+    // compute and copy streams do not wait for
+    CANOPY_CUDA_CHECK(cudaDeviceSynchronize());
   }
   ~CudaBackend() override {
     cudaStreamSynchronize(copy_);

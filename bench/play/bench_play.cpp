@@ -81,7 +81,7 @@ int main(int argc, char** argv) {
                         << R"({"frame":)" << frames / 2 << R"(,"position":[0,3,-5],"target":[30,2,10],"fov":60},)"
                         << R"({"frame":)" << frames << R"(,"position":[40,4,15],"target":[0,2,0],"fov":60}]})";
     scenes.push_back({"plant", plant, "orbit:elevation=15"});
-    scenes.push_back({"forest-orbit", forest, "orbit:elevation=30"});
+    scenes.push_back({"forest-orbit", forest, "orbit:elevation=30,distance=55"});
     scenes.push_back({"forest-walk", forest, walk});
     for (const std::string& e : extra) {
       const size_t eq = e.find('=');

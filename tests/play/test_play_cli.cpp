@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include "canopy/atomic_file.h"
+#include "canopy/device.h"
 #include "runtime/image_io.h"
 #include "tests/play/scenes.h"
 
@@ -78,6 +79,10 @@ TEST(PlayCli, WritesAPngOfTheRequestedSizeThatIsNotBlank) {
   for (const char* k : {"frame_ms_median", "frame_ms_p95", "cache_hit_rate", "pages_streamed", "mb_streamed", "stream_mb_per_s"})
     EXPECT_TRUE(j.contains(k)) << k;
   EXPECT_NE(r.err.find("median"), std::string::npos) << r.err;  // the summary on stderr
+  // the same input gives the same bytes (a converged frame does not depend on loader timing)
+  const std::string again = pt::tmpDir("cli") + "/ball-again.png";
+  ASSERT_EQ(run("'" + sceneFile() + "' -o '" + again + "' --size 40x30 --device cpu --quiet").code, 0);
+  EXPECT_EQ(canopy::readFile(out), canopy::readFile(again));
 }
 
 TEST(PlayCli, WritesAnExrSequenceFromAPattern) {
@@ -87,6 +92,15 @@ TEST(PlayCli, WritesAnExrSequenceFromAPattern) {
   ASSERT_EQ(r.code, 0) << r.err;
   for (const char* f : {"/f_00.exr", "/f_01.exr", "/f_02.exr"}) EXPECT_TRUE(exists(dir + f)) << f;
   EXPECT_TRUE(r.err.empty()) << r.err;  // --quiet
+}
+
+TEST(PlayCli, GpuDeviceWithoutAGpuExitsUnsupported) {
+  if (canopy::cudaDeviceCount() > 0) GTEST_SKIP() << "a GPU is present";
+  const std::string out = pt::tmpDir("cli") + "/nogpu.png";
+  std::remove(out.c_str());
+  const CliRun r = run("'" + sceneFile() + "' -o '" + out + "' --size 8x8 --device cuda");
+  EXPECT_EQ(r.code, 5) << r.err;
+  EXPECT_FALSE(exists(out));
 }
 
 TEST(PlayCli, ErrorsHaveDocumentedExitCodesAndLeaveNoOutput) {
@@ -110,6 +124,8 @@ TEST(PlayCli, ErrorsHaveDocumentedExitCodesAndLeaveNoOutput) {
       {"'" + sceneFile() + "' -o '" + dir + "/x.jpg' --device cpu", 1, ".png or .exr"},
       {"'" + sceneFile() + "' -o '" + out + "' --frames 3 --device cpu", 1, "pattern"},
       {"'" + sceneFile() + "' -o '" + out + "' --sun 1,2 --device cpu", 1, "--sun"},
+      {"'" + sceneFile() + "' -o '" + out + "' --lod-bias nan --device cpu", 1, "finite"},
+      {"'" + sceneFile() + "' -o '" + out + "' --step 0 --device cpu", 1, "--step"},
       {"'" + sceneFile() + "' -o '" + out + "' --camera orbit:zoom=2 --device cpu", 1, "zoom"},
       {"'" + sceneFile() + "' -o '" + dir + "/no-such-dir/x.png' --size 8x8 --device cpu", 2, "no-such-dir"},
       {"'" + sceneFile() + "' -o '" + out + "' --camera '" + dir + "/missing.json' --device cpu", 2, "missing.json"},

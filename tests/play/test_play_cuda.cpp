@@ -60,13 +60,17 @@ TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
   o.width = 96;
   o.height = 64;
   o.converge = true;
-  o.camera = "orbit:azimuth=25,elevation=20,turns=0";
-  std::vector<float> cpu, gpu;
-  pl::play(o, canopy::Device{}, &cpu);
-  pl::play(o, cuda(), &gpu);
-  ASSERT_EQ(cpu.size(), gpu.size());
-  EXPECT_LT(rms(cpu, gpu), 2e-3);
-  EXPECT_GT(fractionWithin(cpu, gpu, 1e-2f), 0.99);
+  // the whole forest (coarse levels), and a close view among the trees (finest bricks, overlapping
+  // crowns, long shadow cones)
+  for (const char* camera : {"orbit:azimuth=25,elevation=20,turns=0", "orbit:azimuth=60,elevation=8,distance=5,turns=0"}) {
+    o.camera = camera;
+    std::vector<float> cpu, gpu;
+    pl::play(o, canopy::Device{}, &cpu);
+    pl::play(o, cuda(), &gpu);
+    ASSERT_EQ(cpu.size(), gpu.size());
+    EXPECT_LT(rms(cpu, gpu), 2e-3) << camera;
+    EXPECT_GT(fractionWithin(cpu, gpu, 1e-2f), 0.99) << camera;
+  }
 }
 
 // A quarter-size cache along a camera path through the forest (real-time mode: one pass per
