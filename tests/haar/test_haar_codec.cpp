@@ -107,10 +107,7 @@ TEST(HaarMath, SampleBrickEqualsDecodeThenTrilinearBitForBit) {
     if (trial % 5 == 0) mask &= (uint64_t(rng()) << 32) | rng();  // sparser
     if (trial % 7 == 0) mask = 1;                                    // fast path
     BrickRecord rec;
-    rec.maskLo = uint32_t(mask);
-    rec.maskHi = uint32_t(mask >> 32);
-    rec.first = 5;  // not at the stream start
-    rec.flags = raw ? BrickRecord::kRaw : 0;
+    rec.set(mask, 5, raw);  // first = 5: not at the stream start
     std::vector<float> coefs(3 * (5 + 64));
     for (float& c : coefs) c = u(rng);
     std::vector<uint16_t> coefs16(coefs.size());
