@@ -314,3 +314,23 @@ TEST(HaarEncode, DetailDroppedOnlyWhenAllChannelsUnderThreshold) {
   EXPECT_EQ(lb.encode(0.5f).bricks[0].mask(), uint64_t(1));  // <= T: dropped, fast path left
   EXPECT_EQ(lb.encode(0.2f).bricks[0].mask(), (uint64_t(1) << 0) | (uint64_t(1) << 5) | (uint64_t(1) << 9) | (uint64_t(1) << 40));
 }
+
+// A base (or a whole file) without light: nothing stored, samples are zero, the file round-trips.
+TEST(HaarEncode, EmptyLightStoresNoBricks) {
+  const LatticeGeom g = makeGeom(7, 7, 7);
+  DenseLight dark;
+  dark.rgb.assign(3 * g.cells, 0.0f);
+  LiftedBase lb(g, dark, Precision::Fp32, "dark");
+  EXPECT_EQ(lb.searchThreshold(0.01f), 0.0f);
+  ChaarData d = encodeLights(g, {dark, dark}, 0.01f);
+  EXPECT_EQ(d.header.slotCount, 0u);
+  EXPECT_EQ(d.header.coefCount, 0u);
+  const std::vector<uint8_t> bytes = serializeChaar(d);
+  const ChaarData back = parseChaar(bytes.data(), bytes.size(), "dark.chaar");
+  const Rgb s = chaarSample(back.view(), 1, 3.5f, 2.5f, 1.0f);
+  EXPECT_EQ(s.r, 0.0f);
+  EXPECT_EQ(s.g, 0.0f);
+  std::vector<float> dense;
+  decodeBaseDense(back, 0, dense);
+  EXPECT_EQ(dense, dark.rgb);
+}
