@@ -183,7 +183,7 @@ ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) 
     const std::string bn = "base " + baseName(b);
     ck.require(e.coefOffset == coefCursor && e.coefCount <= h.coefCount - coefCursor,
                bn + " coefficient stream out of range");
-    ck.require(e.coefCount <= 0xffffffffull, bn + " coefficient stream too long");
+    ck.require(e.coefCount <= uint64_t(BrickRecord::kMaxFirst) + 1, bn + " coefficient stream too long");
     for (int a = 0; a < 3; ++a)
       ck.require(e.direction[a] >= -1 && e.direction[a] <= 1, bn + " has a bad direction");
     ck.require(std::isfinite(e.threshold) && std::isfinite(e.maxError) && std::isfinite(e.rmsError) &&
@@ -205,19 +205,19 @@ ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) 
   for (uint32_t s = 0; s < h.slotCount; ++s)
     ck.require(seen[s], "slot " + str(s) + " belongs to no brick");
 
-  // Records: compact, in order, flags known, within the base's stream.
+  // Records: compact, in order, within the base's stream; raw only where there is light.
   for (uint32_t b = 0; b < h.baseCount; ++b) {
     uint64_t next = 0;
     uint32_t nonEmpty = 0, raw = 0;
     for (uint32_t s = 0; s < h.slotCount; ++s) {
       const BrickRecord& r = d.records[uint64_t(b) * h.slotCount + s];
-      ck.require((r.flags & ~BrickRecord::kRaw) == 0,
-                 "base " + baseName(b) + " slot " + str(s) + " has unknown flags");
-      ck.require(r.first == next, "base " + baseName(b) + " slot " + str(s) +
+      ck.require(!r.raw() || r.mask() != 0,
+                 "base " + baseName(b) + " slot " + str(s) + " is an empty brick flagged raw");
+      ck.require(r.first() == next, "base " + baseName(b) + " slot " + str(s) +
                                       " coefficient index out of order or out of range");
       next += uint64_t(popcount64(r.mask()));
       nonEmpty += r.mask() != 0;
-      raw += (r.mask() != 0) && (r.flags & BrickRecord::kRaw);
+      raw += r.raw();
     }
     ck.require(next == d.bases[b].coefCount,
                "base " + baseName(b) + " records do not match its coefficient count");

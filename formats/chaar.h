@@ -11,9 +11,10 @@
 //   BASES    ChaarBaseEntry[baseCount] (64 bytes each): direction, stream offset/count, stats
 //   SLOTS    uint32[brickDims.x*y*z] (x fastest): slot of each brick, 0xffffffff = no light in
 //            any base (brick not stored); every slot 0..slotCount-1 appears exactly once
-//   RECORDS  BrickRecord[baseCount * slotCount] (16 bytes: mask lo, mask hi, first, flags),
-//            base-major; within a base, records in slot order and `first` = running sum of the
-//            popcounts (the coefficient stream is compact, no gaps, no overlaps)
+//   RECORDS  BrickRecord[baseCount * slotCount] (12 bytes: u32 mask lo, u32 mask hi, u32 first
+//            coefficient index in bits 0..30 and the raw flag in bit 31), base-major; within a
+//            base, records in slot order and `first` = running sum of the popcounts (the
+//            coefficient stream is compact, no gaps, no overlaps)
 //   COEFS    the compacted coefficient streams of all bases, base after base: per entry three
 //            channels (R,G,B) as float32 (12 bytes) or binary16 (6 bytes)
 //   end of file = fileSize; nothing may follow.
@@ -108,7 +109,7 @@ struct ChaarData {
   }
   uint64_t latticeCells() const;
   ChaarView view() const;  // host pointers into this object (valid while it lives, unmodified)
-  // Bytes of this base's share of the file: its records and coefficients.
+  // Bytes of this base's share of the file: its records (12 per stored brick) and coefficients.
   uint64_t baseBytes(uint32_t base) const;
 };
 

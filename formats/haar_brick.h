@@ -14,9 +14,11 @@
 // brick bit for bit, and the CPU and CUDA decoders agree bit for bit (products use explicitly
 // rounded multiplies/adds on the device so nvcc cannot contract them into FMAs).
 //
-// A brick record stores the 64-bit mask of kept coefficients and the index of its first one in the
-// base's compacted coefficient stream (coefficient j of the brick, counting set bits in order, is
-// entry first + j). Flag kRaw marks a brick stored without transform (mask = its nonzero values):
+// A brick record (12 bytes, the dissertation's layout) stores the 64-bit mask of kept coefficients
+// and the index of its first one in the base's compacted coefficient stream (coefficient j of the
+// brick, counting set bits in order, is entry first + j); the index's top bit is the raw flag, so a
+// base holds at most 2^31 coefficients. A raw brick is stored without transform (mask = its
+// nonzero values):
 // the encoder uses it where it is no larger and no less exact than the Haar brick, and at threshold
 // 0, where a float Haar round trip is not always exact.
 #pragma once
@@ -39,16 +41,23 @@ struct Rgb {
   float r = 0, g = 0, b = 0;
 };
 
-// One brick of one base: 16 bytes, loaded as one uint4 on the GPU.
-struct alignas(16) BrickRecord {
-  uint32_t maskLo = 0;  // bits 0..31 of the coefficient mask
-  uint32_t maskHi = 0;  // bits 32..63
-  uint32_t first = 0;   // index of the brick's first coefficient in its base's stream
-  uint32_t flags = 0;   // kRaw or 0
-  static constexpr uint32_t kRaw = 1u;
+// One brick of one base: 12 bytes on disk and in memory.
+struct BrickRecord {
+  uint32_t maskLo = 0;         // bits 0..31 of the coefficient mask
+  uint32_t maskHi = 0;         // bits 32..63
+  uint32_t firstAndRaw = 0;    // bits 0..30: index of the first coefficient; bit 31: raw brick
+  static constexpr uint32_t kRawBit = 0x80000000u;
+  static constexpr uint32_t kMaxFirst = 0x7fffffffu;
   CANOPY_HD uint64_t mask() const { return uint64_t(maskLo) | (uint64_t(maskHi) << 32); }
+  CANOPY_HD uint32_t first() const { return firstAndRaw & kMaxFirst; }
+  CANOPY_HD bool raw() const { return (firstAndRaw & kRawBit) != 0; }
+  CANOPY_HD void set(uint64_t mask, uint32_t first, bool raw) {
+    maskLo = uint32_t(mask);
+    maskHi = uint32_t(mask >> 32);
+    firstAndRaw = (first & kMaxFirst) | (raw ? kRawBit : 0u);
+  }
 };
-static_assert(sizeof(BrickRecord) == 16, "BrickRecord is 16 bytes on disk and on the device");
+static_assert(sizeof(BrickRecord) == 12, "BrickRecord is 12 bytes on disk and on the device");
 
 CANOPY_HD CANOPY_FORCEINLINE constexpr int brickIndex(int x, int y, int z) { return x + 4 * y + 16 * z; }
 
@@ -163,7 +172,7 @@ CANOPY_HD CANOPY_FORCEINLINE Rgb brickCoef(uint64_t mask, uint64_t first, const 
 template <class Reader>
 CANOPY_HD inline void decodeBrick(const BrickRecord& rec, const Reader& read, float out[3][kBrickValues]) {
   const uint64_t mask = rec.mask();
-  uint64_t k = rec.first;
+  uint64_t k = rec.first();
   for (int c = 0; c < kBrickValues; ++c) {
     Rgb v{};
     if ((mask >> c) & 1u) v = read(k++);
@@ -171,7 +180,7 @@ CANOPY_HD inline void decodeBrick(const BrickRecord& rec, const Reader& read, fl
     out[1][c] = v.g;
     out[2][c] = v.b;
   }
-  if (rec.flags & BrickRecord::kRaw) return;
+  if (rec.raw()) return;
   for (int ch = 0; ch < 3; ++ch) unliftBrick(out[ch]);
 }
 
@@ -214,16 +223,17 @@ CANOPY_HD inline Rgb sampleBrick(const BrickRecord& rec, const Reader& read, int
                                  float fx, float fy, float fz) {
   const uint64_t mask = rec.mask();
   if (mask == 0) return Rgb{};
-  if (mask == 1u && !(rec.flags & BrickRecord::kRaw)) return read(rec.first);  // only the average
+  const uint32_t first = rec.first();
+  if (mask == 1u && !rec.raw()) return read(first);  // only the average: the fast path
   Rgb v[2][2][2];  // [z][y][x]
-  if (rec.flags & BrickRecord::kRaw) {
+  if (rec.raw()) {
     CANOPY_UNROLL
     for (int dz = 0; dz < 2; ++dz)
       CANOPY_UNROLL
       for (int dy = 0; dy < 2; ++dy)
         CANOPY_UNROLL
         for (int dx = 0; dx < 2; ++dx)
-          v[dz][dy][dx] = brickCoef(mask, rec.first, read, brickIndex(lx + dx, ly + dy, lz + dz));
+          v[dz][dy][dx] = brickCoef(mask, first, read, brickIndex(lx + dx, ly + dy, lz + dz));
   } else {
     CANOPY_UNROLL
     for (int kz = 0; kz < 4; ++kz) {
@@ -237,7 +247,7 @@ CANOPY_HD inline Rgb sampleBrick(const BrickRecord& rec, const Reader& read, int
           CANOPY_UNROLL
           for (int kx = 0; kx < 4; ++kx) {
             if (!axisNeeds(kx, lx)) continue;
-            const Rgb c = brickCoef(mask, rec.first, read, brickIndex(kx, ky, kz));
+            const Rgb c = brickCoef(mask, first, read, brickIndex(kx, ky, kz));
             foldAxis(u[0], c, kx, lx);
             foldAxis(u[1], c, kx, lx + 1);
           }

@@ -3,7 +3,7 @@
 // ChaarDevice uploads a validated ChaarData once; view() returns the same POD ChaarView the CPU
 // uses, holding device pointers, so a player kernel can call chaarSample(view, base, x, y, z) from
 // its own code (include formats/haar_view.h in the .cu). The sampler is one thread per sample: it
-// reads the brick's 16-byte record, finds each needed coefficient with the mask and a popcount
+// reads the brick's 12-byte record, finds each needed coefficient with the mask and a popcount
 // (listing 5.5's rule, without the shared-memory staging, barriers or 64-thread cooperation) and
 // reconstructs only the 2^3 texels of its footprint. sample() and decodeDense() are the batch
 // entry points used by tests and benchmarks. No CUDA headers here: host code can include it.

@@ -112,9 +112,7 @@ LiftedBase::Result LiftedBase::encodeBrick(size_t k, float threshold, float* coe
 
   auto measure = [&](uint64_t mask, bool raw, const float* q, Result& r) {
     BrickRecord rec;
-    rec.maskLo = uint32_t(mask);
-    rec.maskHi = uint32_t(mask >> 32);
-    rec.flags = raw ? BrickRecord::kRaw : 0u;
+    rec.set(mask, 0, raw);
     float dec[3][kBrickValues];
     decodeBrick(rec, CoefReader32{q}, dec);
     r.mask = mask;
@@ -186,12 +184,9 @@ BaseCode LiftedBase::encode(float threshold) const {
   for (size_t k = 0; k < n; ++k) {
     const Result& r = res[k];
     const int cnt = popcount64(r.mask);
-    if (next + uint64_t(cnt) > 0xffffffffull)
-      throw unsupported(name_ + ": more than 2^32 coefficients in one base");
-    BrickRecord& rec = code.bricks[size_t(brickIds_[k])];
-    rec.maskLo = uint32_t(r.mask);
-    rec.maskHi = uint32_t(r.mask >> 32);
-    rec.flags = r.raw ? BrickRecord::kRaw : 0u;
+    if (next + uint64_t(cnt) > uint64_t(BrickRecord::kMaxFirst))
+      throw unsupported(name_ + ": more than 2^31 coefficients in one base");
+    code.bricks[size_t(brickIds_[k])].set(r.mask, 0, r.raw);
     code.coefs.insert(code.coefs.end(), &scratch[k * 192], &scratch[k * 192] + 3 * cnt);
     next += uint64_t(cnt);
     code.brickCount += r.mask != 0;
@@ -203,7 +198,7 @@ BaseCode LiftedBase::encode(float threshold) const {
   // so the order survives dropping them into slots.
   next = 0;
   for (auto& rec : code.bricks) {
-    rec.first = uint32_t(next);
+    rec.set(rec.mask(), uint32_t(next), rec.raw());
     next += uint64_t(popcount64(rec.mask()));
   }
   code.coefCount = next;

@@ -107,10 +107,7 @@ TEST(HaarMath, SampleBrickEqualsDecodeThenTrilinearBitForBit) {
     if (trial % 5 == 0) mask &= (uint64_t(rng()) << 32) | rng();  // sparser
     if (trial % 7 == 0) mask = 1;                                    // fast path
     BrickRecord rec;
-    rec.maskLo = uint32_t(mask);
-    rec.maskHi = uint32_t(mask >> 32);
-    rec.first = 5;  // not at the stream start
-    rec.flags = raw ? BrickRecord::kRaw : 0;
+    rec.set(mask, 5, raw);  // first = 5: not at the stream start
     std::vector<float> coefs(3 * (5 + 64));
     for (float& c : coefs) c = u(rng);
     std::vector<uint16_t> coefs16(coefs.size());
@@ -316,4 +313,24 @@ TEST(HaarEncode, DetailDroppedOnlyWhenAllChannelsUnderThreshold) {
   EXPECT_EQ(lb.encode(0.25f).bricks[0].mask(), (uint64_t(1) << 0) | (uint64_t(1) << 9) | (uint64_t(1) << 40));
   EXPECT_EQ(lb.encode(0.5f).bricks[0].mask(), uint64_t(1));  // <= T: dropped, fast path left
   EXPECT_EQ(lb.encode(0.2f).bricks[0].mask(), (uint64_t(1) << 0) | (uint64_t(1) << 5) | (uint64_t(1) << 9) | (uint64_t(1) << 40));
+}
+
+// A base (or a whole file) without light: nothing stored, samples are zero, the file round-trips.
+TEST(HaarEncode, EmptyLightStoresNoBricks) {
+  const LatticeGeom g = makeGeom(7, 7, 7);
+  DenseLight dark;
+  dark.rgb.assign(3 * g.cells, 0.0f);
+  LiftedBase lb(g, dark, Precision::Fp32, "dark");
+  EXPECT_EQ(lb.searchThreshold(0.01f), 0.0f);
+  ChaarData d = encodeLights(g, {dark, dark}, 0.01f);
+  EXPECT_EQ(d.header.slotCount, 0u);
+  EXPECT_EQ(d.header.coefCount, 0u);
+  const std::vector<uint8_t> bytes = serializeChaar(d);
+  const ChaarData back = parseChaar(bytes.data(), bytes.size(), "dark.chaar");
+  const Rgb s = chaarSample(back.view(), 1, 3.5f, 2.5f, 1.0f);
+  EXPECT_EQ(s.r, 0.0f);
+  EXPECT_EQ(s.g, 0.0f);
+  std::vector<float> dense;
+  decodeBaseDense(back, 0, dense);
+  EXPECT_EQ(dense, dark.rgb);
 }

@@ -280,6 +280,7 @@ TEST(HaarTool, SweepWritesTablePlotAndJson) {
 TEST(HaarTool, DISABLED_WriteFrozenFixtureInput) {
   const char* path = std::getenv("CANOPY_HAAR_FIXTURE");
   ASSERT_NE(path, nullptr);
-  const LatticeGeom g = makeGeom(6, 5, 6, -2, 1, 0);
+  const char* n = std::getenv("CANOPY_HAAR_FIXTURE_EDGE");  // optional: an N^3 field instead
+  const LatticeGeom g = n ? makeGeom(std::atoi(n), std::atoi(n), std::atoi(n)) : makeGeom(6, 5, 6, -2, 1, 0);
   writeLightVdb(path, g, smoothSet(g));
 }
