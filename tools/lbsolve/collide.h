@@ -24,8 +24,8 @@ namespace canopy::lb {
 using lattice::kQ;
 
 // Omega for one colour channel, column-major: col[kind][j][i] = Omega_ij, kind 0 = leaf, 1 = wood.
-// (Column-major so the CPU loop over i is contiguous and vectorises; on the GPU every index is a
-// compile-time constant after unrolling and the matrix is a kernel parameter in constant memory.)
+// On the CPU each entry is broadcast to 8 lanes (nodes); on the GPU every index is a compile-time
+// constant after unrolling and the struct is a kernel parameter, i.e. in constant memory.
 struct OmegaSet {
   float col[2][kQ][kQ];
 };
