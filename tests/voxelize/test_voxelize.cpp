@@ -221,7 +221,9 @@ TEST(VoxelizeAnalytic, SingleTriangleMatchesReferenceSat) {
           if (ref == 0) continue;
           const bool touched = got.count({i, j, k}) > 0;
           EXPECT_EQ(touched, ref > 0) << "trial " << trial << " cell " << i << "," << j << "," << k;
-          if (touched) EXPECT_FLOAT_EQ(got.at({i, j, k}).density, 1.f);  // S = 1: all or nothing
+          if (touched) {
+            EXPECT_FLOAT_EQ(got.at({i, j, k}).density, 1.f);  // S = 1: all or nothing
+          }
           ++agree;
         }
     EXPECT_GT(agree, N * N * N - 10);
@@ -447,6 +449,8 @@ TEST(VoxelizeFormats, OffStlPlyObjLoad) {
       EXPECT_NEAR(r.cells[0].albedo[0], 1.0, 1e-6);  // red faces, linear
       EXPECT_NEAR(r.cells[0].albedo[1], 0.0, 1e-6);
     }
-    if (std::string(ext) == "obj") EXPECT_EQ(r.stats.woodTriangles, 4u);
+    if (std::string(ext) == "obj") {
+      EXPECT_EQ(r.stats.woodTriangles, 4u);
+    }
   }
 }

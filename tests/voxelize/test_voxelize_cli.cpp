@@ -175,6 +175,14 @@ TEST_F(VoxelizeCli, BadInputsFailCleanly) {
       {"index out of range",
        [](const std::string& d) { writeBytes(d + "/badidx.glb", toGlb(triangleGltf(oneTriangle(), {0, 1, 7}))); },
        "badidx.glb", "", 3, "badidx.glb"},
+      {"unsupported required extension",
+       [](const std::string& d) {
+         GltfParts g = triangleGltf(oneTriangle(), {0, 1, 2});
+         g.doc["extensionsRequired"] = {"EXT_meshopt_compression"};
+         g.doc["extensionsUsed"] = {"EXT_meshopt_compression"};
+         writeBytes(d + "/meshopt.glb", toGlb(g));
+       },
+       "meshopt.glb", "", 5, "EXT_meshopt_compression"},
       {"not a mesh format", [](const std::string& d) { writeText(d + "/notes.txt", "hello"); }, "notes.txt", "", 5, "notes.txt"},
       {"resolution 0", [](const std::string&) {}, kShared + "/assets/plants/bush_2.glb", "--resolution 0", 1, "--resolution"},
       {"resolution absurd", [](const std::string&) {}, kShared + "/assets/plants/bush_2.glb", "--resolution 1000000", 1, "--resolution"},

@@ -430,6 +430,12 @@ tinygltf::Model parseModel(const uint8_t* data, size_t size, bool binary, const 
     throw Error(io ? ExitCode::Io : ExitCode::InvalidInput,
                 name + ": invalid glTF (" + (e.empty() ? "unknown error" : e) + ")");
   }
+  // A required extension Canopy does not implement would silently change the geometry or the
+  // texture lookup: refuse it. (Material extensions only change shading, which Canopy ignores.)
+  for (const std::string& ext : model.extensionsRequired)
+    if (ext != "KHR_draco_mesh_compression" && ext != "KHR_mesh_quantization" &&
+        ext.rfind("KHR_materials_", 0) != 0)
+      throw unsupported(name + ": requires glTF extension " + ext + ", which Canopy does not support");
   // tinygltf only warns about an external image it cannot find; Canopy needs every image.
   if (warn.find("ile not found") != std::string::npos)
     throw ioError(name + ": a referenced file is missing (" + oneLine(warn) + ")");

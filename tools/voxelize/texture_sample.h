@@ -91,6 +91,12 @@ inline int mipLevel(const MipChain& m, double uvArea, double fineArea) {
   return std::min(level, int(m.levels.size()) - 1);
 }
 
+// floor() for values already clamped to a small range, without a libm call.
+inline int floorToInt(double x) {
+  const int i = int(x);
+  return x < double(i) ? i - 1 : i;
+}
+
 // Bilinear (or nearest) footprint of (u, v): four texel offsets into rgba and their weights.
 struct Footprint {
   size_t at[4];
@@ -100,8 +106,8 @@ struct Footprint {
 inline Footprint footprint(const mesh::Texture& t, float u, float v) {
   if (!std::isfinite(u) || !std::isfinite(v)) u = v = 0;
   // Keep the coordinate in a sane range before converting to int (REPEAT/MIRROR are periodic).
-  const double fu = double(u) - (t.wrapS == 33071 ? 0.0 : 2.0 * std::floor(double(u) / 2.0));
-  const double fv = double(v) - (t.wrapT == 33071 ? 0.0 : 2.0 * std::floor(double(v) / 2.0));
+  const double fu = (t.wrapS == 33071 || (u >= 0 && u <= 2)) ? u : double(u) - 2.0 * std::floor(double(u) / 2.0);
+  const double fv = (t.wrapT == 33071 || (v >= 0 && v <= 2)) ? v : double(v) - 2.0 * std::floor(double(v) / 2.0);
   const double x = std::clamp(fu, -4.0, 4.0) * t.width - 0.5;
   const double y = std::clamp(fv, -4.0, 4.0) * t.height - 0.5;
   auto offset = [&](int xi, int yi) {
@@ -110,11 +116,11 @@ inline Footprint footprint(const mesh::Texture& t, float u, float v) {
   };
   Footprint f;
   if (t.nearest) {
-    const size_t o = offset(int(std::floor(x + 0.5)), int(std::floor(y + 0.5)));
+    const size_t o = offset(floorToInt(x + 0.5), floorToInt(y + 0.5));
     for (int i = 0; i < 4; ++i) { f.at[i] = o; f.w[i] = i == 0 ? 1.f : 0.f; }
     return f;
   }
-  const int x0 = int(std::floor(x)), y0 = int(std::floor(y));
+  const int x0 = floorToInt(x), y0 = floorToInt(y);
   const float ax = float(x - x0), ay = float(y - y0);
   f.at[0] = offset(x0, y0);
   f.at[1] = offset(x0 + 1, y0);

@@ -316,7 +316,7 @@ VoxelizeResult voxelizeMesh(mesh::Mesh mesh, const VoxelizeOptions& opt, const s
                   if (!vox::exactTriBoxOverlap(a, b, c, p)) continue;
                 }
                 ++touchesHere;
-                // Sample the material at the centroid of the triangle's part inside the sub-cell.
+                // Sample the material (alpha test, colour) for this sub-cell.
                 float rgb[3] = {1, 1, 1};
                 if (plan.defaultColor) {
                   if (plan.alphaTest && plan.factor[3] < plan.cutoff) { ++rejectedHere; continue; }

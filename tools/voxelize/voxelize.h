@@ -6,8 +6,10 @@
 //   density = fraction of a cell's fine sub-cells touched by counted geometry (0..1),
 //   wood    = fraction of those sub-cells touched by wood geometry,
 //   albedo  = mean linear base colour over all (triangle, sub-cell) touches in the cell.
-// Leaf (alpha-masked) geometry counts in a sub-cell only where its base-colour alpha, sampled at
-// the centroid of the part of the triangle inside the sub-cell, passes alphaCutoff.
+// Leaf (alpha-masked) geometry counts in a sub-cell only where its base-colour alpha passes
+// alphaCutoff; alpha (and colour) are sampled at the sub-cell centre projected onto the triangle's
+// plane and clamped into the triangle, from the texture's mip level matching the sub-cell's
+// footprint (texture_sample.h).
 // The lattice is a cube of resolution^3 cells: the mesh's bounding cube centred in cells
 // 1..resolution-2 with one fine sub-cell of margin, so the outer layer of cells is always empty.
 // Work and memory follow the occupied 8^3-cell tiles (TBB, deterministic at any thread count).
