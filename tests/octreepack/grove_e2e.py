@@ -3,9 +3,9 @@
 
   grove_e2e.py BIN_DIR GROVE.glb WORK_DIR
 
-1. canopy-voxelize GROVE.glb --instances WORK/grove.scene.json  (the instance list)
-2. every model it names is voxelized from its glTF mesh: canopy-voxelize GROVE.glb --mesh I
-   -o MODEL.density.vdb --resolution 48 (unless step 1 already wrote it)
+1. canopy-voxelize GROVE.glb --instances WORK/grove.scene.json  (the instance list only)
+2. every model it names is voxelized from its glTF mesh (the model's "mesh" field):
+   canopy-voxelize GROVE.glb --mesh M -o MODEL.density.vdb --resolution 48
 3. canopy-octreepack --scene WORK/grove.scene.json -o WORK/grove.canopy; verify; info --json must
    list every model and instance of the scene.
 Exits non-zero (with the failing command) on any problem.
@@ -30,13 +30,12 @@ def main():
     voxelize = os.path.join(bin_dir, "canopy-voxelize")
     pack = os.path.join(bin_dir, "canopy-octreepack")
     scene = os.path.join(work, "grove.scene.json")
-    run([voxelize, glb, "--instances", scene, "-o", os.path.join(work, "grove.density.vdb"), "--resolution", "48", "--quiet"])
+    run([voxelize, glb, "--instances", scene, "--quiet"])
     with open(scene) as f:
         desc = json.load(f)
     for i, m in enumerate(desc["models"]):
         path = os.path.join(work, m["density"])
-        if not os.path.exists(path):
-            run([voxelize, glb, "--mesh", str(i), "-o", path, "--resolution", "48", "--quiet"])
+        run([voxelize, glb, "--mesh", str(m.get("mesh", i)), "-o", path, "--resolution", "48", "--quiet"])
     out = os.path.join(work, "grove.canopy")
     run([pack, "--scene", scene, "-o", out, "--ignore-light", "--quiet"])
     run([pack, "verify", out, "--quiet"])

@@ -86,13 +86,19 @@ ModelSource readDensityVdb(const std::string& path, const std::string& name) {
   return src;
 }
 
-LightVdb readLightVdb(const std::string& path) {
+LightVdb readLightVdb(const std::string& path, const ModelSource& model) {
   vdbio::VdbFile file = vdbio::readVdb(path);
   std::vector<openvdb::Vec3SGrid::ConstPtr> grids;
   for (uint32_t b = 0; b < kCanopyLightBases; ++b) {
     char name[8];
     std::snprintf(name, sizeof name, "B%02u", b);
     grids.push_back(file.require<openvdb::Vec3SGrid>(name));
+  }
+  if (grids[0]->getMetadata<openvdb::Vec3IMetadata>("canopy_lattice_min")) {
+    const vdbio::LatticeMeta meta = vdbio::readLatticeMeta(*grids[0], path);
+    for (int a = 0; a < 3; ++a)
+      if (meta.min[a] != model.latticeMin[a] || meta.max[a] != model.latticeMax[a])
+        throw invalidInput(path + ": its lattice differs from the density lattice of model '" + model.name + "'");
   }
   LightVdb out;
   out.sourceLabel = vdbio::describeSource(path);

@@ -16,12 +16,13 @@ namespace canopy::octreepack {
 ModelSource readDensityVdb(const std::string& path, const std::string& name);
 
 // The uncompressed lighting of canopy-lbsolve (19 Vec3 grids B00..B18, lattice index space) as a
-// LightFn (trilinear-free: the value stored at each cell; the grids' background elsewhere).
+// LightFn (the value stored at each cell; the grids' background elsewhere). Where the grids carry
+// the §0 lattice metadata, it must equal `model`'s lattice.
 struct LightVdb {
   LightFn fn;
   std::string sourceLabel;
 };
-LightVdb readLightVdb(const std::string& path);
+LightVdb readLightVdb(const std::string& path, const ModelSource& model);
 
 // Compressed lighting from canopy-haar (.chaar, 19 bases) sampled through the chaar decoder at
 // every lattice cell (0 outside the lattice). Its lattice must equal `model`'s. Throws

@@ -81,6 +81,13 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
   }
 
   CanopyWriteInput w;
+  if (!o.sceneLight.empty()) {  // read first: a bad scene lattice fails before the models are built
+    SceneLightSource sl = readSceneLightVdb(o.sceneLight, o.sceneLightGrid);
+    w.hasSceneLight = true;
+    w.sceneLight = sl.header;
+    w.sceneLightValues = std::move(sl.values);
+    meta["scene_light"] = sl.sourceLabel;
+  }
   std::vector<BuiltModel> built;
   built.reserve(modelsIn.size());
   nlohmann::json sources = nlohmann::json::array();
@@ -91,7 +98,7 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
     nlohmann::json source = {{"name", modelsIn[i].name}, {"density", src.sourceLabel}};
     LightFn light;
     if (!modelsIn[i].light.empty() && !o.ignoreLight) {
-      LightVdb lv = endsWith(modelsIn[i].light, ".chaar") ? readChaarLight(modelsIn[i].light, src) : readLightVdb(modelsIn[i].light);
+      LightVdb lv = endsWith(modelsIn[i].light, ".chaar") ? readChaarLight(modelsIn[i].light, src) : readLightVdb(modelsIn[i].light, src);
       light = std::move(lv.fn);
       source["light"] = lv.sourceLabel;
     }
@@ -102,13 +109,6 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
   for (auto& b : built) w.models.push_back({b.record, &b.tiles, &b.bricks, &b.light});
   w.instances = instances;
   meta["models"] = sources;
-  if (!o.sceneLight.empty()) {
-    SceneLightSource sl = readSceneLightVdb(o.sceneLight, o.sceneLightGrid);
-    w.hasSceneLight = true;
-    w.sceneLight = sl.header;
-    w.sceneLightValues = std::move(sl.values);
-    meta["scene_light"] = sl.sourceLabel;
-  }
   progress.done();
   w.metadata = meta.dump();
   const CanopyWriteStats stats = writeCanopyFile(o.output, std::move(w));
