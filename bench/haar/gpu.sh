@@ -1,0 +1,35 @@
+#!/usr/bin/env bash
+# GPU checks and benchmark of canopy-haar, for the lead on the GPU host.
+#   BIN=build/bin OUT=out/haar [LIGHT=plant.light.vdb] bash bench/haar/gpu.sh
+# 1. test_haar_cuda: CUDA decode == CPU decode bit for bit (fp32 and fp16), 19 bases; on LIGHT
+#    (a real lbsolve output) when given, else on a synthetic field.
+# 2. bench_haar (CPU): size at 1% volume RMS vs dense fp32, the dissertation and ZFP; writes the
+#    .chaar the GPU benchmark samples.
+# 3. bench_haar_gpu: random trilinear lookups/s, compressed bricks vs a 3D texture and a plain array.
+# Logs: $OUT/test_haar_cuda.log, $OUT/bench_haar.md, $OUT/bench_haar_gpu.md.
+set -euo pipefail
+: "${BIN:?set BIN to the directory holding the built binaries}"
+: "${OUT:?set OUT to a directory for the logs}"
+mkdir -p "$OUT"
+LIGHT=${LIGHT:-}
+status=0
+
+nvidia-smi -L > "$OUT/gpu.txt" 2>&1 || true
+
+echo "== test_haar_cuda" >&2
+CANOPY_HAAR_LIGHT_VDB="$LIGHT" "$BIN/test_haar_cuda" --gtest_color=no > "$OUT/test_haar_cuda.log" 2>&1 || status=1
+if grep -q "SKIPPED" "$OUT/test_haar_cuda.log"; then echo "test_haar_cuda skipped: no GPU?" >&2; status=1; fi
+tail -3 "$OUT/test_haar_cuda.log" >&2
+
+echo "== bench_haar (CPU part)" >&2
+if [[ -n "$LIGHT" ]]; then
+  "$BIN/bench_haar" "$LIGHT" --write-chaar "$OUT/bench.chaar" > "$OUT/bench_haar.md" || status=1
+else
+  "$BIN/bench_haar" --synthetic 128 --write-chaar "$OUT/bench.chaar" > "$OUT/bench_haar.md" || status=1
+fi
+tail -8 "$OUT/bench_haar.md" >&2
+
+echo "== bench_haar_gpu" >&2
+"$BIN/bench_haar_gpu" "$OUT/bench.chaar" > "$OUT/bench_haar_gpu.md" || status=1
+cat "$OUT/bench_haar_gpu.md" >&2
+exit $status

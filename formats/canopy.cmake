@@ -1,0 +1,9 @@
+# canopy_file: the .canopy reader (formats/canopy_file.{h,cpp}). No OpenVDB, so it compiles fast,
+# can be sanitized (tests compile canopy_file.cpp into themselves) and fuzzed.
+add_library(canopy_file STATIC ${CMAKE_CURRENT_LIST_DIR}/canopy_file.cpp)
+target_include_directories(canopy_file PUBLIC ${CMAKE_CURRENT_LIST_DIR}/..)
+target_link_libraries(canopy_file PUBLIC canopy_core PRIVATE canopy_warnings)
+
+# canopy_file_write: the .canopy writer (no OpenVDB either).
+add_library(canopy_file_write STATIC ${CMAKE_CURRENT_LIST_DIR}/canopy_write.cpp)
+target_link_libraries(canopy_file_write PUBLIC canopy_file PRIVATE canopy_warnings)

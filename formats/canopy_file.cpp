@@ -1,0 +1,422 @@
+// canopy_file.cpp: the .canopy reader (see canopy_file.h). No OpenVDB here: this file is compiled
+// into the sanitized tests and the fuzzer. It never trusts the file: every size, offset, count and
+// pointer is checked before use, and every failure is a canopy::Error naming the file.
+#include "formats/canopy_file.h"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <utility>
+
+#include "canopy/errors.h"
+#include "canopy/hash.h"
+
+namespace canopy {
+namespace {
+
+std::string u64s(uint64_t v) { return std::to_string(v); }
+
+[[noreturn]] void bad(const std::string& path, const std::string& what) {
+  throw invalidInput(path + ": " + what);
+}
+
+template <class T>
+std::vector<T> copyArray(const std::vector<unsigned char>& bytes, uint64_t offset, uint32_t count) {
+  std::vector<T> out(count);
+  if (count) std::memcpy(out.data(), bytes.data() + offset, size_t(count) * sizeof(T));
+  return out;
+}
+
+const char* sectionName(uint32_t kind) {
+  switch (CanopySectionKind(kind)) {
+    case CanopySectionKind::Models: return "Models";
+    case CanopySectionKind::Instances: return "Instances";
+    case CanopySectionKind::NodeTiles: return "NodeTiles";
+    case CanopySectionKind::PageTable: return "PageTable";
+    case CanopySectionKind::SceneLight: return "SceneLight";
+    case CanopySectionKind::Metadata: return "Metadata";
+  }
+  return "unknown";
+}
+
+}  // namespace
+
+bool canopyInvertAffine(const double m[12], double out[12]) {
+  const double a = m[0], b = m[1], c = m[2], d = m[4], e = m[5], f = m[6], g = m[8], h = m[9], i = m[10];
+  const double A = e * i - f * h, B = -(d * i - f * g), C = d * h - e * g;
+  const double det = a * A + b * B + c * C;
+  if (!(std::fabs(det) > 1e-300) || !std::isfinite(det)) return false;
+  const double inv[9] = {A / det, -(b * i - c * h) / det, (b * f - c * e) / det,
+                         B / det, (a * i - c * g) / det,  -(a * f - c * d) / det,
+                         C / det, -(a * h - b * g) / det, (a * e - b * d) / det};
+  for (int r = 0; r < 3; ++r) {
+    for (int k = 0; k < 3; ++k) out[4 * r + k] = inv[3 * r + k];
+    out[4 * r + 3] = -(inv[3 * r] * m[3] + inv[3 * r + 1] * m[7] + inv[3 * r + 2] * m[11]);
+  }
+  return true;
+}
+
+namespace {
+// out = a * b for 3x4 affine matrices.
+void composeAffine(const double a[12], const double b[12], double out[12]) {
+  for (int r = 0; r < 3; ++r)
+    for (int k = 0; k < 4; ++k)
+      out[4 * r + k] = a[4 * r] * b[k] + a[4 * r + 1] * b[4 + k] + a[4 * r + 2] * b[8 + k] + (k == 3 ? a[4 * r + 3] : 0.0);
+}
+bool modelToUnitD(const CanopyModel& M, double out[12]) {
+  double inv[12];
+  if (!canopyInvertAffine(M.indexToModel, inv)) return false;
+  // u = (p - origin + 0.5) / rootCells
+  const double s = 1.0 / double(M.rootCells);
+  double unit[12] = {s, 0, 0, (0.5 - M.octreeOrigin[0]) * s, 0, s, 0, (0.5 - M.octreeOrigin[1]) * s, 0, 0, s, (0.5 - M.octreeOrigin[2]) * s};
+  composeAffine(unit, inv, out);
+  return true;
+}
+}  // namespace
+
+bool canopyModelToUnit(const CanopyModel& M, float out[12]) {
+  double d[12];
+  if (!modelToUnitD(M, d)) return false;
+  for (int i = 0; i < 12; ++i) out[i] = float(d[i]);
+  return true;
+}
+
+bool canopyWorldToUnit(const CanopyModel& M, const CanopyInstance& inst, float out[12]) {
+  double mu[12], w[12], wi[12], d[12];
+  if (!modelToUnitD(M, mu)) return false;
+  for (int i = 0; i < 12; ++i) w[i] = inst.modelToWorld[i];
+  if (!canopyInvertAffine(w, wi)) return false;
+  composeAffine(mu, wi, d);
+  for (int i = 0; i < 12; ++i) out[i] = float(d[i]);
+  return true;
+}
+
+uint32_t canopyPageCrc(const void* page, uint32_t pageBytes) {
+  const auto* p = static_cast<const unsigned char*>(page);
+  constexpr size_t kCrcAt = offsetof(CanopyPageHeader, crc);
+  static const unsigned char zeros[4] = {0, 0, 0, 0};
+  uint32_t c = crc32(0, p, kCrcAt);
+  c = crc32(c, zeros, 4);
+  return crc32(c, p + kCrcAt + 4, pageBytes - kCrcAt - 4);
+}
+
+CanopyFile::CanopyFile(CanopyFile&& o) noexcept { *this = std::move(o); }
+
+CanopyFile& CanopyFile::operator=(CanopyFile&& o) noexcept {
+  if (this != &o) {
+    if (fd_ >= 0) ::close(fd_);
+    path_ = std::move(o.path_);
+    fd_ = std::exchange(o.fd_, -1);
+    memory_ = o.memory_;
+    memorySize_ = o.memorySize_;
+    resident_ = std::move(o.resident_);
+    header_ = o.header_;
+    sections_ = std::move(o.sections_);
+    models_ = std::move(o.models_);
+    instances_ = std::move(o.instances_);
+    tiles_ = std::move(o.tiles_);
+    pages_ = std::move(o.pages_);
+    hasSceneLight_ = o.hasSceneLight_;
+    sceneLight_ = o.sceneLight_;
+    sceneLightValues_ = std::move(o.sceneLightValues_);
+    metadata_ = std::move(o.metadata_);
+  }
+  return *this;
+}
+
+CanopyFile::~CanopyFile() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+void CanopyFile::readAt(uint64_t offset, void* dst, size_t bytes) const {
+  if (fd_ < 0) {
+    if (offset > memorySize_ || bytes > memorySize_ - offset)
+      bad(path_, "truncated: needs bytes up to " + u64s(offset + bytes) + ", file has " + u64s(memorySize_));
+    if (bytes) std::memcpy(dst, memory_ + offset, bytes);
+    return;
+  }
+  auto* out = static_cast<unsigned char*>(dst);
+  size_t done = 0;
+  while (done < bytes) {
+    const ssize_t n = ::pread(fd_, out + done, bytes - done, off_t(offset + done));
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      throw ioError(path_ + ": read failed at offset " + u64s(offset + done) + ": " + std::strerror(errno));
+    }
+    if (n == 0)
+      bad(path_, "truncated: needs bytes up to " + u64s(offset + bytes) + ", read ended at " + u64s(offset + done));
+    done += size_t(n);
+  }
+}
+
+CanopyFile CanopyFile::open(const std::string& path) {
+  CanopyFile f;
+  f.path_ = path;
+  f.fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (f.fd_ < 0) throw ioError(path + ": cannot open: " + std::strerror(errno));
+  struct stat st {};
+  if (::fstat(f.fd_, &st) != 0) throw ioError(path + ": cannot stat: " + std::strerror(errno));
+  if (!S_ISREG(st.st_mode)) throw ioError(path + ": not a regular file");
+  f.parseResident(uint64_t(st.st_size));
+  return f;
+}
+
+CanopyFile CanopyFile::fromMemory(const void* data, size_t size, const std::string& name) {
+  CanopyFile f;
+  f.path_ = name;
+  f.memory_ = static_cast<const unsigned char*>(data);
+  f.memorySize_ = size;
+  f.parseResident(size);
+  return f;
+}
+
+const CanopySection* CanopyFile::findSection(CanopySectionKind kind) const {
+  for (const auto& s : sections_)
+    if (s.kind == uint32_t(kind)) return &s;
+  return nullptr;
+}
+
+void CanopyFile::parseResident(uint64_t fileBytes) {
+  const std::string& P = path_;
+  // --- header ---------------------------------------------------------------------------------
+  if (fileBytes < sizeof(CanopyFileHeader))
+    bad(P, "truncated: " + u64s(fileBytes) + " bytes, smaller than the 128-byte header");
+  readAt(0, &header_, sizeof header_);
+  const CanopyFileHeader& h = header_;
+  if (std::memcmp(h.magic, kCanopyMagic, 8) != 0) bad(P, "not a .canopy file (bad magic)");
+  if (h.major > kCanopyMajor)
+    throw unsupported(P + ": format version " + std::to_string(h.major) + "." + std::to_string(h.minor) +
+                      " is newer than this reader (" + std::to_string(kCanopyMajor) + "." +
+                      std::to_string(kCanopyMinor) + "); update canopy");
+  if (h.major < 1) bad(P, "invalid format version " + std::to_string(h.major) + "." + std::to_string(h.minor));
+  if (crc32(0, &h, offsetof(CanopyFileHeader, headerCrc)) != h.headerCrc) bad(P, "header checksum mismatch");
+  if (h.headerBytes != sizeof(CanopyFileHeader)) bad(P, "header size " + u64s(h.headerBytes) + " != 128");
+  if (h.fileBytes != fileBytes)
+    bad(P, fileBytes < h.fileBytes ? "truncated: header says " + u64s(h.fileBytes) + " bytes, file has " + u64s(fileBytes)
+                                   : "trailing bytes: header says " + u64s(h.fileBytes) + " bytes, file has " + u64s(fileBytes));
+  if (h.pageBytes < 32768 || (h.pageBytes & (h.pageBytes - 1)) != 0 || h.pageBytes > (1u << 26))
+    bad(P, "page size " + u64s(h.pageBytes) + " is not a power of two in [32 KiB, 64 MiB]");
+  if (h.brickVoxels != kCanopyBrickVoxels || h.brickBytes != kCanopyBrickBytes)
+    bad(P, "unsupported brick geometry (" + u64s(h.brickVoxels) + " voxels, " + u64s(h.brickBytes) + " bytes)");
+  if (h.bricksPerPage != (h.pageBytes - sizeof(CanopyPageHeader)) / h.brickBytes)
+    bad(P, "bricksPerPage " + u64s(h.bricksPerPage) + " inconsistent with the page size");
+  if (h.lightItemBytes != kCanopyLightItemBytes || h.lightItemsPerPage != (h.pageBytes - sizeof(CanopyPageHeader)) / h.lightItemBytes)
+    bad(P, "unsupported light item geometry (" + u64s(h.lightItemBytes) + " bytes, " + u64s(h.lightItemsPerPage) + " per page)");
+  if (h.pagesOffset != h.residentBytes || h.pagesOffset % h.pageBytes != 0 || h.pagesOffset > fileBytes)
+    bad(P, "pages offset " + u64s(h.pagesOffset) + " invalid");
+  if ((fileBytes - h.pagesOffset) / h.pageBytes != h.pageCount || (fileBytes - h.pagesOffset) % h.pageBytes != 0)
+    bad(P, "page count " + u64s(h.pageCount) + " does not match the file size");
+  if (h.residentBytes > (uint64_t(1) << 34)) bad(P, "resident part of " + u64s(h.residentBytes) + " bytes is absurd");
+  const uint64_t tableEnd = sizeof(CanopyFileHeader) + uint64_t(h.sectionCount) * sizeof(CanopySection);
+  if (h.sectionCount == 0 || h.sectionCount > 64 || tableEnd > h.residentBytes)
+    bad(P, "section count " + u64s(h.sectionCount) + " invalid");
+
+  // --- resident bytes and section table -------------------------------------------------------
+  resident_.resize(size_t(h.residentBytes));
+  readAt(0, resident_.data(), resident_.size());
+  if (crc32(0, resident_.data() + sizeof(CanopyFileHeader), size_t(tableEnd - sizeof(CanopyFileHeader))) != h.sectionTableCrc)
+    bad(P, "section table checksum mismatch");
+  sections_ = copyArray<CanopySection>(resident_, sizeof(CanopyFileHeader), h.sectionCount);
+  for (size_t i = 0; i < sections_.size(); ++i) {
+    const CanopySection& s = sections_[i];
+    const std::string name = std::string("section ") + sectionName(s.kind);
+    if (s.offset % kCanopySectionAlign != 0 || s.offset < tableEnd || s.offset > h.residentBytes ||
+        s.bytes > h.residentBytes - s.offset)
+      bad(P, name + " lies outside the resident part");
+    if (s.itemBytes != 0 && uint64_t(s.itemBytes) * s.itemCount != s.bytes)
+      bad(P, name + " size does not match its item count");
+    if (crc32(0, resident_.data() + s.offset, size_t(s.bytes)) != s.crc) bad(P, name + " checksum mismatch");
+    for (size_t j = 0; j < i; ++j)
+      if (sections_[j].kind == s.kind) bad(P, "duplicate " + name);
+  }
+  // Bytes of the resident part outside the header, the table and the sections must be zero (no CRC
+  // covers them, so anything else there is corruption).
+  {
+    std::vector<std::pair<uint64_t, uint64_t>> used{{0, tableEnd}};
+    for (const CanopySection& s : sections_) used.emplace_back(s.offset, s.offset + s.bytes);
+    std::sort(used.begin(), used.end());
+    uint64_t at = 0;
+    for (const auto& [b, e] : used) {
+      if (b < at) bad(P, "sections overlap");
+      for (uint64_t i = at; i < b; ++i)
+        if (resident_[size_t(i)] != 0) bad(P, "non-zero padding at offset " + u64s(i));
+      at = e;
+    }
+    for (uint64_t i = at; i < resident_.size(); ++i)
+      if (resident_[size_t(i)] != 0) bad(P, "non-zero padding at offset " + u64s(i));
+  }
+  auto require = [&](CanopySectionKind k, uint32_t itemBytes) -> const CanopySection& {
+    const CanopySection* s = findSection(k);
+    if (!s) bad(P, std::string("missing section ") + sectionName(uint32_t(k)));
+    if (s->itemBytes != itemBytes) bad(P, std::string("section ") + sectionName(uint32_t(k)) + " has the wrong item size");
+    return *s;
+  };
+  const CanopySection& sm = require(CanopySectionKind::Models, sizeof(CanopyModel));
+  const CanopySection& si = require(CanopySectionKind::Instances, sizeof(CanopyInstance));
+  const CanopySection& st = require(CanopySectionKind::NodeTiles, sizeof(CanopyNode) * 8);
+  const CanopySection& sp = require(CanopySectionKind::PageTable, sizeof(CanopyPageEntry));
+  if (sm.itemCount != h.modelCount) bad(P, "model count differs between header and Models section");
+  if (si.itemCount != h.instanceCount) bad(P, "instance count differs between header and Instances section");
+  if (sp.itemCount != h.pageCount) bad(P, "page count differs between header and PageTable section");
+  models_ = copyArray<CanopyModel>(resident_, sm.offset, sm.itemCount);
+  instances_ = copyArray<CanopyInstance>(resident_, si.offset, si.itemCount);
+  tiles_ = copyArray<CanopyNode>(resident_, st.offset, st.itemCount * 8);
+  pages_ = copyArray<CanopyPageEntry>(resident_, sp.offset, sp.itemCount);
+
+  if (const CanopySection* sl = findSection(CanopySectionKind::SceneLight)) {
+    if (sl->bytes < sizeof(CanopySceneLight)) bad(P, "SceneLight section too small");
+    std::memcpy(&sceneLight_, resident_.data() + sl->offset, sizeof sceneLight_);
+    uint64_t n = 1;
+    for (int a = 0; a < 3; ++a) {
+      if (sceneLight_.dim[a] <= 0 || sceneLight_.dim[a] > 65536) bad(P, "SceneLight dimensions invalid");
+      n *= uint64_t(sceneLight_.dim[a]);
+    }
+    if (sl->bytes != sizeof(CanopySceneLight) + n * sizeof(float)) bad(P, "SceneLight size does not match its dimensions");
+    sceneLightValues_.resize(size_t(n));
+    std::memcpy(sceneLightValues_.data(), resident_.data() + sl->offset + sizeof(CanopySceneLight), size_t(n) * sizeof(float));
+    hasSceneLight_ = true;
+  }
+  if (const CanopySection* md = findSection(CanopySectionKind::Metadata))
+    metadata_.assign(reinterpret_cast<const char*>(resident_.data() + md->offset), size_t(md->bytes));
+
+  // --- models: ranges and the tree ------------------------------------------------------------
+  const uint64_t tileTotal = st.itemCount;
+  for (uint32_t m = 0; m < models_.size(); ++m) {
+    const CanopyModel& M = models_[m];
+    const std::string name = "model " + std::to_string(m);
+    if (M.name[sizeof M.name - 1] != 0) bad(P, name + " name is not NUL-terminated");
+    for (double v : M.indexToModel)
+      if (!std::isfinite(v)) bad(P, name + " has a non-finite transform");
+    if (M.depth > kCanopyMaxDepth || M.brickSize != kCanopyBrickSize || M.brickBorder != kCanopyBrickBorder ||
+        M.rootCells != (kCanopyBrickSize << M.depth))
+      bad(P, name + " has an invalid octree geometry");
+    for (int a = 0; a < 3; ++a) {
+      if (M.latticeMax[a] < M.latticeMin[a] || int64_t(M.latticeMax[a]) - M.octreeOrigin[a] >= int64_t(M.rootCells) ||
+          M.latticeMin[a] < M.octreeOrigin[a])
+        bad(P, name + " lattice bounds do not fit its octree");
+    }
+    if (uint64_t(M.firstTile) + M.tileCount > tileTotal) bad(P, name + " tiles lie outside NodeTiles");
+    const uint64_t bpp = h.bricksPerPage;
+    if (M.brickPageCount != (uint64_t(M.brickCount) + bpp - 1) / bpp ||
+        uint64_t(M.firstBrickPage) + M.brickPageCount > h.pageCount)
+      bad(P, name + " brick pages out of range");
+    const uint64_t lpp = h.lightItemsPerPage;
+    const bool lit = (M.flags & kCanopyModelHasLight) != 0;
+    if ((lit ? M.lightCount != M.brickCount : M.lightCount != 0) || M.lightPageCount != (uint64_t(M.lightCount) + lpp - 1) / lpp ||
+        uint64_t(M.firstLightPage) + M.lightPageCount > h.pageCount)
+      bad(P, name + " light items or pages out of range");
+    // Every tile must be reached exactly once from the root, at a level < depth: no cycles, no
+    // shared or orphan tiles, every brick id in range.
+    std::vector<unsigned char> seen(M.tileCount, 0);
+    std::vector<std::pair<uint32_t, uint32_t>> stack;  // (tile, level of its nodes)
+    auto checkNode = [&](const CanopyNode& n, uint32_t level) {
+      if (n.brick != kCanopyNone && n.brick >= M.brickCount) bad(P, name + ": brick id " + u64s(n.brick) + " out of range");
+      if (!(n.density >= 0.0f) || n.density > 3.0e38f) bad(P, name + ": node density is negative or not finite");
+      if (n.child == kCanopyNone) return;
+      if (n.child >= M.tileCount) bad(P, name + ": child tile " + u64s(n.child) + " out of range");
+      if (level >= M.depth) bad(P, name + ": a node at the finest level has children");
+      if (seen[n.child]) bad(P, name + ": tile " + u64s(n.child) + " is referenced twice");
+      seen[n.child] = 1;
+      stack.emplace_back(n.child, level + 1);
+    };
+    checkNode(M.root, 0);
+    while (!stack.empty()) {
+      const auto [t, level] = stack.back();
+      stack.pop_back();
+      const CanopyNode* nodes = tiles_.data() + (size_t(M.firstTile) + t) * 8;
+      for (int c = 0; c < 8; ++c) checkNode(nodes[c], level);
+    }
+    for (uint32_t t = 0; t < M.tileCount; ++t)
+      if (!seen[t]) bad(P, name + ": tile " + u64s(t) + " is not reachable from the root");
+  }
+  // Every page belongs to exactly one model range (brick or light): no page is shared or orphaned.
+  {
+    std::vector<unsigned char> owner(h.pageCount, 0);
+    for (const CanopyModel& M : models_)
+      for (auto [first, count] : {std::pair<uint32_t, uint32_t>{M.firstBrickPage, M.brickPageCount}, {M.firstLightPage, M.lightPageCount}})
+        for (uint32_t p = first; p < first + count; ++p) {
+          if (owner[p]) bad(P, "page " + u64s(p) + " is claimed by two model ranges");
+          owner[p] = 1;
+        }
+    if (h.minor <= kCanopyMinor)  // a newer minor may add page kinds outside the model ranges
+      for (uint32_t p = 0; p < h.pageCount; ++p)
+        if (!owner[p]) bad(P, "page " + u64s(p) + " belongs to no model");
+  }
+  for (uint32_t i = 0; i < instances_.size(); ++i) {
+    if (instances_[i].model >= models_.size()) bad(P, "instance " + u64s(i) + " names model " + u64s(instances_[i].model) + " out of range");
+    for (float v : instances_[i].modelToWorld)
+      if (!std::isfinite(v)) bad(P, "instance " + u64s(i) + " has a non-finite transform");
+  }
+
+  // --- page table ----------------------------------------------------------------------------
+  for (uint32_t i = 0; i < pages_.size(); ++i) {
+    const CanopyPageEntry& e = pages_[i];
+    const std::string name = "page " + std::to_string(i);
+    if (std::memcmp(e.magic, kCanopyPageMagic, 4) != 0 || e.pageIndex != i) bad(P, name + ": page table entry is corrupt");
+    if (e.model >= models_.size()) bad(P, name + ": model out of range");
+    if (e.payloadBytes > h.pageBytes - sizeof(CanopyPageHeader)) bad(P, name + ": payload larger than a page");
+    const CanopyModel& M = models_[e.model];
+    if (e.kind == uint32_t(CanopyPageKind::Brick)) {
+      if (i < M.firstBrickPage || i >= M.firstBrickPage + M.brickPageCount) bad(P, name + ": brick page outside its model's range");
+      const uint32_t first = (i - M.firstBrickPage) * h.bricksPerPage;
+      const uint32_t count = std::min<uint32_t>(h.bricksPerPage, M.brickCount - first);
+      if (e.firstItem != first || e.itemCount != count || e.payloadBytes != count * h.brickBytes)
+        bad(P, name + ": brick range does not match its model");
+    } else if (e.kind == uint32_t(CanopyPageKind::Light)) {
+      if (i < M.firstLightPage || i >= M.firstLightPage + M.lightPageCount) bad(P, name + ": light page outside its model's range");
+      const uint32_t first = (i - M.firstLightPage) * h.lightItemsPerPage;
+      const uint32_t count = std::min<uint32_t>(h.lightItemsPerPage, M.lightCount - first);
+      if (e.firstItem != first || e.itemCount != count || e.payloadBytes != count * h.lightItemBytes)
+        bad(P, name + ": light item range does not match its model");
+    } else if (h.minor <= kCanopyMinor || h.major < kCanopyMajor) {
+      bad(P, name + ": unknown page kind " + u64s(e.kind));
+    }
+  }
+}
+
+CanopyLookup CanopyFile::descend(uint32_t m, float ux, float uy, float uz, uint32_t maxLevel) const {
+  const CanopyModel& M = models_.at(m);
+  return canopyDescend(tiles(m), M.tileCount, M.root, M.depth, ux, uy, uz, maxLevel);
+}
+
+void CanopyFile::readPage(uint32_t index, void* dst) const {
+  if (index >= pages_.size()) throw invalidInput(path_ + ": page " + u64s(index) + " out of range");
+  const CanopyPageEntry& e = pages_[index];
+  readAt(header_.pagesOffset + uint64_t(index) * header_.pageBytes, dst, header_.pageBytes);
+  CanopyPageHeader ph;
+  std::memcpy(&ph, dst, sizeof ph);
+  const std::string name = "page " + std::to_string(index);
+  if (std::memcmp(&ph, &e, sizeof ph) != 0) bad(path_, name + ": page header differs from the page table");
+  if (canopyPageCrc(dst, header_.pageBytes) != ph.crc) bad(path_, name + ": checksum mismatch");
+}
+
+std::vector<unsigned char> CanopyFile::readPage(uint32_t index) const {
+  std::vector<unsigned char> page(header_.pageBytes);
+  readPage(index, page.data());
+  return page;
+}
+
+std::vector<std::string> verifyCanopyFile(const std::string& path) {
+  std::vector<std::string> problems;
+  try {
+    CanopyFile f = CanopyFile::open(path);
+    std::vector<unsigned char> page(f.header().pageBytes);
+    for (uint32_t i = 0; i < f.pageCount(); ++i) {
+      try {
+        f.readPage(i, page.data());
+      } catch (const Error& e) {
+        problems.push_back(e.what());
+      }
+    }
+  } catch (const Error& e) {
+    problems.push_back(e.what());
+  }
+  return problems;
+}
+
+}  // namespace canopy

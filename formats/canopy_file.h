@@ -1,0 +1,571 @@
+// canopy_file.h: the packed, streamable scene file (`.canopy`), version 1.0.
+//
+// A .canopy file holds plant models (each a sparse GigaVoxels-style octree of bricks, thesis ch. 5),
+// instances of those models (model id + transform) and an optional coarse scene lighting lattice.
+// It is split into a small RESIDENT part that a player reads once at start-up and fixed-size,
+// aligned PAGES that it streams on demand; every page can be read and verified on its own.
+//
+// Byte layout (little-endian; every offset is from the start of the file):
+//
+//   0                 CanopyFileHeader           128 B   magic "CANOPYPK", major.minor, sizes, CRCs
+//   128               CanopySection[n]           32 B each: kind, offset, bytes, item size/count, CRC
+//   (64-aligned)      sections (written in this order; found through the table), each on a
+//                     64-byte boundary, zero padding between them:
+//                       Models      CanopyModel[modelCount]         512 B each
+//                       Instances   CanopyInstance[instanceCount]    64 B each
+//                       NodeTiles   CanopyNode[8 * tiles]            16 B each (2x2x2 tiles)
+//                       PageTable   CanopyPageEntry[pageCount]       32 B each
+//                       SceneLight  CanopySceneLight + float[dim]    (optional)
+//                       Metadata    UTF-8 JSON: tool version, inputs and their hashes (optional)
+//   pagesOffset       page 0, page 1, ...        pageBytes each (65536), pagesOffset % pageBytes == 0
+//   fileBytes         end of file (== pagesOffset + pageCount * pageBytes; nothing may follow)
+//
+//   resident part = [0, pagesOffset): header, section table, every section. All node tiles are
+//   resident (16 B per node; the whole resident part measured 0.1-0.7% of a file); bricks and
+//   light live in pages.
+//
+// Octree of one model (thesis §5.1): the root covers lattice cells [octreeOrigin, octreeOrigin +
+// rootCells) on each axis, rootCells = brickSize * 2^depth; level 0 is the root, level `depth` the
+// finest, where one brick voxel is one lattice cell. A node at level d covers rootCells / 2^d
+// cells and holds a brick of brickSize^3 voxels (each rootCells / (brickSize 2^d) cells wide), or a
+// constant value (empty = density 0). Every level is a pre-filtered MIP of the level below: a voxel
+// is the box filter (mean) of the 2x2x2 voxels below it; density is averaged, wood and albedo are
+// density-weighted means (0 where the density is 0). A node that is not constant at level < depth
+// points to a tile of 8 children; child c = x + 2y + 4z (x, y, z in {0,1} = upper half on that
+// axis). Constant nodes are terminal (the whole subtree is that constant).
+//
+// Bricks: brickSize = 8 voxels per axis plus a one-voxel border on every side (10^3 stored), as
+// GigaVoxels' default (node-centred voxels, §5.1.4): the border holds the neighbouring voxels of the
+// same level (0 outside the lattice), so a trilinear sample anywhere inside the node reads one brick
+// only. 8^3 keeps the border overhead at 95% (4^3 would be 240%) and the tree shallow. A brick is
+// stored as float density[1000] then uint32 material[1000] (8000 B; voxel (x,y,z) at index
+// x + 10 (y + 10 z), x = 0 and 9 the borders). material = r | g << 8 | b << 16 | wood << 24, each an
+// unsigned normalised 8-bit value of linear albedo / wood fraction, rounded to nearest: albedo and
+// wood round-trip within 0.5/255; density is stored exactly (float32).
+//
+// Pages: a CanopyPageHeader (32 B) then the payload, zero padded to pageBytes. Brick pages hold
+// bricksPerPage (8) consecutive bricks of one model: brick b of model m is in page
+// model.firstBrickPage + b / bricksPerPage at payload offset (b % bricksPerPage) * brickBytes.
+// Brick ids are assigned level by level, coarse to fine (siblings adjacent), so a model's first
+// pages hold its coarse levels. The page CRC covers the whole page with the crc field read as 0; the
+// page table repeats each page's header fields and CRC so a reader can check a page it just read.
+//
+// Light pages (kind Light) carry the model's pre-filtered LB lighting, one light item per brick
+// (light item b belongs to brick b; model.lightCount is 0 or brickCount). A light item holds the 19
+// base solutions (B00 ambient, B01..B18) x RGB on a 4^3 grid over its node (each light voxel two
+// brick voxels wide: lighting is smooth, and half resolution makes an item 3x, not 24x, a density
+// brick) plus a one-voxel border (6^3 stored), as IEEE float16: half values[19][3][216], sample
+// (x,y,z) at index x + 6 (y + 6 z), x = 0 and 5 the borders; 24624 B. Light page p of a model holds
+// items [p * lightItemsPerPage, ...) (2 per page). Light levels are the Haar averages (box filter):
+// the finest light grid (2 cells per voxel) is the mean of the source lighting over its 2x2x2
+// lattice cells; each coarser grid is the mean of the 2x2x2 voxels below it that lie in occupied
+// blocks. Border voxels come from the neighbouring block of the same level, or repeat the edge voxel
+// where that block is empty. A constant node has no light item: use its nearest brick ancestor's.
+// A model without lighting (density only) has no light pages; the player then shows direct and
+// ambient light.
+//
+// Checksums: CRC-32 (zlib polynomial, canopy::crc32) of the header bytes [0, 124), of the section
+// table, of every section, and of every page. A reader rejects bad magic, a newer major version,
+// truncation, trailing bytes, any CRC mismatch and any pointer out of range (canopy::Error).
+//
+// Versioning: major changes on any layout change (a reader refuses a newer major); minor adds
+// optional sections/page kinds that older readers may ignore.
+#pragma once
+#include <math.h>
+#include <string.h>
+
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "canopy/hd.h"
+
+namespace canopy {
+
+// ------------------------------------------------------------------------------------------------
+// Constants
+// ------------------------------------------------------------------------------------------------
+constexpr char kCanopyMagic[8] = {'C', 'A', 'N', 'O', 'P', 'Y', 'P', 'K'};
+constexpr uint16_t kCanopyMajor = 1;
+constexpr uint16_t kCanopyMinor = 0;
+constexpr uint32_t kCanopyPageBytes = 65536;   // page size written (readers accept powers of two >= 32 KiB)
+constexpr uint32_t kCanopySectionAlign = 64;   // every section starts on a 64-byte boundary
+constexpr uint32_t kCanopyBrickSize = 8;       // interior voxels per axis
+constexpr uint32_t kCanopyBrickBorder = 1;     // border voxels on every side
+constexpr uint32_t kCanopyBrickVoxels = kCanopyBrickSize + 2 * kCanopyBrickBorder;  // 10 per axis
+constexpr uint32_t kCanopyBrickVoxelCount = kCanopyBrickVoxels * kCanopyBrickVoxels * kCanopyBrickVoxels;
+constexpr uint32_t kCanopyBrickBytes = kCanopyBrickVoxelCount * 8;  // float + uint32 per voxel
+constexpr uint32_t kCanopyLightBases = 19;     // B00 (ambient) .. B18
+constexpr uint32_t kCanopyLightSize = 4;       // interior light voxels per axis (2 brick voxels each)
+constexpr uint32_t kCanopyLightVoxels = kCanopyLightSize + 2;  // 6 with the border
+constexpr uint32_t kCanopyLightVoxelCount = kCanopyLightVoxels * kCanopyLightVoxels * kCanopyLightVoxels;
+constexpr uint32_t kCanopyLightChannels = kCanopyLightBases * 3;  // 57 planes per item
+constexpr uint32_t kCanopyLightItemBytes = kCanopyLightChannels * kCanopyLightVoxelCount * 2;  // 24624
+constexpr uint32_t kCanopyMaxDepth = 15;       // levels 0..15: up to 8 * 2^15 cells per axis
+constexpr uint32_t kCanopyNone = 0xFFFFFFFFu;  // "no child tile" / "no brick"
+
+// ------------------------------------------------------------------------------------------------
+// Resident structures
+// ------------------------------------------------------------------------------------------------
+struct CanopyFileHeader {          // offset
+  char magic[8];                   //   0  "CANOPYPK"
+  uint16_t major;                  //   8  kCanopyMajor
+  uint16_t minor;                  //  10  kCanopyMinor
+  uint32_t headerBytes;            //  12  sizeof(CanopyFileHeader) = 128
+  uint64_t fileBytes;              //  16  total file size
+  uint64_t residentBytes;          //  24  == pagesOffset: bytes a player reads at start-up
+  uint64_t pagesOffset;            //  32  offset of page 0 (multiple of pageBytes)
+  uint32_t pageBytes;              //  40  kCanopyPageBytes
+  uint32_t pageCount;              //  44
+  uint32_t sectionCount;           //  48  entries in the section table at offset 128
+  uint32_t sectionTableCrc;        //  52  CRC-32 of the section table
+  uint32_t modelCount;             //  56
+  uint32_t instanceCount;          //  60
+  uint32_t brickVoxels;            //  64  stored voxels per brick axis (10)
+  uint32_t brickBytes;             //  68  bytes per brick (8000)
+  uint32_t bricksPerPage;          //  72  floor((pageBytes - 32) / brickBytes) = 8
+  uint32_t flags;                  //  76  0 in 1.0
+  uint32_t lightItemBytes;         //  80  bytes per light item (24624)
+  uint32_t lightItemsPerPage;      //  84  floor((pageBytes - 32) / lightItemBytes) = 2
+  uint8_t reserved[36];            //  88  zero
+  uint32_t headerCrc;              // 124  CRC-32 of bytes [0, 124)
+};
+static_assert(sizeof(CanopyFileHeader) == 128, "CanopyFileHeader layout");
+
+enum class CanopySectionKind : uint32_t {
+  Models = 1,      // CanopyModel[modelCount]
+  Instances = 2,   // CanopyInstance[instanceCount]
+  NodeTiles = 3,   // CanopyNode[8 * tiles], every model's tiles, model.firstTile onwards
+  PageTable = 4,   // CanopyPageEntry[pageCount]
+  SceneLight = 5,  // CanopySceneLight then float values[dim.x * dim.y * dim.z] (optional)
+  Metadata = 6,    // UTF-8 JSON (optional)
+};
+
+struct CanopySection {             // offset
+  uint32_t kind;                   //   0  CanopySectionKind
+  uint32_t itemBytes;              //   4  size of one item (0 for byte blobs)
+  uint64_t offset;                 //   8  from the start of the file, multiple of 64
+  uint64_t bytes;                  //  16  == itemBytes * itemCount for arrays
+  uint32_t itemCount;              //  24
+  uint32_t crc;                    //  28  CRC-32 of the section's bytes
+};
+static_assert(sizeof(CanopySection) == 32, "CanopySection layout");
+
+// One octree node. Its kind follows from the fields:
+//   brick != kCanopyNone      -> a brick (density and material below hold the brick's mean)
+//   brick == kCanopyNone      -> constant: density and material hold the value (density 0: empty)
+//   child != kCanopyNone      -> children in tile `child` (model-relative), nodes 8*child .. +7
+struct CanopyNode {                // offset
+  uint32_t child;                  //   0  model-relative child tile index, or kCanopyNone
+  uint32_t brick;                  //   4  model-relative brick id, or kCanopyNone
+  float density;                   //   8  constant density (or the brick's mean density)
+  uint32_t material;               //  12  packed albedo rgb + wood (see canopyUnpackMaterial)
+};
+static_assert(sizeof(CanopyNode) == 16, "CanopyNode layout");
+
+enum CanopyModelFlags : uint32_t { kCanopyModelHasLight = 1u };
+
+struct CanopyModel {               // offset
+  double indexToModel[12];         //   0  3x4 row-major: model-space position of lattice index
+                                   //      (i,j,k) (cell centre) = M * (i, j, k, 1); metres, +Y up
+  char name[64];                   //  96  NUL-terminated label
+  int32_t latticeMin[3];           // 160  inclusive lattice bounds of the source (§0 contract)
+  int32_t latticeMax[3];           // 172
+  int32_t octreeOrigin[3];         // 184  lattice index of the root's first cell (== latticeMin)
+  uint32_t rootCells;              // 196  cells per axis under the root = brickSize << depth
+  uint32_t depth;                  // 200  finest level (levels 0..depth)
+  uint32_t brickSize;              // 204  8
+  uint32_t brickBorder;            // 208  1
+  uint32_t firstTile;              // 212  index of this model's tile 0 in NodeTiles (in tiles)
+  uint32_t tileCount;              // 216
+  uint32_t brickCount;             // 220
+  uint32_t firstBrickPage;         // 224
+  uint32_t brickPageCount;         // 228  == ceil(brickCount / bricksPerPage)
+  uint32_t lightCount;             // 232  light items: 0 (density only) or brickCount
+  uint32_t firstLightPage;         // 236
+  uint32_t lightPageCount;         // 240
+  uint32_t flags;                  // 244  CanopyModelFlags
+  CanopyNode root;                 // 248  level-0 node
+  uint32_t levelBricks[16];        // 264  bricks per level
+  uint32_t levelTiles[16];         // 328  child tiles per level (tiles whose nodes are at level d)
+  uint32_t reserved[30];           // 392  zero
+};
+static_assert(sizeof(CanopyModel) == 512, "CanopyModel layout");
+
+struct CanopyInstance {            // offset
+  float modelToWorld[12];          //   0  3x4 row-major, metres, +Y up
+  uint32_t model;                  //  48  index into Models
+  uint32_t flags;                  //  52  0
+  uint32_t reserved[2];            //  56  zero
+};
+static_assert(sizeof(CanopyInstance) == 64, "CanopyInstance layout");
+
+enum class CanopyPageKind : uint32_t { Brick = 1, Light = 2 };
+
+// Both the first 32 bytes of every page and (with magic replaced by the same fields) an entry of
+// the resident page table.
+struct CanopyPageHeader {          // offset
+  char magic[4];                   //   0  "CPAG"
+  uint32_t kind;                   //   4  CanopyPageKind
+  uint32_t pageIndex;              //   8  this page's index (a misplaced page is detected)
+  uint32_t model;                  //  12
+  uint32_t firstItem;              //  16  first brick / light item id (model-relative) in the page
+  uint32_t itemCount;              //  20  items in the page (1..bricksPerPage or lightItemsPerPage)
+  uint32_t payloadBytes;           //  24  itemCount * brickBytes (or lightItemBytes)
+  uint32_t crc;                    //  28  CRC-32 of the whole page with these 4 bytes read as 0
+};
+static_assert(sizeof(CanopyPageHeader) == 32, "CanopyPageHeader layout");
+using CanopyPageEntry = CanopyPageHeader;  // the page table holds copies of every page header
+constexpr char kCanopyPageMagic[4] = {'C', 'P', 'A', 'G'};
+
+// Coarse scene lighting lattice (lbsolve --scene): a dense float grid of luminance factors in
+// world space, followed by dim[0]*dim[1]*dim[2] floats, x fastest.
+struct CanopySceneLight {          // offset
+  double indexToWorld[12];         //   0  3x4 row-major
+  int32_t min[3];                  //  96  lattice index of value 0
+  int32_t dim[3];                  // 108  values per axis
+  uint32_t reserved[2];            // 120
+};
+static_assert(sizeof(CanopySceneLight) == 128, "CanopySceneLight layout");
+
+// ------------------------------------------------------------------------------------------------
+// Per-sample functions (CANOPY_HD: the player's CUDA kernels and its CPU reference share them).
+// Coordinates: "octree unit space" u in [0,1)^3 covers the root; lattice index p (VDB index space,
+// cell centres at integers) maps to u = (p - octreeOrigin + 0.5) / rootCells.
+// ------------------------------------------------------------------------------------------------
+struct CanopySample {
+  float density;
+  float wood;
+  float albedo[3];
+};
+
+CANOPY_HD CANOPY_FORCEINLINE float canopyUnorm8(uint32_t v) { return float(v & 0xFFu) * (1.0f / 255.0f); }
+
+CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyToUnorm8(float v) {
+  v = v < 0.0f ? 0.0f : (v > 1.0f ? 1.0f : v);
+  return uint32_t(v * 255.0f + 0.5f);
+}
+
+CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyPackMaterial(float r, float g, float b, float wood) {
+  return canopyToUnorm8(r) | canopyToUnorm8(g) << 8 | canopyToUnorm8(b) << 16 | canopyToUnorm8(wood) << 24;
+}
+
+// A constant node's (or one voxel's) value.
+CANOPY_HD CANOPY_FORCEINLINE CanopySample canopyUnpack(float density, uint32_t material) {
+  CanopySample s;
+  s.density = density;
+  s.albedo[0] = canopyUnorm8(material);
+  s.albedo[1] = canopyUnorm8(material >> 8);
+  s.albedo[2] = canopyUnorm8(material >> 16);
+  s.wood = canopyUnorm8(material >> 24);
+  return s;
+}
+
+// One brick's arrays inside a page payload (see canopyBrickInPage).
+struct CanopyBrickView {
+  const float* density;      // kCanopyBrickVoxelCount values
+  const uint32_t* material;  // kCanopyBrickVoxelCount values
+};
+
+CANOPY_HD CANOPY_FORCEINLINE CanopyBrickView canopyBrickAt(const void* brickBytes) {
+  CanopyBrickView v;
+  v.density = static_cast<const float*>(brickBytes);
+  v.material = reinterpret_cast<const uint32_t*>(static_cast<const unsigned char*>(brickBytes) +
+                                                 kCanopyBrickVoxelCount * sizeof(float));
+  return v;
+}
+
+// The brick `slot` (= brick id % bricksPerPage) of a page image (pageBytes long, header included).
+CANOPY_HD CANOPY_FORCEINLINE CanopyBrickView canopyBrickInPage(const void* page, uint32_t slot) {
+  return canopyBrickAt(static_cast<const unsigned char*>(page) + sizeof(CanopyPageHeader) +
+                       size_t(slot) * kCanopyBrickBytes);
+}
+
+// Stored voxel (x,y,z) in [0,10)^3 (0 and 9 are the border).
+CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyVoxelIndex(uint32_t x, uint32_t y, uint32_t z) {
+  return x + kCanopyBrickVoxels * (y + kCanopyBrickVoxels * z);
+}
+
+// Trilinear sample of a brick at node-local coordinates l in [0,1]^3 (0 = the node's lower
+// corner). Density is interpolated; albedo and wood are density-weighted (the same weighting as the
+// MIP), so empty voxels do not darken a leaf's colour. At the centre of an interior voxel the result
+// is that voxel's stored value.
+CANOPY_HD inline CanopySample canopySampleBrick(CanopyBrickView b, float lx, float ly, float lz) {
+  const float l[3] = {lx, ly, lz};
+  int i0[3];
+  float f[3];
+  for (int a = 0; a < 3; ++a) {
+    // voxel centres at (i + 0.5) / 8 in node-local space map to stored index i + 1
+    float t = l[a] * float(kCanopyBrickSize) + float(kCanopyBrickBorder) - 0.5f;
+    const float hi = float(kCanopyBrickVoxels - 1) - 1e-6f;
+    t = t < 0.0f ? 0.0f : (t > hi ? hi : t);
+    const float fl = floorf(t);
+    i0[a] = int(fl);
+    f[a] = t - fl;
+  }
+  float dens = 0.0f, w = 0.0f, r = 0.0f, g = 0.0f, bl = 0.0f, wsum = 0.0f;
+  for (int c = 0; c < 8; ++c) {
+    const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+    const float wt = (dx ? f[0] : 1.0f - f[0]) * (dy ? f[1] : 1.0f - f[1]) * (dz ? f[2] : 1.0f - f[2]);
+    if (wt == 0.0f) continue;
+    const uint32_t idx = canopyVoxelIndex(uint32_t(i0[0] + dx), uint32_t(i0[1] + dy), uint32_t(i0[2] + dz));
+    const float d = b.density[idx];
+    const CanopySample m = canopyUnpack(d, b.material[idx]);
+    dens += wt * d;
+    const float wd = wt * d;
+    wsum += wd;
+    w += wd * m.wood;
+    r += wd * m.albedo[0];
+    g += wd * m.albedo[1];
+    bl += wd * m.albedo[2];
+  }
+  CanopySample s;
+  s.density = dens;
+  const float inv = wsum > 0.0f ? 1.0f / wsum : 0.0f;
+  s.wood = w * inv;
+  s.albedo[0] = r * inv;
+  s.albedo[1] = g * inv;
+  s.albedo[2] = bl * inv;
+  return s;
+}
+
+// IEEE 754 binary16 -> float (light items).
+CANOPY_HD CANOPY_FORCEINLINE float canopyHalfToFloat(uint16_t h) {
+  const uint32_t sign = uint32_t(h & 0x8000u) << 16;
+  const uint32_t exp = (h >> 10) & 0x1Fu;
+  const uint32_t man = h & 0x3FFu;
+  uint32_t bits;
+  if (exp == 0) {  // zero or subnormal: man * 2^-24
+    const float v = float(man) * (1.0f / 16777216.0f);
+    return sign ? -v : v;
+  } else if (exp == 31) {
+    bits = sign | 0x7F800000u | (man << 13);
+  } else {
+    bits = sign | ((exp + 112u) << 23) | (man << 13);
+  }
+  float f;
+  memcpy(&f, &bits, 4);
+  return f;
+}
+
+// The light item `slot` (= item id % lightItemsPerPage) of a light page image.
+CANOPY_HD CANOPY_FORCEINLINE const uint16_t* canopyLightInPage(const void* page, uint32_t slot) {
+  return reinterpret_cast<const uint16_t*>(static_cast<const unsigned char*>(page) + sizeof(CanopyPageHeader) +
+                                           size_t(slot) * kCanopyLightItemBytes);
+}
+
+// Trilinear sample of base `base` (0..18) of a light item at node-local l in [0,1]^3, RGB into rgb.
+CANOPY_HD inline void canopySampleLight(const uint16_t* item, uint32_t base, float lx, float ly, float lz, float rgb[3]) {
+  const float l[3] = {lx, ly, lz};
+  int i0[3];
+  float f[3];
+  for (int a = 0; a < 3; ++a) {
+    float t = l[a] * float(kCanopyLightSize) + 0.5f;  // light voxel centres (i + 0.5) / 4 -> index i + 1
+    const float hi = float(kCanopyLightVoxels - 1) - 1e-6f;
+    t = t < 0.0f ? 0.0f : (t > hi ? hi : t);
+    const float fl = floorf(t);
+    i0[a] = int(fl);
+    f[a] = t - fl;
+  }
+  for (int ch = 0; ch < 3; ++ch) {
+    const uint16_t* plane = item + size_t(base * 3 + ch) * kCanopyLightVoxelCount;
+    float v = 0.0f;
+    for (int c = 0; c < 8; ++c) {
+      const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+      const float wt = (dx ? f[0] : 1.0f - f[0]) * (dy ? f[1] : 1.0f - f[1]) * (dz ? f[2] : 1.0f - f[2]);
+      if (wt == 0.0f) continue;
+      v += wt * canopyHalfToFloat(plane[(i0[0] + dx) + kCanopyLightVoxels * ((i0[1] + dy) + kCanopyLightVoxels * (i0[2] + dz))]);
+    }
+    rgb[ch] = v;
+  }
+}
+
+// float -> IEEE binary16, round to nearest even; values beyond the half range become +-65504
+// (lighting is never infinite), NaN stays NaN. Host only (the writer).
+inline uint16_t canopyFloatToHalf(float f) {
+  uint32_t x;
+  memcpy(&x, &f, 4);
+  const uint16_t sign = uint16_t((x >> 16) & 0x8000u);
+  const uint32_t absx = x & 0x7FFFFFFFu;
+  if (absx > 0x7F800000u) return uint16_t(sign | 0x7E00u);          // NaN
+  if (absx >= 0x477FF000u) return uint16_t(sign | 0x7BFFu);         // >= 65520 rounds past max: clamp
+  if (absx < 0x38800000u) {                                         // subnormal half (or zero)
+    if (absx < 0x33000000u) return sign;                            // < 2^-25: rounds to 0
+    const uint32_t e = absx >> 23;                                  // 102..112
+    const uint32_t m = (absx & 0x7FFFFFu) | 0x800000u;
+    const uint32_t shift = 126 - e;                                 // value / 2^-24 = m >> shift
+    uint32_t h = m >> shift;
+    const uint32_t rem = m & ((1u << shift) - 1), halfway = 1u << (shift - 1);
+    if (rem > halfway || (rem == halfway && (h & 1u))) ++h;
+    return uint16_t(sign | h);
+  }
+  uint32_t h = ((absx >> 13) - (112u << 10));
+  const uint32_t rem = absx & 0x1FFFu;
+  if (rem > 0x1000u || (rem == 0x1000u && (h & 1u))) ++h;
+  return uint16_t(sign | h);
+}
+
+// The result of descending the octree to a point.
+struct CanopyLookup {
+  CanopyNode node;       // the node reached
+  CanopyNode parent;     // its parent (== node at the root), for quadrilinear LOD blending
+  uint32_t level;        // level of `node`
+  float local[3];        // the point in node-local coordinates [0,1)^3
+  float nodeMin[3];      // node's lower corner in octree unit space
+  float nodeSize;        // node's edge in octree unit space (2^-level)
+};
+
+// Descends from the root towards unit-space point u (clamped into [0,1)) until `maxLevel`, the
+// finest level, or a terminal node (constant, or a brick without children). `tiles` are the
+// model's node tiles (model-relative child indices); `tileCount` bounds them: a child index out of
+// range stops the descent (a verified file never has one).
+CANOPY_HD inline CanopyLookup canopyDescend(const CanopyNode* tiles, uint32_t tileCount, CanopyNode root,
+                                            uint32_t depth, float ux, float uy, float uz,
+                                            uint32_t maxLevel) {
+  float x[3] = {ux, uy, uz};
+  for (int a = 0; a < 3; ++a) x[a] = x[a] < 0.0f ? 0.0f : (x[a] >= 1.0f ? 0.99999994f : x[a]);
+  CanopyLookup r;
+  r.node = root;
+  r.parent = root;
+  r.level = 0;
+  r.nodeSize = 1.0f;
+  r.nodeMin[0] = r.nodeMin[1] = r.nodeMin[2] = 0.0f;
+  if (maxLevel > depth) maxLevel = depth;
+  while (r.level < maxLevel && r.node.child != kCanopyNone && r.node.child < tileCount) {
+    uint32_t c = 0;
+    r.nodeSize *= 0.5f;
+    for (int a = 0; a < 3; ++a) {
+      const float t = x[a] * 2.0f;
+      const uint32_t off = t >= 1.0f ? 1u : 0u;
+      x[a] = t - float(off);
+      c |= off << a;
+      r.nodeMin[a] += float(off) * r.nodeSize;
+    }
+    r.parent = r.node;
+    r.node = tiles[size_t(r.node.child) * 8 + c];
+    ++r.level;
+  }
+  for (int a = 0; a < 3; ++a) r.local[a] = x[a];
+  return r;
+}
+
+// Lattice index space -> octree unit space for one model (see the comment above).
+CANOPY_HD CANOPY_FORCEINLINE void canopyLatticeToUnit(const int32_t origin[3], uint32_t rootCells,
+                                                      float px, float py, float pz, float u[3]) {
+  const float inv = 1.0f / float(rootCells);
+  u[0] = (px - float(origin[0]) + 0.5f) * inv;
+  u[1] = (py - float(origin[1]) + 0.5f) * inv;
+  u[2] = (pz - float(origin[2]) + 0.5f) * inv;
+}
+
+// p' = M p for a 3x4 row-major affine matrix (instances: model -> world; canopyModelToUnit).
+CANOPY_HD CANOPY_FORCEINLINE void canopyTransformPoint(const float m[12], const float p[3], float out[3]) {
+  for (int r = 0; r < 3; ++r) out[r] = m[4 * r] * p[0] + m[4 * r + 1] * p[1] + m[4 * r + 2] * p[2] + m[4 * r + 3];
+}
+// d' = M d (directions: no translation).
+CANOPY_HD CANOPY_FORCEINLINE void canopyTransformDirection(const float m[12], const float d[3], float out[3]) {
+  for (int r = 0; r < 3; ++r) out[r] = m[4 * r] * d[0] + m[4 * r + 1] * d[1] + m[4 * r + 2] * d[2];
+}
+
+// Which page holds brick `brick` of a model, and the slot in it.
+CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyBrickPage(const CanopyModel& m, uint32_t brick, uint32_t bricksPerPage) {
+  return m.firstBrickPage + brick / bricksPerPage;
+}
+CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyBrickSlot(uint32_t brick, uint32_t bricksPerPage) {
+  return brick % bricksPerPage;
+}
+// Which page holds light item `item` (== the brick id) of a model (model.lightCount > 0).
+CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyLightPage(const CanopyModel& m, uint32_t item, uint32_t lightItemsPerPage) {
+  return m.firstLightPage + item / lightItemsPerPage;
+}
+
+// Host-side matrix helpers (double precision, then rounded to float for the device).
+// The inverse of a 3x4 affine matrix; false if it is singular.
+bool canopyInvertAffine(const double m[12], double out[12]);
+// Model space -> octree unit space of model M (inverse of indexToModel, then the unit mapping);
+// false if indexToModel is singular.
+bool canopyModelToUnit(const CanopyModel& M, float out[12]);
+// World space -> octree unit space of an instance: canopyModelToUnit * inverse(modelToWorld).
+bool canopyWorldToUnit(const CanopyModel& M, const CanopyInstance& inst, float out[12]);
+
+// ------------------------------------------------------------------------------------------------
+// Host reader (formats/canopy_file.cpp; no OpenVDB). Every failure throws canopy::Error naming the
+// file: Io (missing, unreadable), InvalidInput (bad magic, truncated, CRC mismatch, pointer out of
+// range), Unsupported (newer major version).
+// ------------------------------------------------------------------------------------------------
+class CanopyFile {
+ public:
+  // Reads and validates the resident part of `path` (header, section table and every section's CRC,
+  // every node pointer and page-table entry in range); pages are read on demand with readPage().
+  static CanopyFile open(const std::string& path);
+  // The same from a whole file image in memory (tests, fuzzer); `name` labels errors. The image is
+  // not copied: it must outlive the CanopyFile (readPage reads from it).
+  static CanopyFile fromMemory(const void* data, size_t size, const std::string& name = "<memory>");
+
+  CanopyFile(CanopyFile&&) noexcept;
+  CanopyFile& operator=(CanopyFile&&) noexcept;
+  ~CanopyFile();
+
+  const std::string& path() const { return path_; }
+  const CanopyFileHeader& header() const { return header_; }
+  uint32_t sectionCount() const { return uint32_t(sections_.size()); }
+  const CanopySection& section(uint32_t i) const { return sections_[i]; }
+  const CanopySection* findSection(CanopySectionKind kind) const;
+
+  uint32_t modelCount() const { return uint32_t(models_.size()); }
+  const CanopyModel& model(uint32_t i) const { return models_[i]; }
+  uint32_t instanceCount() const { return uint32_t(instances_.size()); }
+  const CanopyInstance& instance(uint32_t i) const { return instances_[i]; }
+  // A model's node tiles (8 nodes each, model-relative child indices).
+  const CanopyNode* tiles(uint32_t model) const { return tiles_.data() + size_t(models_[model].firstTile) * 8; }
+  const std::vector<CanopyNode>& allTiles() const { return tiles_; }
+  uint32_t pageCount() const { return uint32_t(pages_.size()); }
+  const CanopyPageEntry& pageEntry(uint32_t i) const { return pages_[i]; }
+  bool hasSceneLight() const { return hasSceneLight_; }
+  const CanopySceneLight& sceneLight() const { return sceneLight_; }
+  const std::vector<float>& sceneLightValues() const { return sceneLightValues_; }
+  const std::string& metadata() const { return metadata_; }
+  // The resident bytes [0, pagesOffset) as read (a player may upload NodeTiles from here).
+  const std::vector<unsigned char>& resident() const { return resident_; }
+
+  // Descends model `m` (CPU convenience over canopyDescend).
+  CanopyLookup descend(uint32_t m, float ux, float uy, float uz, uint32_t maxLevel = kCanopyMaxDepth) const;
+
+  // Reads page `index` into dst (pageBytes) with one pread and checks it against the page table and
+  // its CRC. Thread-safe (no shared file offset).
+  void readPage(uint32_t index, void* dst) const;
+  std::vector<unsigned char> readPage(uint32_t index) const;
+
+ private:
+  CanopyFile() = default;
+  void parseResident(uint64_t fileBytes);
+  void readAt(uint64_t offset, void* dst, size_t bytes) const;
+
+  std::string path_;
+  int fd_ = -1;                          // file mode
+  const unsigned char* memory_ = nullptr;  // memory mode (whole image, not owned)
+  size_t memorySize_ = 0;
+  std::vector<unsigned char> resident_;
+  CanopyFileHeader header_{};
+  std::vector<CanopySection> sections_;
+  std::vector<CanopyModel> models_;
+  std::vector<CanopyInstance> instances_;
+  std::vector<CanopyNode> tiles_;
+  std::vector<CanopyPageEntry> pages_;
+  bool hasSceneLight_ = false;
+  CanopySceneLight sceneLight_{};
+  std::vector<float> sceneLightValues_;
+  std::string metadata_;
+};
+
+// Full check for `canopy-octreepack verify`: opens the file (resident checks) and reads and checks
+// every page. Returns the problems found, one line each (empty = file is good); never throws for
+// a problem in the file's content.
+std::vector<std::string> verifyCanopyFile(const std::string& path);
+
+// CRC-32 of a page image with its crc field read as 0.
+uint32_t canopyPageCrc(const void* page, uint32_t pageBytes);
+
+}  // namespace canopy

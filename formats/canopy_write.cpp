@@ -1,0 +1,203 @@
+// canopy_write.cpp: see canopy_write.h.
+#include "formats/canopy_write.h"
+
+#include <algorithm>
+#include <cstddef>
+#include <cstdio>
+#include <cstring>
+#include <functional>
+
+#include "canopy/atomic_file.h"
+#include "canopy/errors.h"
+#include "canopy/hash.h"
+
+namespace canopy {
+namespace {
+
+uint64_t alignUp(uint64_t v, uint64_t a) { return (v + a - 1) / a * a; }
+
+struct Layout {
+  std::vector<unsigned char> resident;   // header .. end of resident part (zero padded)
+  std::vector<CanopyPageEntry> pages;
+  CanopyWriteStats stats;
+};
+
+// Assigns model ranges, builds the page table (CRCs need page contents: `makePage` is called for
+// every page) and the resident image.
+Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vector<unsigned char>&)>& emitPage) {
+  const uint32_t pageBytes = kCanopyPageBytes;
+  const uint32_t perPage = (pageBytes - uint32_t(sizeof(CanopyPageHeader))) / kCanopyBrickBytes;
+  const uint32_t lightPerPage = (pageBytes - uint32_t(sizeof(CanopyPageHeader))) / kCanopyLightItemBytes;
+  Layout L;
+  // Model ranges.
+  std::vector<CanopyModel> models;
+  std::vector<CanopyNode> tiles;
+  uint32_t page = 0;
+  for (CanopyWriteModel& wm : in.models) {
+    CanopyModel m = wm.record;
+    if (!wm.tiles || !wm.bricks || wm.tiles->size() != size_t(m.tileCount) * 8 ||
+        wm.bricks->size() != size_t(m.brickCount) * kCanopyBrickBytes)
+      throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has inconsistent tile/brick sizes");
+    m.firstTile = uint32_t(tiles.size() / 8);
+    tiles.insert(tiles.end(), wm.tiles->begin(), wm.tiles->end());
+    m.firstBrickPage = page;
+    m.brickPageCount = (m.brickCount + perPage - 1) / perPage;
+    page += m.brickPageCount;
+    const bool lit = wm.light && !wm.light->empty();
+    if (lit && (m.lightCount != m.brickCount || wm.light->size() * 2 != size_t(m.lightCount) * kCanopyLightItemBytes))
+      throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has inconsistent light items");
+    m.lightCount = lit ? m.lightCount : 0;
+    m.firstLightPage = page;
+    m.lightPageCount = (m.lightCount + lightPerPage - 1) / lightPerPage;
+    page += m.lightPageCount;
+    m.flags = lit ? (m.flags | kCanopyModelHasLight) : (m.flags & ~uint32_t(kCanopyModelHasLight));
+    models.push_back(m);
+  }
+  for (const CanopyInstance& inst : in.instances)
+    if (inst.model >= models.size()) throw invalidInput("canopy writer: instance names a model out of range");
+
+  // Page table (and page images through emitPage).
+  std::vector<unsigned char> img(pageBytes);
+  auto addPage = [&](CanopyPageKind kind, uint32_t index, uint32_t model, uint32_t first, uint32_t count, uint32_t itemBytes,
+                     const unsigned char* items) {
+    std::fill(img.begin(), img.end(), 0);
+    CanopyPageHeader h{};
+    std::memcpy(h.magic, kCanopyPageMagic, 4);
+    h.kind = uint32_t(kind);
+    h.pageIndex = index;
+    h.model = model;
+    h.firstItem = first;
+    h.itemCount = count;
+    h.payloadBytes = count * itemBytes;
+    std::memcpy(img.data() + sizeof h, items + size_t(first) * itemBytes, h.payloadBytes);
+    std::memcpy(img.data(), &h, sizeof h);
+    h.crc = canopyPageCrc(img.data(), pageBytes);
+    std::memcpy(img.data(), &h, sizeof h);
+    L.pages.push_back(h);
+    if (emitPage) emitPage(h.pageIndex, img);
+  };
+  for (uint32_t mi = 0; mi < models.size(); ++mi) {
+    const CanopyModel& m = models[mi];
+    for (uint32_t p = 0; p < m.brickPageCount; ++p)
+      addPage(CanopyPageKind::Brick, m.firstBrickPage + p, mi, p * perPage, std::min(perPage, m.brickCount - p * perPage),
+              kCanopyBrickBytes, in.models[mi].bricks->data());
+    for (uint32_t p = 0; p < m.lightPageCount; ++p)
+      addPage(CanopyPageKind::Light, m.firstLightPage + p, mi, p * lightPerPage, std::min(lightPerPage, m.lightCount - p * lightPerPage),
+              kCanopyLightItemBytes, reinterpret_cast<const unsigned char*>(in.models[mi].light->data()));
+  }
+
+  // Resident sections.
+  struct Blob {
+    CanopySectionKind kind;
+    uint32_t itemBytes, itemCount;
+    std::vector<unsigned char> bytes;
+    const char* name;
+  };
+  auto blobOf = [](CanopySectionKind k, const void* p, uint32_t itemBytes, uint32_t count, const char* name) {
+    Blob b{k, itemBytes, count, {}, name};
+    b.bytes.assign(static_cast<const unsigned char*>(p), static_cast<const unsigned char*>(p) + size_t(itemBytes) * count);
+    return b;
+  };
+  std::vector<Blob> blobs;
+  blobs.push_back(blobOf(CanopySectionKind::Models, models.data(), sizeof(CanopyModel), uint32_t(models.size()), "models"));
+  blobs.push_back(blobOf(CanopySectionKind::Instances, in.instances.data(), sizeof(CanopyInstance), uint32_t(in.instances.size()), "instances"));
+  blobs.push_back(blobOf(CanopySectionKind::NodeTiles, tiles.data(), sizeof(CanopyNode) * 8, uint32_t(tiles.size() / 8), "node_tiles"));
+  blobs.push_back(blobOf(CanopySectionKind::PageTable, L.pages.data(), sizeof(CanopyPageEntry), uint32_t(L.pages.size()), "page_table"));
+  if (in.hasSceneLight) {
+    uint64_t n = 1;
+    for (int a = 0; a < 3; ++a) n *= uint64_t(std::max(0, in.sceneLight.dim[a]));
+    if (n == 0 || n != in.sceneLightValues.size()) throw invalidInput("canopy writer: scene light size mismatch");
+    Blob b{CanopySectionKind::SceneLight, 0, 1, {}, "scene_light"};
+    b.bytes.resize(sizeof(CanopySceneLight) + n * sizeof(float));
+    std::memcpy(b.bytes.data(), &in.sceneLight, sizeof(CanopySceneLight));
+    std::memcpy(b.bytes.data() + sizeof(CanopySceneLight), in.sceneLightValues.data(), n * sizeof(float));
+    blobs.push_back(std::move(b));
+  }
+  if (!in.metadata.empty()) {
+    Blob b{CanopySectionKind::Metadata, 0, 1, {}, "metadata"};
+    b.bytes.assign(in.metadata.begin(), in.metadata.end());
+    blobs.push_back(std::move(b));
+  }
+
+  std::vector<CanopySection> table(blobs.size());
+  uint64_t off = alignUp(sizeof(CanopyFileHeader) + blobs.size() * sizeof(CanopySection), kCanopySectionAlign);
+  for (size_t i = 0; i < blobs.size(); ++i) {
+    CanopySection& s = table[i];
+    s.kind = uint32_t(blobs[i].kind);
+    s.itemBytes = blobs[i].itemBytes;
+    s.itemCount = blobs[i].itemCount;
+    s.offset = off;
+    s.bytes = blobs[i].bytes.size();
+    s.crc = crc32(0, blobs[i].bytes.data(), blobs[i].bytes.size());
+    off = alignUp(off + s.bytes, kCanopySectionAlign);
+    L.stats.sections.push_back({blobs[i].name, s.bytes});
+  }
+  const uint64_t pagesOffset = alignUp(off, pageBytes);
+  L.resident.assign(pagesOffset, 0);
+  for (size_t i = 0; i < blobs.size(); ++i)
+    if (!blobs[i].bytes.empty()) std::memcpy(L.resident.data() + table[i].offset, blobs[i].bytes.data(), blobs[i].bytes.size());
+  std::memcpy(L.resident.data() + sizeof(CanopyFileHeader), table.data(), table.size() * sizeof(CanopySection));
+
+  CanopyFileHeader h{};
+  std::memcpy(h.magic, kCanopyMagic, 8);
+  h.major = kCanopyMajor;
+  h.minor = kCanopyMinor;
+  h.headerBytes = sizeof(CanopyFileHeader);
+  h.pageBytes = pageBytes;
+  h.pageCount = uint32_t(L.pages.size());
+  h.pagesOffset = pagesOffset;
+  h.residentBytes = pagesOffset;
+  h.fileBytes = pagesOffset + uint64_t(h.pageCount) * pageBytes;
+  h.sectionCount = uint32_t(table.size());
+  h.sectionTableCrc = crc32(0, table.data(), table.size() * sizeof(CanopySection));
+  h.modelCount = uint32_t(models.size());
+  h.instanceCount = uint32_t(in.instances.size());
+  h.brickVoxels = kCanopyBrickVoxels;
+  h.brickBytes = kCanopyBrickBytes;
+  h.bricksPerPage = perPage;
+  h.lightItemBytes = kCanopyLightItemBytes;
+  h.lightItemsPerPage = lightPerPage;
+  h.headerCrc = crc32(0, &h, offsetof(CanopyFileHeader, headerCrc));
+  std::memcpy(L.resident.data(), &h, sizeof h);
+
+  L.stats.fileBytes = h.fileBytes;
+  L.stats.residentBytes = h.residentBytes;
+  L.stats.pageCount = h.pageCount;
+  L.stats.sections.push_back({"pages", uint64_t(h.pageCount) * pageBytes});
+  return L;
+}
+
+}  // namespace
+
+CanopyWriteStats writeCanopyFile(const std::string& path, CanopyWriteInput input) {
+  AtomicOutput out(path);
+  std::FILE* f = std::fopen(out.tempPath().c_str(), "wb");
+  if (!f) throw ioError(path + ": cannot write output");
+  bool ok = true;
+  // The resident part holds the page table (page CRCs), so it is known only after every page has
+  // been built. Pass 1 lays out without output (resident image); pass 2 streams the pages to their
+  // offsets; both passes must agree byte for byte.
+  const Layout probe = layout(input, nullptr);
+  const uint64_t pagesOffset = probe.resident.size();
+  ok = std::fwrite(probe.resident.data(), 1, probe.resident.size(), f) == probe.resident.size();
+  if (ok && std::fseek(f, long(pagesOffset), SEEK_SET) != 0) ok = false;
+  Layout L = layout(input, [&](uint32_t index, std::vector<unsigned char>& img) {
+    if (ok) ok = std::fwrite(img.data(), 1, img.size(), f) == img.size();
+  });
+  if (ok && L.resident != probe.resident) ok = false;  // deterministic layout: both passes agree
+  if (std::fclose(f) != 0) ok = false;
+  if (!ok) throw ioError(path + ": write failed (disk full?)");
+  out.commit();
+  return L.stats;
+}
+
+std::vector<unsigned char> writeCanopyBytes(CanopyWriteInput input, CanopyWriteStats* stats) {
+  std::vector<std::vector<unsigned char>> pages;
+  Layout L = layout(input, [&](uint32_t, std::vector<unsigned char>& img) { pages.push_back(img); });
+  std::vector<unsigned char> bytes = std::move(L.resident);
+  for (const auto& p : pages) bytes.insert(bytes.end(), p.begin(), p.end());
+  if (stats) *stats = L.stats;
+  return bytes;
+}
+
+}  // namespace canopy

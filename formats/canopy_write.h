@@ -1,0 +1,50 @@
+// canopy_write.h: writes a .canopy file (layout in canopy_file.h) atomically and deterministically.
+//
+// The caller supplies built models (record + node tiles + brick bytes), instances, an optional
+// scene lighting lattice and a metadata string; the writer assigns each model's firstTile and
+// page ranges, lays out the resident sections, fills the pages with their headers and CRCs and
+// writes everything through canopy::AtomicOutput (temporary file + rename). The same input gives
+// the same bytes (all padding is zero, no timestamps).
+#pragma once
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "formats/canopy_file.h"
+
+namespace canopy {
+
+struct CanopyWriteModel {
+  CanopyModel record{};                  // firstTile / firstBrickPage / ... are filled by the writer
+  const std::vector<CanopyNode>* tiles = nullptr;      // 8 per tile
+  const std::vector<unsigned char>* bricks = nullptr;  // record.brickCount * kCanopyBrickBytes
+  const std::vector<uint16_t>* light = nullptr;        // null/empty (density only) or record.lightCount items
+};
+
+struct CanopyWriteInput {
+  std::vector<CanopyWriteModel> models;
+  std::vector<CanopyInstance> instances;
+  bool hasSceneLight = false;
+  CanopySceneLight sceneLight{};
+  std::vector<float> sceneLightValues;
+  std::string metadata;                  // UTF-8 JSON; empty = no Metadata section
+};
+
+struct CanopyWriteStats {
+  uint64_t fileBytes = 0;
+  uint64_t residentBytes = 0;
+  uint32_t pageCount = 0;
+  struct Section {
+    std::string name;
+    uint64_t bytes;
+  };
+  std::vector<Section> sections;         // resident sections, then "pages"
+};
+
+// Throws canopy::Error (Io for an unwritable path, InvalidInput for inconsistent input).
+CanopyWriteStats writeCanopyFile(const std::string& path, CanopyWriteInput input);
+
+// The same into memory (tests and the fuzzer's seed corpus).
+std::vector<unsigned char> writeCanopyBytes(CanopyWriteInput input, CanopyWriteStats* stats = nullptr);
+
+}  // namespace canopy

@@ -1,0 +1,43 @@
+// backend.h: what the frame loop needs from a renderer (CPU reference or CUDA).
+//
+// A backend owns the page pool (slots of pageBytes), the page table (page -> slot or -1), the use
+// and want stamps that rays write, the staging buffers the loader reads pages into, and the image.
+// The CPU backend keeps all of it in host memory; the CUDA backend keeps the pool, table, stamps,
+// node tiles and scene on the device, stages pages in pinned host memory and copies them on a copy
+// stream that the next frame's kernel waits for (cudaStreamWaitEvent), so a frame never waits for
+// the disk and uploads never race a kernel.
+#pragma once
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "runtime/scene.h"
+
+namespace canopy::play {
+
+class Backend {
+ public:
+  virtual ~Backend() = default;
+  virtual std::string name() const = 0;
+  // Host memory for `count` staging pages (pinned on CUDA), owned by the backend.
+  virtual unsigned char* stagingBuffers(uint32_t count) = 0;
+  // Enqueues the copy of a staged page into pool slot `slot`.
+  virtual void upload(uint32_t slot, const unsigned char* staged) = 0;
+  // Publishes the page table; ordered after every upload() before it and before the next render().
+  virtual void setPageTable(const std::vector<int32_t>& table) = 0;
+  // Waits until the staging buffers passed to upload() may be reused.
+  virtual void waitUploads() = 0;
+  // Renders one pass (scene.instances carry this frame's sun weights).
+  virtual void render(const HostScene& scene, const ShadeParams& shade, const CameraView& camera, uint32_t stamp) = 0;
+  // Copies the stamps written by the last render() to the host.
+  virtual void readStamps(std::vector<uint32_t>& slotUsed, std::vector<uint32_t>& pageWanted) = 0;
+  // The last render's image: width * height RGBA floats (premultiplied RGB, alpha = 1 - T).
+  virtual void readImage(std::vector<float>& rgba) = 0;
+};
+
+std::unique_ptr<Backend> makeCpuBackend(const HostScene& scene, uint32_t slots);
+// Throws canopy::Error(Unsupported) in a build without CUDA.
+std::unique_ptr<Backend> makeCudaBackend(const HostScene& scene, uint32_t slots, int deviceIndex);
+
+}  // namespace canopy::play

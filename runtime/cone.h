@@ -1,0 +1,637 @@
+// cone.h: the player's per-pixel code, written once for the CPU reference and the CUDA kernel.
+//
+// One cone per pixel (GigaVoxels ch. 4 and 6, digest ../shared/reference/gigavoxels-004.md §2-3):
+//   1. Instances are found along the ray by a 3D-DDA walk of a uniform world grid of instance
+//      bounding boxes (SceneView::grid*). Each instance's box interval [tin, tout) joins a small hit
+//      list; the walk only advances once the march reaches the current grid cell's exit, so every
+//      instance that starts before the march position is already in the list.
+//   2. Instances are marched in LOCK STEP along the world ray parameter t: at each step every
+//      instance whose interval contains t contributes a segment (its extinction and albedo there
+//      and how far that value is valid); the step ends at the nearest segment end. Overlapping
+//      instances therefore add their extinctions at the same points (correct compositing of
+//      interpenetrating crowns), and non-overlapping ones are composited in ray order.
+//   3. Inside an instance the point goes world -> octree unit space (one affine map: inverse of the
+//      instance transform, inverse of indexToModel, lattice -> unit). The octree level comes from
+//      the cone's footprint (the coarsest level whose voxel is no larger than the footprint), the
+//      descent stops there or at a constant node. A constant node (empty or uniform) is one
+//      analytic segment to its exit (empty space skipped by node size; a uniform node is cut into
+//      pieces of at most kMaxConstantCells so that lighting is still sampled inside it). A brick
+//      node is marched with steps of stepFactor voxels, sampled at the step's midpoint.
+//   4. Opacity of a step of length dt (world) with extinction per lattice cell sigma * density:
+//      alpha = 1 - exp(-sigma * density * dt * cellsPerWorld) (the length correction of §2; the
+//      stored density is a fraction of a lattice cell, so opacity does not depend on the
+//      instance's scale). Front to back: C += T alpha c, T *= 1 - alpha; stop at T < kStopT.
+//   5. Shading of a sample: albedo * (sun * Tshadow + indirect). Tshadow is a shadow cone towards
+//      the sun through every instance (the same lock-step march without shading, its footprint
+//      starting at the primary cone's and widening by shadowAperture per unit length), traced
+//      once per shadow interval (about a voxel of the primary cone) and reused by the samples in
+//      it. indirect is the LB seam, see indirectLight().
+//   6. Streaming: bricks live in pages. A brick whose page is resident (pageSlot[page] >= 0) is
+//      sampled and its slot's use stamp set; a missing page has its want stamp set and the sample
+//      falls back to coarser data: a resident ancestor brick up to kFallbackLevels above, else the
+//      node's stored mean (a constant segment). Never a hole and never a wait.
+#pragma once
+#include <math.h>
+#include <stdint.h>
+
+#include "canopy/hd.h"
+#include "canopy/sun_lookup.h"
+#include "formats/canopy_file.h"
+
+namespace canopy::play {
+
+// ------------------------------------------------------------------------------------------------
+// Small vector math
+// ------------------------------------------------------------------------------------------------
+struct V3 {
+  float x, y, z;
+};
+CANOPY_HD CANOPY_FORCEINLINE V3 v3(float x, float y, float z) { return V3{x, y, z}; }
+CANOPY_HD CANOPY_FORCEINLINE V3 operator+(V3 a, V3 b) { return V3{a.x + b.x, a.y + b.y, a.z + b.z}; }
+CANOPY_HD CANOPY_FORCEINLINE V3 operator-(V3 a, V3 b) { return V3{a.x - b.x, a.y - b.y, a.z - b.z}; }
+CANOPY_HD CANOPY_FORCEINLINE V3 operator*(V3 a, float s) { return V3{a.x * s, a.y * s, a.z * s}; }
+CANOPY_HD CANOPY_FORCEINLINE float dot(V3 a, V3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+CANOPY_HD CANOPY_FORCEINLINE V3 cross(V3 a, V3 b) {
+  return V3{a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+CANOPY_HD CANOPY_FORCEINLINE float length(V3 a) { return sqrtf(dot(a, a)); }
+CANOPY_HD CANOPY_FORCEINLINE V3 normalize(V3 a) {
+  const float l = length(a);
+  return l > 0.0f ? a * (1.0f / l) : a;
+}
+CANOPY_HD CANOPY_FORCEINLINE float comp(V3 a, int i) { return i == 0 ? a.x : (i == 1 ? a.y : a.z); }
+
+// A 3x4 row-major affine map.
+struct Affine {
+  float m[12];
+};
+CANOPY_HD CANOPY_FORCEINLINE V3 applyPoint(const Affine& a, V3 p) {
+  return V3{a.m[0] * p.x + a.m[1] * p.y + a.m[2] * p.z + a.m[3], a.m[4] * p.x + a.m[5] * p.y + a.m[6] * p.z + a.m[7],
+            a.m[8] * p.x + a.m[9] * p.y + a.m[10] * p.z + a.m[11]};
+}
+CANOPY_HD CANOPY_FORCEINLINE V3 applyVector(const Affine& a, V3 v) {
+  return V3{a.m[0] * v.x + a.m[1] * v.y + a.m[2] * v.z, a.m[4] * v.x + a.m[5] * v.y + a.m[6] * v.z,
+            a.m[8] * v.x + a.m[9] * v.y + a.m[10] * v.z};
+}
+
+// Ray/box slab test: [t0, t1] of o + t d inside [lo, hi] (t0 > t1 = miss).
+CANOPY_HD inline void rayBox(V3 o, V3 d, V3 lo, V3 hi, float& t0, float& t1) {
+  t0 = -3.0e38f;
+  t1 = 3.0e38f;
+  for (int a = 0; a < 3; ++a) {
+    const float oa = comp(o, a), da = comp(d, a), l = comp(lo, a), h = comp(hi, a);
+    if (fabsf(da) < 1e-30f) {
+      if (oa < l || oa > h) {
+        t0 = 1.0f, t1 = 0.0f;
+        return;
+      }
+      continue;
+    }
+    const float inv = 1.0f / da;
+    float ta = (l - oa) * inv, tb = (h - oa) * inv;
+    if (ta > tb) {
+      const float s = ta;
+      ta = tb, tb = s;
+    }
+    t0 = ta > t0 ? ta : t0;
+    t1 = tb < t1 ? tb : t1;
+  }
+}
+
+// ------------------------------------------------------------------------------------------------
+// The scene as the kernel sees it (plain pointers: host memory on the CPU, device memory on the GPU)
+// ------------------------------------------------------------------------------------------------
+constexpr int kHitCapacity = 16;        // instances pending or active along one ray at once
+constexpr uint32_t kFallbackLevels = 3;  // a missing brick may use a resident ancestor this much coarser
+constexpr float kMaxConstantCells = 4.0f;  // a uniform non-empty node is shaded at least every 4 cells
+constexpr float kStopT = 1e-3f;          // early stop: opacity above 0.999
+constexpr float kShadowStopT = 1e-2f;  // a shadow cone stops once 99% of the sun is blocked
+constexpr float kMinContribution = 1e-5f;  // samples below this (T * alpha) are not shaded
+
+struct ModelView {
+  const CanopyNode* tiles;  // this model's node tiles (model-relative child indices)
+  uint32_t tileCount;
+  CanopyNode root;
+  uint32_t depth;
+  uint32_t rootCells;
+  uint32_t firstBrickPage;
+  uint32_t hasLight;        // light pages present (never in a 1.0 file; see indirectLight)
+};
+
+struct InstanceView {
+  Affine worldToUnit;       // world -> this instance's model octree unit space
+  float cellWorld;          // mean world length of one lattice cell (footprint -> cells)
+  float unitLo[3], unitHi[3];      // the lattice box in unit space (the instance's exact extent)
+  float boundsLo[3], boundsHi[3];  // world AABB of the lattice box (for the instance grid)
+  uint32_t model;
+  sun::Weights sunWeights;  // the sun in this instance's model space -> LB bases (per frame)
+};
+
+struct SceneLightView {     // coarse scene lattice (lbsolve --scene), factor on indirect light
+  const float* values;      // nullptr: none (factor 1)
+  Affine worldToIndex;
+  int32_t min[3];
+  int32_t dim[3];
+};
+
+struct ShadeParams {
+  V3 toSun;                 // unit vector towards the sun (world)
+  float sun[3];             // sun radiance (linear RGB)
+  float ambient;            // ambient factor (user): indirect = ambient * scene factor without LB data
+  float sigma;              // extinction per lattice cell at density 1
+  float stepFactor;         // brick step in voxels of the chosen level
+  float lodBias;            // added to the chosen level (negative = coarser)
+  float shadowAperture;     // shadow cone: footprint growth per unit length (radians)
+  int shadows;              // 0: no shadow cones (Tshadow = 1)
+};
+
+struct SceneView {
+  const ModelView* models;
+  const InstanceView* instances;
+  uint32_t instanceCount;
+  // Uniform grid of instance boxes: cell c holds gridItems[gridStart[c] .. gridStart[c + 1]).
+  const uint32_t* gridStart;
+  const uint32_t* gridItems;
+  int32_t gridDim[3];
+  float gridLo[3], gridCell[3];
+  // Streaming cache.
+  const int32_t* pageSlot;       // page -> slot in pool, or -1 (missing)
+  const unsigned char* pool;     // slot * pageBytes
+  uint32_t* slotUsed;            // slot -> stamp of the last frame that sampled it
+  uint32_t* pageWanted;          // page -> stamp of the last frame that missed it
+  uint32_t stamp;
+  uint32_t pageBytes;
+  uint32_t bricksPerPage;
+  SceneLightView light;
+  ShadeParams shade;
+};
+
+// Stamp stores are benign races (every writer writes the same value); relaxed atomics on the host.
+CANOPY_HD CANOPY_FORCEINLINE void writeStamp(uint32_t* p, uint32_t v) {
+#if defined(__CUDA_ARCH__)
+  if (*p != v) *p = v;
+#else
+  if (__atomic_load_n(p, __ATOMIC_RELAXED) != v) __atomic_store_n(p, v, __ATOMIC_RELAXED);
+#endif
+}
+
+// ------------------------------------------------------------------------------------------------
+// Lighting
+// ------------------------------------------------------------------------------------------------
+
+// The coarse scene factor at world point p (trilinear, clamped to the lattice; 1 without one).
+CANOPY_HD inline float sceneLightFactor(const SceneLightView& L, V3 p) {
+  if (!L.values) return 1.0f;
+  const V3 q = applyPoint(L.worldToIndex, p);
+  int i0[3];
+  float f[3];
+  for (int a = 0; a < 3; ++a) {
+    float x = comp(q, a) - float(L.min[a]);
+    const float hi = float(L.dim[a] - 1);
+    x = x < 0.0f ? 0.0f : (x > hi ? hi : x);
+    const float fl = floorf(x);
+    i0[a] = int(fl);
+    f[a] = x - fl;
+    if (i0[a] >= L.dim[a] - 1) i0[a] = L.dim[a] > 1 ? L.dim[a] - 2 : 0, f[a] = L.dim[a] > 1 ? 1.0f : 0.0f;
+  }
+  float v = 0.0f;
+  for (int c = 0; c < 8; ++c) {
+    const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+    const float w = (dx ? f[0] : 1 - f[0]) * (dy ? f[1] : 1 - f[1]) * (dz ? f[2] : 1 - f[2]);
+    if (w == 0.0f) continue;
+    const int x = i0[0] + dx < L.dim[0] ? i0[0] + dx : L.dim[0] - 1;
+    const int y = i0[1] + dy < L.dim[1] ? i0[1] + dy : L.dim[1] - 1;
+    const int z = i0[2] + dz < L.dim[2] ? i0[2] + dz : L.dim[2] - 1;
+    v += w * L.values[size_t(x) + size_t(L.dim[0]) * (size_t(y) + size_t(L.dim[1]) * size_t(z))];
+  }
+  return v;
+}
+
+// The LB indirect light of the dissertation §4.2-4.3 at one sample, given the values of the three
+// sun bases chosen by the polyhedron lookup (bases[v] = B_{w.base[v]} there, RGB) and of the
+// ambient base B_0: (sum_v w_v B_v + ambient B_0) * sceneFactor.
+CANOPY_HD inline void lbIndirect(const sun::Weights& w, const float bases[3][3], const float b0[3], float ambient,
+                                 float sceneFactor, float out[3]) {
+  for (int c = 0; c < 3; ++c)
+    out[c] = (w.weight[0] * bases[0][c] + w.weight[1] * bases[1][c] + w.weight[2] * bases[2][c] + ambient * b0[c]) *
+             sceneFactor;
+}
+
+// The indirect light of a sample of instance `inst`. A model without LB light (every model of a
+// .canopy 1.0 file: light pages are reserved but their layout is defined only in 1.1) gets the
+// ambient term alone, B_0 taken as 1: ambient * sceneFactor. Where a model carries light
+// (ModelView::hasLight, 1.1), the caller samples B_{w.base[v]} and B_0 from its light bricks and
+// calls lbIndirect(); that sampler (formats/chaar.h's CANOPY_HD decoder over light pages) is not
+// part of this build, and the player refuses nothing: hasLight models are lit as density-only ones
+// (and say so on stderr, see scene.cpp).
+CANOPY_HD inline void indirectLight(const SceneView& s, const InstanceView& inst, V3 p, float out[3]) {
+  const float factor = sceneLightFactor(s.light, p);
+  const float ones[3][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
+  const float b0[3] = {1.0f, 1.0f, 1.0f};
+  lbIndirect(inst.sunWeights, ones, b0, s.shade.ambient, factor, out);
+}
+
+// ------------------------------------------------------------------------------------------------
+// One instance's segment at ray position t
+// ------------------------------------------------------------------------------------------------
+struct Segment {
+  float k;          // extinction per world unit
+  float albedo[3];
+  float tEnd;       // the value holds on [t, tEnd)
+};
+
+// Finest level whose voxel (2^(depth - L) lattice cells) is no larger than the footprint.
+CANOPY_HD inline uint32_t levelForFootprint(uint32_t depth, float footprintCells, float lodBias) {
+  const float fp = footprintCells > 1.0f ? footprintCells : 1.0f;
+  float L = float(depth) - floorf(log2f(fp)) + lodBias;
+  L = L < 0.0f ? 0.0f : (L > float(depth) ? float(depth) : L);
+  return uint32_t(L);
+}
+
+// World t at which o + t d (unit space) leaves the node box [lo, lo + size).
+CANOPY_HD inline float nodeExit(V3 uo, V3 ud, const float lo[3], float size) {
+  float t = 3.0e38f;
+  for (int a = 0; a < 3; ++a) {
+    const float da = comp(ud, a);
+    if (fabsf(da) < 1e-30f) continue;
+    const float bound = da > 0.0f ? lo[a] + size : lo[a];
+    const float ta = (bound - comp(uo, a)) / da;
+    t = ta < t ? ta : t;
+  }
+  return t;
+}
+
+// Descends instance `inst` at unit point u to `maxLevel`, noting the deepest resident brick on the
+// way (within kFallbackLevels of maxLevel). Returns the node reached.
+struct Descent {
+  CanopyNode node;
+  uint32_t level;
+  float lo[3];
+  float size;
+  // the brick to sample: the node's own if resident, else a resident ancestor's (fallbackLevel)
+  const unsigned char* brickPage;  // nullptr: none resident
+  uint32_t brickSlotInPage;
+  float brickLo[3];
+  float brickSize;
+  int32_t brickPoolSlot;
+  uint32_t missingPage;           // the node's own page when it was missing, else kCanopyNone
+};
+
+CANOPY_HD inline int32_t residentSlot(const SceneView& s, const ModelView& m, uint32_t brick, uint32_t& page) {
+  page = m.firstBrickPage + brick / s.bricksPerPage;
+  return s.pageSlot[page];
+}
+
+CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m, V3 u, uint32_t maxLevel) {
+  float x[3] = {u.x, u.y, u.z};
+  for (int a = 0; a < 3; ++a) x[a] = x[a] < 0.0f ? 0.0f : (x[a] >= 1.0f ? 0.99999994f : x[a]);
+  Descent d;
+  d.node = m.root;
+  d.level = 0;
+  d.size = 1.0f;
+  d.lo[0] = d.lo[1] = d.lo[2] = 0.0f;
+  d.brickPage = nullptr;
+  d.brickSlotInPage = 0;
+  d.brickPoolSlot = -1;
+  d.missingPage = kCanopyNone;
+  const uint32_t firstFallback = maxLevel > kFallbackLevels ? maxLevel - kFallbackLevels : 0;
+  for (;;) {
+    const bool last = !(d.level < maxLevel && d.node.child != kCanopyNone && d.node.child < m.tileCount);
+    if (d.node.brick != kCanopyNone && (d.level >= firstFallback || last)) {
+      uint32_t page;
+      const int32_t slot = residentSlot(s, m, d.node.brick, page);
+      if (slot >= 0) {
+        d.brickPage = s.pool + size_t(slot) * s.pageBytes;
+        d.brickSlotInPage = d.node.brick % s.bricksPerPage;
+        d.brickPoolSlot = slot;
+        d.brickSize = d.size;
+        for (int a = 0; a < 3; ++a) d.brickLo[a] = d.lo[a];
+      } else if (last) {
+        d.missingPage = page;
+      }
+    }
+    if (last) break;
+    uint32_t c = 0;
+    d.size *= 0.5f;
+    for (int a = 0; a < 3; ++a) {
+      const float t = x[a] * 2.0f;
+      const uint32_t off = t >= 1.0f ? 1u : 0u;
+      x[a] = t - float(off);
+      c |= off << a;
+      d.lo[a] += float(off) * d.size;
+    }
+    d.node = m.tiles[size_t(d.node.child) * 8 + c];
+    ++d.level;
+  }
+  return d;
+}
+
+// The segment of instance `inst` at ray position t (world), the cone footprint there being
+// `footprint` (world units). tout is the end of the instance's box interval.
+CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView& inst, V3 o, V3 dir, float t,
+                                         float tout, float footprint, bool shading) {
+  const ModelView& m = s.models[inst.model];
+  const V3 uo = applyPoint(inst.worldToUnit, o);
+  const V3 ud = applyVector(inst.worldToUnit, dir);
+  const float cellsPerWorld = length(ud) * float(m.rootCells);
+  // a thousandth of a cell, but at least a few float ulps of t (progress far from the origin)
+  const float eps = fmaxf(1e-3f / cellsPerWorld, fabsf(t) * 1e-6f);
+  const uint32_t level = levelForFootprint(m.depth, footprint / inst.cellWorld, s.shade.lodBias);
+  const Descent d = descendResident(s, m, uo + ud * (t + eps), level);
+  Segment g;
+  float tExit = nodeExit(uo, ud, d.lo, d.size);
+  if (tExit < t + eps) tExit = t + eps;
+  if (d.missingPage != kCanopyNone) writeStamp(s.pageWanted + d.missingPage, s.stamp);
+  const bool useBrick = d.node.brick != kCanopyNone && d.brickPage != nullptr;
+  if (!useBrick) {
+    // constant node, or a missing brick without a close resident ancestor: the node's mean
+    const CanopySample c = canopyUnpack(d.node.density, d.node.material);
+    g.k = s.shade.sigma * c.density * cellsPerWorld;
+    g.albedo[0] = c.albedo[0], g.albedo[1] = c.albedo[1], g.albedo[2] = c.albedo[2];
+    float tEnd = tExit;
+    if (shading && c.density > 0.0f) {  // a shadow cone integrates it in one go
+      const float maxLen = kMaxConstantCells / cellsPerWorld;
+      tEnd = tEnd < t + maxLen ? tEnd : t + maxLen;
+    }
+    g.tEnd = tEnd < tout ? tEnd : tout;
+    return g;
+  }
+  writeStamp(s.slotUsed + d.brickPoolSlot, s.stamp);
+  const float voxelCells = float(m.rootCells >> 3) * d.size;  // this level's voxel, in cells
+  float tEnd = t + s.shade.stepFactor * voxelCells / cellsPerWorld;
+  tEnd = tEnd < tExit ? tEnd : tExit;
+  tEnd = tEnd < tout ? tEnd : tout;
+  const V3 um = uo + ud * (0.5f * (t + tEnd));
+  const float inv = 1.0f / d.brickSize;
+  const CanopySample c = canopySampleBrick(canopyBrickInPage(d.brickPage, d.brickSlotInPage), (um.x - d.brickLo[0]) * inv,
+                                           (um.y - d.brickLo[1]) * inv, (um.z - d.brickLo[2]) * inv);
+  g.k = s.shade.sigma * c.density * cellsPerWorld;
+  g.albedo[0] = c.albedo[0], g.albedo[1] = c.albedo[1], g.albedo[2] = c.albedo[2];
+  g.tEnd = tEnd;
+  return g;
+}
+
+// ------------------------------------------------------------------------------------------------
+// The lock-step march over every instance along a ray
+// ------------------------------------------------------------------------------------------------
+struct Hit {
+  uint32_t instance;
+  float tin, tout;
+};
+
+// 3D-DDA over the instance grid plus the hit list.
+struct InstanceWalk {
+  Hit hits[kHitCapacity];
+  int count;
+  int cell[3];
+  int stepDir[3];
+  float tNext[3], tDelta[3];
+  float tCellExit;  // the march may advance up to here with the current list
+  float tGridExit;
+  bool done;
+};
+
+CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 d, float tNow) {
+  const int c = w.cell[0] + s.gridDim[0] * (w.cell[1] + s.gridDim[1] * w.cell[2]);
+  for (uint32_t k = s.gridStart[c]; k < s.gridStart[c + 1]; ++k) {
+    const uint32_t id = s.gridItems[k];
+    bool present = false;
+    for (int h = 0; h < w.count; ++h) present |= w.hits[h].instance == id;
+    if (present) continue;
+    const InstanceView& inst = s.instances[id];
+    // the exact interval: the ray against the lattice box in the instance's unit space (an
+    // oriented box in world space; t is the same parameter in both spaces)
+    float t0, t1;
+    rayBox(applyPoint(inst.worldToUnit, o), applyVector(inst.worldToUnit, d), v3(inst.unitLo[0], inst.unitLo[1], inst.unitLo[2]),
+           v3(inst.unitHi[0], inst.unitHi[1], inst.unitHi[2]), t0, t1);
+    if (t0 < tNow) t0 = tNow;
+    if (!(t1 > t0)) continue;
+    if (w.count == kHitCapacity) {  // full: replace the farthest pending hit if this one is nearer
+      int far = 0;
+      for (int h = 1; h < w.count; ++h) far = w.hits[h].tin > w.hits[far].tin ? h : far;
+      if (w.hits[far].tin <= t0) continue;  // dropped; found again from a later cell it overlaps
+      w.hits[far] = Hit{id, t0, t1};
+    } else {
+      w.hits[w.count++] = Hit{id, t0, t1};
+    }
+  }
+}
+
+// Starts the walk for the ray o + t d, t in [tStart, tEnd].
+CANOPY_HD inline void walkBegin(const SceneView& s, InstanceWalk& w, V3 o, V3 d, float tStart, float tEnd) {
+  w.count = 0;
+  w.done = true;
+  w.tCellExit = tEnd;
+  if (s.instanceCount == 0) return;
+  const V3 lo = v3(s.gridLo[0], s.gridLo[1], s.gridLo[2]);
+  const V3 hi = v3(s.gridLo[0] + s.gridCell[0] * float(s.gridDim[0]), s.gridLo[1] + s.gridCell[1] * float(s.gridDim[1]),
+                   s.gridLo[2] + s.gridCell[2] * float(s.gridDim[2]));
+  float t0, t1;
+  rayBox(o, d, lo, hi, t0, t1);
+  t0 = t0 > tStart ? t0 : tStart;
+  t1 = t1 < tEnd ? t1 : tEnd;
+  if (!(t1 > t0)) return;
+  w.done = false;
+  w.tGridExit = t1;
+  const V3 p = o + d * t0;
+  for (int a = 0; a < 3; ++a) {
+    const float cs = s.gridCell[a];
+    int c = int(floorf((comp(p, a) - s.gridLo[a]) / cs));
+    c = c < 0 ? 0 : (c >= s.gridDim[a] ? s.gridDim[a] - 1 : c);
+    w.cell[a] = c;
+    const float da = comp(d, a);
+    if (da > 0.0f) {
+      w.stepDir[a] = 1;
+      w.tNext[a] = (s.gridLo[a] + float(c + 1) * cs - comp(o, a)) / da;
+      w.tDelta[a] = cs / da;
+    } else if (da < 0.0f) {
+      w.stepDir[a] = -1;
+      w.tNext[a] = (s.gridLo[a] + float(c) * cs - comp(o, a)) / da;
+      w.tDelta[a] = -cs / da;
+    } else {
+      w.stepDir[a] = 0;
+      w.tNext[a] = 3.0e38f;
+      w.tDelta[a] = 3.0e38f;
+    }
+  }
+  walkAddCell(s, w, o, d, t0);
+  float tx = w.tNext[0] < w.tNext[1] ? w.tNext[0] : w.tNext[1];
+  tx = tx < w.tNext[2] ? tx : w.tNext[2];
+  w.tCellExit = tx < t1 ? tx : t1;
+}
+
+// Advances the DDA one cell (when the march reached tCellExit).
+CANOPY_HD inline void walkAdvance(const SceneView& s, InstanceWalk& w, V3 o, V3 d, float tNow) {
+  if (w.done) return;
+  if (w.tCellExit >= w.tGridExit) {
+    w.done = true;
+    return;
+  }
+  int a = 0;
+  if (w.tNext[1] < w.tNext[a]) a = 1;
+  if (w.tNext[2] < w.tNext[a]) a = 2;
+  w.cell[a] += w.stepDir[a];
+  w.tNext[a] += w.tDelta[a];
+  if (w.cell[a] < 0 || w.cell[a] >= s.gridDim[a]) {
+    w.done = true;
+    w.tCellExit = w.tGridExit;
+    return;
+  }
+  walkAddCell(s, w, o, d, tNow);
+  float tx = w.tNext[0] < w.tNext[1] ? w.tNext[0] : w.tNext[1];
+  tx = tx < w.tNext[2] ? tx : w.tNext[2];
+  w.tCellExit = tx < w.tGridExit ? tx : w.tGridExit;
+}
+
+// Drops hits that ended before t.
+CANOPY_HD inline void walkRetire(InstanceWalk& w, float t) {
+  int n = 0;
+  for (int h = 0; h < w.count; ++h)
+    if (w.hits[h].tout > t) w.hits[n++] = w.hits[h];
+  w.count = n;
+}
+
+struct ConeResult {
+  float rgb[3];           // premultiplied radiance
+  float transmittance;
+};
+
+// Transmittance from p towards the sun (shadow cone, footprint starts at `footprint0`).
+CANOPY_HD inline float shadowTransmittance(const SceneView& s, V3 p, float footprint0) {
+  const V3 d = s.shade.toSun;
+  InstanceWalk w;
+  walkBegin(s, w, p, d, 0.0f, 3.0e38f);
+  float T = 1.0f;
+  float t = 0.0f;
+  while (true) {
+    walkRetire(w, t);
+    if (w.count == 0 && w.done) break;
+    float next = w.done ? 3.0e38f : w.tCellExit;
+    float k = 0.0f;
+    bool active = false;
+    for (int h = 0; h < w.count; ++h) {
+      const Hit& hit = w.hits[h];
+      if (hit.tin > t) {
+        next = hit.tin < next ? hit.tin : next;
+        continue;
+      }
+      active = true;
+      const Segment g = instanceSegment(s, s.instances[hit.instance], p, d, t, hit.tout, footprint0 + t * s.shade.shadowAperture, false);
+      k += g.k;
+      next = g.tEnd < next ? g.tEnd : next;
+    }
+    if (!active && w.count == 0 && !w.done) {  // nothing here: skip to the next grid cell
+      t = w.tCellExit;
+      walkAdvance(s, w, p, d, t);
+      continue;
+    }
+    if (next >= 3.0e38f) break;
+    T *= expf(-k * (next - t));
+    t = next;
+    if (T < kShadowStopT) return 0.0f;
+    while (!w.done && t >= w.tCellExit) walkAdvance(s, w, p, d, t);
+  }
+  return T;
+}
+
+// One primary cone: origin o, unit direction d, footprint(t) = footprint0 + t * pixelAngle.
+CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixelAngle, float tMax) {
+  ConeResult r;
+  r.rgb[0] = r.rgb[1] = r.rgb[2] = 0.0f;
+  r.transmittance = 1.0f;
+  InstanceWalk w;
+  walkBegin(s, w, o, d, 0.0f, tMax);
+  float t = 0.0f;
+  float T = 1.0f;
+  float sunT = 1.0f, shadowT = -3.0e38f, shadowSpacing = 0.0f;
+  while (true) {
+    walkRetire(w, t);
+    if (w.count == 0 && w.done) break;
+    float next = w.done ? tMax : w.tCellExit;
+    float k = 0.0f, kc[3] = {0.0f, 0.0f, 0.0f};
+    Segment seg[kHitCapacity];
+    bool active = false;
+    const float footprint = t * pixelAngle;
+    float minCell = 3.0e38f;
+    for (int h = 0; h < w.count; ++h) {
+      const Hit& hit = w.hits[h];
+      if (hit.tin > t) {
+        next = hit.tin < next ? hit.tin : next;
+        seg[h].k = 0.0f;
+        continue;
+      }
+      active = true;
+      seg[h] = instanceSegment(s, s.instances[hit.instance], o, d, t, hit.tout, footprint, true);
+      minCell = s.instances[hit.instance].cellWorld < minCell ? s.instances[hit.instance].cellWorld : minCell;
+      k += seg[h].k;
+      next = seg[h].tEnd < next ? seg[h].tEnd : next;
+    }
+    if (!active && w.count == 0) {
+      if (w.done) break;
+      t = w.tCellExit;
+      walkAdvance(s, w, o, d, t);
+      continue;
+    }
+    if (next > tMax) next = tMax;
+    const float dt = next - t;
+    const float alpha = 1.0f - expf(-k * dt);
+    if (alpha > 0.0f && T * alpha > kMinContribution) {
+      const float tm = t + 0.5f * dt;
+      const V3 p = o + d * tm;
+      // One shadow cone per shadow interval: samples closer than about a voxel (1.5 cells of the
+      // nearest active instance, or two footprints) to the last shadow origin reuse its value.
+      if (s.shade.shadows && !(tm - shadowT < shadowSpacing)) {
+        sunT = shadowTransmittance(s, p, footprint);
+        shadowT = tm;
+        shadowSpacing = 2.0f * footprint > 1.5f * minCell ? 2.0f * footprint : 1.5f * minCell;
+      }
+      for (int h = 0; h < w.count; ++h) {
+        if (w.hits[h].tin > t || seg[h].k <= 0.0f) continue;
+        float ind[3];
+        indirectLight(s, s.instances[w.hits[h].instance], p, ind);
+        for (int c = 0; c < 3; ++c) kc[c] += seg[h].k * seg[h].albedo[c] * (s.shade.sun[c] * sunT + ind[c]);
+      }
+      const float scale = T * alpha / k;
+      for (int c = 0; c < 3; ++c) r.rgb[c] += scale * kc[c];
+    }
+    T *= 1.0f - alpha;
+    t = next;
+    if (T < kStopT || t >= tMax) break;
+    while (!w.done && t >= w.tCellExit) walkAdvance(s, w, o, d, t);
+  }
+  r.transmittance = T;
+  return r;
+}
+
+// ------------------------------------------------------------------------------------------------
+// Camera
+// ------------------------------------------------------------------------------------------------
+struct CameraView {
+  V3 position, forward, right, up;  // orthonormal; right/up scaled by tan(fov/2) (and aspect)
+  float pixelAngle;                 // cone aperture per pixel (radians, small-angle)
+  int width, height;
+};
+
+// The ray through pixel (x, y) (y = 0 the top row), through the pixel centre.
+CANOPY_HD inline V3 cameraRay(const CameraView& c, int x, int y, float& footprintPerT) {
+  const float sx = (2.0f * (float(x) + 0.5f) / float(c.width) - 1.0f);
+  const float sy = (1.0f - 2.0f * (float(y) + 0.5f) / float(c.height));
+  const V3 d = c.forward + c.right * sx + c.up * sy;
+  const float len = length(d);
+  footprintPerT = c.pixelAngle / len;  // off-axis pixels subtend slightly less
+  return d * (1.0f / len);
+}
+
+// Renders pixel i of the frame into rgba (premultiplied RGB, alpha = 1 - T).
+CANOPY_HD inline void renderPixel(const SceneView& s, const CameraView& c, int64_t i, float* rgba) {
+  const int x = int(i % c.width), y = int(i / c.width);
+  float fpPerT;
+  const V3 d = cameraRay(c, x, y, fpPerT);
+  const ConeResult r = traceCone(s, c.position, d, fpPerT, 3.0e37f);
+  rgba[4 * i + 0] = r.rgb[0];
+  rgba[4 * i + 1] = r.rgb[1];
+  rgba[4 * i + 2] = r.rgb[2];
+  rgba[4 * i + 3] = 1.0f - r.transmittance;
+}
+
+}  // namespace canopy::play

@@ -1,0 +1,49 @@
+// main.cpp: canopy-play's command line; the work is in player.cpp.
+#include <cstdio>
+#include <string>
+
+#include "canopy/cli.h"
+#include "runtime/player.h"
+
+int main(int argc, char** argv) {
+  canopy::Tool tool("canopy-play",
+                    "Cone-traces a packed scene (.canopy) headless, streaming bricks through a cache.\n"
+                    "  canopy-play FILE.canopy -o out.png [--size WxH]\n"
+                    "  canopy-play FILE.canopy -o frames/f_%04d.exr --frames 120 --camera orbit:turns=1 --sun orbit:turns=0.25");
+  CLI::App& app = tool.app();
+  canopy::play::PlayOptions o;
+  std::string size = "640x360";
+  app.add_option("input", o.input, "FILE.canopy")->required();
+  app.add_option("-o,--output", o.output, "out.png | out.exr | frames/f_%04d.exr (printf pattern for several frames)");
+  app.add_option("--size", size, "Frame size WxH")->capture_default_str();
+  app.add_option("--frames", o.frames, "Number of frames")->capture_default_str();
+  app.add_option("--camera", o.camera, "orbit[:azimuth=,elevation=,distance=,height=,fov=,turns=] or a keyframe path.json")
+      ->capture_default_str();
+  app.add_option("--sun", o.sun, "x,y,z (towards the sun), orbit[:azimuth=,elevation=,turns=] or a keyframe path.json")
+      ->capture_default_str();
+  app.add_option("--cache-mb", o.cacheMb, "Brick page cache budget (MiB)")->capture_default_str();
+  app.add_option("--sigma", o.sigma, "Extinction per lattice cell at density 1")->capture_default_str();
+  app.add_option("--ambient", o.ambient, "Ambient (indirect) light factor")->capture_default_str();
+  app.add_option("--sun-intensity", o.sunIntensity, "Sun radiance")->capture_default_str();
+  app.add_option("--step", o.stepFactor, "Brick step in voxels of the chosen level")->capture_default_str();
+  app.add_option("--lod-bias", o.lodBias, "Added to the footprint's level (negative = coarser)")->capture_default_str();
+  app.add_option("--shadow-aperture", o.shadowAperture, "Shadow cone aperture (radians)")->capture_default_str();
+  bool noShadows = false;
+  app.add_flag("--no-shadows", noShadows, "Direct sun without shadow cones");
+  app.add_flag("--converge", o.converge, "Per frame, render passes until no loadable page is missing (reference quality)");
+  bool coldStart = false;
+  app.add_flag("--no-warm-start", coldStart, "Render the first frame in real-time mode too (node means until pages arrive)");
+  app.add_option("--loader-threads", o.loaderThreads, "Page reader threads")->capture_default_str()->check(CLI::Range(1, 64));
+
+  return tool.run(argc, argv, [&] {
+    int w = 0, h = 0;
+    char tail;
+    if (std::sscanf(size.c_str(), "%dx%d%c", &w, &h, &tail) != 2)
+      throw canopy::usageError("--size '" + size + "': expected WxH, e.g. 1920x1080");
+    o.width = w;
+    o.height = h;
+    o.shadows = !noShadows;
+    o.warmStart = !coldStart;
+    tool.report() = canopy::play::play(o, tool.device());
+  });
+}

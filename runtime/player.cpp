@@ -1,0 +1,327 @@
+// player.cpp: see player.h.
+#include "runtime/player.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include "canopy/atomic_file.h"
+#include "canopy/cli.h"
+#include "canopy/errors.h"
+#include "formats/canopy_file.h"
+#include "runtime/backend.h"
+#include "runtime/image_io.h"
+#include "runtime/streaming.h"
+
+namespace canopy::play {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// "orbit:a=1,b=2" -> {a:1, b:2}; throws Usage naming `what` for a malformed or unknown key.
+std::map<std::string, double> parseKeys(const std::string& spec, const std::string& what,
+                                        const std::vector<std::string>& allowed) {
+  std::map<std::string, double> kv;
+  const size_t colon = spec.find(':');
+  if (colon == std::string::npos) return kv;
+  std::stringstream ss(spec.substr(colon + 1));
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    const size_t eq = item.find('=');
+    if (eq == std::string::npos) throw usageError(what + " '" + spec + "': expected key=value, got '" + item + "'");
+    const std::string key = item.substr(0, eq);
+    if (std::find(allowed.begin(), allowed.end(), key) == allowed.end())
+      throw usageError(what + " '" + spec + "': unknown key '" + key + "'");
+    char* end = nullptr;
+    const std::string val = item.substr(eq + 1);
+    const double v = std::strtod(val.c_str(), &end);
+    if (val.empty() || *end != '\0' || !std::isfinite(v)) throw usageError(what + " '" + spec + "': bad number '" + val + "'");
+    kv[key] = v;
+  }
+  return kv;
+}
+
+double get(const std::map<std::string, double>& kv, const char* k, double def) {
+  auto it = kv.find(k);
+  return it == kv.end() ? def : it->second;
+}
+
+bool startsWith(const std::string& s, const char* p) { return s.rfind(p, 0) == 0; }
+
+V3 jsonV3(const nlohmann::json& j, const std::string& what) {
+  if (!j.is_array() || j.size() != 3) throw invalidInput(what + ": expected [x, y, z]");
+  V3 v{};
+  for (int a = 0; a < 3; ++a) {
+    if (!j[size_t(a)].is_number()) throw invalidInput(what + ": expected numbers");
+    const double x = j[size_t(a)].get<double>();
+    if (!std::isfinite(x)) throw invalidInput(what + ": not finite");
+    (a == 0 ? v.x : a == 1 ? v.y : v.z) = float(x);
+  }
+  return v;
+}
+
+struct Key {
+  double frame;
+  V3 a, b;
+  double fov;
+};
+
+// Keyframes {"keyframes": [{"frame": F, <fieldA>: [..], <fieldB>: [..], "fov": deg}, ...]}, sorted.
+std::vector<Key> readKeyframes(const std::string& path, const char* fieldA, const char* fieldB) {
+  const std::vector<unsigned char> bytes = readFile(path);
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(bytes.begin(), bytes.end());
+  } catch (const std::exception& e) {
+    throw invalidInput(path + ": not valid JSON: " + e.what());
+  }
+  if (!j.is_object() || !j.contains("keyframes") || !j["keyframes"].is_array() || j["keyframes"].empty())
+    throw invalidInput(path + ": expected {\"keyframes\": [...]} with at least one keyframe");
+  std::vector<Key> keys;
+  for (size_t i = 0; i < j["keyframes"].size(); ++i) {
+    const auto& k = j["keyframes"][i];
+    const std::string what = path + ": keyframe " + std::to_string(i);
+    if (!k.is_object() || !k.contains("frame") || !k["frame"].is_number()) throw invalidInput(what + ": needs \"frame\"");
+    Key key{k["frame"].get<double>(), {}, {}, 45.0};
+    if (!k.contains(fieldA)) throw invalidInput(what + ": needs \"" + fieldA + "\"");
+    key.a = jsonV3(k[fieldA], what + " " + fieldA);
+    if (fieldB) {
+      if (!k.contains(fieldB)) throw invalidInput(what + ": needs \"" + fieldB + "\"");
+      key.b = jsonV3(k[fieldB], what + " " + fieldB);
+    }
+    if (k.contains("fov")) {
+      if (!k["fov"].is_number()) throw invalidInput(what + ": fov must be a number");
+      key.fov = k["fov"].get<double>();
+      if (!(key.fov > 0.1 && key.fov < 179.0)) throw invalidInput(what + ": fov must be in (0.1, 179) degrees");
+    }
+    keys.push_back(key);
+  }
+  std::stable_sort(keys.begin(), keys.end(), [](const Key& x, const Key& y) { return x.frame < y.frame; });
+  return keys;
+}
+
+Key interpolate(const std::vector<Key>& keys, double f) {
+  if (f <= keys.front().frame) return keys.front();
+  if (f >= keys.back().frame) return keys.back();
+  size_t i = 1;
+  while (keys[i].frame < f) ++i;
+  const Key &k0 = keys[i - 1], &k1 = keys[i];
+  const float s = float((f - k0.frame) / std::max(k1.frame - k0.frame, 1e-12));
+  return Key{f, k0.a + (k1.a - k0.a) * s, k0.b + (k1.b - k0.b) * s, k0.fov + (k1.fov - k0.fov) * s};
+}
+
+CameraView makeCamera(V3 position, V3 target, double fovDeg, int width, int height) {
+  CameraView c{};
+  c.position = position;
+  c.forward = normalize(target - position);
+  V3 up = v3(0, 1, 0);
+  if (std::fabs(dot(up, c.forward)) > 0.999f) up = v3(0, 0, 1);
+  const V3 right = normalize(cross(c.forward, up));
+  const V3 trueUp = cross(right, c.forward);
+  const float th = float(std::tan(fovDeg * kPi / 360.0));
+  const float aspect = float(width) / float(height);
+  c.right = right * (th * aspect);
+  c.up = trueUp * th;
+  c.pixelAngle = 2.0f * th / float(height);
+  c.width = width;
+  c.height = height;
+  return c;
+}
+
+V3 fromAngles(double azimuthDeg, double elevationDeg) {
+  const double az = azimuthDeg * kPi / 180.0, el = elevationDeg * kPi / 180.0;
+  return v3(float(std::cos(el) * std::sin(az)), float(std::sin(el)), float(std::cos(el) * std::cos(az)));
+}
+
+double percentile(std::vector<double> v, double q) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const double pos = q * double(v.size() - 1);
+  const size_t i = size_t(pos);
+  const double f = pos - double(i);
+  return i + 1 < v.size() ? v[i] * (1 - f) + v[i + 1] * f : v[i];
+}
+
+}  // namespace
+
+std::string frameFileName(const std::string& pattern, int frame, int frames) {
+  if (pattern.find('%') == std::string::npos) {
+    if (frames > 1) throw usageError("-o " + pattern + ": " + std::to_string(frames) + " frames need a pattern such as frames/f_%04d.exr");
+    return pattern;
+  }
+  char buf[4096];
+  const int n = std::snprintf(buf, sizeof(buf), pattern.c_str(), frame);
+  if (n <= 0 || size_t(n) >= sizeof(buf)) throw usageError("-o " + pattern + ": bad frame pattern");
+  return buf;
+}
+
+std::vector<FrameSetup> framePlan(const PlayOptions& o, const HostScene& scene) {
+  if (o.width < 1 || o.height < 1 || o.width > 8192 || o.height > 8192)
+    throw usageError("--size " + std::to_string(o.width) + "x" + std::to_string(o.height) + ": each side must be 1..8192");
+  if (o.frames < 1 || o.frames > 1000000) throw usageError("--frames must be 1..1000000");
+  V3 centre = v3(0, 0, 0);
+  float radius = 1.0f;
+  if (!scene.empty) {
+    const V3 lo = v3(scene.boundsLo[0], scene.boundsLo[1], scene.boundsLo[2]);
+    const V3 hi = v3(scene.boundsHi[0], scene.boundsHi[1], scene.boundsHi[2]);
+    centre = (lo + hi) * 0.5f;
+    radius = std::max(0.5f * length(hi - lo), 1e-3f);
+  }
+  std::vector<FrameSetup> plan(size_t(o.frames));
+  const double n = double(o.frames);
+  // camera
+  if (o.camera == "orbit" || startsWith(o.camera, "orbit:")) {
+    const auto kv = parseKeys(o.camera, "--camera", {"azimuth", "elevation", "distance", "fov", "turns", "height"});
+    const double fov = get(kv, "fov", 40.0);
+    if (!(fov > 0.1 && fov < 179.0)) throw usageError("--camera: fov must be in (0.1, 179) degrees");
+    // default distance: the bounding sphere fills the vertical field of view (with 10% margin)
+    const double dist = get(kv, "distance", 1.1 * radius / std::sin(fov * kPi / 360.0));
+    if (!(dist > 0)) throw usageError("--camera: distance must be > 0");
+    for (int f = 0; f < o.frames; ++f) {
+      const double az = get(kv, "azimuth", 30.0) + 360.0 * get(kv, "turns", 1.0) * double(f) / n;
+      const V3 target = centre + v3(0, float(get(kv, "height", 0.0)), 0);
+      const V3 pos = target + fromAngles(az, get(kv, "elevation", 20.0)) * float(dist);
+      plan[size_t(f)].camera = makeCamera(pos, target, fov, o.width, o.height);
+    }
+  } else {
+    const auto keys = readKeyframes(o.camera, "position", "target");
+    for (int f = 0; f < o.frames; ++f) {
+      const Key k = interpolate(keys, double(f));
+      if (length(k.b - k.a) <= 0.0f) throw invalidInput(o.camera + ": position and target coincide at frame " + std::to_string(f));
+      plan[size_t(f)].camera = makeCamera(k.a, k.b, k.fov, o.width, o.height);
+    }
+  }
+  // sun
+  if (o.sun == "orbit" || startsWith(o.sun, "orbit:")) {
+    const auto kv = parseKeys(o.sun, "--sun", {"azimuth", "elevation", "turns"});
+    for (int f = 0; f < o.frames; ++f)
+      plan[size_t(f)].toSun = fromAngles(get(kv, "azimuth", 40.0) + 360.0 * get(kv, "turns", 0.0) * double(f) / n, get(kv, "elevation", 50.0));
+  } else if (o.sun.size() > 5 && o.sun.substr(o.sun.size() - 5) == ".json") {
+    const auto keys = readKeyframes(o.sun, "direction", nullptr);
+    for (int f = 0; f < o.frames; ++f) {
+      const V3 d = interpolate(keys, double(f)).a;
+      if (length(d) <= 0.0f) throw invalidInput(o.sun + ": zero sun direction at frame " + std::to_string(f));
+      plan[size_t(f)].toSun = normalize(d);
+    }
+  } else {
+    float x, y, z;
+    char tail;
+    if (std::sscanf(o.sun.c_str(), "%f,%f,%f%c", &x, &y, &z, &tail) != 3 || !std::isfinite(x) || !std::isfinite(y) ||
+        !std::isfinite(z) || x * x + y * y + z * z <= 0.0f)
+      throw usageError("--sun '" + o.sun + "': expected x,y,z (towards the sun), orbit[:azimuth=..,elevation=..,turns=..] or a .json path");
+    for (auto& p : plan) p.toSun = normalize(v3(x, y, z));
+  }
+  return plan;
+}
+
+nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<float>* lastImage) {
+  const auto t0 = std::chrono::steady_clock::now();
+  if (!o.output.empty()) {
+    if (!isImageName(o.output)) throw usageError("-o " + o.output + ": output must end in .png or .exr");
+    frameFileName(o.output, 0, o.frames);  // validates the pattern before any work
+  }
+  if (!(o.cacheMb > 0.0) || o.cacheMb > 1.0e6) throw usageError("--cache-mb must be in (0, 1e6]");
+  for (float v : {o.sigma, o.stepFactor, o.ambient, o.sunIntensity, o.shadowAperture, o.lodBias})
+    if (!std::isfinite(v)) throw usageError("shading parameters must be finite");
+  if (!(o.sigma >= 0.0f) || !(o.stepFactor > 0.01f) || !(o.ambient >= 0.0f) || !(o.sunIntensity >= 0.0f) || !(o.shadowAperture >= 0.0f))
+    throw usageError("--sigma, --ambient, --sun-intensity and --shadow-aperture must be >= 0 and --step > 0.01");
+
+  const CanopyFile file = CanopyFile::open(o.input);
+  HostScene scene = buildScene(file);
+  const std::vector<FrameSetup> plan = framePlan(o, scene);
+  const uint64_t cacheBytes = uint64_t(o.cacheMb * 1024.0 * 1024.0);
+  const uint32_t slots = uint32_t(std::min<uint64_t>(std::max<uint64_t>(cacheBytes / file.header().pageBytes, 1), std::max<uint32_t>(file.pageCount(), 1)));
+
+  std::unique_ptr<Backend> backend = device.isCuda() ? makeCudaBackend(scene, slots, device.index) : makeCpuBackend(scene, slots);
+  Streamer streamer(file, *backend, slots, std::min<uint32_t>(o.stagingPages, std::max<uint32_t>(slots, 1)), o.loaderThreads);
+  logInfo("canopy-play: " + o.input + ": " + std::to_string(file.modelCount()) + " model(s), " + std::to_string(file.instanceCount()) +
+          " instance(s), " + std::to_string(file.pageCount()) + " pages; cache " + std::to_string(slots) + " pages (" +
+          std::to_string(uint64_t(slots) * file.header().pageBytes >> 20) + " MiB) on " + backend->name());
+
+  ShadeParams shade{};
+  shade.sun[0] = shade.sun[1] = shade.sun[2] = o.sunIntensity;
+  shade.ambient = o.ambient;
+  shade.sigma = o.sigma;
+  shade.stepFactor = o.stepFactor;
+  shade.lodBias = o.lodBias;
+  shade.shadowAperture = o.shadowAperture;
+  shade.shadows = o.shadows ? 1 : 0;
+
+  std::vector<double> frameMs;
+  std::vector<float> image;
+  uint32_t stamp = 0;
+  double firstCompleteS = -1.0;
+  uint64_t passes = 0;
+  Progress progress("canopy-play", o.frames);
+  for (int f = 0; f < o.frames; ++f) {
+    const FrameSetup& fs = plan[size_t(f)];
+    shade.toSun = fs.toSun;
+    scene.setSun(fs.toSun);
+    const auto tf = std::chrono::steady_clock::now();
+    uint32_t missing = 0;
+    const uint32_t frameStart = stamp + 1;
+    for (int pass = 0; pass < 64; ++pass) {
+      ++stamp;
+      ++passes;
+      const uint64_t loadedBefore = streamer.stats().pagesLoaded;
+      streamer.beginPass(frameStart);
+      backend->render(scene, shade, fs.camera, stamp);
+      missing = streamer.endPass(stamp);
+      const bool complete = o.converge || (o.warmStart && f == 0);
+      if (!complete || missing == 0) break;
+      // the frame's pages do not all fit in the cache: nothing more can be installed
+      if (pass > 0 && streamer.stats().pagesLoaded == loadedBefore) break;
+      streamer.waitLoader();
+    }
+    frameMs.push_back(1000.0 * secondsSince(tf));
+    if (missing == 0 && firstCompleteS < 0.0) firstCompleteS = secondsSince(t0);
+    if (!o.output.empty() || lastImage) backend->readImage(image);
+    if (!o.output.empty()) writeImage(frameFileName(o.output, f, o.frames), image, o.width, o.height, o.background);
+    progress.add();
+  }
+  progress.done();
+
+  const StreamStats& st = streamer.stats();
+  const double total = secondsSince(t0);
+  nlohmann::json r;
+  r["input"] = o.input;
+  r["output"] = o.output;
+  r["device"] = backend->name();
+  r["size"] = {o.width, o.height};
+  r["frames"] = o.frames;
+  r["passes"] = passes;
+  r["frame_ms_median"] = percentile(frameMs, 0.5);
+  r["frame_ms_p95"] = percentile(frameMs, 0.95);
+  r["frame_ms"] = frameMs;
+  r["first_complete_frame_s"] = firstCompleteS;  // -1: no frame was complete
+  const uint64_t lookups = st.pagesUsed + st.pagesMissed;
+  r["cache_hit_rate"] = lookups ? double(st.pagesUsed) / double(lookups) : 1.0;
+  r["cache_slots"] = slots;
+  r["cache_mb"] = double(uint64_t(slots) * file.header().pageBytes) / (1024.0 * 1024.0);
+  r["scene_page_mb"] = double(scene.brickPageBytes) / (1024.0 * 1024.0);
+  r["pages_streamed"] = st.pagesLoaded;
+  r["mb_streamed"] = double(st.bytesLoaded) / (1024.0 * 1024.0);
+  r["stream_mb_per_s"] = total > 0 ? double(st.bytesLoaded) / (1024.0 * 1024.0) / total : 0.0;
+  r["read_mb_per_s"] = st.loadSeconds > 0 ? double(st.bytesLoaded) / (1024.0 * 1024.0) / st.loadSeconds : 0.0;
+  r["pages_deferred"] = st.pagesDeferred;
+  r["evictions"] = st.evictions;
+  r["corrupt_pages"] = st.corruptPages;
+  r["seconds"] = total;
+  char line[512];
+  std::snprintf(line, sizeof(line),
+                "canopy-play: %d frame(s) %dx%d on %s: median %.2f ms, p95 %.2f ms; cache hit rate %.1f%%; streamed %llu pages "
+                "(%.1f MB, %.1f MB/s)%s",
+                o.frames, o.width, o.height, backend->name().c_str(), double(r["frame_ms_median"]), double(r["frame_ms_p95"]),
+                100.0 * double(r["cache_hit_rate"]), static_cast<unsigned long long>(st.pagesLoaded), double(r["mb_streamed"]),
+                double(r["stream_mb_per_s"]),
+                st.corruptPages ? (", " + std::to_string(st.corruptPages) + " corrupt page(s) skipped").c_str() : "");
+  logInfo(line);
+  if (lastImage) *lastImage = image;
+  return r;
+}
+
+}  // namespace canopy::play

@@ -1,0 +1,59 @@
+// player.h: canopy-play's callable core (main.cpp only parses arguments).
+//
+// play() opens a .canopy file, builds the scene, renders `frames` frames along a camera path and a
+// sun path with the chosen backend and the streaming cache, writes the frames and returns the
+// report (frame times, cache statistics). Tests and the benchmark call it in-process.
+#pragma once
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "canopy/device.h"
+#include "runtime/cone.h"
+#include "runtime/scene.h"
+
+namespace canopy::play {
+
+struct PlayOptions {
+  std::string input;                 // FILE.canopy
+  std::string output;                // out.png | out.exr | frames/f_%04d.exr ("" = no output)
+  int width = 640, height = 360;
+  int frames = 1;
+  std::string camera = "orbit";      // orbit[:key=value,...] | path.json
+  std::string sun = "orbit:azimuth=40,elevation=50";  // x,y,z (towards the sun) | orbit:... | path.json
+  double cacheMb = 1024.0;           // brick page pool budget
+  float sigma = 4.0f;                // extinction per lattice cell at density 1
+  float ambient = 0.35f;             // ambient (indirect) factor
+  float sunIntensity = 1.0f;
+  float stepFactor = 0.5f;           // brick step, in voxels of the chosen level
+  float lodBias = 0.0f;
+  float shadowAperture = 0.03f;      // shadow cone growth per unit length (soft shadows, coarser
+                                     // levels and longer steps far from the receiver)
+  bool shadows = true;
+  float background[3] = {0.60f, 0.72f, 0.85f};  // linear RGB behind the scene (PNG only)
+  bool converge = false;             // per frame, render passes until no loadable page is missing
+  bool warmStart = true;             // the first frame converges (a complete first image), the
+                                     // rest are real-time (one pass, loads land in later frames)
+  int loaderThreads = 2;
+  uint32_t stagingPages = 256;       // pages read ahead per pass at most (16 MiB pinned)
+};
+
+// A frame's camera and sun.
+struct FrameSetup {
+  CameraView camera;
+  V3 toSun;
+};
+
+// Evaluates --camera and --sun for frame f of n over the scene's bounds. Throws canopy::Error(Usage)
+// for a bad spelling, (Io/InvalidInput) for a bad path file.
+std::vector<FrameSetup> framePlan(const PlayOptions& o, const HostScene& scene);
+
+// The file name of frame f (printf pattern with one integer, or the plain name for one frame).
+std::string frameFileName(const std::string& pattern, int frame, int frames);
+
+// Runs everything; `lastImage` (optional) receives the last frame's RGBA.
+nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<float>* lastImage = nullptr);
+
+}  // namespace canopy::play

@@ -1,0 +1,153 @@
+// render_cuda.cu: the CUDA backend: the same renderPixel() (cone.h) as the CPU reference, one thread
+// per pixel, with the node tiles resident on the device and the brick pages in a device pool.
+//
+// Uploads: the loader reads pages into pinned staging buffers; upload() copies a page into its slot
+// on the copy stream, setPageTable() copies the table after them on the same stream and records an
+// event that the compute stream waits on before the next kernel. A kernel therefore never sees a
+// table entry whose page is still in flight, and never waits for the disk; the host does not wait
+// for the copies either (they overlap the host's work until the kernel launch).
+#include <cstring>
+
+#include "canopy/parallel_cuda.cuh"
+#include "runtime/backend.h"
+
+namespace canopy::play {
+namespace {
+
+struct PixelKernel {
+  SceneView scene;
+  CameraView camera;
+  float* out;
+  __device__ void operator()(int64_t i) const { renderPixel(scene, camera, i, out); }
+};
+
+template <class T>
+void uploadVector(cuda::DeviceBuffer<T>& d, const std::vector<T>& h) {
+  d.resize(h.empty() ? 1 : h.size());
+  if (!h.empty()) d.upload(h.data(), h.size());
+}
+
+class CudaBackend final : public Backend {
+ public:
+  CudaBackend(const HostScene& scene, uint32_t slots, int device) : pageBytes_(scene.pageBytes), pageCount_(scene.pageCount) {
+    CANOPY_CUDA_CHECK(cudaSetDevice(device));
+    CANOPY_CUDA_CHECK(cudaStreamCreateWithFlags(&compute_, cudaStreamNonBlocking));
+    CANOPY_CUDA_CHECK(cudaStreamCreateWithFlags(&copy_, cudaStreamNonBlocking));
+    for (int i = 0; i < 2; ++i) CANOPY_CUDA_CHECK(cudaEventCreateWithFlags(&tableCopied_[i], cudaEventDisableTiming));
+    // node tiles: every model's, resident (they are the cache's page table of bricks)
+    size_t tiles = 0;
+    for (size_t m = 0; m < scene.models.size(); ++m) tiles = std::max(tiles, size_t(scene.modelFirstTile[m] + scene.models[m].tileCount) * 8);
+    std::vector<CanopyNode> allTiles(tiles > 0 ? tiles : 1);
+    for (size_t m = 0; m < scene.models.size(); ++m)
+      std::memcpy(allTiles.data() + size_t(scene.modelFirstTile[m]) * 8, scene.models[m].tiles, size_t(scene.models[m].tileCount) * 8 * sizeof(CanopyNode));
+    uploadVector(tiles_, allTiles);
+    std::vector<ModelView> models = scene.models;
+    for (size_t m = 0; m < models.size(); ++m) models[m].tiles = tiles_.data() + size_t(scene.modelFirstTile[m]) * 8;
+    uploadVector(models_, models);
+    uploadVector(gridStart_, scene.gridStart);
+    uploadVector(gridItems_, scene.gridItems);
+    uploadVector(light_, scene.lightValues);
+    instances_.resize(std::max<size_t>(scene.instances.size(), 1));
+    pool_.resize(std::max<size_t>(size_t(slots) * pageBytes_, 1));
+    table_.resize(std::max<uint32_t>(pageCount_, 1));
+    slotUsed_.resize(std::max<uint32_t>(slots, 1));
+    pageWanted_.resize(std::max<uint32_t>(pageCount_, 1));
+    CANOPY_CUDA_CHECK(cudaMemset(table_.data(), 0xFF, table_.size() * sizeof(int32_t)));  // -1: missing
+    CANOPY_CUDA_CHECK(cudaMemset(slotUsed_.data(), 0, slotUsed_.size() * sizeof(uint32_t)));
+    CANOPY_CUDA_CHECK(cudaMemset(pageWanted_.data(), 0, pageWanted_.size() * sizeof(uint32_t)));
+    for (int i = 0; i < 2; ++i) CANOPY_CUDA_CHECK(cudaMallocHost(&tableHost_[i], table_.size() * sizeof(int32_t)));
+    slots_ = slots;
+    // the memsets and uploads above ran on the legacy default stream, which the non-blocking
+    // compute and copy streams do not wait for
+    CANOPY_CUDA_CHECK(cudaDeviceSynchronize());
+  }
+  ~CudaBackend() override {
+    cudaStreamSynchronize(copy_);
+    cudaStreamSynchronize(compute_);
+    if (staging_) cudaFreeHost(staging_);
+    for (int i = 0; i < 2; ++i) {
+      if (tableHost_[i]) cudaFreeHost(tableHost_[i]);
+      cudaEventDestroy(tableCopied_[i]);
+    }
+    cudaStreamDestroy(copy_);
+    cudaStreamDestroy(compute_);
+  }
+
+  std::string name() const override { return "cuda"; }
+  unsigned char* stagingBuffers(uint32_t count) override {
+    if (staging_) cudaFreeHost(staging_);
+    CANOPY_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&staging_), size_t(count) * pageBytes_));
+    return staging_;
+  }
+  void upload(uint32_t slot, const unsigned char* staged) override {
+    CANOPY_CUDA_CHECK(cudaMemcpyAsync(pool_.data() + size_t(slot) * pageBytes_, staged, pageBytes_, cudaMemcpyHostToDevice, copy_));
+  }
+  void setPageTable(const std::vector<int32_t>& table) override {
+    // two pinned mirrors, alternating: the one rewritten now was copied two calls ago, a copy that
+    // a finished kernel has already waited for, so this never waits for the page uploads
+    mirror_ ^= 1;
+    CANOPY_CUDA_CHECK(cudaEventSynchronize(tableCopied_[mirror_]));
+    std::memcpy(tableHost_[mirror_], table.data(), table.size() * sizeof(int32_t));
+    CANOPY_CUDA_CHECK(cudaMemcpyAsync(table_.data(), tableHost_[mirror_], table.size() * sizeof(int32_t), cudaMemcpyHostToDevice, copy_));
+    CANOPY_CUDA_CHECK(cudaEventRecord(tableCopied_[mirror_], copy_));
+    CANOPY_CUDA_CHECK(cudaStreamWaitEvent(compute_, tableCopied_[mirror_], 0));
+  }
+  void waitUploads() override { CANOPY_CUDA_CHECK(cudaStreamSynchronize(copy_)); }
+
+  void render(const HostScene& scene, const ShadeParams& shade, const CameraView& camera, uint32_t stamp) override {
+    if (!scene.instances.empty())
+      CANOPY_CUDA_CHECK(cudaMemcpyAsync(instances_.data(), scene.instances.data(), scene.instances.size() * sizeof(InstanceView),
+                                        cudaMemcpyHostToDevice, compute_));
+    const size_t pixels = size_t(camera.width) * camera.height;
+    if (image_.size() != pixels * 4) image_.resize(pixels * 4);
+    SceneView v = hostSceneView(scene);
+    v.models = models_.data();
+    v.instances = instances_.data();
+    v.gridStart = gridStart_.data();
+    v.gridItems = gridItems_.data();
+    v.light.values = scene.hasSceneLight ? light_.data() : nullptr;
+    v.pageSlot = table_.data();
+    v.pool = pool_.data();
+    v.slotUsed = slotUsed_.data();
+    v.pageWanted = pageWanted_.data();
+    v.stamp = stamp;
+    v.shade = shade;
+    cuda::parallelFor(int64_t(pixels), PixelKernel{v, camera, image_.data()}, compute_, 128);
+    CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
+  }
+  void readStamps(std::vector<uint32_t>& slotUsed, std::vector<uint32_t>& pageWanted) override {
+    slotUsed.resize(slots_);
+    pageWanted.resize(pageCount_);
+    if (slots_) slotUsed_.download(slotUsed.data(), slots_);
+    if (pageCount_) pageWanted_.download(pageWanted.data(), pageCount_);
+  }
+  void readImage(std::vector<float>& rgba) override {
+    rgba.resize(image_.size());
+    image_.download(rgba.data(), image_.size());
+  }
+
+ private:
+  uint32_t pageBytes_, pageCount_, slots_ = 0;
+  cudaStream_t compute_ = nullptr, copy_ = nullptr;
+  cudaEvent_t tableCopied_[2] = {nullptr, nullptr};
+  int mirror_ = 0;
+  cuda::DeviceBuffer<CanopyNode> tiles_;
+  cuda::DeviceBuffer<ModelView> models_;
+  cuda::DeviceBuffer<InstanceView> instances_;
+  cuda::DeviceBuffer<uint32_t> gridStart_, gridItems_;
+  cuda::DeviceBuffer<float> light_;
+  cuda::DeviceBuffer<unsigned char> pool_;
+  cuda::DeviceBuffer<int32_t> table_;
+  cuda::DeviceBuffer<uint32_t> slotUsed_, pageWanted_;
+  cuda::DeviceBuffer<float> image_;
+  unsigned char* staging_ = nullptr;
+  int32_t* tableHost_[2] = {nullptr, nullptr};
+};
+
+}  // namespace
+
+std::unique_ptr<Backend> makeCudaBackend(const HostScene& scene, uint32_t slots, int deviceIndex) {
+  return std::make_unique<CudaBackend>(scene, slots, deviceIndex < 0 ? 0 : deviceIndex);
+}
+
+}  // namespace canopy::play

@@ -1,0 +1,213 @@
+// scene.cpp: HostScene from a CanopyFile (see scene.h).
+#include "runtime/scene.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+#include "canopy/cli.h"
+#include "canopy/errors.h"
+
+namespace canopy::play {
+namespace {
+
+using M34 = std::array<double, 12>;
+
+M34 compose(const M34& a, const M34& b) {  // a * b (as 4x4 with last row 0 0 0 1)
+  M34 r{};
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 4; ++j) {
+      double v = j == 3 ? a[size_t(i * 4 + 3)] : 0.0;
+      for (int k = 0; k < 3; ++k) v += a[size_t(i * 4 + k)] * b[size_t(k * 4 + j)];
+      r[size_t(i * 4 + j)] = v;
+    }
+  }
+  return r;
+}
+
+double det3(const M34& m) {
+  return m[0] * (m[5] * m[10] - m[6] * m[9]) - m[1] * (m[4] * m[10] - m[6] * m[8]) + m[2] * (m[4] * m[9] - m[5] * m[8]);
+}
+
+M34 invert(const M34& m, const std::string& what) {
+  const double det = det3(m);
+  if (!std::isfinite(det) || std::fabs(det) < 1e-18) throw invalidInput(what + ": singular transform");
+  const double id = 1.0 / det;
+  M34 r{};
+  r[0] = (m[5] * m[10] - m[6] * m[9]) * id;
+  r[1] = (m[2] * m[9] - m[1] * m[10]) * id;
+  r[2] = (m[1] * m[6] - m[2] * m[5]) * id;
+  r[4] = (m[6] * m[8] - m[4] * m[10]) * id;
+  r[5] = (m[0] * m[10] - m[2] * m[8]) * id;
+  r[6] = (m[2] * m[4] - m[0] * m[6]) * id;
+  r[8] = (m[4] * m[9] - m[5] * m[8]) * id;
+  r[9] = (m[1] * m[8] - m[0] * m[9]) * id;
+  r[10] = (m[0] * m[5] - m[1] * m[4]) * id;
+  for (int i = 0; i < 3; ++i)
+    r[size_t(i * 4 + 3)] = -(r[size_t(i * 4)] * m[3] + r[size_t(i * 4 + 1)] * m[7] + r[size_t(i * 4 + 2)] * m[11]);
+  return r;
+}
+
+Affine toAffine(const M34& m) {
+  Affine a;
+  for (int i = 0; i < 12; ++i) a.m[i] = float(m[size_t(i)]);
+  return a;
+}
+
+M34 apply(const M34& m, double x, double y, double z, std::array<double, 3>& out) {
+  for (int i = 0; i < 3; ++i) out[size_t(i)] = m[size_t(i * 4)] * x + m[size_t(i * 4 + 1)] * y + m[size_t(i * 4 + 2)] * z + m[size_t(i * 4 + 3)];
+  return m;
+}
+
+}  // namespace
+
+HostScene buildScene(const CanopyFile& f) {
+  HostScene s;
+  const CanopyFileHeader& h = f.header();
+  s.pageCount = h.pageCount;
+  s.pageBytes = h.pageBytes;
+  s.bricksPerPage = h.bricksPerPage;
+  std::vector<M34> latticeToModel(f.modelCount()), modelToUnit(f.modelCount());
+  for (uint32_t m = 0; m < f.modelCount(); ++m) {
+    const CanopyModel& M = f.model(m);
+    ModelView v{};
+    v.tiles = f.tiles(m);
+    v.tileCount = M.tileCount;
+    v.root = M.root;
+    v.depth = M.depth;
+    v.rootCells = M.rootCells;
+    v.firstBrickPage = M.firstBrickPage;
+    v.hasLight = (M.flags & kCanopyModelHasLight) ? 1u : 0u;
+    if (v.hasLight)
+      logWarn(f.path() + ": model '" + std::string(M.name, strnlen(M.name, sizeof(M.name))) +
+              "' carries LB light pages; this player lights it as density-only (direct sun + ambient)");
+    s.models.push_back(v);
+    s.modelFirstTile.push_back(M.firstTile);
+    s.brickPageBytes += uint64_t(M.brickPageCount) * h.pageBytes;
+    M34 i2m;
+    for (int k = 0; k < 12; ++k) i2m[size_t(k)] = M.indexToModel[k];
+    latticeToModel[m] = i2m;
+    // lattice index p -> unit u = (p - origin + 0.5) / rootCells
+    const double inv = 1.0 / double(M.rootCells);
+    modelToUnit[m] = compose(M34{inv, 0, 0, (0.5 - M.octreeOrigin[0]) * inv, 0, inv, 0, (0.5 - M.octreeOrigin[1]) * inv, 0, 0,
+                                 inv, (0.5 - M.octreeOrigin[2]) * inv},
+                             invert(i2m, f.path() + ": model " + std::to_string(m) + " indexToModel"));
+  }
+  double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
+  for (uint32_t i = 0; i < f.instanceCount(); ++i) {
+    const CanopyInstance& I = f.instance(i);
+    const CanopyModel& M = f.model(I.model);
+    M34 m2w;
+    for (int k = 0; k < 12; ++k) m2w[size_t(k)] = I.modelToWorld[k];
+    const std::string what = f.path() + ": instance " + std::to_string(i);
+    const M34 l2w = compose(m2w, latticeToModel[I.model]);
+    const M34 w2l = invert(l2w, what);
+    InstanceView v{};
+    v.worldToUnit = toAffine(compose(modelToUnit[I.model], invert(m2w, what)));
+    v.cellWorld = float(std::cbrt(std::fabs(det3(l2w))));
+    v.model = I.model;
+    for (int a = 0; a < 3; ++a) {
+      v.unitLo[a] = float(double(M.latticeMin[a] - M.octreeOrigin[a]) / M.rootCells);
+      v.unitHi[a] = float(double(M.latticeMax[a] + 1 - M.octreeOrigin[a]) / M.rootCells);
+      v.boundsLo[a] = 3e38f;
+      v.boundsHi[a] = -3e38f;
+    }
+    for (int c = 0; c < 8; ++c) {  // the lattice box's corners (cells centred at integers)
+      std::array<double, 3> p;
+      apply(l2w, (c & 1) ? M.latticeMax[0] + 0.5 : M.latticeMin[0] - 0.5, (c & 2) ? M.latticeMax[1] + 0.5 : M.latticeMin[1] - 0.5,
+            (c & 4) ? M.latticeMax[2] + 0.5 : M.latticeMin[2] - 0.5, p);
+      for (int a = 0; a < 3; ++a) {
+        v.boundsLo[a] = std::min(v.boundsLo[a], float(p[size_t(a)]));
+        v.boundsHi[a] = std::max(v.boundsHi[a], float(p[size_t(a)]));
+      }
+    }
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], double(v.boundsLo[a]));
+      hi[a] = std::max(hi[a], double(v.boundsHi[a]));
+    }
+    s.instances.push_back(v);
+    Affine lin = toAffine(w2l);
+    lin.m[3] = lin.m[7] = lin.m[11] = 0.0f;
+    s.worldToLatticeLinear.push_back(lin);
+  }
+  s.empty = s.instances.empty();
+  if (!s.empty) {
+    // Uniform grid: about one instance per cell, at most 64 cells per axis.
+    const double n = double(s.instances.size());
+    double ext[3];
+    for (int a = 0; a < 3; ++a) {
+      ext[a] = std::max(hi[a] - lo[a], 1e-6);
+      s.boundsLo[a] = float(lo[a]);
+      s.boundsHi[a] = float(hi[a]);
+    }
+    const double cell = std::cbrt(ext[0] * ext[1] * ext[2] / n);
+    for (int a = 0; a < 3; ++a) {
+      s.gridDim[a] = int(std::clamp(std::ceil(ext[a] / std::max(cell, 1e-9)), 1.0, 64.0));
+      // a small margin so that rounding never leaves a box outside the grid
+      const double pad = ext[a] * 1e-4;
+      s.gridLo[a] = float(lo[a] - pad);
+      s.gridCell[a] = float((ext[a] + 2 * pad) / s.gridDim[a]);
+    }
+    const size_t cells = size_t(s.gridDim[0]) * s.gridDim[1] * s.gridDim[2];
+    std::vector<std::vector<uint32_t>> lists(cells);
+    for (uint32_t i = 0; i < s.instances.size(); ++i) {
+      int c0[3], c1[3];
+      for (int a = 0; a < 3; ++a) {
+        c0[a] = std::clamp(int(std::floor((s.instances[i].boundsLo[a] - s.gridLo[a]) / s.gridCell[a])), 0, s.gridDim[a] - 1);
+        c1[a] = std::clamp(int(std::floor((s.instances[i].boundsHi[a] - s.gridLo[a]) / s.gridCell[a])), 0, s.gridDim[a] - 1);
+      }
+      for (int z = c0[2]; z <= c1[2]; ++z)
+        for (int y = c0[1]; y <= c1[1]; ++y)
+          for (int x = c0[0]; x <= c1[0]; ++x) lists[size_t(x + s.gridDim[0] * (y + s.gridDim[1] * z))].push_back(i);
+    }
+    s.gridStart.assign(cells + 1, 0);
+    for (size_t c = 0; c < cells; ++c) {
+      s.gridStart[c + 1] = s.gridStart[c] + uint32_t(lists[c].size());
+      s.gridItems.insert(s.gridItems.end(), lists[c].begin(), lists[c].end());
+    }
+  } else {
+    s.gridStart.assign(2, 0);
+  }
+  if (f.hasSceneLight()) {
+    const CanopySceneLight& L = f.sceneLight();
+    M34 i2w;
+    for (int k = 0; k < 12; ++k) i2w[size_t(k)] = L.indexToWorld[k];
+    s.hasSceneLight = true;
+    s.lightValues = f.sceneLightValues();
+    s.light.worldToIndex = toAffine(invert(i2w, f.path() + ": scene light indexToWorld"));
+    for (int a = 0; a < 3; ++a) {
+      s.light.min[a] = L.min[a];
+      s.light.dim[a] = L.dim[a];
+    }
+  }
+  return s;
+}
+
+void HostScene::setSun(V3 toSun) {
+  for (size_t i = 0; i < instances.size(); ++i) {
+    // light travels from the sun: -toSun, taken into the lattice axes of the instance's model
+    const V3 d = applyVector(worldToLatticeLinear[i], toSun * -1.0f);
+    sun::lookup(d.x, d.y, d.z, instances[i].sunWeights);
+  }
+}
+
+SceneView hostSceneView(const HostScene& s) {
+  SceneView v{};
+  v.models = s.models.data();
+  v.instances = s.instances.data();
+  v.instanceCount = uint32_t(s.instances.size());
+  v.gridStart = s.gridStart.data();
+  v.gridItems = s.gridItems.data();
+  for (int a = 0; a < 3; ++a) {
+    v.gridDim[a] = s.gridDim[a];
+    v.gridLo[a] = s.gridLo[a];
+    v.gridCell[a] = s.gridCell[a];
+  }
+  v.pageBytes = s.pageBytes;
+  v.bricksPerPage = s.bricksPerPage;
+  v.light = s.light;
+  v.light.values = s.hasSceneLight ? s.lightValues.data() : nullptr;
+  return v;
+}
+
+}  // namespace canopy::play

@@ -1,0 +1,43 @@
+// scene.h: the host-side scene of the player, built once from a CanopyFile's resident part.
+//
+// HostScene holds the arrays that cone.h's SceneView points at (models, instances, the uniform grid
+// of instance boxes, the coarse scene light); the backends copy them (the CUDA one to the device)
+// and fill in the cache pointers. setSun() recomputes every instance's sun lookup (the sun taken
+// into the instance's model/lattice axes, dissertation §4.2) once per frame.
+#pragma once
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "formats/canopy_file.h"
+#include "runtime/cone.h"
+
+namespace canopy::play {
+
+struct HostScene {
+  std::vector<ModelView> models;          // tiles point into the CanopyFile's resident tiles
+  std::vector<uint32_t> modelFirstTile;   // each model's first tile in CanopyFile::allTiles()
+  std::vector<InstanceView> instances;
+  std::vector<Affine> worldToLatticeLinear;  // per instance: world vectors -> lattice index axes
+  std::vector<uint32_t> gridStart, gridItems;
+  int32_t gridDim[3] = {1, 1, 1};
+  float gridLo[3] = {0, 0, 0}, gridCell[3] = {1, 1, 1};
+  float boundsLo[3] = {0, 0, 0}, boundsHi[3] = {0, 0, 0};  // world bounds of every instance
+  bool empty = true;                      // no instance
+  bool hasSceneLight = false;
+  SceneLightView light{};                 // values == nullptr; backends point it at lightValues
+  std::vector<float> lightValues;
+  uint32_t pageCount = 0, pageBytes = 0, bricksPerPage = 0;
+  uint64_t brickPageBytes = 0;            // bytes of all brick pages (the streamed part)
+
+  // Sets every instance's sun weights for the direction towards the sun (world).
+  void setSun(V3 toSun);
+};
+
+// Builds the scene; throws canopy::Error(InvalidInput) for a degenerate transform.
+HostScene buildScene(const CanopyFile& file);
+
+// The SceneView over the host arrays (cache pointers left null: the backend sets them).
+SceneView hostSceneView(const HostScene& scene);
+
+}  // namespace canopy::play

@@ -1,0 +1,53 @@
+// fuzz_canopy.cpp: libFuzzer harness for the .canopy reader. Any input must either be rejected
+// with a canopy::Error or be read in full (every page, a descent and a brick sample per model)
+// without a sanitizer report.
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "canopy/errors.h"
+#include "formats/canopy_file.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  try {
+    canopy::CanopyFile f = canopy::CanopyFile::fromMemory(data, size, "fuzz.canopy");
+    std::vector<unsigned char> page(f.header().pageBytes);
+    for (uint32_t i = 0; i < f.pageCount() && i < 64; ++i) {
+      try {
+        f.readPage(i, page.data());
+      } catch (const canopy::Error&) {
+      }
+    }
+    for (uint32_t m = 0; m < f.modelCount(); ++m) {
+      const canopy::CanopyModel& M = f.model(m);
+      for (int k = 0; k < 8; ++k) {
+        const float u = (float(k) + 0.5f) / 8.0f;
+        const canopy::CanopyLookup r = f.descend(m, u, 1.0f - u, u * u, M.depth);
+        if (r.node.brick == canopy::kCanopyNone) continue;
+        const uint32_t bpp = f.header().bricksPerPage;
+        try {
+          f.readPage(canopy::canopyBrickPage(M, r.node.brick, bpp), page.data());
+        } catch (const canopy::Error&) {
+          continue;
+        }
+        volatile float d = canopy::canopySampleBrick(canopy::canopyBrickInPage(page.data(), canopy::canopyBrickSlot(r.node.brick, bpp)),
+                                                     r.local[0], r.local[1], r.local[2]).density;
+        (void)d;
+        if (M.lightCount == 0) continue;
+        const uint32_t lpp = f.header().lightItemsPerPage;
+        try {
+          f.readPage(canopy::canopyLightPage(M, r.node.brick, lpp), page.data());
+        } catch (const canopy::Error&) {
+          continue;
+        }
+        float rgb[3];
+        canopy::canopySampleLight(canopy::canopyLightInPage(page.data(), r.node.brick % lpp), uint32_t(k) % canopy::kCanopyLightBases,
+                                  r.local[0], r.local[1], r.local[2], rgb);
+        volatile float l = rgb[0] + rgb[1] + rgb[2];
+        (void)l;
+      }
+    }
+  } catch (const canopy::Error&) {
+  }
+  return 0;
+}

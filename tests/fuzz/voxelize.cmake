@@ -1,0 +1,10 @@
+# fuzz_glb: the glTF binary loader (GLB container, tinygltf JSON, Draco, accessors, images).
+#   build-fuzz/tests/fuzz/fuzz_glb -max_len=65536 corpus/   (seed corpus: canopy-voxelize --write-sample)
+set(vox_src ${CMAKE_SOURCE_DIR}/tools/voxelize)
+add_executable(fuzz_glb ${CMAKE_CURRENT_SOURCE_DIR}/fuzz_glb.cpp
+  ${vox_src}/tinygltf_impl.cpp ${vox_src}/gltf_loader.cpp ${vox_src}/openmesh_loader.cpp)
+target_include_directories(fuzz_glb PRIVATE ${vox_src})
+target_compile_definitions(fuzz_glb PRIVATE _USE_MATH_DEFINES)
+target_compile_options(fuzz_glb PRIVATE -fsanitize=fuzzer,address,undefined -fno-omit-frame-pointer)
+target_link_options(fuzz_glb PRIVATE -fsanitize=fuzzer,address,undefined)
+target_link_libraries(fuzz_glb PRIVATE canopy_core draco::draco OpenMeshCore canopy_stb nlohmann_json::nlohmann_json)

@@ -1,0 +1,336 @@
+// Haar brick math, encoder guarantees and the random-access sampler (no OpenVDB, no files).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <random>
+
+#include "canopy/errors.h"
+#include "canopy/half.h"
+#include "formats/haar_encode.h"
+#include "formats/haar_view.h"
+#include "synthetic_light.h"
+
+using namespace canopy::haar;
+using namespace canopy::haar::testing;
+
+namespace {
+
+// Trilinear sample of a dense decoded lattice (3 floats per cell), same clamp/convention as the
+// compressed sampler, same float operations (trilinear()), values outside the lattice = 0.
+Rgb denseSample(const LatticeGeom& g, const std::vector<float>& dense, float x, float y, float z) {
+  const float p[3] = {x, y, z};
+  int i[3];
+  float f[3];
+  for (int a = 0; a < 3; ++a) {
+    const float q = clampf(p[a], float(g.min[a]), float(g.max[a]));
+    const float fl = std::floor(q);
+    i[a] = int(fl) - g.min[a];
+    f[a] = q - fl;
+  }
+  auto at = [&](int64_t xx, int64_t yy, int64_t zz, int ch) -> float {
+    if (xx >= g.dims[0] || yy >= g.dims[1] || zz >= g.dims[2]) return 0.0f;
+    return dense[size_t(3 * ((zz * g.dims[1] + yy) * g.dims[0] + xx) + ch)];
+  };
+  float out[3];
+  for (int ch = 0; ch < 3; ++ch) {
+    float v[2][2][2];
+    for (int dz = 0; dz < 2; ++dz)
+      for (int dy = 0; dy < 2; ++dy)
+        for (int dx = 0; dx < 2; ++dx) v[dz][dy][dx] = at(i[0] + dx, i[1] + dy, i[2] + dz, ch);
+    out[ch] = trilinear(v, f[0], f[1], f[2]);
+  }
+  return Rgb{out[0], out[1], out[2]};
+}
+
+double maxAbsDiff(const std::vector<float>& a, const std::vector<float>& b) {
+  double m = 0;
+  for (size_t i = 0; i < a.size(); ++i) m = std::max(m, std::fabs(double(a[i]) - double(b[i])));
+  return m;
+}
+
+}  // namespace
+
+TEST(Half, KnownValuesAndRoundTrip) {
+  EXPECT_EQ(canopy::floatToHalf(1.0f), 0x3c00);
+  EXPECT_EQ(canopy::floatToHalf(-2.0f), 0xc000);
+  EXPECT_EQ(canopy::floatToHalf(65504.0f), 0x7bff);
+  EXPECT_EQ(canopy::floatToHalf(65520.0f), 0x7c00);       // rounds to infinity
+  EXPECT_EQ(canopy::floatToHalf(5.9604645e-8f), 0x0001);  // smallest subnormal
+  EXPECT_EQ(canopy::floatToHalf(2.9802322e-8f), 0x0000);  // half of it: tie to even -> 0
+  EXPECT_EQ(canopy::floatToHalf(1.0f + 1.0f / 2048), 0x3c00);  // tie to even (down)
+  EXPECT_EQ(canopy::floatToHalf(1.0f + 3.0f / 2048), 0x3c02);  // tie to even (up)
+  for (uint32_t h = 0; h < 0x10000u; ++h) {
+    if ((h & 0x7c00u) == 0x7c00u) continue;  // inf/NaN
+    const float f = canopy::halfToFloat(uint16_t(h));
+    EXPECT_EQ(canopy::floatToHalf(f), uint16_t(h)) << h;
+  }
+}
+
+TEST(HaarMath, DissertationExample1D) {
+  // §2.3: [4 19 44 0] -> [16.75 -5.25 -7.5 22]
+  double v[4] = {4, 19, 44, 0};
+  lift4(v, 1);
+  EXPECT_DOUBLE_EQ(v[0], 16.75);
+  EXPECT_DOUBLE_EQ(v[1], -5.25);
+  EXPECT_DOUBLE_EQ(v[2], -7.5);
+  EXPECT_DOUBLE_EQ(v[3], 22);
+  float f[4] = {16.75f, -5.25f, -7.5f, 22.0f};
+  unlift4(f, 1);
+  EXPECT_EQ(f[0], 4.0f);
+  EXPECT_EQ(f[1], 19.0f);
+  EXPECT_EQ(f[2], 44.0f);
+  EXPECT_EQ(f[3], 0.0f);
+}
+
+TEST(HaarMath, LiftUnliftBrickRoundTripsDyadicValuesExactly) {
+  // Small integers: every intermediate is exact in float, so the round trip is exact.
+  std::mt19937 rng(7);
+  float v[64];
+  double d[64];
+  for (int c = 0; c < 64; ++c) d[c] = v[c] = float(int(rng() % 200) - 50);
+  liftBrick(d);
+  float f[64];
+  for (int c = 0; c < 64; ++c) f[c] = float(d[c]);
+  unliftBrick(f);
+  for (int c = 0; c < 64; ++c) EXPECT_EQ(f[c], v[c]) << c;
+}
+
+// The point sampler reconstructs only 8 texels but must equal trilinear interpolation of the fully
+// decoded brick bit for bit (raw and Haar bricks, any mask, both precisions).
+TEST(HaarMath, SampleBrickEqualsDecodeThenTrilinearBitForBit) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> u(-2.0f, 2.0f);
+  for (int trial = 0; trial < 400; ++trial) {
+    const bool raw = trial % 4 == 3;
+    uint64_t mask = (uint64_t(rng()) << 32) | rng();
+    if (trial % 5 == 0) mask &= (uint64_t(rng()) << 32) | rng();  // sparser
+    if (trial % 7 == 0) mask = 1;                                    // fast path
+    BrickRecord rec;
+    rec.set(mask, 5, raw);  // first = 5: not at the stream start
+    std::vector<float> coefs(3 * (5 + 64));
+    for (float& c : coefs) c = u(rng);
+    std::vector<uint16_t> coefs16(coefs.size());
+    for (size_t i = 0; i < coefs.size(); ++i) coefs16[i] = canopy::floatToHalf(coefs[i]);
+    for (int prec = 0; prec < 2; ++prec) {
+      float dec[3][kBrickValues];
+      if (prec == 0)
+        decodeBrick(rec, CoefReader32{coefs.data()}, dec);
+      else
+        decodeBrick(rec, CoefReader16{coefs16.data()}, dec);
+      for (int s = 0; s < 30; ++s) {
+        const int lx = int(rng() % 3), ly = int(rng() % 3), lz = int(rng() % 3);
+        float f[3];
+        for (float& x : f) x = (s % 3 == 0) ? float(rng() % 2) : std::uniform_real_distribution<float>(0, 1)(rng);
+        const Rgb got = prec == 0 ? sampleBrick(rec, CoefReader32{coefs.data()}, lx, ly, lz, f[0], f[1], f[2])
+                                  : sampleBrick(rec, CoefReader16{coefs16.data()}, lx, ly, lz, f[0], f[1], f[2]);
+        for (int ch = 0; ch < 3; ++ch) {
+          float v[2][2][2];
+          for (int dz = 0; dz < 2; ++dz)
+            for (int dy = 0; dy < 2; ++dy)
+              for (int dx = 0; dx < 2; ++dx) v[dz][dy][dx] = dec[ch][brickIndex(lx + dx, ly + dy, lz + dz)];
+          const float want = trilinear(v, f[0], f[1], f[2]);
+          const float g = ch == 0 ? got.r : ch == 1 ? got.g : got.b;
+          // == (not bit equality): only the sign of an exact zero may differ.
+          ASSERT_EQ(g, want) << "trial " << trial << " prec " << prec << " ch " << ch;
+        }
+      }
+    }
+  }
+}
+
+// Threshold 0 reproduces fp32 input exactly (Haar bricks whose float round trip is exact, raw
+// bricks otherwise), and fp16 within fp16 rounding.
+TEST(HaarEncode, ThresholdZeroIsExactInFp32AndWithinRoundingInFp16) {
+  const LatticeGeom g = makeGeom(13, 11, 10, -4, 2, 7);
+  for (int kind = 0; kind < 2; ++kind) {
+    std::vector<DenseLight> lights = {kind ? randomLight(g, 3) : smoothLight(g, 4)};
+    const ChaarData d32 = encodeLights(g, lights, 0.0f);
+    std::vector<float> dense;
+    decodeBaseDense(d32, 0, dense);
+    EXPECT_EQ(dense, lights[0].rgb) << "fp32 threshold 0 must be lossless";
+    EXPECT_EQ(d32.bases[0].maxError, 0.0f);
+    // Float Haar round trips are not always exact: bricks fall back to raw.
+    EXPECT_GT(d32.bases[0].rawBrickCount, 0u);
+    std::printf("threshold 0 fp32 (%s): %u of %u bricks raw\n", kind ? "random" : "smooth",
+                d32.bases[0].rawBrickCount, d32.bases[0].brickCount);
+
+    const ChaarData d16 = encodeLights(g, lights, 0.0f, -1.0f, Precision::Fp16);
+    decodeBaseDense(d16, 0, dense);
+    for (size_t i = 0; i < dense.size(); ++i) {
+      // Raw bricks round each value once (<= 2^-11 relative); Haar bricks sum at most 7 rounded
+      // coefficients each bounded by the brick's max |value| (<= 1 here): 7 * 2^-11 absolute.
+      const double tol = 7.0 / 2048.0;
+      ASSERT_LE(std::fabs(double(dense[i]) - lights[0].rgb[i]), tol) << i;
+    }
+  }
+}
+
+TEST(HaarEncode, MaxErrorIsNeverExceeded) {
+  const LatticeGeom g = makeGeom(17, 14, 12);
+  for (int kind = 0; kind < 2; ++kind)
+    for (Precision p : {Precision::Fp32, Precision::Fp16})
+      for (float E : {0.002f, 0.01f, 0.05f, 0.2f}) {
+        const DenseLight light = kind ? randomLight(g, 99, 2.0f) : smoothLight(g, 9, 3.0f);
+        LiftedBase lb(g, light, p, "t");
+        float T;
+        try {
+          T = lb.searchThreshold(E);
+        } catch (const canopy::Error& e) {
+          // Only allowed where fp16 rounding alone exceeds E (checked below to be so).
+          ASSERT_EQ(p, Precision::Fp16) << e.what();
+          EXPECT_GT(lb.encode(0.0f).maxError, E);
+          EXPECT_EQ(e.code(), canopy::ExitCode::Unsupported);
+          continue;
+        }
+        const BaseCode c = lb.encode(T);
+        EXPECT_LE(c.maxError, E) << "kind " << kind << " E " << E;
+        // Independent check: decode the file and compare every cell with the input.
+        const ChaarData d = encodeLights(g, {light}, 0.0f, E, p);
+        std::vector<float> dense;
+        decodeBaseDense(d, 0, dense);
+        EXPECT_LE(maxAbsDiff(dense, light.rgb), double(E)) << "kind " << kind << " E " << E;
+        if (E >= 0.05f && kind == 0) {
+          EXPECT_GT(T, 0.0f) << "a loose bound must allow dropping details";
+        }
+      }
+}
+
+TEST(HaarEncode, ThresholdTradesSizeForError) {
+  const LatticeGeom g = makeGeom(24, 24, 24);
+  const DenseLight light = smoothLight(g, 3);
+  LiftedBase lb(g, light, Precision::Fp32, "t");
+  uint64_t lastCoefs = ~uint64_t(0);
+  for (float T : {0.0f, 0.001f, 0.01f, 0.1f}) {
+    const BaseCode c = lb.encode(T);
+    EXPECT_LE(c.coefCount, lastCoefs);
+    lastCoefs = c.coefCount;
+  }
+  // Empty bricks are not stored and a loose threshold leaves single-coefficient bricks.
+  const BaseCode loose = lb.encode(10.0f);
+  EXPECT_LT(loose.brickCount, g.bricks);
+  EXPECT_EQ(loose.coefCount, loose.brickCount);
+}
+
+// Seams: samples on brick faces, edges and corners (and just inside either side).
+TEST(HaarSample, BrickSeamsFacesEdgesCorners) {
+  const LatticeGeom g = makeGeom(16, 13, 11, 3, -5, 0);
+  const DenseLight light = smoothLight(g, 11);
+  std::vector<float> dense;
+  std::vector<float> seams;
+  for (int k = 0; k <= 5; ++k) seams.push_back(float(3 * k));  // brick boundaries (lattice-relative)
+  const float offs[] = {0.0f, 1e-3f, -1e-3f, 0.5f};
+  for (float T : {0.0f, 0.004f, 0.03f}) {
+    const ChaarData d = encodeLights(g, {light}, T);
+    const ChaarView v = d.view();
+    decodeBaseDense(d, 0, dense);
+    const double E = d.bases[0].maxError;
+    int n = 0;
+    for (float sx : seams)
+      for (float sy : seams)
+        for (float sz : seams)
+          for (int o = 0; o < 16; ++o) {
+            // o picks which axes sit exactly on the seam: all three = corner, two = edge, one = face.
+            const float x = g.min[0] + sx + (o & 1 ? offs[(o >> 1) % 4] : 0.0f);
+            const float y = g.min[1] + sy + (o & 2 ? offs[(o >> 2) % 4] : 0.0f);
+            const float z = g.min[2] + sz + (o & 4 ? offs[(o >> 3) % 4] : 0.0f);
+            const Rgb c = chaarSample(v, 0, x, y, z);
+            const Rgb r = denseSample(g, dense, x, y, z);
+            const Rgb in = denseSample(g, light.rgb, x, y, z);
+            ++n;
+            if (T == 0.0f) {
+              // Lossless: the compressed sample is the dense sample, bit for bit.
+              ASSERT_EQ(c.r, r.r) << x << " " << y << " " << z;
+              ASSERT_EQ(c.g, r.g);
+              ASSERT_EQ(c.b, r.b);
+            } else {
+              // Lossy: both copies of a shared texel are within E of the input, so the compressed
+              // sample is within E of the input's sample and within 2E of the dense-decoded one.
+              ASSERT_LE(std::fabs(double(c.g) - in.g), E + 1e-6);
+              ASSERT_LE(std::fabs(double(c.g) - r.g), 2 * E + 1e-6);
+            }
+          }
+    EXPECT_GT(n, 1000);
+  }
+}
+
+TEST(HaarSample, RandomPointsMatchDenseAtThresholdZero) {
+  const LatticeGeom g = makeGeom(10, 9, 8, -2, 0, 5);
+  std::vector<DenseLight> lights = {smoothLight(g, 0), randomLight(g, 5), smoothLight(g, 14)};
+  const ChaarData d = encodeLights(g, lights, 0.0f);
+  const ChaarView v = d.view();
+  std::mt19937 rng(1);
+  std::uniform_real_distribution<float> ux(g.min[0] - 2.0f, g.max[0] + 2.0f), uy(g.min[1] - 2.0f, g.max[1] + 2.0f),
+      uz(g.min[2] - 2.0f, g.max[2] + 2.0f);
+  for (uint32_t b = 0; b < 3; ++b)
+    for (int i = 0; i < 3000; ++i) {
+      const float x = ux(rng), y = uy(rng), z = uz(rng);
+      const Rgb c = chaarSample(v, int(b), x, y, z);
+      const Rgb r = denseSample(g, lights[b].rgb, x, y, z);
+      ASSERT_EQ(c.r, r.r);
+      ASSERT_EQ(c.b, r.b);
+    }
+  // NaN coordinates clamp (no out-of-bounds read).
+  const Rgb n = chaarSample(v, 0, NAN, NAN, NAN);
+  EXPECT_TRUE(std::isfinite(n.r));
+}
+
+TEST(HaarEncode, RejectsNonFiniteAndFp16Overflow) {
+  const LatticeGeom g = makeGeom(5, 5, 5);
+  DenseLight light = smoothLight(g, 1);
+  light.rgb[3 * 62 + 1] = NAN;
+  try {
+    LiftedBase lb(g, light, Precision::Fp32, "file.vdb grid B01");
+    FAIL();
+  } catch (const canopy::Error& e) {
+    EXPECT_EQ(e.code(), canopy::ExitCode::InvalidInput);
+    EXPECT_NE(std::string(e.what()).find("file.vdb grid B01: non-finite value at (2,2,2)"), std::string::npos) << e.what();
+  }
+  light = smoothLight(g, 1, 1e5f);
+  EXPECT_THROW(LiftedBase(g, light, Precision::Fp16, "x"), canopy::Error);
+  EXPECT_NO_THROW(LiftedBase(g, light, Precision::Fp32, "x"));
+}
+
+// The decimation rule: a detail is dropped only when all three channels are <= T (joint RGB).
+TEST(HaarEncode, DetailDroppedOnlyWhenAllChannelsUnderThreshold) {
+  float coef[3][kBrickValues] = {};
+  for (int ch = 0; ch < 3; ++ch) coef[ch][0] = 1.0f;
+  const float c5[3] = {0.25f, 0.25f, 0.25f}, c9[3] = {0.25f, 0.125f, 0.5f}, c40[3] = {-0.5f, 0.0f, 0.0f};
+  for (int ch = 0; ch < 3; ++ch) {
+    coef[ch][5] = c5[ch];
+    coef[ch][9] = c9[ch];
+    coef[ch][40] = c40[ch];
+    unliftBrick(coef[ch]);  // dyadic values: exact
+  }
+  const LatticeGeom g = makeGeom(4, 4, 4);  // brick 0 is the whole lattice (its border included)
+  DenseLight light;
+  light.rgb.resize(3 * 64);
+  for (int c = 0; c < 64; ++c)
+    for (int ch = 0; ch < 3; ++ch) light.rgb[size_t(3 * c + ch)] = coef[ch][c];
+  LiftedBase lb(g, light, Precision::Fp32, "t");
+  const BaseCode code = lb.encode(0.3f);
+  EXPECT_EQ(code.bricks[0].mask(), (uint64_t(1) << 0) | (uint64_t(1) << 9) | (uint64_t(1) << 40));
+  EXPECT_EQ(lb.encode(0.25f).bricks[0].mask(), (uint64_t(1) << 0) | (uint64_t(1) << 9) | (uint64_t(1) << 40));
+  EXPECT_EQ(lb.encode(0.5f).bricks[0].mask(), uint64_t(1));  // <= T: dropped, fast path left
+  EXPECT_EQ(lb.encode(0.2f).bricks[0].mask(), (uint64_t(1) << 0) | (uint64_t(1) << 5) | (uint64_t(1) << 9) | (uint64_t(1) << 40));
+}
+
+// A base (or a whole file) without light: nothing stored, samples are zero, the file round-trips.
+TEST(HaarEncode, EmptyLightStoresNoBricks) {
+  const LatticeGeom g = makeGeom(7, 7, 7);
+  DenseLight dark;
+  dark.rgb.assign(3 * g.cells, 0.0f);
+  LiftedBase lb(g, dark, Precision::Fp32, "dark");
+  EXPECT_EQ(lb.searchThreshold(0.01f), 0.0f);
+  ChaarData d = encodeLights(g, {dark, dark}, 0.01f);
+  EXPECT_EQ(d.header.slotCount, 0u);
+  EXPECT_EQ(d.header.coefCount, 0u);
+  const std::vector<uint8_t> bytes = serializeChaar(d);
+  const ChaarData back = parseChaar(bytes.data(), bytes.size(), "dark.chaar");
+  const Rgb s = chaarSample(back.view(), 1, 3.5f, 2.5f, 1.0f);
+  EXPECT_EQ(s.r, 0.0f);
+  EXPECT_EQ(s.g, 0.0f);
+  std::vector<float> dense;
+  decodeBaseDense(back, 0, dense);
+  EXPECT_EQ(dense, dark.rgb);
+}

@@ -1,0 +1,232 @@
+// test_canopy_file.cpp: the .canopy reader never trusts its input (built with ASan/UBSan: the
+// reader, writer and builder sources are compiled into this test).
+//   - the frozen 1.0 file in data/ still reads, and the writer still produces it byte for byte
+//     (a layout change must be deliberate: bump the version and add a new frozen file);
+//   - every truncated prefix, flipped bytes (header, table, sections, padding, pages), trailing
+//     bytes, bad magic and a newer major version are rejected with a one-line canopy::Error.
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <cstring>
+#include <string>
+
+#include "canopy/atomic_file.h"
+#include "canopy/errors.h"
+#include "canopy/hash.h"
+#include "formats/canopy_file.h"
+#include "formats/canopy_write.h"
+#include "tests/octreepack/packed_sampler.h"
+#include "tests/octreepack/synthetic.h"
+
+using namespace canopy;
+namespace op = canopy::octreepack;
+
+namespace {
+
+const std::string kFrozen = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v1.0.canopy";
+
+// The frozen file's content: a 20-cell synthetic plant (depth 2, density only) and an 8-cell one
+// with analytic lighting (depth 0), three instances.
+std::vector<unsigned char> smallFileBytes() {
+  const op::ModelSource src = op::testing::syntheticPlant(20, 2, "frozen", 0);
+  const op::BuiltModel m = op::buildOctree(src, "frozen");
+  const op::BuiltModel lit = op::buildOctree(op::testing::syntheticPlant(8, 0, "lit", 0), "lit", op::testing::analyticLight);
+  CanopyWriteInput in;
+  in.models.push_back({m.record, &m.tiles, &m.bricks, nullptr});
+  in.models.push_back({lit.record, &lit.tiles, &lit.bricks, &lit.light});
+  CanopyInstance a{}, b{};
+  a.modelToWorld[0] = a.modelToWorld[5] = a.modelToWorld[10] = 1.0f;
+  b = a;
+  b.modelToWorld[3] = 4.0f;
+  CanopyInstance c = a;
+  c.model = 1;
+  in.instances = {a, b, c};
+  in.metadata = R"({"tool":"test_canopy_file","note":"frozen .canopy 1.0"})";
+  return writeCanopyBytes(std::move(in));
+}
+
+std::string expectRejected(const std::vector<unsigned char>& bytes, bool readPages = true) {
+  try {
+    CanopyFile f = CanopyFile::fromMemory(bytes.data(), bytes.size(), "bad.canopy");
+    if (readPages)
+      for (uint32_t i = 0; i < f.pageCount(); ++i) (void)f.readPage(i);
+  } catch (const Error& e) {
+    const std::string m = e.what();
+    EXPECT_EQ(m.rfind("bad.canopy: ", 0), 0u) << m;
+    EXPECT_EQ(m.find('\n'), std::string::npos) << m;
+    return m;
+  }
+  ADD_FAILURE() << "corrupt file was accepted";
+  return "";
+}
+
+}  // namespace
+
+TEST(CanopyFile, FrozenSmallFileStillReads) {
+  if (std::getenv("CANOPY_WRITE_FROZEN")) {  // regenerate deliberately (new format version only)
+    const auto bytes = smallFileBytes();
+    writeFileAtomic(kFrozen, bytes.data(), bytes.size());
+  }
+  CanopyFile f = CanopyFile::open(kFrozen);
+  EXPECT_EQ(f.header().major, 1);
+  EXPECT_EQ(f.header().minor, 0);
+  ASSERT_EQ(f.modelCount(), 2u);
+  ASSERT_EQ(f.instanceCount(), 3u);
+  EXPECT_EQ(f.model(0).lightCount, 0u);
+  EXPECT_EQ(f.model(1).lightCount, f.model(1).brickCount);
+  EXPECT_EQ(f.instance(2).model, 1u);
+  EXPECT_FLOAT_EQ(f.instance(1).modelToWorld[3], 4.0f);
+  EXPECT_EQ(std::string(f.model(0).name), "frozen");
+  EXPECT_EQ(f.model(0).depth, 2u);
+  EXPECT_NE(f.metadata().find("frozen .canopy 1.0"), std::string::npos);
+  // Sample every occupied cell of the source through the HD functions.
+  op::testing::PackedSampler S(f);
+  const op::ModelSource src = op::testing::syntheticPlant(20, 2, "frozen", 0);
+  for (const auto& c : src.cells) {
+    const CanopySample v = S.sampleLattice(0, float(c.ijk[0]), float(c.ijk[1]), float(c.ijk[2]));
+    ASSERT_EQ(v.density, c.density);
+    ASSERT_NEAR(v.albedo[1], c.albedo[1], 0.5 / 255 + 1e-6);
+  }
+  for (uint32_t i = 0; i < f.pageCount(); ++i) EXPECT_NO_THROW(f.readPage(i));
+  // The lit model's root light item: voxel centres hold the mean of the analytic light over 2x2x2
+  // cells (float16: relative error <= 2^-11).
+  const CanopyModel& L = f.model(1);
+  ASSERT_EQ(L.depth, 0u);
+  const auto page = f.readPage(canopyLightPage(L, 0, f.header().lightItemsPerPage));
+  const uint16_t* item = canopyLightInPage(page.data(), 0);
+  float tmp[kCanopyLightChannels];
+  for (uint32_t base : {0u, 7u, 18u})
+    for (int z = 0; z < 4; ++z)
+      for (int x = 0; x < 4; ++x) {
+        double ref[3] = {0, 0, 0};
+        for (int s = 0; s < 8; ++s) {
+          op::testing::analyticLight(L.latticeMin[0] + 2 * x + (s & 1), L.latticeMin[1] + 2 + ((s >> 1) & 1), L.latticeMin[2] + 2 * z + (s >> 2), tmp);
+          for (int ch = 0; ch < 3; ++ch) ref[ch] += tmp[3 * base + ch] / 8.0;
+        }
+        float rgb[3];
+        canopySampleLight(item, base, (float(x) + 0.5f) / 4, 1.5f / 4, (float(z) + 0.5f) / 4, rgb);
+        for (int ch = 0; ch < 3; ++ch) ASSERT_NEAR(rgb[ch], ref[ch], std::abs(ref[ch]) * 0.0005 + 1e-6) << base << " " << x << " " << z;
+      }
+  // The writer still produces exactly these bytes.
+  EXPECT_EQ(readFile(kFrozen), smallFileBytes()) << "the .canopy layout changed: bump the version";
+}
+
+TEST(CanopyFile, EveryTruncatedPrefixIsRejected) {
+  const std::vector<unsigned char> good = readFile(kFrozen);
+  for (size_t n = 0; n < good.size(); ++n) {
+    try {
+      CanopyFile f = CanopyFile::fromMemory(good.data(), n, "bad.canopy");
+      FAIL() << "prefix of " << n << " bytes accepted";
+    } catch (const Error& e) {
+      ASSERT_EQ(e.code(), ExitCode::InvalidInput) << e.what();
+      ASSERT_NE(std::string(e.what()).find("truncated"), std::string::npos) << e.what();
+    }
+  }
+}
+
+TEST(CanopyFile, TrailingBytesAndBadMagicAreRejected) {
+  std::vector<unsigned char> good = readFile(kFrozen);
+  auto longer = good;
+  longer.push_back(0);
+  EXPECT_NE(expectRejected(longer).find("trailing"), std::string::npos);
+  auto magic = good;
+  magic[0] = 'X';
+  EXPECT_NE(expectRejected(magic).find("magic"), std::string::npos);
+}
+
+TEST(CanopyFile, NewerMajorVersionIsRejectedClearly) {
+  std::vector<unsigned char> bytes = readFile(kFrozen);
+  CanopyFileHeader h;
+  std::memcpy(&h, bytes.data(), sizeof h);
+  h.major = kCanopyMajor + 1;
+  h.headerCrc = crc32(0, &h, offsetof(CanopyFileHeader, headerCrc));
+  std::memcpy(bytes.data(), &h, sizeof h);
+  try {
+    CanopyFile::fromMemory(bytes.data(), bytes.size(), "bad.canopy");
+    FAIL() << "newer major accepted";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ExitCode::Unsupported);
+    EXPECT_NE(std::string(e.what()).find("newer than this reader"), std::string::npos) << e.what();
+  }
+  // A newer minor version of the same major reads.
+  bytes = readFile(kFrozen);
+  std::memcpy(&h, bytes.data(), sizeof h);
+  h.minor = kCanopyMinor + 1;
+  h.headerCrc = crc32(0, &h, offsetof(CanopyFileHeader, headerCrc));
+  std::memcpy(bytes.data(), &h, sizeof h);
+  EXPECT_NO_THROW(CanopyFile::fromMemory(bytes.data(), bytes.size(), "minor.canopy"));
+}
+
+// Every byte of the header and section table, every 11th byte of the rest of the resident part, and
+// every 13th byte of every page (plus each page's header): all flips are caught.
+TEST(CanopyFile, FlippedBytesAreCaught) {
+  const std::vector<unsigned char> good = readFile(kFrozen);
+  CanopyFileHeader h;
+  std::memcpy(&h, good.data(), sizeof h);
+  const size_t tableEnd = sizeof h + h.sectionCount * sizeof(CanopySection);
+  std::vector<size_t> positions;
+  for (size_t i = 0; i < good.size(); ++i) {
+    const bool inPageHeader = i >= h.pagesOffset && (i - h.pagesOffset) % h.pageBytes < sizeof(CanopyPageHeader);
+    if (i < tableEnd || inPageHeader || (i < h.pagesOffset && i % 11 == 0) || (i >= h.pagesOffset && i % 61 == 0))
+      positions.push_back(i);
+  }
+  size_t pageFlips = 0;
+  std::vector<unsigned char> bad = good;
+  for (size_t i : positions) {
+    bad[i] ^= 0x01;  // flipped in place and restored: no copy per case
+    const std::string m = expectRejected(bad);
+    bad[i] ^= 0x01;
+    if (i >= h.pagesOffset) {
+      ++pageFlips;
+      EXPECT_NE(m.find("page"), std::string::npos) << m;
+    }
+  }
+  EXPECT_GT(pageFlips, 500u);
+}
+
+// A node pointing outside its model (with every CRC made valid again) is caught by the structure
+// checks, not by luck.
+TEST(CanopyFile, OutOfRangePointersAreRejectedEvenWithValidChecksums) {
+  std::vector<unsigned char> bytes = readFile(kFrozen);
+  CanopyFile f = CanopyFile::fromMemory(bytes.data(), bytes.size(), "ok.canopy");
+  const CanopySection* tiles = f.findSection(CanopySectionKind::NodeTiles);
+  ASSERT_NE(tiles, nullptr);
+  ASSERT_GT(tiles->itemCount, 0u);
+  auto reseal = [](std::vector<unsigned char>& b) {
+    CanopyFileHeader h;
+    std::memcpy(&h, b.data(), sizeof h);
+    for (uint32_t i = 0; i < h.sectionCount; ++i) {
+      CanopySection s;
+      std::memcpy(&s, b.data() + sizeof h + i * sizeof s, sizeof s);
+      s.crc = crc32(0, b.data() + s.offset, size_t(s.bytes));
+      std::memcpy(b.data() + sizeof h + i * sizeof s, &s, sizeof s);
+    }
+    h.sectionTableCrc = crc32(0, b.data() + sizeof h, h.sectionCount * sizeof(CanopySection));
+    h.headerCrc = crc32(0, &h, offsetof(CanopyFileHeader, headerCrc));
+    std::memcpy(b.data(), &h, sizeof h);
+  };
+  struct Case {
+    size_t fieldOffset;
+    uint32_t value;
+    const char* expect;
+  };
+  for (const Case& c : {Case{offsetof(CanopyNode, brick), 999999u, "brick id"}, Case{offsetof(CanopyNode, child), 77u, "child tile"},
+                        Case{offsetof(CanopyNode, child), 0u, "referenced twice"}}) {
+    std::vector<unsigned char> bad = bytes;
+    // Put the value into the first node of tile 0 that has a brick (or its child field).
+    size_t at = 0;
+    for (uint32_t n = 0; n < tiles->itemCount * 8; ++n) {
+      CanopyNode node;
+      std::memcpy(&node, bad.data() + tiles->offset + n * sizeof node, sizeof node);
+      if (node.brick != kCanopyNone) {
+        at = tiles->offset + n * sizeof node;
+        break;
+      }
+    }
+    ASSERT_NE(at, 0u);
+    std::memcpy(bad.data() + at + c.fieldOffset, &c.value, 4);
+    reseal(bad);
+    const std::string m = expectRejected(bad, false);
+    EXPECT_NE(m.find(c.expect), std::string::npos) << m;
+  }
+}

@@ -1,0 +1,664 @@
+// test_octreepack.cpp: the packer end to end (VDB in, .canopy out), read back through the format's
+// CANOPY_HD sampling functions, plus the CLI contract (exit codes, no output left behind).
+//
+// Tolerances: density is stored as float32 and must come back exactly at the finest level and
+// within 1e-6 (float rounding of the double mean) on the MIP levels; albedo and wood are unorm8,
+// so they come back within 0.5/255 of the source (plus 1e-6 for float rounding).
+#include <gtest/gtest.h>
+
+#include <sys/stat.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <random>
+#include <string>
+
+#include <openvdb/openvdb.h>
+#include <tbb/global_control.h>
+
+#include "canopy/atomic_file.h"
+#include "canopy/hash.h"
+#include "formats/canopy_file.h"
+#include "formats/canopy_write.h"
+#include "formats/lattice_vdb.h"
+#include "tests/octreepack/packed_sampler.h"
+#include "tests/octreepack/synthetic.h"
+#include "tools/octreepack/inputs.h"
+#include "tools/octreepack/octreepack.h"
+
+namespace op = canopy::octreepack;
+using canopy::CanopyFile;
+using canopy::CanopySample;
+using op::testing::PackedSampler;
+using op::testing::syntheticPlant;
+
+namespace {
+
+constexpr float kQuant = 0.5f / 255.0f + 1e-6f;
+
+std::string tmpDir() {
+  static std::string dir = [] {
+    std::string d = std::string(CANOPY_BINARY_DIR) + "/tests/octreepack/tmp";
+    std::string cmd = "mkdir -p '" + d + "'";
+    EXPECT_EQ(std::system(cmd.c_str()), 0);
+    return d;
+  }();
+  return dir;
+}
+
+void writeSourceVdb(const std::string& path, const op::ModelSource& s) {
+  canopy::vdbio::initialize();
+  auto density = openvdb::FloatGrid::create(0.0f);
+  auto wood = openvdb::FloatGrid::create(0.0f);
+  auto albedo = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
+  density->setName("density");
+  wood->setName("wood");
+  albedo->setName("albedo");
+  openvdb::Mat4d m = openvdb::Mat4d::identity();
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 4; ++c) m(c, r) = s.indexToModel[size_t(r * 4 + c)];  // OpenVDB: row vectors
+  auto xf = openvdb::math::Transform::createLinearTransform(m);
+  auto da = density->getAccessor();
+  auto wa = wood->getAccessor();
+  auto aa = albedo->getAccessor();
+  for (const auto& c : s.cells) {
+    const openvdb::Coord ijk(c.ijk[0], c.ijk[1], c.ijk[2]);
+    da.setValue(ijk, c.density);
+    wa.setValue(ijk, c.wood);
+    aa.setValue(ijk, openvdb::Vec3s(c.albedo[0], c.albedo[1], c.albedo[2]));
+  }
+  canopy::vdbio::LatticeMeta meta;
+  meta.min = openvdb::Coord(s.latticeMin[0], s.latticeMin[1], s.latticeMin[2]);
+  meta.max = openvdb::Coord(s.latticeMax[0], s.latticeMax[1], s.latticeMax[2]);
+  meta.source = "test";
+  for (openvdb::GridBase::Ptr g : {openvdb::GridBase::Ptr(density), openvdb::GridBase::Ptr(wood), openvdb::GridBase::Ptr(albedo)}) {
+    g->setTransform(xf);
+    canopy::vdbio::stampGrid(*g, meta);
+  }
+  canopy::vdbio::writeVdb(path, {density, wood, albedo});
+}
+
+std::string packVdb(const std::string& vdb, const std::string& out) {
+  op::OctreepackOptions o;
+  o.inputs = {vdb};
+  o.output = out;
+  op::octreepack(o);
+  return out;
+}
+
+std::string packPlant(const op::ModelSource& s, const std::string& stem) {
+  const std::string vdb = tmpDir() + "/" + stem + ".density.vdb";
+  writeSourceVdb(vdb, s);
+  return packVdb(vdb, tmpDir() + "/" + stem + ".canopy");
+}
+
+std::vector<unsigned char> bytesOf(const std::string& p) { return canopy::readFile(p); }
+
+int run(const std::string& args) {
+  const std::string cmd = std::string(CANOPY_BINARY_DIR) + "/bin/canopy-octreepack " + args + " >/dev/null 2>&1";
+  const int rc = std::system(cmd.c_str());
+  return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+}
+
+bool exists(const std::string& p) {
+  struct stat st;
+  return stat(p.c_str(), &st) == 0;
+}
+
+const op::ModelSource& plant() {
+  static op::ModelSource s = syntheticPlant(40, -3, "plant");
+  return s;
+}
+
+const std::string& plantFile() {
+  static std::string f = packPlant(plant(), "plant");
+  return f;
+}
+
+}  // namespace
+
+TEST(Octreepack, FinestLevelRoundTripsEveryOccupiedCell) {
+  CanopyFile f = CanopyFile::open(plantFile());
+  ASSERT_EQ(f.modelCount(), 1u);
+  ASSERT_EQ(f.instanceCount(), 1u);
+  const canopy::CanopyModel& M = f.model(0);
+  EXPECT_EQ(M.depth, 3u);  // 40 cells -> 8 * 2^3 = 64
+  EXPECT_EQ(std::string(M.name), "plant");
+  EXPECT_DOUBLE_EQ(M.indexToModel[3], 0.1);
+  PackedSampler S(f);
+  size_t checked = 0;
+  for (const auto& c : plant().cells) {
+    const CanopySample v = S.sampleLattice(0, float(c.ijk[0]), float(c.ijk[1]), float(c.ijk[2]));
+    ASSERT_EQ(v.density, c.density) << "cell " << c.ijk[0] << "," << c.ijk[1] << "," << c.ijk[2];
+    ASSERT_NEAR(v.wood, c.wood, kQuant);
+    for (int a = 0; a < 3; ++a) ASSERT_NEAR(v.albedo[a], c.albedo[a], kQuant);
+    ++checked;
+  }
+  EXPECT_GT(checked, 5000u);
+}
+
+TEST(Octreepack, UnoccupiedCellsAreEmpty) {
+  CanopyFile f = CanopyFile::open(plantFile());
+  PackedSampler S(f);
+  std::vector<char> occ(40 * 40 * 40, 0);
+  for (const auto& c : plant().cells) occ[size_t((c.ijk[0] + 3) + 40 * ((c.ijk[1] + 3) + 40 * (c.ijk[2] + 3)))] = 1;
+  for (int k = 0; k < 40; k += 3)
+    for (int j = 0; j < 40; ++j)
+      for (int i = 0; i < 40; ++i)
+        if (!occ[size_t(i + 40 * (j + 40 * k))]) {
+          ASSERT_EQ(S.sampleLattice(0, float(i - 3), float(j - 3), float(k - 3)).density, 0.0f);
+        }
+}
+
+// Trilinear sampling between cell centres, including across brick boundaries (the border voxels),
+// equals trilinear interpolation of the source lattice (0 outside it).
+TEST(Octreepack, TrilinearSamplesMatchSourceAcrossBrickBorders) {
+  CanopyFile f = CanopyFile::open(plantFile());
+  PackedSampler S(f);
+  std::vector<float> dense(40 * 40 * 40, 0.0f);
+  for (const auto& c : plant().cells) dense[size_t((c.ijk[0] + 3) + 40 * ((c.ijk[1] + 3) + 40 * (c.ijk[2] + 3)))] = c.density;
+  auto at = [&](int i, int j, int k) {
+    i += 3, j += 3, k += 3;
+    return (i < 0 || j < 0 || k < 0 || i >= 40 || j >= 40 || k >= 40) ? 0.0f : dense[size_t(i + 40 * (j + 40 * k))];
+  };
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> U(-3.0f, 36.0f);
+  int acrossBorder = 0;
+  for (int n = 0; n < 20000; ++n) {
+    const float p[3] = {U(rng), U(rng), U(rng)};
+    int i0[3];
+    float fr[3];
+    for (int a = 0; a < 3; ++a) {
+      i0[a] = int(std::floor(p[a]));
+      fr[a] = p[a] - float(i0[a]);
+    }
+    if (((i0[0] + 3) & 7) == 7 || ((i0[1] + 3) & 7) == 7 || ((i0[2] + 3) & 7) == 7) ++acrossBorder;
+    double ref = 0;
+    for (int c = 0; c < 8; ++c) {
+      const int dx = c & 1, dy = (c >> 1) & 1, dz = c >> 2;
+      ref += double((dx ? fr[0] : 1 - fr[0]) * (dy ? fr[1] : 1 - fr[1]) * (dz ? fr[2] : 1 - fr[2])) *
+             at(i0[0] + dx, i0[1] + dy, i0[2] + dz);
+    }
+    const CanopySample v = S.sampleLattice(0, p[0], p[1], p[2]);
+    // Inside a constant node the packed model returns the constant (no neighbour blending across
+    // its faces: GigaVoxels §6.1.6); the synthetic core is surrounded by equal values one cell deep
+    // only where the uniform region continues, so compare only where the node holds a brick.
+    const canopy::CanopyModel& M = f.model(0);
+    float u[3];
+    canopy::canopyLatticeToUnit(M.octreeOrigin, M.rootCells, p[0], p[1], p[2], u);
+    if (f.descend(0, u[0], u[1], u[2], M.depth).node.brick == canopy::kCanopyNone) continue;
+    ASSERT_NEAR(v.density, ref, 2e-6) << p[0] << "," << p[1] << "," << p[2];
+  }
+  EXPECT_GT(acrossBorder, 2000);
+}
+
+// Every voxel of every coarser level is the 2x2x2 box filter of the level below: density averaged,
+// albedo and wood density-weighted.
+TEST(Octreepack, EveryMipLevelIsABoxFilterOfTheLevelBelow) {
+  CanopyFile f = CanopyFile::open(plantFile());
+  PackedSampler S(f);
+  const canopy::CanopyModel& M = f.model(0);
+  size_t nonEmpty = 0;
+  for (uint32_t level = 0; level < M.depth; ++level) {
+    const int64_t n = int64_t(canopy::kCanopyBrickSize) << level;
+    for (int64_t z = 0; z < n; ++z)
+      for (int64_t y = 0; y < n; ++y)
+        for (int64_t x = 0; x < n; ++x) {
+          const int64_t g[3] = {x, y, z};
+          const CanopySample p = S.voxel(0, level, g);
+          double sd = 0, sw = 0, sa[3] = {0, 0, 0};
+          for (int c = 0; c < 8; ++c) {
+            const int64_t h[3] = {2 * x + (c & 1), 2 * y + ((c >> 1) & 1), 2 * z + (c >> 2)};
+            const CanopySample v = S.voxel(0, level + 1, h);
+            sd += v.density;
+            sw += double(v.density) * v.wood;
+            for (int a = 0; a < 3; ++a) sa[a] += double(v.density) * v.albedo[a];
+          }
+          ASSERT_NEAR(p.density, sd / 8, 1e-6) << "level " << level << " voxel " << x << "," << y << "," << z;
+          if (sd > 0) {
+            ++nonEmpty;
+            ASSERT_NEAR(p.wood, sw / sd, kQuant);
+            for (int a = 0; a < 3; ++a) ASSERT_NEAR(p.albedo[a], sa[a] / sd, kQuant);
+          }
+        }
+  }
+  EXPECT_GT(nonEmpty, 500u);
+}
+
+TEST(Octreepack, UniformRegionsBecomeConstantNodes) {
+  CanopyFile f = CanopyFile::open(plantFile());
+  const nlohmann::json info = op::canopyInfo(f);
+  uint64_t constant = 0, bricks = 0;
+  for (const auto& l : info["models"][0]["levels"]) {
+    constant += l["constant_nodes"].get<uint64_t>();
+    bricks += l["bricks"].get<uint64_t>();
+  }
+  EXPECT_GE(constant, 1u);
+  EXPECT_EQ(bricks, f.model(0).brickCount);
+  EXPECT_LT(info["resident_fraction"].get<double>(), 0.5);  // tiny test file: the 64 KiB resident page dominates
+}
+
+TEST(Octreepack, PackingTwiceGivesIdenticalBytesWhateverTheCellOrder) {
+  const std::string a = plantFile();
+  const std::string b = packVdb(tmpDir() + "/plant.density.vdb", tmpDir() + "/plant_again.canopy");
+  EXPECT_EQ(bytesOf(a), bytesOf(b));
+  op::ModelSource shuffled = plant();
+  std::mt19937 rng(3);
+  std::shuffle(shuffled.cells.begin(), shuffled.cells.end(), rng);
+  const op::BuiltModel x = op::buildOctree(plant(), "a"), y = op::buildOctree(shuffled, "b");
+  EXPECT_EQ(x.bricks, y.bricks);
+  EXPECT_EQ(0, std::memcmp(x.tiles.data(), y.tiles.data(), x.tiles.size() * sizeof(canopy::CanopyNode)));
+}
+
+TEST(Octreepack, SceneJsonPacksModelsInstancesAndSceneLight) {
+  const std::string dir = tmpDir();
+  writeSourceVdb(dir + "/a.density.vdb", syntheticPlant(24, 0, "a", 0));
+  writeSourceVdb(dir + "/b.density.vdb", syntheticPlant(20, 5, "b", 0));
+  // A coarse scene lighting lattice: a float grid named "light".
+  auto light = openvdb::FloatGrid::create(0.0f);
+  light->setName("light");
+  for (int k = 0; k < 3; ++k)
+    for (int j = 0; j < 4; ++j)
+      for (int i = 0; i < 5; ++i) light->tree().setValue(openvdb::Coord(i, j, k), 1.0f + float(i + 10 * j + 100 * k));
+  light->setTransform(openvdb::math::Transform::createLinearTransform(2.0));
+  canopy::vdbio::writeVdb(dir + "/scene_light.vdb", {light});
+  std::ofstream(dir + "/scene.json") << R"({"canopy_scene": 1,
+    "models": [{"name": "a", "density": "a.density.vdb"}, {"name": "b", "density": "b.density.vdb"}],
+    "instances": [{"model": 0, "matrix": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1]},
+                  {"model": 1, "matrix": [0,0,1,5, 0,1,0,0, -1,0,0,2, 0,0,0,1]},
+                  {"model": 0, "matrix": [2,0,0,-4, 0,2,0,0, 0,0,2,1, 0,0,0,1]}]})";
+  op::OctreepackOptions o;
+  o.scene = dir + "/scene.json";
+  o.sceneLight = dir + "/scene_light.vdb";
+  o.output = dir + "/scene.canopy";
+  const nlohmann::json report = op::octreepack(o);
+  CanopyFile f = CanopyFile::open(o.output);
+  ASSERT_EQ(f.modelCount(), 2u);
+  ASSERT_EQ(f.instanceCount(), 3u);
+  EXPECT_EQ(std::string(f.model(1).name), "b");
+  EXPECT_EQ(f.instance(1).model, 1u);
+  EXPECT_FLOAT_EQ(f.instance(1).modelToWorld[2], 1.0f);
+  EXPECT_FLOAT_EQ(f.instance(1).modelToWorld[3], 5.0f);
+  EXPECT_FLOAT_EQ(f.instance(2).modelToWorld[0], 2.0f);
+  EXPECT_EQ(f.model(1).firstBrickPage, f.model(0).brickPageCount);
+  ASSERT_TRUE(f.hasSceneLight());
+  EXPECT_EQ(f.sceneLight().dim[0], 5);
+  EXPECT_EQ(f.sceneLight().dim[2], 3);
+  EXPECT_FLOAT_EQ(f.sceneLightValues()[size_t(4 + 5 * (3 + 4 * 2))], 1.0f + 4 + 30 + 200);
+  EXPECT_DOUBLE_EQ(f.sceneLight().indexToWorld[0], 2.0);
+  EXPECT_EQ(report["models"][1]["instances"].get<int>(), 1);
+  // Both models sample back exactly.
+  PackedSampler S(f);
+  const auto b = syntheticPlant(20, 5, "b", 0);
+  for (const auto& c : b.cells) ASSERT_EQ(S.sampleLattice(1, float(c.ijk[0]), float(c.ijk[1]), float(c.ijk[2])).density, c.density);
+}
+
+// The parallel builder's bytes do not depend on the number of threads (lit, to cover the light
+// pyramid too).
+TEST(Octreepack, BytesDoNotDependOnTheThreadCount) {
+  auto packBytes = [] {
+    const op::BuiltModel m = op::buildOctree(syntheticPlant(40, -3, "threads"), "threads", op::testing::analyticLight);
+    canopy::CanopyWriteInput in;
+    in.models.push_back({m.record, &m.tiles, &m.bricks, &m.light});
+    return canopy::writeCanopyBytes(std::move(in));
+  };
+  const std::vector<unsigned char> parallel = packBytes();
+  std::vector<unsigned char> serial;
+  {
+    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    serial = packBytes();
+  }
+  EXPECT_EQ(parallel, serial);
+}
+
+// World -> octree unit space of an instance (what a player uses to start a ray in a model): the
+// model-space centre of a lattice cell, moved by the instance, maps back to that cell's unit point.
+TEST(Octreepack, WorldToUnitInvertsInstanceAndModelTransforms) {
+  CanopyFile f = CanopyFile::open(plantFile());
+  canopy::CanopyModel M = f.model(0);
+  canopy::CanopyInstance inst{};
+  const float yaw = 0.7f, s = 1.3f;
+  const float m[12] = {s * std::cos(yaw), 0, s * std::sin(yaw), 4.0f, 0, s, 0, -1.0f, -s * std::sin(yaw), 0, s * std::cos(yaw), 2.5f};
+  std::memcpy(inst.modelToWorld, m, sizeof m);
+  float w2u[12];
+  ASSERT_TRUE(canopy::canopyWorldToUnit(M, inst, w2u));
+  for (const auto& c : {plant().cells[0], plant().cells[1000], plant().cells.back()}) {
+    float pm[3];
+    for (int r = 0; r < 3; ++r)
+      pm[r] = float(M.indexToModel[4 * r] * c.ijk[0] + M.indexToModel[4 * r + 1] * c.ijk[1] + M.indexToModel[4 * r + 2] * c.ijk[2] +
+                    M.indexToModel[4 * r + 3]);
+    float pw[3], u[3], want[3];
+    canopy::canopyTransformPoint(inst.modelToWorld, pm, pw);
+    canopy::canopyTransformPoint(w2u, pw, u);
+    canopy::canopyLatticeToUnit(M.octreeOrigin, M.rootCells, float(c.ijk[0]), float(c.ijk[1]), float(c.ijk[2]), want);
+    for (int a = 0; a < 3; ++a) ASSERT_NEAR(u[a], want[a], 1e-5f);
+  }
+  canopy::CanopyInstance flat = inst;
+  flat.modelToWorld[5] = 0;  // singular
+  EXPECT_FALSE(canopy::canopyWorldToUnit(M, flat, w2u));
+}
+
+// ---- CLI contract ---------------------------------------------------------------------------------
+TEST(OctreepackCli, InfoAndVerifyOnAGoodFile) {
+  const std::string f = plantFile();
+  EXPECT_EQ(run("info '" + f + "'"), 0);
+  EXPECT_EQ(run("info '" + f + "' --json"), 0);
+  EXPECT_EQ(run("verify '" + f + "'"), 0);
+  EXPECT_EQ(run("--help"), 0);
+  EXPECT_EQ(run("--version"), 0);
+}
+
+TEST(OctreepackCli, VerifyFailsOnCorruptTruncatedAndNewerFiles) {
+  const std::vector<unsigned char> good = bytesOf(plantFile());
+  const std::string dir = tmpDir();
+  auto writeVariant = [&](const std::string& name, std::vector<unsigned char> bytes) {
+    canopy::writeFileAtomic(dir + "/" + name, bytes.data(), bytes.size());
+    return dir + "/" + name;
+  };
+  canopy::CanopyFileHeader h;
+  std::memcpy(&h, good.data(), sizeof h);
+  // A flipped byte in the middle of the last page: only its CRC catches it.
+  std::vector<unsigned char> flipped = good;
+  flipped[size_t(h.pagesOffset + uint64_t(h.pageCount - 1) * h.pageBytes + 1000)] ^= 0x10;
+  EXPECT_EQ(run("verify '" + writeVariant("flipped.canopy", flipped) + "'"), 3);
+  EXPECT_EQ(run("info '" + dir + "/flipped.canopy'"), 0);  // info reads the resident part only
+  // Truncated at several points.
+  for (size_t n : {size_t(0), size_t(100), size_t(h.pagesOffset), good.size() - 1})
+    EXPECT_EQ(run("verify '" + writeVariant("trunc.canopy", std::vector<unsigned char>(good.begin(), good.begin() + long(n))) + "'"), 3) << n;
+  // Newer major version (header CRC recomputed so only the version is wrong).
+  std::vector<unsigned char> newer = good;
+  canopy::CanopyFileHeader nh = h;
+  nh.major = canopy::kCanopyMajor + 1;
+  nh.headerCrc = canopy::crc32(0, &nh, offsetof(canopy::CanopyFileHeader, headerCrc));
+  std::memcpy(newer.data(), &nh, sizeof nh);
+  EXPECT_EQ(run("verify '" + writeVariant("newer.canopy", newer) + "'"), 5);
+  EXPECT_EQ(run("verify '" + dir + "/does-not-exist.canopy'"), 2);
+}
+
+TEST(OctreepackCli, BadInputsFailCleanlyAndLeaveNoOutput) {
+  const std::string dir = tmpDir();
+  writeSourceVdb(dir + "/cli.density.vdb", syntheticPlant(16, 0, "cli", 0));
+  const std::string out = dir + "/cli-out.canopy";
+  std::remove(out.c_str());
+  EXPECT_EQ(run("'" + dir + "/missing.density.vdb' -o '" + out + "'"), 2);
+  EXPECT_EQ(run("'" + dir + "/cli.density.vdb'"), 1);                             // no -o
+  EXPECT_EQ(run("--no-such-flag"), 1);
+  EXPECT_EQ(run("'" + dir + "/cli.density.vdb' -o /nonexistent-dir/x.canopy"), 2);  // unwritable
+  std::ofstream(dir + "/not.vdb") << "this is not a vdb";
+  EXPECT_EQ(run("'" + dir + "/not.vdb' -o '" + out + "'"), 3);
+  std::ofstream(dir + "/p.light.chaar") << "x";
+  // Without the chaar decoder a .chaar is unsupported (5); with it, this one is corrupt (3).
+  EXPECT_EQ(run("'" + dir + "/cli.density.vdb' '" + dir + "/p.light.chaar' -o '" + out + "'"), op::chaarSupported() ? 3 : 5);
+  EXPECT_EQ(run("--scene '" + std::string(CANOPY_SHARED_DIR) + "/assets/scenes/grove.glb' -o '" + out + "'"), 5);
+  std::ofstream(dir + "/bad.scene.json") << R"({"canopy_scene": 1, "models": [{"density": "cli.density.vdb"}], "instances": [{"model": 3, "matrix": [1,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1]}]})";
+  EXPECT_EQ(run("--scene '" + dir + "/bad.scene.json' -o '" + out + "'"), 3);
+  EXPECT_FALSE(exists(out));
+  // The same plant with --ignore-light packs.
+  EXPECT_EQ(run("'" + dir + "/cli.density.vdb' '" + dir + "/p.light.chaar' --ignore-light -o '" + out + "'"), 0);
+  EXPECT_TRUE(exists(out));
+  EXPECT_EQ(run("verify '" + out + "'"), 0);
+}
+
+TEST(OctreepackCli, NonFiniteDensityIsRejected) {
+  op::ModelSource s = syntheticPlant(16, 0, "nan", 0);
+  s.cells[3].density = std::numeric_limits<float>::quiet_NaN();
+  const std::string dir = tmpDir();
+  writeSourceVdb(dir + "/nan.density.vdb", s);
+  std::remove((dir + "/nan.canopy").c_str());
+  EXPECT_EQ(run("'" + dir + "/nan.density.vdb' -o '" + dir + "/nan.canopy'"), 3);
+  EXPECT_FALSE(exists(dir + "/nan.canopy"));
+}
+
+// The forest path: pipelines/scatter.py -> scene JSON -> canopy-octreepack --scene -> verify.
+TEST(OctreepackCli, ScatteredForestOf400InstancesPacks) {
+  const std::string dir = tmpDir();
+  writeSourceVdb(dir + "/fa.density.vdb", syntheticPlant(24, 0, "fa", 0));
+  writeSourceVdb(dir + "/fb.density.vdb", syntheticPlant(16, 0, "fb", 0));
+  const std::string scatter = "python3 '" + std::string(CANOPY_SOURCE_DIR) + "/pipelines/scatter.py' --count 400 --seed 5 --radius 30 --model fa='" +
+                              dir + "/fa.density.vdb' --model fb='" + dir + "/fb.density.vdb' -o ";
+  ASSERT_EQ(std::system((scatter + "'" + dir + "/forest.scene.json' 2>/dev/null").c_str()), 0);
+  ASSERT_EQ(std::system((scatter + "'" + dir + "/forest2.scene.json' 2>/dev/null").c_str()), 0);
+  EXPECT_EQ(bytesOf(dir + "/forest.scene.json"), bytesOf(dir + "/forest2.scene.json"));  // deterministic
+  EXPECT_EQ(run("--scene '" + dir + "/forest.scene.json' -o '" + dir + "/forest.canopy'"), 0);
+  EXPECT_EQ(run("verify '" + dir + "/forest.canopy'"), 0);
+  CanopyFile f = CanopyFile::open(dir + "/forest.canopy");
+  EXPECT_EQ(f.instanceCount(), 400u);
+  EXPECT_EQ(f.modelCount(), 2u);
+  uint32_t perModel[2] = {0, 0};
+  for (uint32_t i = 0; i < f.instanceCount(); ++i) {
+    const auto& in = f.instance(i);
+    ++perModel[in.model];
+    const float x = in.modelToWorld[3], z = in.modelToWorld[11];
+    ASSERT_LE(x * x + z * z, 30.0f * 30.0f + 1e-3f);
+    const float s = in.modelToWorld[5];  // uniform scale (the yaw keeps the y axis)
+    ASSERT_NEAR(in.modelToWorld[0] * in.modelToWorld[0] + in.modelToWorld[2] * in.modelToWorld[2], s * s, 1e-4f);
+  }
+  EXPECT_GT(perModel[0], 150u);
+  EXPECT_GT(perModel[1], 150u);
+}
+
+// ---- lighting -------------------------------------------------------------------------------------
+namespace {
+// A fully occupied cube (every block present at every level, random densities: no constant nodes).
+op::ModelSource denseCube(int edge) {
+  op::ModelSource s;
+  s.name = "cube";
+  for (int a = 0; a < 3; ++a) s.latticeMin[a] = -2, s.latticeMax[a] = edge - 3;
+  for (int k = 0; k < edge; ++k)
+    for (int j = 0; j < edge; ++j)
+      for (int i = 0; i < edge; ++i) {
+        const uint32_t h = op::testing::mix32(uint32_t(i + 97 * j + 9973 * k));
+        s.cells.push_back({{i - 2, j - 2, k - 2}, 0.1f + 0.8f * op::testing::unit(h), 0.0f, {0.2f, 0.5f, 0.1f}});
+      }
+  return s;
+}
+}  // namespace
+
+// Light levels are the Haar averages of the source lighting: a light voxel of level d (2^(depth-d+1)
+// cells wide) holds the mean of the source over its cells (float16: relative error <= 2^-11).
+TEST(OctreepackLight, LightLevelsAreBoxFiltersOfTheSourceLighting) {
+  const op::ModelSource src = denseCube(32);
+  const op::BuiltModel m = op::buildOctree(src, "cube", op::testing::analyticLight);
+  canopy::CanopyWriteInput in;
+  in.models.push_back({m.record, &m.tiles, &m.bricks, &m.light});
+  in.instances.push_back(canopy::CanopyInstance{});
+  const std::vector<unsigned char> bytes = canopy::writeCanopyBytes(std::move(in));
+  CanopyFile f = CanopyFile::fromMemory(bytes.data(), bytes.size(), "cube.canopy");
+  const canopy::CanopyModel& M = f.model(0);
+  ASSERT_EQ(M.depth, 2u);
+  ASSERT_EQ(M.lightCount, M.brickCount);
+  std::mt19937 rng(5);
+  float tmp[canopy::kCanopyLightChannels];
+  for (uint32_t level = 0; level <= M.depth; ++level) {
+    const int cellsPerVoxel = 2 << (M.depth - level);
+    const int voxels = 32 / cellsPerVoxel;  // light voxels per axis over the occupied cube
+    for (int n = 0; n < 40; ++n) {
+      const int g[3] = {int(rng() % uint32_t(voxels)), int(rng() % uint32_t(voxels)), int(rng() % uint32_t(voxels))};
+      const uint32_t base = rng() % canopy::kCanopyLightBases;
+      double ref[3] = {0, 0, 0};
+      const int c = cellsPerVoxel;
+      for (int z = 0; z < c; ++z)
+        for (int y = 0; y < c; ++y)
+          for (int x = 0; x < c; ++x) {
+            op::testing::analyticLight(-2 + g[0] * c + x, -2 + g[1] * c + y, -2 + g[2] * c + z, tmp);
+            for (int ch = 0; ch < 3; ++ch) ref[ch] += tmp[3 * base + ch];
+          }
+      const float u[3] = {(float(g[0]) + 0.5f) * float(c) / float(M.rootCells), (float(g[1]) + 0.5f) * float(c) / float(M.rootCells),
+                          (float(g[2]) + 0.5f) * float(c) / float(M.rootCells)};
+      const canopy::CanopyLookup r = f.descend(0, u[0], u[1], u[2], level);
+      ASSERT_EQ(r.level, level);
+      ASSERT_NE(r.node.brick, canopy::kCanopyNone);
+      const auto page = f.readPage(canopy::canopyLightPage(M, r.node.brick, f.header().lightItemsPerPage));
+      float rgb[3];
+      canopy::canopySampleLight(canopy::canopyLightInPage(page.data(), r.node.brick % f.header().lightItemsPerPage), base, r.local[0],
+                                r.local[1], r.local[2], rgb);
+      for (int ch = 0; ch < 3; ++ch) {
+        const double want = ref[ch] / double(c * c * c);
+        ASSERT_NEAR(rgb[ch], want, std::abs(want) * 6e-4 + 1e-5) << "level " << level << " base " << base;
+      }
+    }
+  }
+}
+
+// An lbsolve-style light VDB (19 Vec3 grids B00..B18) packs through the CLI; samples at light
+// voxel centres of the finest level equal the 2x2x2 mean of the grids' values.
+TEST(OctreepackLight, LbsolveLightVdbPacksThroughTheCli) {
+  const std::string dir = tmpDir();
+  const op::ModelSource src = syntheticPlant(16, 0, "litcli", 0);
+  writeSourceVdb(dir + "/litcli.density.vdb", src);
+  openvdb::GridPtrVec grids;
+  float tmp[canopy::kCanopyLightChannels];
+  for (uint32_t b = 0; b < canopy::kCanopyLightBases; ++b) {
+    auto g = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
+    char name[8];
+    std::snprintf(name, sizeof name, "B%02u", b);
+    g->setName(name);
+    auto acc = g->getAccessor();
+    for (int k = 0; k < 16; ++k)
+      for (int j = 0; j < 16; ++j)
+        for (int i = 0; i < 16; ++i) {
+          op::testing::analyticLight(i, j, k, tmp);
+          acc.setValue(openvdb::Coord(i, j, k), openvdb::Vec3s(tmp[3 * b], tmp[3 * b + 1], tmp[3 * b + 2]));
+        }
+    grids.push_back(g);
+  }
+  canopy::vdbio::writeVdb(dir + "/litcli.light.vdb", grids);
+  const std::string out = dir + "/litcli.canopy";
+  ASSERT_EQ(run("'" + dir + "/litcli.density.vdb' '" + dir + "/litcli.light.vdb' -o '" + out + "'"), 0);
+  ASSERT_EQ(run("verify '" + out + "'"), 0);
+  CanopyFile f = CanopyFile::open(out);
+  const canopy::CanopyModel& M = f.model(0);
+  ASSERT_TRUE(M.flags & canopy::kCanopyModelHasLight);
+  ASSERT_EQ(M.lightCount, M.brickCount);
+  ASSERT_EQ(M.depth, 1u);
+  size_t checked = 0;
+  for (int z = 0; z < 8; ++z)
+    for (int y = 0; y < 8; ++y)
+      for (int x = 0; x < 8; ++x) {  // finest light voxels (2 cells) over the 16^3 lattice
+        const float u[3] = {(2.0f * float(x) + 1.0f) / 16.0f, (2.0f * float(y) + 1.0f) / 16.0f, (2.0f * float(z) + 1.0f) / 16.0f};
+        const canopy::CanopyLookup r = f.descend(0, u[0], u[1], u[2], M.depth);
+        if (r.level != M.depth || r.node.brick == canopy::kCanopyNone) continue;
+        double ref[3] = {0, 0, 0};
+        for (int s = 0; s < 8; ++s) {
+          op::testing::analyticLight(2 * x + (s & 1), 2 * y + ((s >> 1) & 1), 2 * z + (s >> 2), tmp);
+          for (int ch = 0; ch < 3; ++ch) ref[ch] += tmp[3 * 4 + ch] / 8.0;
+        }
+        const auto page = f.readPage(canopy::canopyLightPage(M, r.node.brick, f.header().lightItemsPerPage));
+        float rgb[3];
+        canopy::canopySampleLight(canopy::canopyLightInPage(page.data(), r.node.brick % f.header().lightItemsPerPage), 4, r.local[0],
+                                  r.local[1], r.local[2], rgb);
+        for (int ch = 0; ch < 3; ++ch) ASSERT_NEAR(rgb[ch], ref[ch], std::abs(ref[ch]) * 6e-4 + 1e-5);
+        ++checked;
+      }
+  EXPECT_GT(checked, 50u);
+}
+
+#if __has_include("formats/chaar.h")
+#include "formats/chaar.h"
+
+// .chaar lighting (canopy-haar's frozen test file) packed through the CLI: every finest light voxel
+// equals the mean of the chaar decoder's samples at its 2x2x2 lattice cells (0 outside the
+// lattice), within float16 (relative 2^-11).
+TEST(OctreepackLight, ChaarLightingEqualsTheDecoder) {
+  const std::string chaar = std::string(CANOPY_SOURCE_DIR) + "/tests/haar/data/small_v1_0.chaar";
+  const canopy::haar::ChaarData d = canopy::haar::readChaar(chaar);
+  const canopy::haar::ChaarView view = d.view();
+  op::ModelSource s;
+  s.name = "chaarlit";
+  for (int a = 0; a < 3; ++a) s.latticeMin[a] = d.header.latticeMin[a], s.latticeMax[a] = d.header.latticeMax[a];
+  for (int k = s.latticeMin[2]; k <= s.latticeMax[2]; ++k)
+    for (int j = s.latticeMin[1]; j <= s.latticeMax[1]; ++j)
+      for (int i = s.latticeMin[0]; i <= s.latticeMax[0]; ++i)
+        s.cells.push_back({{i, j, k}, 0.1f + 0.05f * float((i + 2 * j + 3 * k) & 7), 0.0f, {0.3f, 0.6f, 0.2f}});
+  const std::string dir = tmpDir();
+  writeSourceVdb(dir + "/chaarlit.density.vdb", s);
+  const std::string out = dir + "/chaarlit.canopy";
+  ASSERT_EQ(run("'" + dir + "/chaarlit.density.vdb' '" + chaar + "' -o '" + out + "'"), 0);
+  ASSERT_EQ(run("verify '" + out + "'"), 0);
+  CanopyFile f = CanopyFile::open(out);
+  const canopy::CanopyModel& M = f.model(0);
+  ASSERT_EQ(M.lightCount, M.brickCount);
+  auto decoded = [&](int base, int i, int j, int k, int ch) {
+    if (i < s.latticeMin[0] || j < s.latticeMin[1] || k < s.latticeMin[2] || i > s.latticeMax[0] || j > s.latticeMax[1] || k > s.latticeMax[2])
+      return 0.0f;
+    const canopy::haar::Rgb v = canopy::haar::chaarSample(view, base, float(i), float(j), float(k));
+    return ch == 0 ? v.r : (ch == 1 ? v.g : v.b);
+  };
+  size_t checked = 0;
+  const int n = int(M.rootCells / 2);
+  for (int z = 0; z < n; ++z)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x) {
+        const float u[3] = {(2.0f * float(x) + 1.0f) / float(M.rootCells), (2.0f * float(y) + 1.0f) / float(M.rootCells),
+                            (2.0f * float(z) + 1.0f) / float(M.rootCells)};
+        const canopy::CanopyLookup r = f.descend(0, u[0], u[1], u[2], M.depth);
+        if (r.level != M.depth || r.node.brick == canopy::kCanopyNone) continue;
+        const auto page = f.readPage(canopy::canopyLightPage(M, r.node.brick, f.header().lightItemsPerPage));
+        for (int base = 0; base < int(canopy::kCanopyLightBases); ++base) {
+          float rgb[3];
+          canopy::canopySampleLight(canopy::canopyLightInPage(page.data(), r.node.brick % f.header().lightItemsPerPage), uint32_t(base),
+                                    r.local[0], r.local[1], r.local[2], rgb);
+          for (int ch = 0; ch < 3; ++ch) {
+            double ref = 0;
+            for (int c = 0; c < 8; ++c)
+              ref += decoded(base, M.octreeOrigin[0] + 2 * x + (c & 1), M.octreeOrigin[1] + 2 * y + ((c >> 1) & 1),
+                             M.octreeOrigin[2] + 2 * z + (c >> 2), ch) / 8.0;
+            ASSERT_NEAR(rgb[ch], ref, std::abs(ref) * 6e-4 + 1e-6) << "base " << base << " voxel " << x << "," << y << "," << z;
+          }
+        }
+        ++checked;
+      }
+  EXPECT_GT(checked, 5u);
+}
+#endif
+
+#ifdef CANOPY_HAS_CUDA
+#include "canopy/device.h"
+#include "tests/octreepack/sample_cuda.h"
+#endif
+
+// The GPU path runs the same CANOPY_HD descent and brick sampling as the CPU reference: on a GPU
+// host every sample must agree (same float operations; FMA contraction may differ: 1e-5).
+TEST(OctreepackSample, CudaMatchesCpuReference) {
+#ifndef CANOPY_HAS_CUDA
+  GTEST_SKIP() << "CPU-only build";
+#else
+  if (canopy::cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA device";
+  CanopyFile f = CanopyFile::open(plantFile());
+  PackedSampler S(f);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> U(0.0f, 1.0f);
+  std::vector<float> pts(3 * 50000);
+  for (float& p : pts) p = U(rng);
+  for (uint32_t level : {0u, 1u, 2u, 3u}) {
+    const std::vector<CanopySample> gpu = op::testing::sampleOnCuda(f, 0, pts, level);
+    ASSERT_EQ(gpu.size(), pts.size() / 3);
+    for (size_t i = 0; i < gpu.size(); ++i) {
+      const CanopySample c = S.sampleUnit(0, &pts[3 * i], level);
+      ASSERT_NEAR(gpu[i].density, c.density, 1e-5f) << "level " << level << " point " << i;
+      for (int a = 0; a < 3; ++a) ASSERT_NEAR(gpu[i].albedo[a], c.albedo[a], 1e-5f);
+      ASSERT_NEAR(gpu[i].wood, c.wood, 1e-5f);
+    }
+  }
+  // Lighting on the device (float16 decode + trilinear) vs the host, on a lit dense cube.
+  const op::BuiltModel m = op::buildOctree(denseCube(32), "cube", op::testing::analyticLight);
+  canopy::CanopyWriteInput in;
+  in.models.push_back({m.record, &m.tiles, &m.bricks, &m.light});
+  const std::vector<unsigned char> bytes = canopy::writeCanopyBytes(std::move(in));
+  CanopyFile lit = CanopyFile::fromMemory(bytes.data(), bytes.size(), "cube.canopy");
+  std::vector<float> rgb;
+  op::testing::sampleOnCuda(lit, 0, pts, 2, &rgb, 9);
+  for (size_t i = 0; i < pts.size() / 3; i += 7) {
+    const canopy::CanopyLookup r = lit.descend(0, pts[3 * i], pts[3 * i + 1], pts[3 * i + 2], 2);
+    if (r.node.brick == canopy::kCanopyNone) continue;
+    const auto page = lit.readPage(canopy::canopyLightPage(lit.model(0), r.node.brick, lit.header().lightItemsPerPage));
+    float ref[3];
+    canopy::canopySampleLight(canopy::canopyLightInPage(page.data(), r.node.brick % lit.header().lightItemsPerPage), 9, r.local[0],
+                              r.local[1], r.local[2], ref);
+    for (int ch = 0; ch < 3; ++ch) ASSERT_NEAR(rgb[3 * i + ch], ref[ch], 1e-5f);
+  }
+#endif
+}
+

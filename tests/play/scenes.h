@@ -1,0 +1,66 @@
+// scenes.h: .canopy test scenes built in-process with the octreepack builder and writer
+// (canopy_octree), for the player's tests and benchmark.
+#pragma once
+#include <cmath>
+#include <cstdlib>
+#include <string>
+#include <vector>
+
+#include "formats/canopy_write.h"
+#include "tools/octreepack/octree_build.h"
+
+namespace canopy::play::testing {
+
+// A ball of uniform density: every lattice cell whose centre lies within `radius` cells of the
+// lattice centre, in a lattice of `edge` cells per axis with one cell = `cell` metres, centred on
+// the model origin.
+inline octreepack::ModelSource sphereModel(int edge, float radius, float density, float cell = 0.1f,
+                                           const float albedo[3] = nullptr) {
+  octreepack::ModelSource s;
+  s.name = "sphere";
+  s.sourceLabel = "synthetic:sphere";
+  for (int a = 0; a < 3; ++a) s.latticeMin[a] = 0, s.latticeMax[a] = edge - 1;
+  const double c = 0.5 * (edge - 1);
+  s.indexToModel = {cell, 0, 0, -c * cell, 0, cell, 0, -c * cell, 0, 0, cell, -c * cell};
+  const float alb[3] = {albedo ? albedo[0] : 0.5f, albedo ? albedo[1] : 0.5f, albedo ? albedo[2] : 0.5f};
+  for (int k = 0; k < edge; ++k)
+    for (int j = 0; j < edge; ++j)
+      for (int i = 0; i < edge; ++i) {
+        const double x = i - c, y = j - c, z = k - c;
+        if (x * x + y * y + z * z >= double(radius) * radius) continue;
+        s.cells.push_back({{i, j, k}, density, 0.0f, {alb[0], alb[1], alb[2]}});
+      }
+  return s;
+}
+
+// A translation(+ uniform scale, + rotation about y) instance.
+inline CanopyInstance instanceAt(uint32_t model, float x, float y, float z, float scale = 1.0f, float yawRad = 0.0f) {
+  CanopyInstance in{};
+  const float c = std::cos(yawRad) * scale, s = std::sin(yawRad) * scale;
+  const float m[12] = {c, 0, s, x, 0, scale, 0, y, -s, 0, c, z};
+  for (int i = 0; i < 12; ++i) in.modelToWorld[i] = m[i];
+  in.model = model;
+  return in;
+}
+
+// Builds every model and writes `path`.
+inline void writeScene(const std::string& path, const std::vector<octreepack::ModelSource>& sources,
+                       const std::vector<CanopyInstance>& instances) {
+  std::vector<octreepack::BuiltModel> built;
+  built.reserve(sources.size());
+  for (const auto& s : sources) built.push_back(octreepack::buildOctree(s, s.name));
+  CanopyWriteInput w;
+  for (auto& b : built) w.models.push_back({b.record, &b.tiles, &b.bricks});
+  w.instances = instances;
+  w.metadata = "{\"tool\":\"tests/play\"}";
+  writeCanopyFile(path, std::move(w));
+}
+
+inline std::string tmpDir(const char* sub) {
+  const std::string d = std::string(CANOPY_BINARY_DIR) + "/tests/play/tmp/" + sub;
+  const std::string cmd = "mkdir -p '" + d + "'";
+  if (std::system(cmd.c_str()) != 0) std::abort();
+  return d;
+}
+
+}  // namespace canopy::play::testing

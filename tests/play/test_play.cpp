@@ -1,0 +1,475 @@
+// test_play.cpp: the player's CPU reference (the same cone.h code the CUDA kernel runs), its cache
+// and its command line.
+//
+// Scenes are built in-process with the octreepack builder (tests/play/scenes.h). Tolerances are
+// stated at each test with their reason.
+#include <gtest/gtest.h>
+
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstring>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "canopy/atomic_file.h"
+#include "canopy/errors.h"
+#include "formats/canopy_file.h"
+#include "runtime/cone.h"
+#include "runtime/image_io.h"
+#include "runtime/page_cache.h"
+#include "runtime/player.h"
+#include "runtime/scene.h"
+#include "tests/octreepack/synthetic.h"
+#include "bench/play/forest.h"
+#include "tests/play/scenes.h"
+
+namespace pl = canopy::play;
+namespace pt = canopy::play::testing;
+using canopy::Device;
+
+namespace {
+
+// Sphere scene: 48^3 lattice, 0.1 m cells, radius 18 cells (1.8 m), density 0.05.
+constexpr int kEdge = 48;
+constexpr float kRadius = 18.0f, kDensity = 0.05f, kCell = 0.1f;
+
+const std::string& sphereFile() {
+  static const std::string path = [] {
+    const std::string p = pt::tmpDir("scenes") + "/sphere.canopy";
+    pt::writeScene(p, {pt::sphereModel(kEdge, kRadius, kDensity, kCell)}, {pt::instanceAt(0, 0, 0, 0)});
+    return p;
+  }();
+  return path;
+}
+
+const std::string& plantFile() {
+  static const std::string path = [] {
+    const std::string p = pt::tmpDir("scenes") + "/plant.canopy";
+    pt::writeScene(p, {canopy::octreepack::testing::syntheticPlant(40, 0, "plant", 4)}, {pt::instanceAt(0, 0, 0, 0)});
+    return p;
+  }();
+  return path;
+}
+
+pl::PlayOptions smallView(const std::string& file, int w, int h) {
+  pl::PlayOptions o;
+  o.input = file;
+  o.width = w;
+  o.height = h;
+  o.converge = true;  // every frame complete: the reference
+  return o;
+}
+
+std::vector<float> render(const pl::PlayOptions& o, nlohmann::json* report = nullptr) {
+  std::vector<float> img;
+  nlohmann::json r = pl::play(o, Device{}, &img);
+  if (report) *report = r;
+  return img;
+}
+
+double rms(const std::vector<float>& a, const std::vector<float>& b) {
+  double s = 0;
+  for (size_t i = 0; i < a.size(); ++i) s += double(a[i] - b[i]) * (a[i] - b[i]);
+  return std::sqrt(s / double(a.size()));
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// Per-sample math
+// ---------------------------------------------------------------------------------------------
+
+TEST(Cone, LevelFromFootprintIsTheCoarsestLevelNoLargerThanTheFootprint) {
+  // voxel at level L = 2^(depth - L) cells
+  EXPECT_EQ(pl::levelForFootprint(5, 0.3f, 0), 5u);   // below a cell: finest
+  EXPECT_EQ(pl::levelForFootprint(5, 1.0f, 0), 5u);
+  EXPECT_EQ(pl::levelForFootprint(5, 1.9f, 0), 5u);
+  EXPECT_EQ(pl::levelForFootprint(5, 2.0f, 0), 4u);
+  EXPECT_EQ(pl::levelForFootprint(5, 7.9f, 0), 3u);
+  EXPECT_EQ(pl::levelForFootprint(5, 1e6f, 0), 0u);   // clamped at the root
+  EXPECT_EQ(pl::levelForFootprint(5, 8.0f, -1), 1u);  // bias: coarser
+}
+
+TEST(Cone, RayBoxAndNodeExit) {
+  float t0, t1;
+  pl::rayBox(pl::v3(-1, 0.5f, 0.5f), pl::v3(1, 0, 0), pl::v3(0, 0, 0), pl::v3(1, 1, 1), t0, t1);
+  EXPECT_FLOAT_EQ(t0, 1.0f);
+  EXPECT_FLOAT_EQ(t1, 2.0f);
+  pl::rayBox(pl::v3(-1, 2.0f, 0.5f), pl::v3(1, 0, 0), pl::v3(0, 0, 0), pl::v3(1, 1, 1), t0, t1);
+  EXPECT_GT(t0, t1);  // parallel and outside: miss
+  const float lo[3] = {0.25f, 0.5f, 0.0f};
+  EXPECT_FLOAT_EQ(pl::nodeExit(pl::v3(0.3f, 0.6f, 0.1f), pl::v3(0, 0, 2), lo, 0.25f), (0.25f - 0.1f) / 2.0f);
+}
+
+TEST(Cone, LbIndirectIsTheWeightedBasesPlusAmbientTimesSceneFactor) {
+  canopy::sun::Weights w;
+  ASSERT_TRUE(canopy::sun::lookupToSun(0.3f, 1.0f, 0.2f, w));
+  const float bases[3][3] = {{1, 2, 3}, {4, 5, 6}, {7, 8, 9}};
+  const float b0[3] = {0.5f, 0.25f, 1.0f};
+  float out[3];
+  pl::lbIndirect(w, bases, b0, 0.4f, 0.5f, out);
+  for (int c = 0; c < 3; ++c) {
+    const float expect = (w.weight[0] * bases[0][c] + w.weight[1] * bases[1][c] + w.weight[2] * bases[2][c] + 0.4f * b0[c]) * 0.5f;
+    EXPECT_NEAR(out[c], expect, 1e-6f);
+  }
+}
+
+TEST(Cone, SceneLightFactorIsTrilinearAndOneWithoutALattice) {
+  pl::SceneLightView L{};
+  EXPECT_EQ(pl::sceneLightFactor(L, pl::v3(1, 2, 3)), 1.0f);
+  const float values[8] = {0, 1, 0, 1, 0, 1, 0, 1};  // 2x2x2, value = x index
+  L.values = values;
+  for (int i = 0; i < 12; ++i) L.worldToIndex.m[i] = (i % 5 == 0) ? 1.0f : 0.0f;  // identity
+  for (int a = 0; a < 3; ++a) L.min[a] = 0, L.dim[a] = 2;
+  EXPECT_NEAR(pl::sceneLightFactor(L, pl::v3(0.25f, 0.5f, 0.5f)), 0.25f, 1e-6f);
+  EXPECT_NEAR(pl::sceneLightFactor(L, pl::v3(5.0f, 0.5f, 0.5f)), 1.0f, 1e-6f);  // clamped
+}
+
+// ---------------------------------------------------------------------------------------------
+// The cache
+// ---------------------------------------------------------------------------------------------
+
+TEST(PageCache, EvictsTheLeastRecentlyUsedButNeverAPageUsedThisFrame) {
+  pl::PageCache c(10, 3);
+  EXPECT_EQ(c.assign(0, 1).slot, 0);
+  EXPECT_EQ(c.assign(1, 1).slot, 1);
+  EXPECT_EQ(c.assign(2, 1).slot, 2);
+  // frame 2 uses pages 0 and 2: page 1 is the least recently used
+  c.touch(uint32_t(c.table()[0]), 2);
+  c.touch(uint32_t(c.table()[2]), 2);
+  pl::PageCache::Assignment a = c.assign(3, 3);
+  EXPECT_EQ(a.evicted, 1);
+  EXPECT_EQ(a.slot, 1);
+  EXPECT_FALSE(c.resident(1));
+  EXPECT_TRUE(c.resident(3));
+  // frame 4 uses everything: the next load is deferred, nothing is evicted
+  for (uint32_t s = 0; s < 3; ++s) c.touch(s, 4);
+  a = c.assign(4, 4);
+  EXPECT_EQ(a.slot, -1);
+  EXPECT_EQ(a.evicted, -1);
+  EXPECT_EQ(c.evictions(), 1u);
+  c.markBad(7);
+  EXPECT_TRUE(c.bad(7));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Rendering (CPU reference)
+// ---------------------------------------------------------------------------------------------
+
+// The sphere seen head-on from 6 m with a 40 degree field of view in a 65x65 image: the pixel
+// footprint there is 0.07 m < one 0.1 m cell, so the finest level is sampled. For each pixel the
+// analytic chord through the ball (radius R = 18 cells) gives alpha = 1 - exp(-sigma d chord).
+// Tolerance: the voxelised ball's surface is a staircase of cells whose centres lie within R,
+// reconstructed trilinearly, so its boundary is uncertain by about one cell: alpha must lie between
+// the analytic values for chord -/+ 1.5 cells (well inside the ball) and be exactly 0 for rays that
+// pass farther than R + sqrt(3) cells from the centre (no voxel's trilinear support reaches them).
+TEST(Render, SphereHasTheAnalyticSilhouetteAndBeerLambertOpacity) {
+  pl::PlayOptions o = smallView(sphereFile(), 65, 65);
+  o.camera = "orbit:azimuth=0,elevation=0,distance=6,fov=40,turns=0";
+  o.sigma = 1.0f;
+  const std::vector<float> img = render(o);
+  const canopy::CanopyFile f = canopy::CanopyFile::open(sphereFile());
+  const pl::HostScene scene = pl::buildScene(f);
+  const pl::CameraView cam = pl::framePlan(o, scene)[0].camera;
+  const double Rw = kRadius * kCell, k = double(o.sigma) * kDensity / kCell;  // extinction per metre
+  int inside = 0, outside = 0;
+  for (int y = 0; y < 65; ++y)
+    for (int x = 0; x < 65; ++x) {
+      float fp;
+      const pl::V3 d = pl::cameraRay(cam, x, y, fp);
+      const pl::V3 oc = pl::v3(0, 0, 0) - cam.position;
+      const double along = pl::dot(oc, d);
+      const double b = std::sqrt(std::max(0.0, double(pl::dot(oc, oc)) - along * along));  // ray-centre distance
+      const float alpha = img[size_t(4 * (y * 65 + x) + 3)];
+      if (b < Rw - 2 * kCell) {
+        const double chord = 2 * std::sqrt(Rw * Rw - b * b);
+        const double lo = 1 - std::exp(-k * (chord - 1.5 * kCell)), hi = 1 - std::exp(-k * (chord + 1.5 * kCell));
+        EXPECT_GE(alpha, lo - 1e-4) << "pixel " << x << "," << y << " b=" << b;
+        EXPECT_LE(alpha, hi + 1e-4) << "pixel " << x << "," << y << " b=" << b;
+        ++inside;
+      } else if (b > Rw + std::sqrt(3.0) * kCell) {
+        EXPECT_EQ(alpha, 0.0f) << "pixel " << x << "," << y << " b=" << b;
+        ++outside;
+      }
+    }
+  EXPECT_GT(inside, 1000);
+  EXPECT_GT(outside, 1000);
+  // the centre ray: T = exp(-sigma d 2R) (2R = 36 cells) within one cell of chord
+  const float centreT = 1.0f - img[size_t(4 * (32 * 65 + 32) + 3)];
+  EXPECT_NEAR(std::log(centreT), -o.sigma * kDensity * 2 * kRadius, o.sigma * kDensity * 1.0);
+}
+
+TEST(Render, OverlappingInstancesAddTheirExtinction) {
+  // two copies of the ball at the same place composite like one ball of twice the density
+  const std::string two = pt::tmpDir("scenes") + "/two-spheres.canopy";
+  const std::string dbl = pt::tmpDir("scenes") + "/double-sphere.canopy";
+  pt::writeScene(two, {pt::sphereModel(kEdge, kRadius, kDensity, kCell)}, {pt::instanceAt(0, 0, 0, 0), pt::instanceAt(0, 0, 0, 0)});
+  pt::writeScene(dbl, {pt::sphereModel(kEdge, kRadius, 2 * kDensity, kCell)}, {pt::instanceAt(0, 0, 0, 0)});
+  pl::PlayOptions o = smallView(two, 33, 33);
+  o.camera = "orbit:azimuth=20,elevation=10,distance=6,fov=40,turns=0";
+  o.shadows = false;  // the shadows differ at the 1e-7 level only; keep the comparison about compositing
+  const std::vector<float> a = render(o);
+  o.input = dbl;
+  const std::vector<float> b = render(o);
+  // float rounding of the summed extinctions and of the doubled stored density
+  // Tolerance: the two scenes' instance grids differ (one vs two boxes), and steps end at grid cell
+  // boundaries, so the brick samples sit at slightly different points along the ray: a midpoint-rule
+  // difference of the same trilinear field (measured 7e-4), far below a compositing error (two
+  // instances composited in sequence instead of summed would differ by up to 0.3 here).
+  for (size_t i = 0; i < a.size(); ++i) ASSERT_NEAR(a[i], b[i], 2e-3f) << i;
+}
+
+TEST(Render, NearerInstanceOccludesTheFartherOne) {
+  // a dense ball in front of a bright one: the bright one barely shows through
+  const std::string p = pt::tmpDir("scenes") + "/occlusion.canopy";
+  const float dark[3] = {0.05f, 0.05f, 0.05f}, bright[3] = {1, 1, 1};
+  pt::writeScene(p, {pt::sphereModel(24, 10, 1.0f, 0.1f, dark), pt::sphereModel(24, 10, 1.0f, 0.1f, bright)},
+                 {pt::instanceAt(0, 0, 0, 2.0f), pt::instanceAt(1, 0, 0, -2.0f)});
+  pl::PlayOptions o = smallView(p, 17, 17);
+  o.camera = "orbit:azimuth=0,elevation=0,distance=8,fov=20,turns=0";  // camera on +z: the dark ball is nearer
+  const std::vector<float> img = render(o);
+  const size_t c = size_t(4 * (8 * 17 + 8));
+  EXPECT_GT(img[c + 3], 0.999f);
+  EXPECT_LT(img[c], 0.05f * 1.4f);  // the dark ball's albedo times at most sun + ambient
+}
+
+TEST(Render, ExrHoldsLinearPremultipliedRgbAndAlphaOneMinusTransmittance) {
+  pl::PlayOptions o = smallView(sphereFile(), 33, 21);
+  o.output = pt::tmpDir("out") + "/sphere.exr";
+  const std::vector<float> img = render(o);
+  int w = 0, h = 0;
+  const std::vector<float> exr = pl::readExrRgba(o.output, w, h);
+  ASSERT_EQ(w, 33);
+  ASSERT_EQ(h, 21);
+  ASSERT_EQ(exr.size(), img.size());
+  float peak = 0;
+  for (size_t i = 0; i < img.size(); ++i) {
+    ASSERT_NEAR(exr[i], img[i], 1e-3f * std::max(1.0f, std::fabs(img[i]))) << i;  // half precision
+    if (i % 4 == 3) peak = std::max(peak, exr[i]);
+  }
+  EXPECT_GT(peak, 0.5f);
+}
+
+TEST(Render, EmptySceneRendersTheBackground) {
+  const std::string p = pt::tmpDir("scenes") + "/empty.canopy";
+  pt::writeScene(p, {pt::sphereModel(16, 5, 0.5f)}, {});  // a model, no instance
+  pl::PlayOptions o = smallView(p, 24, 16);
+  o.output = pt::tmpDir("out") + "/empty.png";
+  const std::vector<float> img = render(o);
+  for (float v : img) ASSERT_EQ(v, 0.0f);
+  int w = 0, h = 0;
+  const std::vector<unsigned char> px = pl::readPngRgb(o.output, w, h);
+  ASSERT_EQ(w, 24);
+  ASSERT_EQ(h, 16);
+  for (size_t i = 0; i < px.size(); ++i)
+    ASSERT_EQ(px[i], (unsigned char)std::lround(255.0f * pl::linearToSrgb(o.background[i % 3])));
+}
+
+// Moving the sun by 1 degree per frame must change the image by a small, steady amount: no
+// popping. Bounds (linear radiance; sun 1, ambient 0.35, albedo <= 0.8): the largest per-pixel
+// change per step stays below 0.05, and no step's mean change exceeds 2x the median step's (a
+// discontinuity, e.g. a face switch in the sun lookup or a LOD jump in the shadow cones, shows as
+// one step far above the others).
+TEST(Render, MovingTheSunChangesTheImageSmoothly) {
+  pl::PlayOptions o = smallView(plantFile(), 48, 48);
+  o.camera = "orbit:azimuth=30,elevation=15,fov=40,turns=0";
+  std::vector<std::vector<float>> frames;
+  for (int s = 0; s <= 8; ++s) {
+    o.sun = "orbit:azimuth=" + std::to_string(40 + s) + ",elevation=35";
+    frames.push_back(render(o));
+  }
+  std::vector<double> means;
+  double maxPixel = 0;
+  for (size_t s = 1; s < frames.size(); ++s) {
+    double sum = 0;
+    for (size_t i = 0; i < frames[s].size(); ++i) {
+      if (i % 4 == 3) {
+        ASSERT_EQ(frames[s][i], frames[s - 1][i]);  // opacity does not depend on the sun
+        continue;
+      }
+      const double d = std::fabs(frames[s][i] - frames[s - 1][i]);
+      sum += d;
+      maxPixel = std::max(maxPixel, d);
+    }
+    means.push_back(sum / double(frames[s].size() * 3 / 4));
+  }
+  std::vector<double> sorted = means;
+  std::sort(sorted.begin(), sorted.end());
+  const double median = sorted[sorted.size() / 2];
+  std::printf("sun steps: median mean change %.3g, largest step mean %.3g, largest pixel change %.3g\n", median, sorted.back(),
+              maxPixel);
+  EXPECT_GT(median, 0.0);  // the sun does light the plant
+  EXPECT_LT(maxPixel, 0.05);
+  for (double m : means) EXPECT_LE(m, 2.0 * median + 1e-6);
+}
+
+TEST(Render, SceneLightFactorScalesTheIndirectTerm) {
+  // a uniform scene lattice of 0.5 halves the ambient part: with the sun off, the image halves
+  const std::string p = pt::tmpDir("scenes") + "/scene-light.canopy";
+  std::vector<canopy::octreepack::BuiltModel> built;
+  built.push_back(canopy::octreepack::buildOctree(pt::sphereModel(24, 10, 0.3f), "s"));
+  canopy::CanopyWriteInput w;
+  w.models.push_back({built[0].record, &built[0].tiles, &built[0].bricks});
+  w.instances = {pt::instanceAt(0, 0, 0, 0)};
+  w.hasSceneLight = true;
+  const double m[12] = {1, 0, 0, -4, 0, 1, 0, -4, 0, 0, 1, -4};
+  for (int i = 0; i < 12; ++i) w.sceneLight.indexToWorld[i] = m[i];
+  for (int a = 0; a < 3; ++a) w.sceneLight.min[a] = 0, w.sceneLight.dim[a] = 9;
+  w.sceneLightValues.assign(9 * 9 * 9, 0.5f);
+  canopy::writeCanopyFile(p, std::move(w));
+  pl::PlayOptions o = smallView(p, 17, 17);
+  o.sunIntensity = 0.0f;
+  const std::vector<float> lit = render(o);
+  o.input = sphereFile();
+  pt::writeScene(pt::tmpDir("scenes") + "/no-scene-light.canopy", {pt::sphereModel(24, 10, 0.3f)}, {pt::instanceAt(0, 0, 0, 0)});
+  o.input = pt::tmpDir("scenes") + "/no-scene-light.canopy";
+  const std::vector<float> ref = render(o);
+  double peak = 0;
+  for (size_t i = 0; i < lit.size(); ++i) {
+    if (i % 4 == 3) {
+      ASSERT_EQ(lit[i], ref[i]);
+      continue;
+    }
+    ASSERT_NEAR(lit[i], 0.5f * ref[i], 1e-6f);
+    peak = std::max(peak, double(ref[i]));
+  }
+  EXPECT_GT(peak, 0.05);
+}
+
+// A flipped byte in a brick page: the page fails its CRC when the loader reads it; the player says
+// so once, never caches it, and renders that page's bricks from coarser data (an ancestor brick or
+// the node means), so the frame completes with no hole: wherever the intact render is opaque
+// (alpha > 0.2), the damaged one still shows matter (alpha > 0.05).
+TEST(Render, CorruptPageIsReportedOnceAndRenderedFromCoarserData) {
+  const std::string good = plantFile();
+  const std::string bad = pt::tmpDir("scenes") + "/plant-corrupt.canopy";
+  std::vector<unsigned char> bytes = canopy::readFile(good);
+  const canopy::CanopyFile f = canopy::CanopyFile::open(good);
+  ASSERT_GE(f.pageCount(), 2u);
+  const uint32_t page = f.pageCount() - 1;  // the finest level's last bricks
+  bytes[size_t(f.header().pagesOffset) + size_t(page) * f.header().pageBytes + 100] ^= 0x40;
+  canopy::writeFileAtomic(bad, bytes.data(), bytes.size());
+  pl::PlayOptions o = smallView(good, 48, 48);
+  o.frames = 3;
+  o.camera = "orbit:azimuth=30,elevation=15,fov=40,turns=0.02";
+  nlohmann::json rg, rb;
+  const std::vector<float> intact = render(o, &rg);
+  o.input = bad;
+  const std::vector<float> damaged = render(o, &rb);
+  EXPECT_EQ(rg["corrupt_pages"], 0);
+  EXPECT_EQ(rb["corrupt_pages"], 1);  // once, although three frames want it
+  EXPECT_EQ(int(rb["pages_streamed"]) + 1, int(rg["pages_streamed"]));
+  int differ = 0;
+  for (size_t i = 3; i < intact.size(); i += 4) {
+    if (intact[i] > 0.2f) {
+      EXPECT_GT(damaged[i], 0.05f) << "hole at pixel " << i / 4;
+    }
+    differ += intact[i] != damaged[i];
+  }
+  EXPECT_GT(differ, 0);  // the page was visible
+}
+
+TEST(Render, TruncatedFileIsRefusedAtOpen) {
+  const std::vector<unsigned char> bytes = canopy::readFile(sphereFile());
+  const std::string p = pt::tmpDir("scenes") + "/truncated.canopy";
+  canopy::writeFileAtomic(p, bytes.data(), bytes.size() - 4096);
+  pl::PlayOptions o = smallView(p, 8, 8);
+  try {
+    render(o);
+    FAIL() << "a truncated file was accepted";
+  } catch (const canopy::Error& e) {
+    EXPECT_EQ(e.code(), canopy::ExitCode::InvalidInput);
+    EXPECT_NE(std::string(e.what()).find(p), std::string::npos) << e.what();
+  }
+}
+
+// Streaming with a cache of a quarter of the brick pages, real-time mode (one pass per frame, the
+// loader works between frames): a camera path through a small forest completes, pages are evicted
+// and reloaded, and once the path holds a distant view (warm-up) the frame equals the converged
+// full-cache reference exactly (same pages, same code), because that view's working set fits.
+TEST(Render, SmallCacheStreamsAForestAndConvergesToTheFullCacheImage) {
+  const std::string p = pt::tmpDir("scenes") + "/forest.canopy";
+  std::vector<canopy::CanopyInstance> inst;
+  for (int i = 0; i < 12; ++i)
+    inst.push_back(pt::instanceAt(uint32_t(i % 2), float(i % 4) * 2.5f - 3.75f, 0, float(i / 4) * 2.5f - 2.5f, 1.0f, 0.5f * float(i)));
+  pt::writeScene(p, {canopy::octreepack::testing::syntheticPlant(40, 0, "a", 4), canopy::octreepack::testing::syntheticPlant(32, 0, "b", 3)},
+                 inst);
+  const canopy::CanopyFile f = canopy::CanopyFile::open(p);
+  const double pageMb = double(f.pageCount()) * f.header().pageBytes / (1024.0 * 1024.0);
+  // camera path: sweep past the trees, then hold the last view for warm-up frames
+  const std::string path = pt::tmpDir("scenes") + "/forest-path.json";
+  // far overview -> through the forest close to the trees (many fine pages: thrashing) -> far
+  // overview again, held from frame 8 (its coarse pages fit in the cache)
+  std::ofstream(path) << R"({"keyframes":[{"frame":0,"position":[-12,4,12],"target":[0,0,0],"fov":50},)"
+                      << R"({"frame":3,"position":[-2.5,0.5,1.2],"target":[3,0,-2.5],"fov":50},)"
+                      << R"({"frame":5,"position":[2.5,0.5,1.2],"target":[-3,0,-2.5],"fov":50},)"
+                      << R"({"frame":8,"position":[12,4,12],"target":[0,0,0],"fov":50}]})";
+  pl::PlayOptions o = smallView(p, 40, 30);
+  o.camera = path;
+  o.frames = 14;
+  o.converge = false;
+  o.cacheMb = pageMb / 4;
+  nlohmann::json small;
+  const std::vector<float> last = render(o, &small);
+  EXPECT_GT(int(small["evictions"]), 0) << small.dump();
+  EXPECT_LT(double(small["cache_hit_rate"]), 1.0);
+  EXPECT_GE(double(small["first_complete_frame_s"]), 0.0);  // some frame had every page it wanted
+  pl::PlayOptions ref = o;
+  ref.cacheMb = pageMb * 2;
+  ref.converge = true;
+  nlohmann::json full;
+  const std::vector<float> want = render(ref, &full);
+  EXPECT_EQ(int(full["evictions"]), 0);
+  EXPECT_LT(rms(last, want), 1e-6) << small.dump();
+}
+
+// ---------------------------------------------------------------------------------------------
+// The benchmark's scene generator (bench/play/forest.h), its CPU-side logic
+// ---------------------------------------------------------------------------------------------
+
+TEST(PlayBench, ScatterIsDeterministicAndPlacesEveryInstanceOnTheDisk) {
+  pl::bench::ScatterOptions so;
+  so.count = 400;
+  so.radius = 40;
+  const auto a = pl::bench::scatterInstances(so), b = pl::bench::scatterInstances(so);
+  ASSERT_EQ(a.size(), 400u);
+  std::vector<int> perModel(so.models, 0);
+  for (size_t i = 0; i < a.size(); ++i) {
+    EXPECT_EQ(std::memcmp(&a[i], &b[i], sizeof(a[i])), 0);
+    const float x = a[i].modelToWorld[3], y = a[i].modelToWorld[7], z = a[i].modelToWorld[11];
+    EXPECT_LE(x * x + z * z, so.radius * so.radius * 1.0001f);
+    EXPECT_EQ(y, 0.0f);
+    const float scale = std::sqrt(a[i].modelToWorld[0] * a[i].modelToWorld[0] + a[i].modelToWorld[8] * a[i].modelToWorld[8]);
+    EXPECT_GE(scale, so.scaleMin - 1e-5f);
+    EXPECT_LE(scale, so.scaleMax + 1e-5f);
+    ASSERT_LT(a[i].model, so.models);
+    ++perModel[a[i].model];
+  }
+  for (int n : perModel) EXPECT_GT(n, 100);  // every model used, roughly uniformly
+}
+
+TEST(PlayBench, A400InstanceForestRendersWithEveryInstanceInTheGrid) {
+  pl::bench::ScatterOptions so;
+  so.count = 400;
+  so.models = 2;
+  so.radius = 25;
+  const std::string p = pt::tmpDir("scenes") + "/forest400.canopy";
+  pt::writeScene(p, {pt::sphereModel(16, 6, 0.5f, 0.25f), pt::sphereModel(12, 4, 0.8f, 0.25f)}, pl::bench::scatterInstances(so));
+  const canopy::CanopyFile f = canopy::CanopyFile::open(p);
+  const pl::HostScene scene = pl::buildScene(f);
+  std::vector<int> seen(400, 0);
+  for (uint32_t id : scene.gridItems) seen[id] = 1;
+  for (int v : seen) EXPECT_EQ(v, 1);
+  pl::PlayOptions o = smallView(p, 48, 27);
+  o.camera = "orbit:elevation=35,turns=0";
+  const std::vector<float> img = render(o);
+  int covered = 0;
+  for (size_t i = 3; i < img.size(); i += 4) covered += img[i] > 0.5f;
+  EXPECT_GT(covered, 50);  // measured 110: 400 balls of 1.5-3 m on a 50 m disk seen from 30 m
+}

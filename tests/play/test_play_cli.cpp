@@ -1,0 +1,140 @@
+// test_play_cli.cpp: canopy-play's command line as data: command, expected exit code, expected
+// files and report fields (CONVENTIONS.md 12). Runs the built executable.
+#include <gtest/gtest.h>
+
+#include <sys/stat.h>
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "canopy/atomic_file.h"
+#include "canopy/device.h"
+#include "runtime/image_io.h"
+#include "tests/play/scenes.h"
+
+namespace pt = canopy::play::testing;
+
+namespace {
+
+const std::string kBin = std::string(CANOPY_BINARY_DIR) + "/bin/canopy-play";
+
+struct CliRun {
+  int code;
+  std::string out, err;
+};
+
+CliRun run(const std::string& args) {
+  const std::string dir = pt::tmpDir("cli");
+  const std::string o = dir + "/stdout.txt", e = dir + "/stderr.txt";
+  const std::string cmd = "'" + kBin + "' " + args + " > '" + o + "' 2> '" + e + "'";
+  const int status = std::system(cmd.c_str());
+  CliRun r{WIFEXITED(status) ? WEXITSTATUS(status) : -1, {}, {}};
+  std::stringstream so, se;
+  so << std::ifstream(o).rdbuf();
+  se << std::ifstream(e).rdbuf();
+  r.out = so.str();
+  r.err = se.str();
+  return r;
+}
+
+bool exists(const std::string& p) {
+  struct stat st;
+  return ::stat(p.c_str(), &st) == 0;
+}
+
+const std::string& sceneFile() {
+  static const std::string p = [] {
+    const std::string f = pt::tmpDir("cli") + "/ball.canopy";
+    const float albedo[3] = {0.2f, 0.6f, 0.1f};
+    pt::writeScene(f, {pt::sphereModel(24, 10, 0.4f, 0.1f, albedo)}, {pt::instanceAt(0, 0, 0, 0)});
+    return f;
+  }();
+  return p;
+}
+
+}  // namespace
+
+TEST(PlayCli, WritesAPngOfTheRequestedSizeThatIsNotBlank) {
+  const std::string out = pt::tmpDir("cli") + "/ball.png";
+  std::remove(out.c_str());
+  const CliRun r = run("'" + sceneFile() + "' -o '" + out + "' --size 40x30 --device cpu --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  int w = 0, h = 0;
+  const std::vector<unsigned char> px = canopy::play::readPngRgb(out, w, h);
+  EXPECT_EQ(w, 40);
+  EXPECT_EQ(h, 30);
+  int fg = 0;
+  for (size_t i = 0; i < px.size(); i += 3) fg += px[i] != px[0] || px[i + 1] != px[1] || px[i + 2] != px[2];
+  EXPECT_GT(fg, 100);  // the ball covers a good part of the frame
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["frames"], 1);
+  EXPECT_EQ(j["device"], "cpu");
+  for (const char* k : {"frame_ms_median", "frame_ms_p95", "cache_hit_rate", "pages_streamed", "mb_streamed", "stream_mb_per_s"})
+    EXPECT_TRUE(j.contains(k)) << k;
+  EXPECT_NE(r.err.find("median"), std::string::npos) << r.err;  // the summary on stderr
+  // the same input gives the same bytes (a converged frame does not depend on loader timing)
+  const std::string again = pt::tmpDir("cli") + "/ball-again.png";
+  ASSERT_EQ(run("'" + sceneFile() + "' -o '" + again + "' --size 40x30 --device cpu --quiet").code, 0);
+  EXPECT_EQ(canopy::readFile(out), canopy::readFile(again));
+}
+
+TEST(PlayCli, WritesAnExrSequenceFromAPattern) {
+  const std::string dir = pt::tmpDir("cli/seq");
+  const CliRun r = run("'" + sceneFile() + "' -o '" + dir + "/f_%02d.exr' --frames 3 --size 16x16 --device cpu "
+                    "--camera orbit:turns=0.1 --sun orbit:turns=0.05 --quiet");
+  ASSERT_EQ(r.code, 0) << r.err;
+  for (const char* f : {"/f_00.exr", "/f_01.exr", "/f_02.exr"}) EXPECT_TRUE(exists(dir + f)) << f;
+  EXPECT_TRUE(r.err.empty()) << r.err;  // --quiet
+}
+
+TEST(PlayCli, GpuDeviceWithoutAGpuExitsUnsupported) {
+  if (canopy::cudaDeviceCount() > 0) GTEST_SKIP() << "a GPU is present";
+  const std::string out = pt::tmpDir("cli") + "/nogpu.png";
+  std::remove(out.c_str());
+  const CliRun r = run("'" + sceneFile() + "' -o '" + out + "' --size 8x8 --device cuda");
+  EXPECT_EQ(r.code, 5) << r.err;
+  EXPECT_FALSE(exists(out));
+}
+
+TEST(PlayCli, ErrorsHaveDocumentedExitCodesAndLeaveNoOutput) {
+  const std::string dir = pt::tmpDir("cli/errors");
+  const std::string out = dir + "/x.png";
+  struct Case {
+    std::string args;
+    int code;
+    const char* message;
+  };
+  const std::vector<unsigned char> bytes = canopy::readFile(sceneFile());
+  const std::string truncated = dir + "/truncated.canopy";
+  canopy::writeFileAtomic(truncated, bytes.data(), bytes.size() / 2);
+  const std::string badPath = dir + "/bad-path.json";
+  std::ofstream(badPath) << R"({"keyframes":[{"frame":0,"position":[0,0,5]}]})";  // no target
+  const std::vector<Case> cases = {
+      {"'" + sceneFile() + "' -o '" + out + "' --camera '" + badPath + "' --device cpu", 3, "target"},
+      {"'" + dir + "/missing.canopy' -o '" + out + "' --device cpu", 2, "missing.canopy"},
+      {"'" + truncated + "' -o '" + out + "' --device cpu", 3, "truncated.canopy"},
+      {"'" + sceneFile() + "' -o '" + out + "' --size 40by30 --device cpu", 1, "--size"},
+      {"'" + sceneFile() + "' -o '" + dir + "/x.jpg' --device cpu", 1, ".png or .exr"},
+      {"'" + sceneFile() + "' -o '" + out + "' --frames 3 --device cpu", 1, "pattern"},
+      {"'" + sceneFile() + "' -o '" + out + "' --sun 1,2 --device cpu", 1, "--sun"},
+      {"'" + sceneFile() + "' -o '" + out + "' --lod-bias nan --device cpu", 1, "finite"},
+      {"'" + sceneFile() + "' -o '" + out + "' --step 0 --device cpu", 1, "--step"},
+      {"'" + sceneFile() + "' -o '" + out + "' --camera orbit:zoom=2 --device cpu", 1, "zoom"},
+      {"'" + sceneFile() + "' -o '" + dir + "/no-such-dir/x.png' --size 8x8 --device cpu", 2, "no-such-dir"},
+      {"'" + sceneFile() + "' -o '" + out + "' --camera '" + dir + "/missing.json' --device cpu", 2, "missing.json"},
+  };
+  for (const Case& c : cases) {
+    std::remove(out.c_str());
+    const CliRun r = run(c.args);
+    EXPECT_EQ(r.code, c.code) << c.args << "\n" << r.err;
+    EXPECT_NE(r.err.find(c.message), std::string::npos) << c.args << "\n" << r.err;
+    EXPECT_FALSE(exists(out)) << c.args;
+  }
+}

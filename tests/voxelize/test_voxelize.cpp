@@ -1,0 +1,456 @@
+// test_voxelize.cpp: the rasteriser against analytic shapes, and the real assets.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <random>
+#include <set>
+#include <tuple>
+
+#include <tbb/task_arena.h>
+
+#include "overlap.h"
+#include "test_helpers.h"
+#include "voxelize.h"
+
+using namespace canopy;
+using canopy::test::addBox;
+using canopy::test::addSphere;
+using canopy::test::addTriangle;
+using canopy::test::emptyMesh;
+
+namespace {
+
+using Key = std::tuple<int, int, int>;
+
+std::map<Key, LatticeCell> byCell(const VoxelizeResult& r) {
+  std::map<Key, LatticeCell> m;
+  for (const auto& c : r.cells) m[{c.i, c.j, c.k}] = c;
+  return m;
+}
+
+VoxelizeOptions opts(int resolution, int supersample) {
+  VoxelizeOptions o;
+  o.resolution = resolution;
+  o.supersample = supersample;
+  return o;
+}
+
+// Lattice cell (i,j,k) spans [corner + i h, corner + (i+1) h) in model space.
+struct Frame {
+  double corner[3], h;
+  explicit Frame(const LatticeFrame& f) : h(f.voxelSize) {
+    for (int k = 0; k < 3; ++k) corner[k] = f.origin[k] - 0.5 * f.voxelSize;
+  }
+};
+
+const std::string kShared = CANOPY_SHARED_DIR;
+
+}  // namespace
+
+// A sphere: the polyhedron lies between radius r - sagitta and r. A cell that holds points inside
+// r - sagitta and points outside r must meet the surface (the box is connected); a cell entirely
+// inside r - sagitta or entirely outside r cannot. Both sets are checked exactly; cells in the thin
+// shell between are not constrained (tolerance = the tessellation's sagitta).
+TEST(VoxelizeAnalytic, SphereSurfaceTouchesExpectedCells) {
+  mesh::Mesh m = emptyMesh();
+  const double r = 1.0;
+  const int rings = 96, segs = 192;
+  addSphere(m, {0.1, -0.2, 0.3}, r, rings, segs);
+  const VoxelizeResult res = voxelizeMesh(m, opts(40, 4), "sphere");
+  const auto cells = byCell(res);
+  const Frame f(res.frame);
+  const double sagitta = r * (1 - std::cos(M_PI / rings)) * 2;  // generous: both directions
+  int mustTouch = 0, mustNot = 0, checked = 0;
+  for (int i = 0; i < 40; ++i)
+    for (int j = 0; j < 40; ++j)
+      for (int k = 0; k < 40; ++k) {
+        const int idx[3] = {i, j, k};
+        const double c[3] = {0.1, -0.2, 0.3};
+        double dmin2 = 0, dmax2 = 0;
+        for (int a = 0; a < 3; ++a) {
+          const double lo = f.corner[a] + idx[a] * f.h - c[a], hi = lo + f.h;
+          const double near = lo > 0 ? lo : (hi < 0 ? -hi : 0);
+          const double far = std::max(std::fabs(lo), std::fabs(hi));
+          dmin2 += near * near;
+          dmax2 += far * far;
+        }
+        const double dmin = std::sqrt(dmin2), dmax = std::sqrt(dmax2);
+        const bool touched = cells.count({i, j, k}) > 0;
+        if (dmin < r - sagitta && dmax > r) {
+          ++mustTouch;
+          EXPECT_TRUE(touched) << "cell " << i << "," << j << "," << k << " must meet the sphere";
+        } else if (dmax < r - sagitta || dmin > r) {
+          ++mustNot;
+          EXPECT_FALSE(touched) << "cell " << i << "," << j << "," << k << " cannot meet the sphere";
+        }
+        ++checked;
+      }
+  EXPECT_GT(mustTouch, 1000);
+  EXPECT_GT(mustNot, 50000);
+  // Outer layer empty; density within (0, 1].
+  for (const auto& c : res.cells) {
+    EXPECT_GT(c.i, 0); EXPECT_LT(c.i, 39);
+    EXPECT_GT(c.j, 0); EXPECT_LT(c.j, 39);
+    EXPECT_GT(c.k, 0); EXPECT_LT(c.k, 39);
+    EXPECT_GT(c.density, 0.f);
+    EXPECT_LE(c.density, 1.f);
+  }
+}
+
+// An axis-aligned cube whose faces fall at generic fine-grid positions: each face touches exactly
+// the fine sub-cells whose closed box meets the face rectangle, computable per axis. Every
+// lattice cell's density must equal (its such sub-cells) / S^3 exactly. (The lattice frame puts
+// the extremes of the largest axis on fine-cell faces by construction, so two tiny triangles at far
+// corners define the frame and the cube's faces stay generic.)
+TEST(VoxelizeAnalytic, CubeSurfaceDensityIsExact) {
+  mesh::Mesh m = emptyMesh();
+  const mesh::Vec3 lo{-0.71, -0.53, -0.37}, hi{0.64, 0.58, 0.49};
+  addBox(m, lo, hi);
+  addTriangle(m, {-1.5, -1.5, -1.5}, {-1.49, -1.5, -1.5}, {-1.5, -1.49, -1.5});
+  addTriangle(m, {1.5, 1.5, 1.5}, {1.49, 1.5, 1.5}, {1.5, 1.49, 1.5});
+  const int N = 24, S = 4;
+  const VoxelizeResult res = voxelizeMesh(m, opts(N, S), "cube");
+  const Frame f(res.frame);
+  const double hf = f.h / S;
+  // Fine coordinates of the faces.
+  double flo[3], fhi[3];
+  for (int a = 0; a < 3; ++a) {
+    flo[a] = (lo[a] - f.corner[a]) / hf;
+    fhi[a] = (hi[a] - f.corner[a]) / hf;
+    ASSERT_GT(std::fabs(flo[a] - std::round(flo[a])), 1e-3) << "face on a fine boundary: pick other numbers";
+    ASSERT_GT(std::fabs(fhi[a] - std::round(fhi[a])), 1e-3);
+  }
+  // Sub-cell x is touched iff it meets the box surface: it overlaps the solid box's closed range
+  // on every axis and contains a face plane on at least one axis.
+  auto overlaps = [&](int x, int a) { return x + 1 >= flo[a] && x <= fhi[a]; };
+  auto holdsFace = [&](int x, int a) {
+    return (x <= flo[a] && flo[a] <= x + 1) || (x <= fhi[a] && fhi[a] <= x + 1);
+  };
+  std::map<Key, int> expected;
+  const int F = N * S;
+  for (int x = 0; x < F; ++x) {
+    if (!overlaps(x, 0)) continue;
+    for (int y = 0; y < F; ++y) {
+      if (!overlaps(y, 1)) continue;
+      for (int z = 0; z < F; ++z) {
+        if (!overlaps(z, 2)) continue;
+        if (holdsFace(x, 0) || holdsFace(y, 1) || holdsFace(z, 2)) ++expected[{x / S, y / S, z / S}];
+      }
+    }
+  }
+  auto got = byCell(res);
+  // Drop the cells of the two frame triangles (far from the cube).
+  for (auto it = got.begin(); it != got.end();) {
+    const int i = std::get<0>(it->first);
+    it = (i < int(flo[0] / S) - 1 || i > int(fhi[0] / S) + 1) ? got.erase(it) : std::next(it);
+  }
+  ASSERT_GT(expected.size(), 50u);
+  ASSERT_EQ(got.size(), expected.size());
+  for (const auto& [key, n] : expected) {
+    auto it = got.find(key);
+    ASSERT_NE(it, got.end());
+    EXPECT_FLOAT_EQ(it->second.density, float(n) / float(S * S * S));
+  }
+  // The cube is leaf material (no wood pattern match): wood fraction 0.
+  EXPECT_EQ(res.stats.woodFraction, 0.0);
+}
+
+// A reference triangle/box test written differently (Akenine-Möller's 13 SAT axes, naive): returns
+// +1 overlap, -1 separated, 0 too close to call in double precision.
+static int referenceOverlap(const double v[3][3], const double lo[3], double size) {
+  double c[3], h = size / 2, t[3][3];
+  for (int k = 0; k < 3; ++k) c[k] = lo[k] + h;
+  for (int i = 0; i < 3; ++i)
+    for (int k = 0; k < 3; ++k) t[i][k] = v[i][k] - c[k];
+  std::vector<std::array<double, 3>> axes = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  double e[3][3];
+  for (int i = 0; i < 3; ++i)
+    for (int k = 0; k < 3; ++k) e[i][k] = t[(i + 1) % 3][k] - t[i][k];
+  axes.push_back({e[0][1] * e[1][2] - e[0][2] * e[1][1], e[0][2] * e[1][0] - e[0][0] * e[1][2],
+                  e[0][0] * e[1][1] - e[0][1] * e[1][0]});
+  for (int i = 0; i < 3; ++i)
+    for (int a = 0; a < 3; ++a) {
+      double u[3] = {0, 0, 0};
+      u[a] = 1;
+      axes.push_back({u[1] * e[i][2] - u[2] * e[i][1], u[2] * e[i][0] - u[0] * e[i][2],
+                      u[0] * e[i][1] - u[1] * e[i][0]});
+    }
+  double worst = -1e300;
+  for (auto& ax : axes) {
+    const double len = std::sqrt(ax[0] * ax[0] + ax[1] * ax[1] + ax[2] * ax[2]);
+    if (len < 1e-12) continue;
+    double pmin = 1e300, pmax = -1e300;
+    for (int i = 0; i < 3; ++i) {
+      const double p = (t[i][0] * ax[0] + t[i][1] * ax[1] + t[i][2] * ax[2]) / len;
+      pmin = std::min(pmin, p);
+      pmax = std::max(pmax, p);
+    }
+    const double r = h * (std::fabs(ax[0]) + std::fabs(ax[1]) + std::fabs(ax[2])) / len;
+    worst = std::max(worst, std::max(pmin - r, -pmax - r));  // > 0: separated on this axis
+  }
+  if (worst > 1e-9) return -1;
+  if (worst < -1e-9) return 1;
+  return 0;
+}
+
+// Single triangles at supersample 1 (lattice cell = fine cell): the touched cells are exactly
+// those the reference SAT finds, except cells within 1e-9 cell of touching (not constrained).
+TEST(VoxelizeAnalytic, SingleTriangleMatchesReferenceSat) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> U(-1, 1);
+  for (int trial = 0; trial < 20; ++trial) {
+    mesh::Mesh m = emptyMesh();
+    mesh::Vec3 v[3];
+    for (auto& p : v) p = {U(rng), U(rng), U(rng)};
+    addTriangle(m, v[0], v[1], v[2]);
+    const int N = 20;
+    const VoxelizeResult res = voxelizeMesh(m, opts(N, 1), "triangle");
+    const auto got = byCell(res);
+    const Frame f(res.frame);
+    double tri[3][3];
+    for (int i = 0; i < 3; ++i)
+      for (int k = 0; k < 3; ++k) tri[i][k] = (v[i][k] - f.corner[k]) / f.h;  // cell units
+    int agree = 0;
+    for (int i = 0; i < N; ++i)
+      for (int j = 0; j < N; ++j)
+        for (int k = 0; k < N; ++k) {
+          const double lo[3] = {double(i), double(j), double(k)};
+          const int ref = referenceOverlap(tri, lo, 1.0);
+          if (ref == 0) continue;
+          const bool touched = got.count({i, j, k}) > 0;
+          EXPECT_EQ(touched, ref > 0) << "trial " << trial << " cell " << i << "," << j << "," << k;
+          if (touched) {
+            EXPECT_FLOAT_EQ(got.at({i, j, k}).density, 1.f);  // S = 1: all or nothing
+          }
+          ++agree;
+        }
+    EXPECT_GT(agree, N * N * N - 10);
+  }
+}
+
+// overlap.h on boxes touching a triangle exactly at a face, edge or vertex: the fast test must
+// not answer "No" (it answers Yes or hands over to the exact predicate).
+TEST(VoxelizeAnalytic, ExactContactsAreNotMissed) {
+  const double a[3] = {1, 1, 1}, b[3] = {3, 1, 1}, c[3] = {1, 3, 1};  // in the plane z = 1
+  const int sign[3] = {0, 0, 1};
+  const vox::TriBoxSetup s = vox::setupTriBox(a, b, c, 5, sign);
+  const double below[3] = {1, 1, 0}, above[3] = {1, 1, 1}, corner[3] = {0, 0, 0}, away[3] = {1, 1, 2};
+  EXPECT_NE(vox::testTriBox(s, below), vox::Overlap::No);   // box top face holds the triangle
+  EXPECT_NE(vox::testTriBox(s, above), vox::Overlap::No);   // box bottom face holds it
+  EXPECT_NE(vox::testTriBox(s, corner), vox::Overlap::No);  // box touches vertex a only
+  EXPECT_EQ(vox::testTriBox(s, away), vox::Overlap::No);
+}
+
+// A leaf quad with a texture opaque on its right half (alpha 255) and transparent on its left
+// (alpha 0), MASK cutoff 0.5, versus the same quad fully opaque: about half the density. The
+// boundary is straight and axis-aligned in uv; the error is at most one column of sub-cells along
+// it (1/60 of the quad here), so the tolerance is 0.03.
+TEST(VoxelizeAnalytic, HalfTransparentLeafGivesHalfDensity) {
+  auto leafMesh = [](bool halfTransparent) {
+    mesh::Mesh m;
+    mesh::Material mat;
+    mat.name = "leaves";
+    mat.alphaMode = mesh::AlphaMode::Mask;
+    mat.alphaCutoff = 0.5f;
+    mat.baseColorTexture = 0;
+    m.materials.push_back(mat);
+    mesh::Texture t;
+    t.width = t.height = 16;
+    t.wrapS = t.wrapT = 33071;
+    for (int y = 0; y < 16; ++y)
+      for (int x = 0; x < 16; ++x) {
+        const uint8_t alpha = (halfTransparent && x < 8) ? 0 : 255;
+        t.rgba.insert(t.rgba.end(), {40, 160, 30, alpha});
+      }
+    m.textures.push_back(t);
+    // A tilted quad (not axis-aligned) with uv spanning the texture.
+    const mesh::Vec3 p[4] = {{0, 0, 0}, {1, 0.2, 0.1}, {1.1, 1.1, 0.5}, {0.1, 0.9, 0.4}};
+    const std::array<float, 2> uv[4] = {{0, 1}, {1, 1}, {1, 0}, {0, 0}};
+    for (auto tri : {std::array<int, 3>{0, 1, 2}, std::array<int, 3>{0, 2, 3}}) {
+      mesh::Triangle tr;
+      for (int k = 0; k < 3; ++k) {
+        tr.p[size_t(k)] = p[tri[size_t(k)]];
+        tr.uv[size_t(k)] = uv[tri[size_t(k)]];
+      }
+      m.triangles.push_back(tr);
+    }
+    return m;
+  };
+  const VoxelizeResult opaque = voxelizeMesh(leafMesh(false), opts(16, 8), "opaque");
+  const VoxelizeResult half = voxelizeMesh(leafMesh(true), opts(16, 8), "half");
+  ASSERT_GT(opaque.stats.totalDensity, 0);
+  const double ratio = half.stats.totalDensity / opaque.stats.totalDensity;
+  EXPECT_NEAR(ratio, 0.5, 0.03);
+  EXPECT_GT(half.stats.alphaRejected, 0u);
+  EXPECT_EQ(opaque.stats.alphaRejected, 0u);
+  // Albedo is the texture colour, linearised (sRGB 160 -> 0.3515).
+  for (const auto& c : opaque.cells) EXPECT_NEAR(c.albedo[1], 0.3515, 0.002);
+}
+
+TEST(VoxelizeAnalytic, WoodFractionFollowsMaterialNames) {
+  mesh::Mesh m = emptyMesh();
+  mesh::Material bark;
+  bark.name = "Oak_Bark_01";
+  m.materials.push_back(bark);
+  addBox(m, {0, 0, 0}, {0.3, 2, 0.3});
+  for (auto& t : m.triangles) t.material = 1;
+  addTriangle(m, {1, 1, 1}, {1.5, 1, 1}, {1, 1.5, 1.2}, 0);
+  const VoxelizeResult r = voxelizeMesh(m, opts(32, 4), "mixed");
+  EXPECT_EQ(r.stats.woodTriangles, 12u);
+  EXPECT_GT(r.stats.woodFraction, 0.5);
+  EXPECT_LT(r.stats.woodFraction, 1.0);
+  VoxelizeOptions o = opts(32, 4);
+  o.woodPattern = "nothing-matches";
+  EXPECT_EQ(voxelizeMesh(m, o, "mixed").stats.woodFraction, 0.0);
+}
+
+TEST(VoxelizeAnalytic, CleanupRemovesDegenerateAndDuplicateFaces) {
+  mesh::Mesh m = emptyMesh();
+  addTriangle(m, {0, 0, 0}, {1, 0, 0}, {0, 1, 0});
+  addTriangle(m, {0, 1, 0}, {0, 0, 0}, {1, 0, 0});    // same face, rotated
+  addTriangle(m, {0, 0, 0}, {0, 1, 0}, {1, 0, 0});    // same face, reversed
+  addTriangle(m, {0, 0, 0}, {1, 1, 1}, {2, 2, 2});    // collinear
+  addTriangle(m, {0, 0, 1}, {0, 0, 1}, {1, 0, 1});    // repeated vertex
+  addTriangle(m, {0, 0, 2}, {1, 0, 2}, {0, 1, 2.5});  // a real one
+  const VoxelizeResult r = voxelizeMesh(m, opts(16, 2), "dirty");
+  EXPECT_EQ(r.stats.degenerateRemoved, 2u);
+  EXPECT_EQ(r.stats.duplicatesRemoved, 2u);
+  EXPECT_EQ(r.stats.triangles, 2u);
+}
+
+TEST(VoxelizeAnalytic, ResultIsIndependentOfThreadCount) {
+  mesh::Mesh m = emptyMesh();
+  addSphere(m, {0, 0, 0}, 1, 24, 48);
+  const VoxelizeResult a = voxelizeMesh(m, opts(48, 4), "sphere");
+  VoxelizeResult b;
+  {
+    tbb::task_arena one(1);
+    one.execute([&] { b = voxelizeMesh(m, opts(48, 4), "sphere"); });
+  }
+  ASSERT_EQ(a.cells.size(), b.cells.size());
+  for (size_t i = 0; i < a.cells.size(); ++i) {
+    EXPECT_EQ(a.cells[i].density, b.cells[i].density);
+    EXPECT_EQ(a.cells[i].albedo[0], b.cells[i].albedo[0]);
+  }
+}
+
+// ---- Real assets -------------------------------------------------------------------------------
+
+TEST(VoxelizeAssets, DracoAndPlainOakDifferInAtMostOnePercentOfCells) {
+  VoxelizeOptions o = opts(64, 8);
+  o.input = kShared + "/assets/plants/oak_medium.glb";
+  const VoxelizeResult plain = voxelize(o);
+  o.input = kShared + "/assets/plants/oak_medium.draco.glb";
+  const VoxelizeResult draco = voxelize(o);
+  // Draco's quantisation collapses some slivers: same input triangles, a few more removed by CGAL.
+  EXPECT_EQ(plain.stats.inputTriangles, draco.stats.inputTriangles);
+  EXPECT_GT(draco.stats.degenerateRemoved, plain.stats.degenerateRemoved);
+  std::set<Key> a, b;
+  for (const auto& c : plain.cells) a.insert({c.i, c.j, c.k});
+  for (const auto& c : draco.cells) b.insert({c.i, c.j, c.k});
+  std::vector<Key> diff;
+  std::set_symmetric_difference(a.begin(), a.end(), b.begin(), b.end(), std::back_inserter(diff));
+  std::set<Key> all = a;
+  all.insert(b.begin(), b.end());
+  EXPECT_LE(double(diff.size()), 0.01 * double(all.size()))
+      << diff.size() << " of " << all.size() << " cells differ";
+  EXPECT_GT(plain.stats.woodFraction, 0.02);
+  EXPECT_LT(plain.stats.woodFraction, 0.9);
+  EXPECT_GT(plain.stats.alphaRejected, 0u);
+}
+
+TEST(VoxelizeAssets, OakSmallObjLoadsWithMaterials) {
+  const mesh::Mesh m = mesh::loadMesh(kShared + "/assets/plants/oak_small.obj");
+  EXPECT_EQ(m.triangles.size(), 3206u + 3600u);
+  const std::vector<bool> wood = classifyWood(m.materials, VoxelizeOptions().woodPattern);
+  size_t woodTris = 0;
+  for (const auto& t : m.triangles) woodTris += wood[size_t(t.material)];
+  EXPECT_EQ(woodTris, 3206u);
+  VoxelizeOptions o = opts(32, 4);
+  o.input = kShared + "/assets/plants/oak_small.obj";
+  const VoxelizeResult r = voxelize(o);
+  EXPECT_GT(r.stats.occupiedCells, 100u);
+}
+
+TEST(VoxelizeAssets, GroveWholeSceneHoldsEveryInstance) {
+  const std::string grove = kShared + "/assets/scenes/grove.glb";
+  const mesh::SceneInfo scene = mesh::listGltfScene(grove);
+  ASSERT_EQ(scene.instances.size(), 12u);
+  ASSERT_EQ(scene.meshes.size(), 3u);
+  size_t expectedTriangles = 0;
+  for (const auto& inst : scene.instances) expectedTriangles += scene.meshes[size_t(inst.mesh)].triangles;
+  VoxelizeOptions o = opts(64, 4);
+  o.input = grove;
+  const VoxelizeResult r = voxelize(o);
+  EXPECT_EQ(r.stats.inputTriangles, expectedTriangles);
+  // Every instance's origin (its trunk base) lies in an occupied cell's neighbourhood.
+  const Frame f(r.frame);
+  std::set<Key> occ;
+  for (const auto& c : r.cells) occ.insert({c.i, c.j, c.k});
+  for (const auto& inst : scene.instances) {
+    const double p[3] = {inst.matrix[3], inst.matrix[7], inst.matrix[11]};
+    int idx[3];
+    for (int a = 0; a < 3; ++a) idx[a] = int(std::floor((p[a] - f.corner[a]) / f.h));
+    bool found = false;
+    for (int dx = -1; dx <= 1 && !found; ++dx)
+      for (int dy = -1; dy <= 2 && !found; ++dy)
+        for (int dz = -1; dz <= 1 && !found; ++dz)
+          found = occ.count({idx[0] + dx, idx[1] + dy, idx[2] + dz}) > 0;
+    EXPECT_TRUE(found) << "instance " << inst.nodeName << " not voxelised";
+  }
+  // One mesh alone, in its own model space, has that mesh's triangle count.
+  o.meshIndex = 1;
+  EXPECT_EQ(voxelize(o).stats.inputTriangles, scene.meshes[1].triangles);
+}
+
+// The OpenMesh formats: the same unit cube as ASCII OFF, STL and PLY (with face colours) and as
+// an OBJ with two material runs.
+TEST(VoxelizeFormats, OffStlPlyObjLoad) {
+  const std::string dir = canopy::test::scratchDir("voxelize_formats");
+  const char* v[8] = {"0 0 0", "1 0 0", "1 1 0", "0 1 0", "0 0 1", "1 0 1", "1 1 1", "0 1 1"};
+  const int f[12][3] = {{0, 2, 1}, {0, 3, 2}, {4, 5, 6}, {4, 6, 7}, {0, 1, 5}, {0, 5, 4},
+                        {2, 3, 7}, {2, 7, 6}, {1, 2, 6}, {1, 6, 5}, {0, 4, 7}, {0, 7, 3}};
+  std::string off = "OFF\n8 12 0\n", ply, stl = "solid cube\n", obj;
+  for (auto s : v) off += std::string(s) + "\n";
+  for (auto& t : f) off += "3 " + std::to_string(t[0]) + " " + std::to_string(t[1]) + " " + std::to_string(t[2]) + "\n";
+  ply = "ply\nformat ascii 1.0\nelement vertex 8\nproperty float x\nproperty float y\nproperty float z\n"
+        "element face 12\nproperty list uchar int vertex_indices\nproperty uchar red\nproperty uchar green\n"
+        "property uchar blue\nend_header\n";
+  for (auto s : v) ply += std::string(s) + "\n";
+  for (auto& t : f) ply += "3 " + std::to_string(t[0]) + " " + std::to_string(t[1]) + " " + std::to_string(t[2]) + " 255 0 0\n";
+  for (auto& t : f) {
+    stl += "facet normal 0 0 0\nouter loop\n";
+    for (int k = 0; k < 3; ++k) stl += std::string("vertex ") + v[t[k]] + "\n";
+    stl += "endloop\nendfacet\n";
+  }
+  stl += "endsolid cube\n";
+  for (auto s : v) obj += std::string("v ") + s + "\n";
+  obj += "usemtl bark\n";
+  for (int i = 0; i < 12; ++i) {
+    if (i == 4) obj += "usemtl leaves\n";
+    obj += "f " + std::to_string(f[i][0] + 1) + " " + std::to_string(f[i][1] + 1) + " " + std::to_string(f[i][2] + 1) + "\n";
+  }
+  canopy::test::writeText(dir + "/cube.off", off);
+  canopy::test::writeText(dir + "/cube.ply", ply);
+  canopy::test::writeText(dir + "/cube.stl", stl);
+  canopy::test::writeText(dir + "/cube.obj", obj);
+  for (const char* ext : {"off", "ply", "stl", "obj"}) {
+    SCOPED_TRACE(ext);
+    const mesh::Mesh m = mesh::loadMesh(dir + "/cube." + ext);
+    EXPECT_EQ(m.triangles.size(), 12u);
+    VoxelizeOptions o = opts(16, 2);
+    o.input = dir + "/cube." + ext;
+    const VoxelizeResult r = voxelize(o);
+    EXPECT_GT(r.stats.occupiedCells, 50u);
+    if (std::string(ext) == "ply") {
+      ASSERT_TRUE(m.hasTriangleColors);
+      EXPECT_NEAR(r.cells[0].albedo[0], 1.0, 1e-6);  // red faces, linear
+      EXPECT_NEAR(r.cells[0].albedo[1], 0.0, 1e-6);
+    }
+    if (std::string(ext) == "obj") {
+      EXPECT_EQ(r.stats.woodTriangles, 4u);
+    }
+  }
+}

@@ -1,0 +1,320 @@
+// test_voxelize_cli.cpp: the canopy-voxelize executable as a user (or make) runs it.
+//
+// Cases are data: arguments, expected exit code, and what stderr must name. Every failing case
+// must print exactly one line ("canopy-voxelize: error: <file>: <problem>"), exit with the
+// documented code and leave no output (nor temporary file) behind.
+#include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+
+#include <array>
+#include <cstdio>
+#include <cstring>
+#include <dirent.h>
+#include <limits>
+
+#include "test_helpers.h"
+
+using namespace canopy::test;
+
+namespace {
+
+const std::string kBin = std::string(CANOPY_BINARY_DIR) + "/bin/canopy-voxelize";
+const std::string kShared = CANOPY_SHARED_DIR;
+
+struct RunResult {
+  int code = -1;
+  std::string out, err;
+};
+
+RunResult run(const std::string& args, const std::string& dir) {
+  const std::string errFile = dir + "/stderr.txt";
+  const std::string cmd = kBin + " " + args + " 2>'" + errFile + "'";
+  RunResult r;
+  FILE* p = popen(cmd.c_str(), "r");
+  if (!p) return r;
+  std::array<char, 4096> buf;
+  size_t n;
+  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) r.out.append(buf.data(), n);
+  const int status = pclose(p);
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  const auto e = readBytes(errFile);
+  r.err.assign(e.begin(), e.end());
+  std::remove(errFile.c_str());
+  return r;
+}
+
+bool exists(const std::string& p) {
+  struct stat st;
+  return stat(p.c_str(), &st) == 0;
+}
+
+// Files in dir whose name contains "canopy-tmp" (atomic-output leftovers).
+int leftovers(const std::string& dir) {
+  int n = 0;
+  if (DIR* d = opendir(dir.c_str())) {
+    while (dirent* e = readdir(d)) n += std::strstr(e->d_name, "canopy-tmp") != nullptr;
+    closedir(d);
+  }
+  return n;
+}
+
+int lines(const std::string& s) {
+  int n = 0;
+  for (char c : s) n += c == '\n';
+  return n;
+}
+
+// Each test gets its own scratch directory (CTest may run them in parallel).
+class VoxelizeCli : public ::testing::Test {
+ protected:
+  std::string dir;
+  void SetUp() override {
+    dir = scratchDir(std::string("voxelize_cli_") +
+                     ::testing::UnitTest::GetInstance()->current_test_info()->name());
+  }
+};
+
+std::vector<float> oneTriangle(float bad = 0.f, bool useBad = false) {
+  std::vector<float> p = {0, 0, 0, 1, 0, 0, 0, 1, 0.5f};
+  if (useBad) p[4] = bad;
+  return p;
+}
+
+// The sample plant as a .gltf with its buffer in sample.bin and its leaf texture either in
+// leaf.png (external) or inline as a data: URI (embedded). imageUri overrides the external name.
+void writeSampleGltf(const std::string& dir, const std::string& name, bool embedded,
+                     const std::string& imageUri = "leaf.png") {
+  const auto glb = canopy::samplePlantGlb();
+  uint32_t jsonLen, binLen;
+  std::memcpy(&jsonLen, glb.data() + 12, 4);
+  std::memcpy(&binLen, glb.data() + 20 + jsonLen, 4);
+  auto doc = nlohmann::json::parse(std::string(glb.begin() + 20, glb.begin() + 20 + jsonLen));
+  const std::vector<uint8_t> bin(glb.begin() + 28 + jsonLen, glb.begin() + 28 + jsonLen + binLen);
+  auto& image = doc["images"][0];
+  const auto& view = doc["bufferViews"][image["bufferView"].get<size_t>()];
+  const size_t off = view["byteOffset"], len = view["byteLength"];
+  const std::vector<uint8_t> png(bin.begin() + long(off), bin.begin() + long(off + len));
+  image.erase("bufferView");
+  image.erase("mimeType");
+  if (embedded) {
+    static const char* b64 = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    std::string enc;
+    for (size_t i = 0; i < png.size(); i += 3) {
+      const uint32_t v = uint32_t(png[i]) << 16 | (i + 1 < png.size() ? uint32_t(png[i + 1]) << 8 : 0) |
+                         (i + 2 < png.size() ? png[i + 2] : 0);
+      enc += b64[v >> 18 & 63];
+      enc += b64[v >> 12 & 63];
+      enc += i + 1 < png.size() ? b64[v >> 6 & 63] : '=';
+      enc += i + 2 < png.size() ? b64[v & 63] : '=';
+    }
+    image["uri"] = "data:image/png;base64," + enc;
+  } else {
+    image["uri"] = imageUri;
+    writeBytes(dir + "/leaf.png", png);
+  }
+  doc["buffers"][0]["uri"] = "sample.bin";
+  writeBytes(dir + "/sample.bin", bin);
+  writeText(dir + "/" + name, doc.dump());
+}
+
+}  // namespace
+
+// ---- Bad input: (name, setup, args, expected code, text stderr must contain) -----------------
+struct BadCase {
+  std::string name;
+  std::function<void(const std::string& dir)> make;
+  std::string input;  // relative to dir, or absolute
+  std::string extra;
+  int code;
+  std::string mustName;  // substring of the error line (the file)
+};
+
+TEST_F(VoxelizeCli, BadInputsFailCleanly) {
+  const std::vector<BadCase> cases = {
+      {"missing file", [](const std::string&) {}, "nope.glb", "", 2, "nope.glb"},
+      {"directory", [](const std::string& d) { std::system(("mkdir -p '" + d + "/adir.glb'").c_str()); },
+       "adir.glb", "", 2, "adir.glb"},
+      {"empty glb", [](const std::string& d) { writeBytes(d + "/empty.glb", {}); }, "empty.glb", "", 3, "empty.glb"},
+      {"empty obj", [](const std::string& d) { writeBytes(d + "/empty.obj", {}); }, "empty.obj", "", 3, "empty.obj"},
+      {"truncated glb",
+       [](const std::string& d) {
+         auto b = canopy::samplePlantGlb();
+         b.resize(b.size() / 2);
+         writeBytes(d + "/trunc.glb", b);
+       },
+       "trunc.glb", "", 3, "trunc.glb"},
+      {"gltf with missing buffer",
+       [](const std::string& d) {
+         GltfParts g = triangleGltf(oneTriangle(), {0, 1, 2});
+         g.doc["buffers"][0]["uri"] = "missing.bin";
+         writeText(d + "/nobuf.gltf", g.doc.dump());
+       },
+       "nobuf.gltf", "", 2, "nobuf.gltf"},
+      {"gltf with missing image",
+       [](const std::string& d) { writeSampleGltf(d, "noimg.gltf", false, "missing.png"); }, "noimg.gltf", "", 2,
+       "noimg.gltf"},
+      {"NaN vertex",
+       [](const std::string& d) {
+         writeBytes(d + "/nan.glb", toGlb(triangleGltf(oneTriangle(std::numeric_limits<float>::quiet_NaN(), true), {0, 1, 2})));
+       },
+       "nan.glb", "", 3, "nan.glb"},
+      {"inf vertex",
+       [](const std::string& d) {
+         writeBytes(d + "/inf.glb", toGlb(triangleGltf(oneTriangle(std::numeric_limits<float>::infinity(), true), {0, 1, 2})));
+       },
+       "inf.glb", "", 3, "inf.glb"},
+      {"NaN vertex in OBJ", [](const std::string& d) { writeText(d + "/nan.obj", "v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n"); },
+       "nan.obj", "", 3, "nan.obj: vertex 3 has a NaN"},
+      {"zero triangles",
+       [](const std::string& d) { writeBytes(d + "/zero.glb", toGlb(triangleGltf(oneTriangle(), {}))); },
+       "zero.glb", "", 3, "zero.glb"},
+      {"only degenerate triangles",
+       [](const std::string& d) { writeBytes(d + "/degen.glb", toGlb(triangleGltf({0, 0, 0, 1, 1, 1, 2, 2, 2}, {0, 1, 2}))); },
+       "degen.glb", "", 3, "degen.glb"},
+      {"index out of range",
+       [](const std::string& d) { writeBytes(d + "/badidx.glb", toGlb(triangleGltf(oneTriangle(), {0, 1, 7}))); },
+       "badidx.glb", "", 3, "badidx.glb"},
+      {"unsupported required extension",
+       [](const std::string& d) {
+         GltfParts g = triangleGltf(oneTriangle(), {0, 1, 2});
+         g.doc["extensionsRequired"] = {"EXT_meshopt_compression"};
+         g.doc["extensionsUsed"] = {"EXT_meshopt_compression"};
+         writeBytes(d + "/meshopt.glb", toGlb(g));
+       },
+       "meshopt.glb", "", 5, "EXT_meshopt_compression"},
+      {"not a mesh format", [](const std::string& d) { writeText(d + "/notes.txt", "hello"); }, "notes.txt", "", 5, "notes.txt"},
+      {"resolution 0", [](const std::string&) {}, kShared + "/assets/plants/bush_2.glb", "--resolution 0", 1, "--resolution"},
+      {"resolution absurd", [](const std::string&) {}, kShared + "/assets/plants/bush_2.glb", "--resolution 1000000", 1, "--resolution"},
+      {"supersample absurd", [](const std::string&) {}, kShared + "/assets/plants/bush_2.glb", "--supersample 99", 1, "--supersample"},
+      {"unwritable output", [](const std::string&) {}, kShared + "/assets/plants/bush_2.glb", "-o /nonexistent-dir/x.vdb", 2,
+       "/nonexistent-dir/x.vdb"},
+  };
+  for (const BadCase& c : cases) {
+    SCOPED_TRACE(c.name);
+    c.make(dir);
+    const std::string input = c.input[0] == '/' ? c.input : dir + "/" + c.input;
+    const std::string out = dir + "/out.vdb";
+    std::remove(out.c_str());
+    const std::string outArg = c.extra.find("-o ") == std::string::npos ? " -o '" + out + "'" : "";
+    const RunResult r = run("'" + input + "' -q -r 16" + outArg + " " + c.extra, dir);
+    EXPECT_EQ(r.code, c.code) << r.err;
+    EXPECT_NE(r.err.find("canopy-voxelize: error: "), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find(c.mustName), std::string::npos) << r.err;
+    // One line of error (usage errors add the "See --help" hint line).
+    EXPECT_EQ(lines(r.err), c.code == 1 ? 2 : 1) << r.err;
+    EXPECT_FALSE(exists(out));
+    EXPECT_EQ(leftovers(dir), 0);
+  }
+}
+
+TEST_F(VoxelizeCli, OutputBytesAreIdenticalAcrossRuns) {
+  const std::string glb = dir + "/det.glb";
+  ASSERT_EQ(run("--write-sample '" + glb + "'", dir).code, 0);
+  const auto sample1 = readBytes(glb);
+  ASSERT_EQ(run("--write-sample '" + glb + "'", dir).code, 0);
+  EXPECT_EQ(sample1, readBytes(glb)) << "the sample plant must be deterministic";
+  ASSERT_EQ(run("'" + glb + "' -r 32 -o '" + dir + "/a.vdb'", dir).code, 0);
+  ASSERT_EQ(run("'" + glb + "' -r 32 -o '" + dir + "/b.vdb'", dir).code, 0);
+  const auto a = readBytes(dir + "/a.vdb"), b = readBytes(dir + "/b.vdb");
+  ASSERT_GT(a.size(), 100u);
+  EXPECT_EQ(a, b);
+}
+
+// The same plant as .glb (image in the binary chunk), .gltf + external .png, and .gltf with a
+// data: URI image gives the same lattice.
+TEST_F(VoxelizeCli, EmbeddedAndExternalImagesGiveTheSameLattice) {
+  writeBytes(dir + "/img.glb", canopy::samplePlantGlb());
+  writeSampleGltf(dir, "external.gltf", false);
+  writeSampleGltf(dir, "embedded.gltf", true);
+  double density[3];
+  const char* names[3] = {"img.glb", "external.gltf", "embedded.gltf"};
+  for (int i = 0; i < 3; ++i) {
+    const RunResult r = run("'" + dir + "/" + names[i] + "' -q -r 24 -o '" + dir + "/img.vdb' --json", dir);
+    ASSERT_EQ(r.code, 0) << names[i] << ": " << r.err;
+    const auto j = nlohmann::json::parse(r.out);
+    density[i] = j["total_density"];
+    EXPECT_GT(j["alpha_rejected"].get<int>(), 0) << names[i];
+  }
+  EXPECT_EQ(density[0], density[1]);
+  EXPECT_EQ(density[0], density[2]);
+}
+
+TEST_F(VoxelizeCli, JsonReportAndInfo) {
+  const std::string glb = dir + "/rep.glb", vdb = dir + "/rep.vdb";
+  ASSERT_EQ(run("--write-sample '" + glb + "'", dir).code, 0);
+  const RunResult r = run("'" + glb + "' -r 32 -s 4 -o '" + vdb + "' --json", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["tool"], "canopy-voxelize");
+  EXPECT_EQ(j["exit_code"], 0);
+  EXPECT_EQ(j["resolution"], 32);
+  EXPECT_EQ(j["supersample"], 4);
+  EXPECT_GT(j["occupied_cells"].get<int>(), 10);
+  EXPECT_GT(j["total_density"].get<double>(), 0.0);
+  EXPECT_GT(j["wood_fraction"].get<double>(), 0.0);
+  EXPECT_LT(j["wood_fraction"].get<double>(), 1.0);
+  EXPECT_GT(j["triangles"]["alpha_tested"].get<int>(), 0);
+  EXPECT_GT(j["alpha_rejected"].get<int>(), 0);
+  EXPECT_EQ(j["lattice_max"][0], 31);
+  EXPECT_GT(j["voxel_size"].get<double>(), 0.0);
+  EXPECT_NE(j["source"].get<std::string>().find("xxh64:"), std::string::npos);
+
+  const RunResult info = run("info '" + vdb + "' --json", dir);
+  ASSERT_EQ(info.code, 0) << info.err;
+  const auto k = nlohmann::json::parse(info.out);
+  EXPECT_EQ(k["occupied_cells"], j["occupied_cells"]);
+  EXPECT_NEAR(k["total_density"].get<double>(), j["total_density"].get<double>(), 1e-3);
+  EXPECT_NEAR(k["wood_fraction"].get<double>(), j["wood_fraction"].get<double>(), 1e-6);
+  EXPECT_EQ(k["lattice_size"][0], 32);
+  EXPECT_EQ(k["metadata"]["canopy_supersample"], "4");
+  EXPECT_EQ(k["grids"].size(), 3u);
+}
+
+TEST_F(VoxelizeCli, InfoRejectsFilesThatAreNotLattices) {
+  writeText(dir + "/text.vdb", "not a vdb at all");
+  RunResult r = run("info '" + dir + "/text.vdb'", dir);
+  EXPECT_EQ(r.code, 3);
+  EXPECT_NE(r.err.find("text.vdb"), std::string::npos);
+  r = run("info '" + dir + "/missing.vdb'", dir);
+  EXPECT_EQ(r.code, 2);
+  // A truncated lattice.
+  const std::string glb = dir + "/t.glb", vdb = dir + "/t.vdb";
+  ASSERT_EQ(run("--write-sample '" + glb + "'", dir).code, 0);
+  ASSERT_EQ(run("'" + glb + "' -r 16 -o '" + vdb + "'", dir).code, 0);
+  auto bytes = readBytes(vdb);
+  bytes.resize(bytes.size() - 20);
+  writeBytes(dir + "/cut.vdb", bytes);
+  r = run("info '" + dir + "/cut.vdb'", dir);
+  EXPECT_EQ(r.code, 3);
+  EXPECT_EQ(lines(r.err), 1) << r.err;
+}
+
+TEST_F(VoxelizeCli, SceneInstanceList) {
+  const std::string json = dir + "/grove.scene.json";
+  const RunResult r = run("'" + kShared + "/assets/scenes/grove.glb' --instances '" + json +
+                        "' --model-pattern 'grove.{name}.density.vdb'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  std::ifstream f(json);
+  const auto j = nlohmann::json::parse(f);
+  EXPECT_EQ(j["canopy_scene"], 1);
+  ASSERT_EQ(j["models"].size(), 3u);
+  ASSERT_EQ(j["instances"].size(), 12u);
+  EXPECT_EQ(j["models"][0]["density"], "grove.Oak_Medium.density.vdb");
+  for (const auto& inst : j["instances"]) {
+    ASSERT_EQ(inst["matrix"].size(), 16u);
+    EXPECT_EQ(inst["matrix"][15], 1.0);
+    EXPECT_EQ(inst["matrix"][12], 0.0);
+    EXPECT_LT(inst["model"].get<int>(), 3);
+  }
+}
+
+TEST_F(VoxelizeCli, HelpVersionAndUsage) {
+  EXPECT_EQ(run("--help", dir).code, 0);
+  const RunResult v = run("--version", dir);
+  EXPECT_EQ(v.code, 0);
+  EXPECT_NE(v.out.find("canopy-voxelize"), std::string::npos);
+  EXPECT_EQ(run("", dir).code, 1);
+  EXPECT_EQ(run("--bogus-flag", dir).code, 1);
+  EXPECT_EQ(run("'" + kShared + "/assets/plants/bush_2.glb' --device cuda -o '" + dir + "/x.vdb'", dir).code, 5);
+}

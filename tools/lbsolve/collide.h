@@ -1,0 +1,161 @@
+// collide.h: the lattice-Boltzmann lighting update of one node, written once for CPU and CUDA.
+//
+// The model is the dissertation's (§2.2, §4.1; listing 5.1 for the order of operations):
+//   f_m(r + c_m, t+1) = max(0, f_m(r,t) + rho(r) * (Omega f(r,t))_m),   m = 0..18,
+// where Omega is the 19x19 collision matrix of eq. 2.15-2.17 with sigma_s scaled by the normalised
+// Henyey-Greenstein phase function pn_ij(g) of eq. 4.1-4.2. At leaf ("green") nodes f_0 (the
+// absorbed light) is zeroed before the update; wood ("brown") nodes use their own Omega (g = -1)
+// and keep f_0. Only interior nodes are written; the outer layer keeps its fixed boundary values.
+//
+// Storage (both backends): structure of arrays, state[m * n + idx] with idx = (z*ny + y)*nx + x,
+// so that consecutive threads (x) touch consecutive addresses for every m. The per-node "coded"
+// density is rho for leaf/empty nodes and -rho for wood nodes (the dissertation's encoding).
+//
+// Invariants (tests/lbsolve/test_collide.cpp): every column of Omega sums to 0 (a step conserves
+// energy where sigma_a = 0); rho = 0 is a pure pass-through; sigma_a = 0 with g = 1 is a pass-through.
+#pragma once
+#include <cstdint>
+
+#include "canopy/hd.h"
+#include "canopy/lattice_dirs.h"
+
+namespace canopy::lb {
+
+using lattice::kQ;
+
+// Omega for one colour channel, column-major: col[kind][j][i] = Omega_ij, kind 0 = leaf, 1 = wood.
+// On the CPU each entry is broadcast to 8 lanes (nodes); on the GPU every index is a compile-time
+// constant after unrolling and the struct is a kernel parameter, i.e. in constant memory.
+struct OmegaSet {
+  float col[2][kQ][kQ];
+};
+
+struct Dims {
+  int nx = 0, ny = 0, nz = 0;
+  CANOPY_HD int64_t count() const { return int64_t(nx) * ny * nz; }
+  CANOPY_HD int64_t index(int x, int y, int z) const { return (int64_t(z) * ny + y) * nx + x; }
+  CANOPY_HD bool interior(int x, int y, int z) const {
+    return x > 0 && y > 0 && z > 0 && x < nx - 1 && y < ny - 1 && z < nz - 1;
+  }
+};
+
+// The collision of L nodes of the same kind (all leaf/empty, or all wood), one per lane:
+//   out_i = max(0, f_i + rho * sum_j Omega_ij f_j),  f_0 zeroed first at leaf nodes.
+// f is modified (f_0 zeroing). Every lane computes the same IEEE operations in the same order
+// (j ascending) whatever L is: L = 1 on the GPU (one thread per node), L = 8 on the CPU (the
+// compiler vectorises across lanes), so both backends produce the same bits (solve_cuda.cu is
+// built without FMA contraction). When every lane has rho == 0 the product is skipped; that is
+// bit-identical to the general path (f + 0 * x == f for finite x and f >= 0).
+template <int L>
+CANOPY_HD CANOPY_FORCEINLINE void collideLanes(const OmegaSet& om, bool wood, const float rho[L],
+                                               float f[kQ][L], float out[kQ][L]) {
+  if (!wood) {
+    for (int l = 0; l < L; ++l) f[0][l] = 0.f;  // absorbed light leaves the visible spectrum
+  }
+  bool empty = true;
+  for (int l = 0; l < L; ++l) empty = empty && rho[l] == 0.f;
+  if (empty) {
+    CANOPY_UNROLL
+    for (int i = 0; i < kQ; ++i)
+      for (int l = 0; l < L; ++l) out[i][l] = f[i][l];
+    return;
+  }
+  const float(*col)[kQ] = om.col[wood ? 1 : 0];
+  CANOPY_UNROLL
+  for (int i = 0; i < kQ; ++i) {
+    float acc[L];
+    for (int l = 0; l < L; ++l) acc[l] = 0.f;
+    CANOPY_UNROLL
+    for (int j = 0; j < kQ; ++j) {
+      const float c = col[j][i];
+      for (int l = 0; l < L; ++l) acc[l] += c * f[j][l];
+    }
+    for (int l = 0; l < L; ++l) {
+      const float v = f[i][l] + rho[l] * acc[l];
+      out[i][l] = v > 0.f ? v : 0.f;
+    }
+  }
+}
+
+// One node's collision; `coded` is rho (leaf/empty) or -rho (wood).
+CANOPY_HD CANOPY_FORCEINLINE void collide(const OmegaSet& om, float coded, float f[kQ], float out[kQ]) {
+  const bool wood = coded < 0.f;
+  const float rho[1] = {wood ? -coded : coded};
+  float fl[kQ][1], ol[kQ][1];
+  CANOPY_UNROLL
+  for (int m = 0; m < kQ; ++m) fl[m][0] = f[m];
+  collideLanes<1>(om, wood, rho, fl, ol);
+  CANOPY_UNROLL
+  for (int m = 0; m < kQ; ++m) f[m] = fl[m][0], out[m] = ol[m][0];
+}
+
+// The push update of L consecutive nodes (x .. x+L-1, y, z) of the same kind (listing 5.2): load
+// their 19 arriving values from `in`, collide, and write value m to the neighbour r + c_m in `out`
+// if that neighbour is interior. Every node, boundary included, is a source; only interior nodes
+// are targets, and each (target, m) pair has exactly one source, so the update is race-free with
+// separate in/out buffers (ping-pong). Precondition: all L nodes are wood, or none is.
+template <int L>
+CANOPY_HD CANOPY_FORCEINLINE void updateLanes(const OmegaSet& om, const Dims& d, const float* coded,
+                                              const float* in, float* out, int x, int y, int z) {
+  const int64_t n = d.count();
+  const int64_t idx = d.index(x, y, z);
+  float f[kQ][L], post[kQ][L], rho[L];
+  const bool wood = coded[idx] < 0.f;
+  for (int l = 0; l < L; ++l) rho[l] = wood ? -coded[idx + l] : coded[idx + l];
+  CANOPY_UNROLL
+  for (int m = 0; m < kQ; ++m)
+    for (int l = 0; l < L; ++l) f[m][l] = in[m * n + idx + l];
+  collideLanes<L>(om, wood, rho, f, post);
+  CANOPY_UNROLL
+  for (int m = 0; m < kQ; ++m) {
+    const int ty = y + lattice::dir(m, 1), tz = z + lattice::dir(m, 2);
+    if (ty < 1 || tz < 1 || ty > d.ny - 2 || tz > d.nz - 2) continue;
+    const int dx = lattice::dir(m, 0);
+    const int64_t target = d.index(x + dx, ty, tz);
+    for (int l = 0; l < L; ++l) {
+      const int tx = x + l + dx;
+      if (tx >= 1 && tx <= d.nx - 2) out[m * n + target + l] = post[m][l];
+    }
+  }
+}
+
+CANOPY_HD CANOPY_FORCEINLINE void updateNode(const OmegaSet& om, const Dims& d, const float* coded,
+                                             const float* in, float* out, int x, int y, int z) {
+  updateLanes<1>(om, d, coded, in, out, x, y, z);
+}
+
+// Initial state of node idx for a solve: boundary nodes hold the fixed boundary values, interior
+// nodes start at 0 (§5.1 / listing 5.1).
+CANOPY_HD CANOPY_FORCEINLINE void initNode(const Dims& d, const float boundary[kQ], float* state,
+                                           int x, int y, int z) {
+  const int64_t n = d.count(), idx = d.index(x, y, z);
+  const bool in = d.interior(x, y, z);
+  CANOPY_UNROLL
+  for (int m = 0; m < kQ; ++m) state[m * n + idx] = in ? 0.f : boundary[m];
+}
+
+// Total site density rho = sum_{m=0..18} f_m (§2.2): the value stored per node and channel.
+CANOPY_HD CANOPY_FORCEINLINE float nodeTotal(const float* state, int64_t n, int64_t idx) {
+  float s = 0.f;
+  CANOPY_UNROLL
+  for (int m = 0; m < kQ; ++m) s += state[m * n + idx];
+  return s;
+}
+
+// ---- Building Omega (host) ----------------------------------------------------------------
+
+// The normalised Henyey-Greenstein phase pn_ij(g) (eq. 4.1-4.2) for output direction i and input
+// direction j (both 1..18), in double precision. The factor (1 - g^2) of p_ij cancels in the
+// normalisation and is dropped, so |g| < 1 never divides 0 by 0; |g| = 1 takes the limit: all
+// weight on i = j (g = 1) or i = opposite(j) (g = -1), pn = 24 / (2 or 1).
+// Precondition: -1 <= g <= 1.
+double normalisedPhase(double g, int i, int j);
+
+// Omega (eq. 2.15-2.17) for absorption sigmaA, scattering sigmaS (sigma_t = sigmaA + sigmaS) and
+// anisotropy g, written column-major into col[j][i].
+void buildOmega(double sigmaA, double sigmaS, double g, float col[kQ][kQ]);
+
+// The leaf (g) and wood (gWood, -1 by default) matrices of one channel.
+OmegaSet makeOmegaSet(double sigmaA, double sigmaS, double g, double gWood = -1.0);
+
+}  // namespace canopy::lb

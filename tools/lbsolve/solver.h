@@ -1,0 +1,75 @@
+// solver.h: one steady-state LB solve on a dense lattice, behind a CPU or CUDA backend.
+//
+// A Solver owns the lattice state for one device (two 19-value buffers, ping-pong: the step
+// reads one and writes the other, see collide.h) and runs solve(spec) = iterate the update of
+// collide.h from the initial state of the spec's boundary values until the residual falls to the
+// tolerance or the iteration cap is reached. The loop is shared (solver.cpp); backends provide
+// init/step/residual/gather (solve_cpu.cpp: TBB, the reference; solve_cuda.cu: CUDA kernels).
+// No OpenVDB here: this header is included by the .cu file.
+#pragma once
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "canopy/device.h"
+#include "collide.h"
+
+namespace canopy::lb {
+
+// The lattice as the solvers see it: coded density (rho, or -rho at wood nodes) per node, and the
+// node indices whose light is returned (sorted ascending).
+struct DenseLattice {
+  Dims dims;
+  std::vector<float> coded;
+  std::vector<int64_t> stored;
+};
+
+struct SolveSpec {
+  OmegaSet omega;
+  float boundary[kQ] = {};  // fixed f_m on the outer layer
+  int maxIterations = 1;    // cap (>= 1)
+  float tolerance = 0.f;    // stop when residual <= tolerance; 0 = run exactly maxIterations
+  int checkEvery = 16;      // residual is computed every checkEvery iterations (and at the cap)
+};
+
+struct SolveResult {
+  int iterations = 0;
+  // max over nodes |rho_t - rho_{t-1}| / max over nodes rho_t, for the last iteration run
+  // (rho = sum of the 19 values, the stored quantity).
+  float residual = 0.f;
+  std::vector<float> values;  // rho at DenseLattice::stored, same order
+  double seconds = 0.0;
+};
+
+class Solver {
+ public:
+  virtual ~Solver() = default;
+  SolveResult solve(const SolveSpec& spec);
+  virtual std::string name() const = 0;
+
+ protected:
+  virtual void init(const float boundary[kQ]) = 0;  // state := boundary on the outer layer, 0 inside
+  virtual void step(const OmegaSet& omega) = 0;     // one update; afterwards current = new state
+  virtual float residual() = 0;                     // between the current and the previous state
+  virtual std::vector<float> gather() = 0;          // rho of the current state at stored nodes
+};
+
+std::unique_ptr<Solver> makeCpuSolver(const DenseLattice& lattice);
+// Throws canopy::Error(Unsupported) in a build without CUDA.
+std::unique_ptr<Solver> makeCudaSolver(const DenseLattice& lattice, int gpu);
+
+// Bytes of device memory a CUDA solver needs for this lattice (2 x 19 floats + coded density per
+// node, plus the stored-node index list and its values).
+int64_t cudaSolverBytes(const DenseLattice& lattice);
+
+// Runs every spec; results[k] belongs to specs[k]. CPU: one solver, specs in order. CUDA: one
+// solver per GPU (device.index >= 0: that GPU only; -1: every GPU), each taking the next spec from
+// a shared queue, so several GPUs share the 57 solves. onDone(k, result) is called (serialised)
+// as each solve finishes.
+std::vector<SolveResult> runSolves(const DenseLattice& lattice, const std::vector<SolveSpec>& specs,
+                                   const Device& device,
+                                   const std::function<void(size_t, const SolveResult&)>& onDone = {});
+
+}  // namespace canopy::lb

@@ -1,0 +1,248 @@
+// inputs.cpp: see inputs.h.
+#include "tools/octreepack/inputs.h"
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+#include <openvdb/openvdb.h>
+
+#include "canopy/atomic_file.h"
+#include "canopy/errors.h"
+#include "formats/lattice_vdb.h"
+
+#if __has_include("formats/chaar.h")  // the chaar decoder (canopy-haar's branch) is in this tree
+#include <memory>
+
+#include "formats/chaar.h"
+#define CANOPY_OCTREEPACK_HAS_CHAAR 1
+#endif
+
+namespace canopy::octreepack {
+namespace {
+
+// index -> world of a linear OpenVDB transform as a 3x4 row-major matrix.
+std::array<double, 12> affineOf(const openvdb::math::Transform& xf, const std::string& path) {
+  if (!xf.isLinear()) throw invalidInput(path + ": grid transform is not linear (frustum maps are not supported)");
+  const openvdb::Vec3d o = xf.indexToWorld(openvdb::Vec3d(0, 0, 0));
+  std::array<double, 12> m{};
+  for (int a = 0; a < 3; ++a) {
+    openvdb::Vec3d e(0, 0, 0);
+    e[a] = 1;
+    const openvdb::Vec3d c = xf.indexToWorld(e) - o;
+    for (int r = 0; r < 3; ++r) m[size_t(r * 4 + a)] = c[r];
+  }
+  for (int r = 0; r < 3; ++r) m[size_t(r * 4 + 3)] = o[r];
+  return m;
+}
+
+std::string folderOf(const std::string& p) {
+  const auto s = p.find_last_of('/');
+  return s == std::string::npos ? std::string() : p.substr(0, s + 1);
+}
+
+}  // namespace
+
+ModelSource readDensityVdb(const std::string& path, const std::string& name) {
+  vdbio::VdbFile file = vdbio::readVdb(path);
+  auto density = file.require<openvdb::FloatGrid>("density");
+  auto wood = file.require<openvdb::FloatGrid>("wood");
+  auto albedo = file.require<openvdb::Vec3SGrid>("albedo");
+  const vdbio::LatticeMeta meta = vdbio::readLatticeMeta(*density, path);
+  ModelSource src;
+  src.name = name;
+  src.sourceLabel = vdbio::describeSource(path);
+  for (int a = 0; a < 3; ++a) {
+    src.latticeMin[a] = meta.min[a];
+    src.latticeMax[a] = meta.max[a];
+  }
+  src.indexToModel = affineOf(density->transform(), path);
+  auto woodAcc = wood->getConstAccessor();
+  auto albAcc = albedo->getConstAccessor();
+  auto add = [&](const openvdb::Coord& ijk, float d) {
+    if (d == 0.0f) return;
+    SourceCell c;
+    for (int a = 0; a < 3; ++a) c.ijk[a] = ijk[a];
+    c.density = d;
+    c.wood = woodAcc.getValue(ijk);
+    const openvdb::Vec3s al = albAcc.getValue(ijk);
+    for (int a = 0; a < 3; ++a) c.albedo[a] = al[a];
+    src.cells.push_back(c);
+  };
+  const openvdb::Index64 active = density->activeVoxelCount();
+  if (active > (openvdb::Index64(1) << 31)) throw invalidInput(path + ": " + std::to_string(active) + " active voxels is absurd");
+  src.cells.reserve(size_t(active));
+  for (auto it = density->cbeginValueOn(); it; ++it) {
+    if (it.isVoxelValue()) {
+      add(it.getCoord(), *it);
+    } else {
+      openvdb::CoordBBox box;
+      it.getBoundingBox(box);
+      for (auto c = box.begin(); c; ++c) add(*c, *it);
+    }
+  }
+  return src;
+}
+
+LightVdb readLightVdb(const std::string& path, const ModelSource& model) {
+  vdbio::VdbFile file = vdbio::readVdb(path);
+  std::vector<openvdb::Vec3SGrid::ConstPtr> grids;
+  for (uint32_t b = 0; b < kCanopyLightBases; ++b) {
+    char name[8];
+    std::snprintf(name, sizeof name, "B%02u", b);
+    grids.push_back(file.require<openvdb::Vec3SGrid>(name));
+  }
+  if (grids[0]->getMetadata<openvdb::Vec3IMetadata>("canopy_lattice_min")) {
+    const vdbio::LatticeMeta meta = vdbio::readLatticeMeta(*grids[0], path);
+    for (int a = 0; a < 3; ++a)
+      if (meta.min[a] != model.latticeMin[a] || meta.max[a] != model.latticeMax[a])
+        throw invalidInput(path + ": its lattice differs from the density lattice of model '" + model.name + "'");
+  }
+  LightVdb out;
+  out.sourceLabel = vdbio::describeSource(path);
+  // Tree::getValue on a const tree is thread-safe (no accessor cache): the builder calls this from
+  // several threads.
+  out.fn = [grids](int32_t i, int32_t j, int32_t k, float* o) {
+    const openvdb::Coord ijk(i, j, k);
+    for (size_t b = 0; b < grids.size(); ++b) {
+      const openvdb::Vec3s v = grids[b]->tree().getValue(ijk);
+      o[3 * b] = v[0], o[3 * b + 1] = v[1], o[3 * b + 2] = v[2];
+    }
+  };
+  return out;
+}
+
+bool chaarSupported() {
+#ifdef CANOPY_OCTREEPACK_HAS_CHAAR
+  return true;
+#else
+  return false;
+#endif
+}
+
+LightVdb readChaarLight(const std::string& path, const ModelSource& model) {
+#ifdef CANOPY_OCTREEPACK_HAS_CHAAR
+  auto data = std::make_shared<haar::ChaarData>(haar::readChaar(path));
+  const haar::ChaarHeader& h = data->header;
+  if (h.baseCount != kCanopyLightBases)
+    throw invalidInput(path + ": has " + std::to_string(h.baseCount) + " bases, a plant's lighting has " +
+                       std::to_string(kCanopyLightBases));
+  for (int a = 0; a < 3; ++a)
+    if (h.latticeMin[a] != model.latticeMin[a] || h.latticeMax[a] != model.latticeMax[a])
+      throw invalidInput(path + ": its lattice differs from the density lattice of model '" + model.name + "'");
+  LightVdb out;
+  out.sourceLabel = vdbio::describeSource(path);
+  const haar::ChaarView view = data->view();
+  out.fn = [data, view](int32_t i, int32_t j, int32_t k, float* o) {
+    const int32_t p[3] = {i, j, k};
+    bool inside = true;
+    for (int a = 0; a < 3; ++a) inside = inside && p[a] >= view.latticeMin[a] && p[a] <= view.latticeMax[a];
+    for (uint32_t b = 0; b < kCanopyLightBases; ++b) {
+      haar::Rgb v;
+      if (inside) v = haar::chaarSample(view, int(b), float(i), float(j), float(k));
+      o[3 * b] = v.r, o[3 * b + 1] = v.g, o[3 * b + 2] = v.b;
+    }
+  };
+  return out;
+#else
+  (void)model;
+  throw unsupported(path + ": packing .chaar lighting needs the chaar decoder, which this build does not have yet; "
+                    "pass PLANT.light.vdb (canopy-lbsolve) instead, or --ignore-light to pack density only");
+#endif
+}
+
+SceneDesc readSceneJson(const std::string& path) {
+  const std::vector<unsigned char> bytes = readFile(path);
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(bytes.begin(), bytes.end());
+  } catch (const std::exception& e) {
+    throw invalidInput(path + ": not valid JSON (" + std::string(e.what()) + ")");
+  }
+  auto fail = [&](const std::string& what) -> Error { return invalidInput(path + ": " + what); };
+  if (!j.is_object() || !j.contains("canopy_scene") || !j["canopy_scene"].is_number_integer())
+    throw fail("not a Canopy scene (no integer 'canopy_scene')");
+  if (j["canopy_scene"].get<int64_t>() != 1)
+    throw unsupported(path + ": scene format version " + j["canopy_scene"].dump() + " is not supported (1)");
+  if (!j.contains("models") || !j["models"].is_array() || j["models"].empty()) throw fail("'models' must be a non-empty array");
+  if (!j.contains("instances") || !j["instances"].is_array()) throw fail("'instances' must be an array");
+  const std::string dir = folderOf(path);
+  auto resolve = [&](const std::string& p) { return p.empty() || p[0] == '/' ? p : dir + p; };
+  SceneDesc s;
+  for (size_t i = 0; i < j["models"].size(); ++i) {
+    const auto& m = j["models"][i];
+    if (!m.is_object() || !m.contains("density") || !m["density"].is_string())
+      throw fail("models[" + std::to_string(i) + "] needs a 'density' path");
+    SceneDesc::Model model;
+    model.name = m.value("name", std::string("model") + std::to_string(i));
+    if (!m.contains("name")) model.name = "model" + std::to_string(i);
+    else if (!m["name"].is_string()) throw fail("models[" + std::to_string(i) + "].name must be a string");
+    model.density = resolve(m["density"].get<std::string>());
+    if (m.contains("light")) {
+      if (!m["light"].is_string()) throw fail("models[" + std::to_string(i) + "].light must be a string");
+      model.light = resolve(m["light"].get<std::string>());
+    }
+    s.models.push_back(model);
+  }
+  for (size_t i = 0; i < j["instances"].size(); ++i) {
+    const auto& in = j["instances"][i];
+    const std::string at = "instances[" + std::to_string(i) + "]";
+    if (!in.is_object() || !in.contains("model") || !in["model"].is_number_integer()) throw fail(at + " needs an integer 'model'");
+    const int64_t model = in["model"].get<int64_t>();
+    if (model < 0 || model >= int64_t(s.models.size())) throw fail(at + ".model " + std::to_string(model) + " out of range");
+    if (!in.contains("matrix") || !in["matrix"].is_array() || in["matrix"].size() != 16)
+      throw fail(at + ".matrix must be 16 numbers (row-major 4x4)");
+    double m[16];
+    for (int k = 0; k < 16; ++k) {
+      if (!in["matrix"][size_t(k)].is_number()) throw fail(at + ".matrix must be 16 numbers");
+      m[k] = in["matrix"][size_t(k)].get<double>();
+      if (!std::isfinite(m[k])) throw fail(at + ".matrix is not finite");
+    }
+    if (std::abs(m[12]) > 1e-6 || std::abs(m[13]) > 1e-6 || std::abs(m[14]) > 1e-6 || std::abs(m[15] - 1) > 1e-6)
+      throw fail(at + ".matrix last row must be 0,0,0,1");
+    SceneDesc::Instance inst;
+    inst.model = uint32_t(model);
+    for (int k = 0; k < 12; ++k) inst.modelToWorld[size_t(k)] = m[k];
+    s.instances.push_back(inst);
+  }
+  return s;
+}
+
+SceneLightSource readSceneLightVdb(const std::string& path, const std::string& gridName) {
+  vdbio::VdbFile file = vdbio::readVdb(path);
+  auto grid = file.require<openvdb::FloatGrid>(gridName);
+  openvdb::CoordBBox box;
+  if (grid->getMetadata<openvdb::Vec3IMetadata>("canopy_lattice_min")) {
+    const vdbio::LatticeMeta meta = vdbio::readLatticeMeta(*grid, path);
+    box = openvdb::CoordBBox(meta.min, meta.max);
+  } else {
+    box = grid->evalActiveVoxelBoundingBox();
+  }
+  if (box.empty()) throw invalidInput(path + ": scene lighting grid '" + gridName + "' is empty");
+  const openvdb::Coord dim = box.dim();
+  const int64_t n = int64_t(dim.x()) * dim.y() * dim.z();
+  if (n > (int64_t(1) << 26)) throw invalidInput(path + ": scene lighting lattice of " + std::to_string(n) + " nodes is too large for the resident part");
+  SceneLightSource s;
+  s.sourceLabel = vdbio::describeSource(path);
+  const auto m = affineOf(grid->transform(), path);
+  for (int i = 0; i < 12; ++i) s.header.indexToWorld[i] = m[size_t(i)];
+  for (int a = 0; a < 3; ++a) {
+    s.header.min[a] = box.min()[a];
+    s.header.dim[a] = dim[a];
+  }
+  s.values.resize(size_t(n));
+  auto acc = grid->getConstAccessor();
+  size_t i = 0;
+  for (int z = box.min().z(); z <= box.max().z(); ++z)
+    for (int y = box.min().y(); y <= box.max().y(); ++y)
+      for (int x = box.min().x(); x <= box.max().x(); ++x) {
+        const float v = acc.getValue(openvdb::Coord(x, y, z));
+        if (!std::isfinite(v)) throw invalidInput(path + ": scene lighting value at (" + std::to_string(x) + "," + std::to_string(y) + "," + std::to_string(z) + ") is not finite");
+        s.values[i++] = v;
+      }
+  return s;
+}
+
+}  // namespace canopy::octreepack

@@ -1,0 +1,53 @@
+// inputs.h: canopy-octreepack's inputs -> plain structures (the only OpenVDB code of the tool).
+//   readDensityVdb:     a canopy-voxelize lattice (grids density, wood, albedo; §0 metadata)
+//   readSceneJson:      a scene instance list (docs/scene-json.md)
+//   readSceneLightVdb:  the coarse scene lighting lattice (lbsolve --scene), one float grid
+// Every failure is a canopy::Error naming the file.
+#pragma once
+#include <array>
+#include <string>
+#include <vector>
+
+#include "formats/canopy_file.h"
+#include "tools/octreepack/octree_build.h"
+
+namespace canopy::octreepack {
+
+ModelSource readDensityVdb(const std::string& path, const std::string& name);
+
+// The uncompressed lighting of canopy-lbsolve (19 Vec3 grids B00..B18, lattice index space) as a
+// LightFn (the value stored at each cell; the grids' background elsewhere). Where the grids carry
+// the §0 lattice metadata, it must equal `model`'s lattice.
+struct LightVdb {
+  LightFn fn;
+  std::string sourceLabel;
+};
+LightVdb readLightVdb(const std::string& path, const ModelSource& model);
+
+// Compressed lighting from canopy-haar (.chaar, 19 bases) sampled through the chaar decoder at
+// every lattice cell (0 outside the lattice). Its lattice must equal `model`'s. Throws
+// Unsupported when this build has no chaar decoder (chaarSupported() == false).
+bool chaarSupported();
+LightVdb readChaarLight(const std::string& path, const ModelSource& model);
+
+struct SceneDesc {
+  struct Model {
+    std::string name, density, light;  // paths resolved against the JSON file's folder
+  };
+  struct Instance {
+    uint32_t model;
+    std::array<double, 12> modelToWorld;  // 3x4 row-major
+  };
+  std::vector<Model> models;
+  std::vector<Instance> instances;
+};
+SceneDesc readSceneJson(const std::string& path);
+
+struct SceneLightSource {
+  CanopySceneLight header{};
+  std::vector<float> values;
+  std::string sourceLabel;
+};
+SceneLightSource readSceneLightVdb(const std::string& path, const std::string& gridName);
+
+}  // namespace canopy::octreepack

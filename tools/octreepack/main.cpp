@@ -1,0 +1,49 @@
+// main.cpp: canopy-octreepack's command line (pack, info, verify); the work is in octreepack.cpp.
+#include <iostream>
+
+#include "canopy/cli.h"
+#include "tools/octreepack/octreepack.h"
+
+int main(int argc, char** argv) {
+  canopy::Tool tool("canopy-octreepack",
+                    "Packs density lattices (and scene instances) into one streamable .canopy file.\n"
+                    "  canopy-octreepack PLANT.density.vdb [PLANT.light.chaar|PLANT.light.vdb] -o PLANT.canopy\n"
+                    "  canopy-octreepack --scene SCENE.json -o SCENE.canopy\n"
+                    "  canopy-octreepack info FILE.canopy [--json]\n"
+                    "  canopy-octreepack verify FILE.canopy",
+                    /*withDevice=*/false);
+  CLI::App& app = tool.app();
+  canopy::octreepack::OctreepackOptions o;
+  app.add_option("inputs", o.inputs, "PLANT.density.vdb [PLANT.light.chaar | PLANT.light.vdb]");
+  app.add_option("-o,--output", o.output, "Output .canopy file");
+  app.add_option("--scene", o.scene, "Scene instance list (SCENE.json, docs/scene-json.md)");
+  app.add_option("--scene-light", o.sceneLight, "Coarse scene lighting lattice (VDB, lbsolve --scene)");
+  app.add_option("--scene-light-grid", o.sceneLightGrid, "Float grid name in --scene-light")->capture_default_str();
+  app.add_flag("--ignore-light", o.ignoreLight, "Pack density only, even where a .chaar is given");
+  app.fallthrough();  // (inherited by the subcommands) `info FILE --json` works too
+  std::string infoPath, verifyPath;
+  CLI::App* info = app.add_subcommand("info", "Print models, levels, node/brick/page counts and bytes per section");
+  info->add_option("file", infoPath, "FILE.canopy")->required();
+  CLI::App* verify = app.add_subcommand("verify", "Check every checksum and pointer; exit non-zero on any problem");
+  verify->add_option("file", verifyPath, "FILE.canopy")->required();
+  app.require_subcommand(0, 1);
+
+  return tool.run(argc, argv, [&] {
+    namespace op = canopy::octreepack;
+    if (*info) {
+      nlohmann::json j = op::canopyInfo(canopy::CanopyFile::open(infoPath));
+      if (tool.common().json) tool.report() = j;
+      else std::cout << op::formatInfo(j);
+    } else if (*verify) {
+      try {
+        op::canopyVerify(verifyPath, tool.report());
+      } catch (const canopy::Error&) {
+        tool.report()["ok"] = false;
+        throw;
+      }
+      canopy::logInfo(verifyPath + ": ok (" + tool.report()["pages_checked"].dump() + " pages)");
+    } else {
+      tool.report() = op::octreepack(o);
+    }
+  });
+}

@@ -1,0 +1,232 @@
+// octreepack.cpp: see octreepack.h.
+#include "tools/octreepack/octreepack.h"
+
+#include <chrono>
+#include <cstring>
+#include <sstream>
+
+#include "canopy/atomic_file.h"
+#include "canopy/cli.h"
+#include "canopy/errors.h"
+#include "formats/canopy_write.h"
+#include "tools/octreepack/inputs.h"
+#include "tools/octreepack/octree_build.h"
+
+namespace canopy::octreepack {
+namespace {
+
+bool endsWith(const std::string& s, const std::string& suf) {
+  return s.size() >= suf.size() && s.compare(s.size() - suf.size(), suf.size(), suf) == 0;
+}
+
+std::string stemOf(const std::string& path) {
+  std::string base = path.substr(path.find_last_of('/') == std::string::npos ? 0 : path.find_last_of('/') + 1);
+  for (const char* suf : {".density.vdb", ".vdb"})
+    if (endsWith(base, suf)) return base.substr(0, base.size() - std::strlen(suf));
+  return base;
+}
+
+
+}  // namespace
+
+nlohmann::json octreepack(const OctreepackOptions& o) {
+  const auto t0 = std::chrono::steady_clock::now();
+  struct ModelIn {
+    std::string name, density, light;
+  };
+  std::vector<ModelIn> modelsIn;
+  std::vector<CanopyInstance> instances;
+  auto identityInstance = [](uint32_t model) {
+    CanopyInstance in{};
+    in.modelToWorld[0] = in.modelToWorld[5] = in.modelToWorld[10] = 1.0f;
+    in.model = model;
+    return in;
+  };
+  nlohmann::json meta = {{"tool", "canopy-octreepack"}, {"version", versionString()}};
+  if (!o.scene.empty()) {
+    if (!o.inputs.empty()) throw usageError("give either --scene or PLANT.density.vdb inputs, not both");
+    if (endsWith(o.scene, ".glb") || endsWith(o.scene, ".gltf"))
+      throw unsupported(o.scene + ": glTF scenes need canopy-voxelize's glTF loader, not in this build; "
+                        "run canopy-voxelize --instances to write a SCENE.json and pass that");
+    const SceneDesc s = readSceneJson(o.scene);
+    for (const auto& m : s.models) modelsIn.push_back({m.name, m.density, m.light});
+    for (const auto& in : s.instances) {
+      CanopyInstance ci{};
+      for (int k = 0; k < 12; ++k) ci.modelToWorld[k] = float(in.modelToWorld[size_t(k)]);
+      ci.model = in.model;
+      instances.push_back(ci);
+    }
+    meta["scene"] = o.scene;
+  } else {
+    if (o.inputs.empty()) throw usageError("no input: give PLANT.density.vdb [PLANT.light.chaar] or --scene SCENE.json");
+    if (o.inputs.size() > 2) throw usageError("one plant takes PLANT.density.vdb and at most one PLANT.light.chaar");
+    std::string light;
+    if (o.inputs.size() == 2) {
+      if (!endsWith(o.inputs[1], ".chaar") && !endsWith(o.inputs[1], ".vdb"))
+        throw usageError(o.inputs[1] + ": the second input must be lighting: PLANT.light.chaar (canopy-haar) or PLANT.light.vdb (canopy-lbsolve)");
+      light = o.inputs[1];
+    }
+    modelsIn.push_back({stemOf(o.inputs[0]), o.inputs[0], light});
+    instances.push_back(identityInstance(0));
+  }
+  if (o.output.empty()) throw usageError("no output: give -o OUT.canopy");
+  for (const auto& m : modelsIn) {
+    requireReadableFile(m.density);
+    if (!m.light.empty() && !o.ignoreLight) {
+      requireReadableFile(m.light);
+      if (endsWith(m.light, ".chaar") && !chaarSupported())  // fail before any work
+        throw unsupported(m.light + ": packing .chaar lighting needs the chaar decoder, which this build does not have yet; "
+                          "pass PLANT.light.vdb (canopy-lbsolve) instead, or --ignore-light to pack density only");
+    }
+  }
+
+  CanopyWriteInput w;
+  if (!o.sceneLight.empty()) {  // read first: a bad scene lattice fails before the models are built
+    SceneLightSource sl = readSceneLightVdb(o.sceneLight, o.sceneLightGrid);
+    w.hasSceneLight = true;
+    w.sceneLight = sl.header;
+    w.sceneLightValues = std::move(sl.values);
+    meta["scene_light"] = sl.sourceLabel;
+  }
+  std::vector<BuiltModel> built;
+  built.reserve(modelsIn.size());
+  nlohmann::json sources = nlohmann::json::array();
+  Progress progress("octreepack models", int64_t(modelsIn.size()));
+  for (size_t i = 0; i < modelsIn.size(); ++i) {
+    logInfo("octreepack: model " + std::to_string(i) + " '" + modelsIn[i].name + "' from " + modelsIn[i].density);
+    ModelSource src = readDensityVdb(modelsIn[i].density, modelsIn[i].name);
+    nlohmann::json source = {{"name", modelsIn[i].name}, {"density", src.sourceLabel}};
+    LightFn light;
+    if (!modelsIn[i].light.empty() && !o.ignoreLight) {
+      LightVdb lv = endsWith(modelsIn[i].light, ".chaar") ? readChaarLight(modelsIn[i].light, src) : readLightVdb(modelsIn[i].light, src);
+      light = std::move(lv.fn);
+      source["light"] = lv.sourceLabel;
+    }
+    built.push_back(buildOctree(src, modelsIn[i].density, light));
+    sources.push_back(source);
+    progress.add();
+  }
+  for (auto& b : built) w.models.push_back({b.record, &b.tiles, &b.bricks, &b.light});
+  w.instances = instances;
+  meta["models"] = sources;
+  progress.done();
+  w.metadata = meta.dump();
+  const CanopyWriteStats stats = writeCanopyFile(o.output, std::move(w));
+
+  nlohmann::json report = canopyInfo(CanopyFile::open(o.output));
+  report["output"] = o.output;
+  report["seconds"] = secondsSince(t0);
+  uint64_t cells = 0;
+  for (const auto& b : built) cells += b.occupiedCells;
+  report["occupied_cells"] = cells;
+  logInfo("octreepack: wrote " + o.output + " (" + std::to_string(stats.fileBytes) + " bytes, resident " +
+          std::to_string(stats.residentBytes) + ", " + std::to_string(stats.pageCount) + " pages)");
+  return report;
+}
+
+nlohmann::json canopyInfo(const CanopyFile& f) {
+  const CanopyFileHeader& h = f.header();
+  nlohmann::json j;
+  j["file"] = f.path();
+  j["format_version"] = std::to_string(h.major) + "." + std::to_string(h.minor);
+  j["file_bytes"] = h.fileBytes;
+  j["resident_bytes"] = h.residentBytes;
+  j["resident_fraction"] = h.fileBytes ? double(h.residentBytes) / double(h.fileBytes) : 0.0;
+  j["page_bytes"] = h.pageBytes;
+  j["pages"] = h.pageCount;
+  j["bricks_per_page"] = h.bricksPerPage;
+  j["instances"] = h.instanceCount;
+  nlohmann::json sections = nlohmann::json::array();
+  const char* names[] = {"", "models", "instances", "node_tiles", "page_table", "scene_light", "metadata"};
+  for (uint32_t i = 0; i < f.sectionCount(); ++i) {
+    const CanopySection& s = f.section(i);
+    sections.push_back({{"name", s.kind < 7 ? names[s.kind] : "unknown"}, {"offset", s.offset}, {"bytes", s.bytes}, {"items", s.itemCount}});
+  }
+  sections.push_back({{"name", "pages"}, {"offset", h.pagesOffset}, {"bytes", uint64_t(h.pageCount) * h.pageBytes}, {"items", h.pageCount}});
+  j["sections"] = sections;
+  nlohmann::json models = nlohmann::json::array();
+  for (uint32_t m = 0; m < f.modelCount(); ++m) {
+    const CanopyModel& M = f.model(m);
+    nlohmann::json levels = nlohmann::json::array();
+    // Node kinds per level, by walking the (already validated) tree.
+    std::vector<uint64_t> empty(M.depth + 1, 0), constant(M.depth + 1, 0), brick(M.depth + 1, 0);
+    std::vector<std::pair<CanopyNode, uint32_t>> stack{{M.root, 0}};
+    while (!stack.empty()) {
+      auto [n, level] = stack.back();
+      stack.pop_back();
+      if (n.brick != kCanopyNone) ++brick[level];
+      else if (n.density == 0.0f) ++empty[level];
+      else ++constant[level];
+      if (n.child != kCanopyNone)
+        for (int c = 0; c < 8; ++c) stack.emplace_back(f.tiles(m)[size_t(n.child) * 8 + c], level + 1);
+    }
+    for (uint32_t d = 0; d <= M.depth; ++d)
+      levels.push_back({{"level", d}, {"voxel_cells", M.rootCells / (kCanopyBrickSize << d)}, {"bricks", brick[d]},
+                        {"constant_nodes", constant[d]}, {"empty_nodes", empty[d]}});
+    uint32_t instances = 0;
+    for (uint32_t i = 0; i < f.instanceCount(); ++i) instances += f.instance(i).model == m;
+    models.push_back({{"name", std::string(M.name)},
+                      {"lattice_min", {M.latticeMin[0], M.latticeMin[1], M.latticeMin[2]}},
+                      {"lattice_max", {M.latticeMax[0], M.latticeMax[1], M.latticeMax[2]}},
+                      {"depth", M.depth},
+                      {"root_cells", M.rootCells},
+                      {"tiles", M.tileCount},
+                      {"nodes", 1 + uint64_t(M.tileCount) * 8},
+                      {"bricks", M.brickCount},
+                      {"brick_pages", M.brickPageCount},
+                      {"light_pages", M.lightPageCount},
+                      {"has_light", (M.flags & kCanopyModelHasLight) != 0},
+                      {"instances", instances},
+                      {"levels", levels}});
+  }
+  j["models"] = models;
+  j["scene_light"] = f.hasSceneLight();
+  if (f.hasSceneLight()) {
+    const auto& s = f.sceneLight();
+    j["scene_light_dim"] = {s.dim[0], s.dim[1], s.dim[2]};
+  }
+  return j;
+}
+
+std::string formatInfo(const nlohmann::json& j) {
+  std::ostringstream o;
+  o << j["file"].get<std::string>() << ": .canopy " << j["format_version"].get<std::string>() << ", "
+    << j["file_bytes"].get<uint64_t>() << " bytes, resident " << j["resident_bytes"].get<uint64_t>() << " ("
+    << 100.0 * j["resident_fraction"].get<double>() << "%), " << j["pages"].get<uint64_t>() << " pages of "
+    << j["page_bytes"].get<uint64_t>() << " bytes, " << j["instances"].get<uint64_t>() << " instances\n";
+  o << "sections:\n";
+  for (const auto& s : j["sections"])
+    o << "  " << s["name"].get<std::string>() << ": " << s["bytes"].get<uint64_t>() << " bytes at " << s["offset"].get<uint64_t>() << "\n";
+  for (const auto& m : j["models"]) {
+    o << "model '" << m["name"].get<std::string>() << "': depth " << m["depth"].get<uint32_t>() << " (" << m["root_cells"].get<uint32_t>()
+      << " cells/axis), " << m["nodes"].get<uint64_t>() << " nodes, " << m["bricks"].get<uint64_t>() << " bricks in "
+      << m["brick_pages"].get<uint64_t>() << " pages, " << m["instances"].get<uint64_t>() << " instances, light: "
+      << (m["has_light"].get<bool>() ? "yes (" + std::to_string(m["light_pages"].get<uint64_t>()) + " pages)" : std::string("no")) << "\n";
+    for (const auto& l : m["levels"])
+      o << "  level " << l["level"].get<uint32_t>() << " (voxel = " << l["voxel_cells"].get<uint32_t>() << " cells): "
+        << l["bricks"].get<uint64_t>() << " bricks, " << l["constant_nodes"].get<uint64_t>() << " constant, "
+        << l["empty_nodes"].get<uint64_t>() << " empty\n";
+  }
+  return o.str();
+}
+
+void canopyVerify(const std::string& path, nlohmann::json& report) {
+  CanopyFile f = CanopyFile::open(path);  // resident problems throw with their own exit code
+  std::vector<std::string> problems;
+  std::vector<unsigned char> page(f.header().pageBytes);
+  for (uint32_t i = 0; i < f.pageCount(); ++i) {
+    try {
+      f.readPage(i, page.data());
+    } catch (const Error& e) {
+      problems.push_back(e.what());
+    }
+  }
+  report["file"] = path;
+  report["pages_checked"] = f.pageCount();
+  report["problems"] = problems;
+  report["ok"] = problems.empty();
+  if (!problems.empty())
+    throw invalidInput(problems.front() + (problems.size() > 1 ? " (and " + std::to_string(problems.size() - 1) + " more problems)" : ""));
+}
+
+}  // namespace canopy::octreepack

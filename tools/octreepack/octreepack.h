@@ -1,0 +1,37 @@
+// octreepack.h: canopy-octreepack's callable core (main.cpp only parses arguments).
+//   octreepack():  density lattices (+ scene instances, + coarse scene lighting) -> one .canopy
+//   canopyInfo():  the `info` report of a .canopy file (models, levels, counts, bytes per section)
+//   canopyVerify(): the `verify` check (every CRC, every pointer); throws on the first class of
+//                  problem with all problems listed in the report.
+#pragma once
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "formats/canopy_file.h"
+
+namespace canopy::octreepack {
+
+struct OctreepackOptions {
+  std::vector<std::string> inputs;   // PLANT.density.vdb [PLANT.light.chaar] (one plant)
+  std::string scene;                 // SCENE.json (or .glb: not supported in this build)
+  std::string output;                // OUT.canopy
+  std::string sceneLight;            // coarse scene lighting lattice (VDB), optional
+  std::string sceneLightGrid = "light";
+  bool ignoreLight = false;          // pack density only even where a .chaar is named
+};
+
+// Packs; returns the JSON report (models, levels, bytes, seconds). Throws canopy::Error.
+nlohmann::json octreepack(const OctreepackOptions& options);
+
+// Report of `info` (also used by octreepack's own report).
+nlohmann::json canopyInfo(const CanopyFile& file);
+// Human-readable rendering of canopyInfo (for stdout without --json).
+std::string formatInfo(const nlohmann::json& info);
+
+// Opens and checks everything; fills report["problems"]; throws canopy::Error(InvalidInput) if any
+// page is bad (errors opening the resident part propagate with their own code).
+void canopyVerify(const std::string& path, nlohmann::json& report);
+
+}  // namespace canopy::octreepack

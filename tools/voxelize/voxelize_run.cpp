@@ -1,0 +1,129 @@
+// voxelize_run.cpp: canopy::voxelize() (load, voxelise, write, report) and the scene list writer.
+#include <chrono>
+#include <cctype>
+#include <map>
+#include <set>
+
+#include "canopy/atomic_file.h"
+#include "canopy/cli.h"
+#include "canopy/errors.h"
+#include "formats/lattice_vdb.h"
+#include "voxelize.h"
+
+namespace canopy {
+namespace {
+
+std::string baseName(const std::string& p) {
+  const auto s = p.find_last_of('/');
+  return s == std::string::npos ? p : p.substr(s + 1);
+}
+
+std::string stemOf(const std::string& p) {
+  std::string b = baseName(p);
+  const auto d = b.find_last_of('.');
+  return d == std::string::npos || d == 0 ? b : b.substr(0, d);
+}
+
+std::string sanitize(const std::string& s) {
+  std::string r;
+  for (char c : s) r += (std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_') ? c : '_';
+  return r.empty() ? "mesh" : r;
+}
+
+std::string replaceAll(std::string s, const std::string& from, const std::string& to) {
+  for (size_t at = s.find(from); at != std::string::npos; at = s.find(from, at + to.size()))
+    s.replace(at, from.size(), to);
+  return s;
+}
+
+}  // namespace
+
+void writeInstances(const std::string& gltfPath, const std::string& jsonPath,
+                    const std::string& modelPattern) {
+  const mesh::SceneInfo scene = mesh::listGltfScene(gltfPath);
+  if (scene.instances.empty()) throw invalidInput(gltfPath + ": the scene has no node with a mesh");
+  std::set<int> used;
+  for (const auto& inst : scene.instances) used.insert(inst.mesh);
+  std::map<int, int> modelOf;
+  nlohmann::json models = nlohmann::json::array();
+  for (int m : used) {
+    modelOf[m] = int(models.size());
+    const std::string& name = scene.meshes[size_t(m)].name;
+    std::string path = replaceAll(modelPattern, "{stem}", stemOf(gltfPath));
+    path = replaceAll(path, "{N}", std::to_string(m));
+    path = replaceAll(path, "{name}", sanitize(name));
+    models.push_back({{"name", name}, {"mesh", m}, {"density", path}});
+  }
+  nlohmann::json instances = nlohmann::json::array();
+  for (const auto& inst : scene.instances) {
+    nlohmann::json mat = nlohmann::json::array();
+    for (double v : inst.matrix) mat.push_back(v);
+    instances.push_back({{"model", modelOf.at(inst.mesh)}, {"node", inst.nodeName}, {"matrix", mat}});
+  }
+  nlohmann::json doc = {{"canopy_scene", 1},
+                        {"source", vdbio::describeSource(gltfPath)},
+                        {"models", models},
+                        {"instances", instances}};
+  writeFileAtomic(jsonPath, doc.dump(2) + "\n");
+}
+
+VoxelizeResult voxelize(const VoxelizeOptions& o, nlohmann::json* report) {
+  const auto t0 = std::chrono::steady_clock::now();
+  validateOptions(o);
+  if (o.input.empty()) throw usageError("no input mesh given");
+  // Fail on an unwritable destination before any work (the probe's temporary file is removed).
+  if (!o.output.empty()) AtomicOutput probe(o.output);
+  if (!o.instancesOutput.empty()) AtomicOutput probe(o.instancesOutput);
+
+  mesh::LoadOptions lo;
+  lo.meshIndex = o.meshIndex;
+  logInfo("canopy-voxelize: loading " + o.input);
+  auto tl = std::chrono::steady_clock::now();
+  mesh::Mesh m = mesh::loadMesh(o.input, lo);
+  const double secondsLoad = secondsSince(tl);
+  if (m.droppedNonTriangles) logWarn(o.input + ": skipped " + std::to_string(m.droppedNonTriangles) +
+                                     " point/line primitives");
+  VoxelizeResult r = voxelizeMesh(std::move(m), o, o.input);
+  r.stats.secondsLoad = secondsLoad;
+  logInfo("canopy-voxelize: " + std::to_string(r.stats.triangles) + " triangles -> " +
+          std::to_string(r.stats.occupiedCells) + " occupied cells of " +
+          std::to_string(o.resolution) + "^3");
+  const std::string source = vdbio::describeSource(o.input);
+  auto tw = std::chrono::steady_clock::now();
+  if (!o.output.empty()) writeLattice(r, o, source);
+  if (!o.instancesOutput.empty()) writeInstances(o.input, o.instancesOutput, o.modelPattern);
+  r.stats.secondsWrite = secondsSince(tw);
+
+  if (report) {
+    const VoxelizeStats& s = r.stats;
+    nlohmann::json& j = *report;
+    j["input"] = o.input;
+    j["source"] = source;
+    j["output"] = o.output;
+    if (!o.instancesOutput.empty()) j["instances"] = o.instancesOutput;
+    j["resolution"] = o.resolution;
+    j["supersample"] = o.supersample;
+    j["mesh_index"] = o.meshIndex;
+    j["wood_pattern"] = o.woodPattern;
+    j["voxel_size"] = r.frame.voxelSize;
+    j["origin"] = {r.frame.origin[0], r.frame.origin[1], r.frame.origin[2]};
+    j["lattice_min"] = {0, 0, 0};
+    j["lattice_max"] = {o.resolution - 1, o.resolution - 1, o.resolution - 1};
+    j["triangles"] = {{"input", s.inputTriangles}, {"degenerate_removed", s.degenerateRemoved},
+                      {"duplicates_removed", s.duplicatesRemoved}, {"voxelized", s.triangles},
+                      {"wood", s.woodTriangles}, {"alpha_tested", s.maskedTriangles}};
+    j["occupied_tiles"] = s.occupiedTiles;
+    j["occupied_cells"] = s.occupiedCells;
+    j["total_density"] = s.totalDensity;
+    j["wood_fraction"] = s.woodFraction;
+    j["fine_touches"] = s.fineTouches;
+    j["alpha_rejected"] = s.alphaRejected;
+    j["exact_tests"] = s.exactTests;
+    j["seconds"] = {{"load", s.secondsLoad}, {"clean", s.secondsClean},
+                    {"voxelize", s.secondsVoxelize}, {"write", s.secondsWrite},
+                    {"total", secondsSince(t0)}};
+  }
+  return r;
+}
+
+}  // namespace canopy
