@@ -21,7 +21,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--sun", o.sun, "x,y,z (towards the sun), orbit[:azimuth=,elevation=,turns=] or a keyframe path.json")
       ->capture_default_str();
-  app.add_option("--cache-mb", o.cacheMb, "Brick page cache budget (MiB)")->capture_default_str();
+  app.add_option("--cache-mb", o.cacheMb, "Page cache budget (MiB; brick and light pages share it)")->capture_default_str();
   app.add_option("--sigma", o.sigma, "Extinction per lattice cell at density 1")->capture_default_str();
   app.add_option("--ambient", o.ambient, "Ambient (indirect) light factor")->capture_default_str();
   app.add_option("--sun-intensity", o.sunIntensity, "Sun radiance")->capture_default_str();
