@@ -26,7 +26,8 @@
 //      starting at the primary cone's and widening by shadowAperture per unit length), traced
 //      once per shadow interval (about a voxel of the primary cone) and reused by the samples in
 //      it. indirect is the LB light of the dissertation §4.2-4.3, see lbIndirect() and
-//      segmentIndirect(): sampled once per segment, at the same point as the density.
+//      segmentIndirect(): one sample per segment, at the point where the density is sampled, and
+//      only for samples that contribute (like the shadow cone).
 //   6. Streaming: bricks live in pages. A brick whose page is resident (pageSlot[page] >= 0) is
 //      sampled and its slot's use stamp set; a missing page has its want stamp set and the sample
 //      falls back to coarser data: a resident ancestor brick up to kFallbackLevels above, else the
@@ -259,7 +260,10 @@ struct Segment {
   float k;          // extinction per world unit
   float albedo[3];
   float tEnd;       // the value holds on [t, tEnd)
-  float indirect[3];  // shading segments only: the indirect light at the sample (before albedo)
+  // shading segments with matter only: where the indirect light is sampled
+  const uint16_t* lightItem;  // the light item (nullptr: density-only indirect term)
+  float light[3];             // the sample's node-local coordinates in the light item's node
+  float tSample;              // the sample's world ray parameter (scene factor)
 };
 
 // Finest level whose voxel (2^(depth - L) lattice cells) is no larger than the footprint.
@@ -376,25 +380,33 @@ CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m,
   return d;
 }
 
-// The indirect light of a segment sampled at unit point um (world ray parameter tm): from the
-// descent's light item at the node-local coordinates of um, else the density-only ambient term.
-CANOPY_HD inline void segmentIndirect(const SceneView& s, const InstanceView& inst, const Descent& d, V3 o, V3 dir, V3 um,
-                                      float tm, float out[3]) {
-  // light pages are used and asked for only by samples with matter (not by empty space)
+// A shading segment's light at unit point um (world ray parameter tm): the descent's light item and
+// the node-local coordinates of um in it. Light pages are used and asked for here, only by
+// segments with matter (not by empty space).
+CANOPY_HD inline void segmentLight(const SceneView& s, const Descent& d, V3 um, float tm, Segment& g) {
   if (d.missingLightPage != kCanopyNone) writeStamp(s.pageWanted + d.missingLightPage, s.stamp);
   if (d.lightItem) {
     writeStamp(s.slotUsed + d.lightPoolSlot, s.stamp);
   } else if (d.coarsestLightPage != kCanopyNone) {
     writeStamp(s.pageWanted + d.coarsestLightPage, s.stamp);
   }
-  const float factor = sceneLightFactor(s.light, o + dir * tm);
-  if (!d.lightItem) {
+  g.lightItem = d.lightItem;
+  g.tSample = tm;
+  const float inv = d.lightItem ? 1.0f / d.lightSize : 0.0f;
+  g.light[0] = (um.x - d.lightLo[0]) * inv;
+  g.light[1] = (um.y - d.lightLo[1]) * inv;
+  g.light[2] = (um.z - d.lightLo[2]) * inv;
+}
+
+// The indirect light of a shading segment of instance `inst` on the ray o + t dir: the LB light of
+// its light item, else the density-only ambient term; times the scene factor at its sample.
+CANOPY_HD inline void segmentIndirect(const SceneView& s, const InstanceView& inst, const Segment& g, V3 o, V3 dir, float out[3]) {
+  const float factor = sceneLightFactor(s.light, o + dir * g.tSample);
+  if (!g.lightItem) {
     ambientOnly(s, factor, out);
     return;
   }
-  const float inv = 1.0f / d.lightSize;
-  sampleLbLight(d.lightItem, inst.sunWeights, (um.x - d.lightLo[0]) * inv, (um.y - d.lightLo[1]) * inv, (um.z - d.lightLo[2]) * inv,
-                s.shade.ambient, factor, out);
+  sampleLbLight(g.lightItem, inst.sunWeights, g.light[0], g.light[1], g.light[2], s.shade.ambient, factor, out);
 }
 
 // The segment of instance `inst` at ray position t (world), the cone footprint there being
@@ -425,10 +437,7 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
       tEnd = tEnd < t + maxLen ? tEnd : t + maxLen;
     }
     g.tEnd = tEnd < tout ? tEnd : tout;
-    if (shading && g.k > 0.0f)
-      segmentIndirect(s, inst, d, o, dir, uo + ud * (0.5f * (t + g.tEnd)), 0.5f * (t + g.tEnd), g.indirect);
-    else
-      g.indirect[0] = g.indirect[1] = g.indirect[2] = 0.0f;
+    if (shading && g.k > 0.0f) segmentLight(s, d, uo + ud * (0.5f * (t + g.tEnd)), 0.5f * (t + g.tEnd), g);
     return g;
   }
   writeStamp(s.slotUsed + d.brickPoolSlot, s.stamp);
@@ -443,10 +452,7 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
   g.k = s.shade.sigma * c.density * cellsPerWorld;
   g.albedo[0] = c.albedo[0], g.albedo[1] = c.albedo[1], g.albedo[2] = c.albedo[2];
   g.tEnd = tEnd;
-  if (shading && g.k > 0.0f)
-    segmentIndirect(s, inst, d, o, dir, um, 0.5f * (t + tEnd), g.indirect);
-  else
-    g.indirect[0] = g.indirect[1] = g.indirect[2] = 0.0f;
+  if (shading && g.k > 0.0f) segmentLight(s, d, um, 0.5f * (t + tEnd), g);
   return g;
 }
 
@@ -666,7 +672,9 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
       }
       for (int h = 0; h < w.count; ++h) {
         if (w.hits[h].tin > t || seg[h].k <= 0.0f) continue;
-        for (int c = 0; c < 3; ++c) kc[c] += seg[h].k * seg[h].albedo[c] * (s.shade.sun[c] * sunT + seg[h].indirect[c]);
+        float ind[3];
+        segmentIndirect(s, s.instances[w.hits[h].instance], seg[h], o, d, ind);
+        for (int c = 0; c < 3; ++c) kc[c] += seg[h].k * seg[h].albedo[c] * (s.shade.sun[c] * sunT + ind[c]);
       }
       const float scale = T * alpha / k;
       for (int c = 0; c < 3; ++c) r.rgb[c] += scale * kc[c];
