@@ -25,11 +25,22 @@
 //      the sun through every instance (the same lock-step march without shading, its footprint
 //      starting at the primary cone's and widening by shadowAperture per unit length), traced
 //      once per shadow interval (about a voxel of the primary cone) and reused by the samples in
-//      it. indirect is the LB seam, see indirectLight().
+//      it. indirect is the LB light of the dissertation §4.2-4.3, see lbIndirect() and
+//      segmentIndirect(): one sample per segment, at the point where the density is sampled, and
+//      only for samples that contribute (like the shadow cone).
 //   6. Streaming: bricks live in pages. A brick whose page is resident (pageSlot[page] >= 0) is
 //      sampled and its slot's use stamp set; a missing page has its want stamp set and the sample
 //      falls back to coarser data: a resident ancestor brick up to kFallbackLevels above, else the
 //      node's stored mean (a constant segment). Never a hole and never a wait.
+//   7. LB light (models with kCanopyModelHasLight): light pages go through the SAME cache as brick
+//      pages (one page table, one pool, one LRU; a light page is just a page of another kind, of the
+//      same size). Light item b belongs to brick b and covers the same node, so the sample's
+//      node-local coordinates are the density's. The light used is that of the deepest brick on the
+//      descent path whose light page is resident (the node's own brick, else an ancestor's: a
+//      constant node always uses its nearest brick ancestor's, as canopy_file.h says); the node's
+//      own light page is asked for when it is missing. Only when no light page on the path is
+//      resident yet (a cold start) does the sample get the density-only indirect term
+//      (ambient x scene factor), and the coarsest brick's light page is asked for as well.
 #pragma once
 #include <math.h>
 #include <stdint.h>
@@ -115,7 +126,8 @@ struct ModelView {
   uint32_t depth;
   uint32_t rootCells;
   uint32_t firstBrickPage;
-  uint32_t hasLight;        // light pages present (never in a 1.0 file; see indirectLight)
+  uint32_t hasLight;        // light items present (kCanopyModelHasLight, lightCount == brickCount)
+  uint32_t firstLightPage;  // light item b is in page firstLightPage + b / lightItemsPerPage
 };
 
 struct InstanceView {
@@ -162,6 +174,7 @@ struct SceneView {
   uint32_t stamp;
   uint32_t pageBytes;
   uint32_t bricksPerPage;
+  uint32_t lightItemsPerPage;
   SceneLightView light;
   ShadeParams shade;
 };
@@ -217,18 +230,27 @@ CANOPY_HD inline void lbIndirect(const sun::Weights& w, const float bases[3][3],
              sceneFactor;
 }
 
-// The indirect light of a sample of instance `inst`. A model without LB light (every model of a
-// .canopy 1.0 file: light pages are reserved but their layout is defined only in 1.1) gets the
-// ambient term alone, B_0 taken as 1: ambient * sceneFactor. Where a model carries light
-// (ModelView::hasLight, 1.1), the caller samples B_{w.base[v]} and B_0 from its light bricks and
-// calls lbIndirect(); that sampler (formats/chaar.h's CANOPY_HD decoder over light pages) is not
-// part of this build, and the player refuses nothing: hasLight models are lit as density-only ones
-// (and say so on stderr, see scene.cpp).
-CANOPY_HD inline void indirectLight(const SceneView& s, const InstanceView& inst, V3 p, float out[3]) {
-  const float factor = sceneLightFactor(s.light, p);
-  const float ones[3][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
+// The indirect light of a sample of a model without LB light (or of a lit model before any of its
+// light pages is resident): the ambient term alone, B_0 taken as 1: ambient * sceneFactor.
+CANOPY_HD inline void ambientOnly(const SceneView& s, float sceneFactor, float out[3]) {
+  const float zero[3][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
   const float b0[3] = {1.0f, 1.0f, 1.0f};
-  lbIndirect(inst.sunWeights, ones, b0, s.shade.ambient, factor, out);
+  const sun::Weights none;
+  lbIndirect(none, zero, b0, s.shade.ambient, sceneFactor, out);
+}
+
+// The LB indirect light from a light item at node-local l in [0,1]^3: the (up to) three sun bases
+// of the instance's lookup and B_0, each trilinear (canopySampleLight), then lbIndirect().
+CANOPY_HD inline void sampleLbLight(const uint16_t* item, const sun::Weights& w, float lx, float ly, float lz, float ambient,
+                                    float sceneFactor, float out[3]) {
+  float bases[3][3];
+  for (int v = 0; v < 3; ++v) {
+    bases[v][0] = bases[v][1] = bases[v][2] = 0.0f;
+    if (w.weight[v] > 0.0f) canopySampleLight(item, uint32_t(w.base[v]), lx, ly, lz, bases[v]);
+  }
+  float b0[3];
+  canopySampleLight(item, 0, lx, ly, lz, b0);
+  lbIndirect(w, bases, b0, ambient, sceneFactor, out);
 }
 
 // ------------------------------------------------------------------------------------------------
@@ -238,6 +260,10 @@ struct Segment {
   float k;          // extinction per world unit
   float albedo[3];
   float tEnd;       // the value holds on [t, tEnd)
+  // shading segments with matter only: where the indirect light is sampled
+  const uint16_t* lightItem;  // the light item (nullptr: density-only indirect term)
+  float light[3];             // the sample's node-local coordinates in the light item's node
+  float tSample;              // the sample's world ray parameter (scene factor)
 };
 
 // Finest level whose voxel (2^(depth - L) lattice cells) is no larger than the footprint.
@@ -275,6 +301,13 @@ struct Descent {
   float brickSize;
   int32_t brickPoolSlot;
   uint32_t missingPage;           // the node's own page when it was missing, else kCanopyNone
+  // LB light (wantLight only): the deepest brick on the path whose light page is resident
+  const uint16_t* lightItem;      // nullptr: none resident
+  float lightLo[3];
+  float lightSize;
+  int32_t lightPoolSlot;
+  uint32_t missingLightPage;      // the deepest brick's light page when it was missing, else kCanopyNone
+  uint32_t coarsestLightPage;     // the shallowest brick's light page (asked for on a cold start)
 };
 
 CANOPY_HD inline int32_t residentSlot(const SceneView& s, const ModelView& m, uint32_t brick, uint32_t& page) {
@@ -282,7 +315,7 @@ CANOPY_HD inline int32_t residentSlot(const SceneView& s, const ModelView& m, ui
   return s.pageSlot[page];
 }
 
-CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m, V3 u, uint32_t maxLevel) {
+CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m, V3 u, uint32_t maxLevel, bool wantLight) {
   float x[3] = {u.x, u.y, u.z};
   for (int a = 0; a < 3; ++a) x[a] = x[a] < 0.0f ? 0.0f : (x[a] >= 1.0f ? 0.99999994f : x[a]);
   Descent d;
@@ -294,9 +327,30 @@ CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m,
   d.brickSlotInPage = 0;
   d.brickPoolSlot = -1;
   d.missingPage = kCanopyNone;
+  d.lightItem = nullptr;
+  d.lightSize = 0.0f;
+  d.lightLo[0] = d.lightLo[1] = d.lightLo[2] = 0.0f;
+  d.lightPoolSlot = -1;
+  d.missingLightPage = kCanopyNone;
+  d.coarsestLightPage = kCanopyNone;
+  wantLight = wantLight && m.hasLight;
   const uint32_t firstFallback = maxLevel > kFallbackLevels ? maxLevel - kFallbackLevels : 0;
   for (;;) {
     const bool last = !(d.level < maxLevel && d.node.child != kCanopyNone && d.node.child < m.tileCount);
+    if (wantLight && d.node.brick != kCanopyNone) {
+      const uint32_t lpage = m.firstLightPage + d.node.brick / s.lightItemsPerPage;
+      const int32_t lslot = s.pageSlot[lpage];
+      if (d.coarsestLightPage == kCanopyNone) d.coarsestLightPage = lpage;
+      if (lslot >= 0) {
+        d.lightItem = canopyLightInPage(s.pool + size_t(lslot) * s.pageBytes, d.node.brick % s.lightItemsPerPage);
+        d.lightPoolSlot = lslot;
+        d.lightSize = d.size;
+        for (int a = 0; a < 3; ++a) d.lightLo[a] = d.lo[a];
+        d.missingLightPage = kCanopyNone;
+      } else {
+        d.missingLightPage = lpage;
+      }
+    }
     if (d.node.brick != kCanopyNone && (d.level >= firstFallback || last)) {
       uint32_t page;
       const int32_t slot = residentSlot(s, m, d.node.brick, page);
@@ -326,6 +380,35 @@ CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m,
   return d;
 }
 
+// A shading segment's light at unit point um (world ray parameter tm): the descent's light item and
+// the node-local coordinates of um in it. Light pages are used and asked for here, only by
+// segments with matter (not by empty space).
+CANOPY_HD inline void segmentLight(const SceneView& s, const Descent& d, V3 um, float tm, Segment& g) {
+  if (d.missingLightPage != kCanopyNone) writeStamp(s.pageWanted + d.missingLightPage, s.stamp);
+  if (d.lightItem) {
+    writeStamp(s.slotUsed + d.lightPoolSlot, s.stamp);
+  } else if (d.coarsestLightPage != kCanopyNone) {
+    writeStamp(s.pageWanted + d.coarsestLightPage, s.stamp);
+  }
+  g.lightItem = d.lightItem;
+  g.tSample = tm;
+  const float inv = d.lightItem ? 1.0f / d.lightSize : 0.0f;
+  g.light[0] = (um.x - d.lightLo[0]) * inv;
+  g.light[1] = (um.y - d.lightLo[1]) * inv;
+  g.light[2] = (um.z - d.lightLo[2]) * inv;
+}
+
+// The indirect light of a shading segment of instance `inst` on the ray o + t dir: the LB light of
+// its light item, else the density-only ambient term; times the scene factor at its sample.
+CANOPY_HD inline void segmentIndirect(const SceneView& s, const InstanceView& inst, const Segment& g, V3 o, V3 dir, float out[3]) {
+  const float factor = sceneLightFactor(s.light, o + dir * g.tSample);
+  if (!g.lightItem) {
+    ambientOnly(s, factor, out);
+    return;
+  }
+  sampleLbLight(g.lightItem, inst.sunWeights, g.light[0], g.light[1], g.light[2], s.shade.ambient, factor, out);
+}
+
 // The segment of instance `inst` at ray position t (world), the cone footprint there being
 // `footprint` (world units). tout is the end of the instance's box interval.
 CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView& inst, V3 o, V3 dir, float t,
@@ -337,7 +420,7 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
   // a thousandth of a cell, but at least a few float ulps of t (progress far from the origin)
   const float eps = fmaxf(1e-3f / cellsPerWorld, fabsf(t) * 1e-6f);
   const uint32_t level = levelForFootprint(m.depth, footprint / inst.cellWorld, s.shade.lodBias);
-  const Descent d = descendResident(s, m, uo + ud * (t + eps), level);
+  const Descent d = descendResident(s, m, uo + ud * (t + eps), level, shading);
   Segment g;
   float tExit = nodeExit(uo, ud, d.lo, d.size);
   if (tExit < t + eps) tExit = t + eps;
@@ -354,6 +437,7 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
       tEnd = tEnd < t + maxLen ? tEnd : t + maxLen;
     }
     g.tEnd = tEnd < tout ? tEnd : tout;
+    if (shading && g.k > 0.0f) segmentLight(s, d, uo + ud * (0.5f * (t + g.tEnd)), 0.5f * (t + g.tEnd), g);
     return g;
   }
   writeStamp(s.slotUsed + d.brickPoolSlot, s.stamp);
@@ -368,6 +452,7 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
   g.k = s.shade.sigma * c.density * cellsPerWorld;
   g.albedo[0] = c.albedo[0], g.albedo[1] = c.albedo[1], g.albedo[2] = c.albedo[2];
   g.tEnd = tEnd;
+  if (shading && g.k > 0.0f) segmentLight(s, d, um, 0.5f * (t + tEnd), g);
   return g;
 }
 
@@ -588,7 +673,7 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
       for (int h = 0; h < w.count; ++h) {
         if (w.hits[h].tin > t || seg[h].k <= 0.0f) continue;
         float ind[3];
-        indirectLight(s, s.instances[w.hits[h].instance], p, ind);
+        segmentIndirect(s, s.instances[w.hits[h].instance], seg[h], o, d, ind);
         for (int c = 0; c < 3; ++c) kc[c] += seg[h].k * seg[h].albedo[c] * (s.shade.sun[c] * sunT + ind[c]);
       }
       const float scale = T * alpha / k;

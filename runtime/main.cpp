@@ -21,9 +21,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--sun", o.sun, "x,y,z (towards the sun), orbit[:azimuth=,elevation=,turns=] or a keyframe path.json")
       ->capture_default_str();
-  app.add_option("--cache-mb", o.cacheMb, "Brick page cache budget (MiB)")->capture_default_str();
+  app.add_option("--cache-mb", o.cacheMb, "Page cache budget (MiB; brick and light pages share it)")->capture_default_str();
   app.add_option("--sigma", o.sigma, "Extinction per lattice cell at density 1")->capture_default_str();
-  app.add_option("--ambient", o.ambient, "Ambient (indirect) light factor")->capture_default_str();
+  app.add_option("--ambient", o.ambient, "Ambient factor: times B_0 of LB-lit models, the whole indirect term of density-only ones")->capture_default_str();
   app.add_option("--sun-intensity", o.sunIntensity, "Sun radiance")->capture_default_str();
   app.add_option("--step", o.stepFactor, "Brick step in voxels of the chosen level")->capture_default_str();
   app.add_option("--lod-bias", o.lodBias, "Added to the footprint's level (negative = coarser)")->capture_default_str();

@@ -302,7 +302,9 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   r["cache_hit_rate"] = lookups ? double(st.pagesUsed) / double(lookups) : 1.0;
   r["cache_slots"] = slots;
   r["cache_mb"] = double(uint64_t(slots) * file.header().pageBytes) / (1024.0 * 1024.0);
-  r["scene_page_mb"] = double(scene.brickPageBytes) / (1024.0 * 1024.0);
+  r["scene_page_mb"] = double(scene.brickPageBytes + scene.lightPageBytes) / (1024.0 * 1024.0);
+  r["light_page_mb"] = double(scene.lightPageBytes) / (1024.0 * 1024.0);
+  r["lit_models"] = scene.litModels;
   r["pages_streamed"] = st.pagesLoaded;
   r["mb_streamed"] = double(st.bytesLoaded) / (1024.0 * 1024.0);
   r["stream_mb_per_s"] = total > 0 ? double(st.bytesLoaded) / (1024.0 * 1024.0) / total : 0.0;

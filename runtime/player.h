@@ -23,7 +23,7 @@ struct PlayOptions {
   int frames = 1;
   std::string camera = "orbit";      // orbit[:key=value,...] | path.json
   std::string sun = "orbit:azimuth=40,elevation=50";  // x,y,z (towards the sun) | orbit:... | path.json
-  double cacheMb = 1024.0;           // brick page pool budget
+  double cacheMb = 1024.0;           // page pool budget (brick and light pages share it)
   float sigma = 4.0f;                // extinction per lattice cell at density 1
   float ambient = 0.35f;             // ambient (indirect) factor
   float sunIntensity = 1.0f;

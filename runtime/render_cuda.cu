@@ -1,5 +1,6 @@
 // render_cuda.cu: the CUDA backend: the same renderPixel() (cone.h) as the CPU reference, one thread
-// per pixel, with the node tiles resident on the device and the brick pages in a device pool.
+// per pixel, with the node tiles resident on the device and the brick and light pages in one device
+// pool (one page table: a light page is a page like any other, see cone.h 7).
 //
 // Uploads: the loader reads pages into pinned staging buffers; upload() copies a page into its slot
 // on the copy stream, setPageTable() copies the table after them on the same stream and records an

@@ -67,6 +67,7 @@ HostScene buildScene(const CanopyFile& f) {
   s.pageCount = h.pageCount;
   s.pageBytes = h.pageBytes;
   s.bricksPerPage = h.bricksPerPage;
+  s.lightItemsPerPage = h.lightItemsPerPage;
   std::vector<M34> latticeToModel(f.modelCount()), modelToUnit(f.modelCount());
   for (uint32_t m = 0; m < f.modelCount(); ++m) {
     const CanopyModel& M = f.model(m);
@@ -77,13 +78,17 @@ HostScene buildScene(const CanopyFile& f) {
     v.depth = M.depth;
     v.rootCells = M.rootCells;
     v.firstBrickPage = M.firstBrickPage;
-    v.hasLight = (M.flags & kCanopyModelHasLight) ? 1u : 0u;
-    if (v.hasLight)
+    // the reader has checked the light pages' range; a model flagged lit must have one item per brick
+    v.hasLight = (M.flags & kCanopyModelHasLight) && M.lightCount > 0 && M.lightCount == M.brickCount && h.lightItemsPerPage > 0 ? 1u : 0u;
+    v.firstLightPage = M.firstLightPage;
+    if ((M.flags & kCanopyModelHasLight) && !v.hasLight)
       logWarn(f.path() + ": model '" + std::string(M.name, strnlen(M.name, sizeof(M.name))) +
-              "' carries LB light pages; this player lights it as density-only (direct sun + ambient)");
+              "' is flagged lit but has no light item per brick; it is lit as density-only (direct sun + ambient)");
+    s.litModels += v.hasLight;
     s.models.push_back(v);
     s.modelFirstTile.push_back(M.firstTile);
     s.brickPageBytes += uint64_t(M.brickPageCount) * h.pageBytes;
+    if (v.hasLight) s.lightPageBytes += uint64_t(M.lightPageCount) * h.pageBytes;
     M34 i2m;
     for (int k = 0; k < 12; ++k) i2m[size_t(k)] = M.indexToModel[k];
     latticeToModel[m] = i2m;
@@ -185,8 +190,11 @@ HostScene buildScene(const CanopyFile& f) {
 
 void HostScene::setSun(V3 toSun) {
   for (size_t i = 0; i < instances.size(); ++i) {
-    // light travels from the sun: -toSun, taken into the lattice axes of the instance's model
-    const V3 d = applyVector(worldToLatticeLinear[i], toSun * -1.0f);
+    // The lookup wants the direction the light TRAVELS (-toSun) in the LB lattice's index axes:
+    // the inverse of the instance's linear part (lattice -> model -> world) applied to it, i.e. the
+    // inverse rotation (and scale) of the instance, normalised. For a rotation + uniform scale this
+    // is the transpose of the rotation; a non-uniform scale maps directions as displacements.
+    const V3 d = normalize(applyVector(worldToLatticeLinear[i], toSun * -1.0f));
     sun::lookup(d.x, d.y, d.z, instances[i].sunWeights);
   }
 }
@@ -205,6 +213,7 @@ SceneView hostSceneView(const HostScene& s) {
   }
   v.pageBytes = s.pageBytes;
   v.bricksPerPage = s.bricksPerPage;
+  v.lightItemsPerPage = s.lightItemsPerPage > 0 ? s.lightItemsPerPage : 1;
   v.light = s.light;
   v.light.values = s.hasSceneLight ? s.lightValues.data() : nullptr;
   return v;

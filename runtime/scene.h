@@ -3,7 +3,8 @@
 // HostScene holds the arrays that cone.h's SceneView points at (models, instances, the uniform grid
 // of instance boxes, the coarse scene light); the backends copy them (the CUDA one to the device)
 // and fill in the cache pointers. setSun() recomputes every instance's sun lookup (the sun taken
-// into the instance's model/lattice axes, dissertation §4.2) once per frame.
+// into the instance's model/lattice axes, dissertation §4.2) once per frame. Light pages share the
+// brick pages' cache (page table, pool, LRU, loader): see cone.h, 7.
 #pragma once
 #include <cstdint>
 #include <string>
@@ -27,8 +28,10 @@ struct HostScene {
   bool hasSceneLight = false;
   SceneLightView light{};                 // values == nullptr; backends point it at lightValues
   std::vector<float> lightValues;
-  uint32_t pageCount = 0, pageBytes = 0, bricksPerPage = 0;
-  uint64_t brickPageBytes = 0;            // bytes of all brick pages (the streamed part)
+  uint32_t pageCount = 0, pageBytes = 0, bricksPerPage = 0, lightItemsPerPage = 0;
+  uint64_t brickPageBytes = 0;            // bytes of all brick pages (streamed)
+  uint64_t lightPageBytes = 0;            // bytes of the lit models' light pages (streamed, same cache)
+  uint32_t litModels = 0;                 // models sampled with LB light
 
   // Sets every instance's sun weights for the direction towards the sun (world).
   void setSun(V3 toSun);

@@ -56,6 +56,32 @@ inline void writeScene(const std::string& path, const std::vector<octreepack::Mo
   writeCanopyFile(path, std::move(w));
 }
 
+// Builds every model with its lighting (lights[m] may be null: density only; the octreepack
+// builder makes the light items, canopy_file.h's "Light pages") and writes `path`.
+inline void writeLitScene(const std::string& path, const std::vector<octreepack::ModelSource>& sources,
+                          const std::vector<octreepack::LightFn>& lights, const std::vector<CanopyInstance>& instances) {
+  std::vector<octreepack::BuiltModel> built;
+  built.reserve(sources.size());
+  for (size_t m = 0; m < sources.size(); ++m)
+    built.push_back(octreepack::buildOctree(sources[m], sources[m].name, m < lights.size() ? lights[m] : nullptr));
+  CanopyWriteInput w;
+  for (auto& b : built) w.models.push_back({b.record, &b.tiles, &b.bricks, &b.light});
+  w.instances = instances;
+  w.metadata = "{\"tool\":\"tests/play\"}";
+  writeCanopyFile(path, std::move(w));
+}
+
+// Lighting whose base j is (j + 1) * rgb[c] * (1 + gradient * i / edge): constant per base when
+// gradient = 0 (every light level then holds exactly these values), else varying along lattice x.
+inline octreepack::LightFn rampLight(const float rgb[3], float gradient = 0.0f, int edge = 1, float scale = 1.0f) {
+  const float c[3] = {rgb[0], rgb[1], rgb[2]};
+  return [c, gradient, edge, scale](int32_t i, int32_t, int32_t, float* out) {
+    const float g = 1.0f + gradient * float(i) / float(edge);
+    for (int b = 0; b < 19; ++b)
+      for (int ch = 0; ch < 3; ++ch) out[3 * b + ch] = scale * float(b + 1) * c[ch] * g;
+  };
+}
+
 inline std::string tmpDir(const char* sub) {
   const std::string d = std::string(CANOPY_BINARY_DIR) + "/tests/play/tmp/" + sub;
   const std::string cmd = "mkdir -p '" + d + "'";
