@@ -22,12 +22,31 @@ mkdir -p "$W"
 nvidia-smi > "$W/nvidia-smi.txt" 2>&1
 date -u > "$W/date.txt"
 tools=("$@")
-((${#tools[@]})) || tools=(core lbsolve haar octreepack play)
+((${#tools[@]})) || tools=(core plant lbsolve haar octreepack play)
 for t in "${tools[@]}"; do
   echo "=== $t $(date -u +%T)"
   start=$(date +%s)
   if [[ $t == core ]]; then
     "$BIN/test_core" --gtest_filter='*cuda*' > "$W/core.log" 2>&1
+  elif [[ $t == plant ]]; then
+    # A real plant's light field: oak_medium voxelised and lit on the GPU (timed), for haar's
+    # bit-exact CUDA decode check and benchmark (LIGHT), and the same solve on the CPU to compare.
+    {
+      "$BIN/canopy-voxelize" /work/shared/assets/plants/oak_medium.glb -o "$W/oak64.density.vdb" --resolution 64 &&
+      "$BIN/canopy-voxelize" /work/shared/assets/plants/oak_medium.glb -o "$W/oak128.density.vdb" --resolution 128 &&
+      "$BIN/canopy-lbsolve" "$W/oak128.density.vdb" -o "$W/oak128.light.vdb" --device cuda --json > "$W/oak128.lbsolve.cuda.json" &&
+      "$BIN/canopy-lbsolve" "$W/oak64.density.vdb" -o "$W/oak64.light.vdb" --device cuda --json > "$W/oak64.lbsolve.cuda.json" &&
+      "$BIN/canopy-lbsolve" "$W/oak64.density.vdb" -o "$W/oak64.cpu.light.vdb" --device cpu --json > "$W/oak64.lbsolve.cpu.json" &&
+      python3 - "$W" <<'PY'
+import json, sys
+w = sys.argv[1]
+for name in ("oak128.lbsolve.cuda", "oak64.lbsolve.cuda", "oak64.lbsolve.cpu"):
+    r = json.load(open(f"{w}/{name}.json"))
+    keys = {k: r[k] for k in r if k in ("seconds", "wall_seconds", "node_updates", "node_updates_per_second", "device")}
+    print(name, json.dumps(keys))
+PY
+    } > "$W/plant.log" 2>&1
+    export LIGHT=$W/oak64.light.vdb
   else
     OUT=$W/$t timeout "${GPU_STEP_TIMEOUT:-240}" bash "bench/$t/gpu.sh" > "$W/$t.log" 2>&1
   fi
