@@ -621,7 +621,7 @@ TEST(OctreepackLight, ChaarLightingEqualsTheDecoder) {
 
 // The GPU path runs the same CANOPY_HD descent and brick sampling as the CPU reference: on a GPU
 // host every sample must agree (same float operations; FMA contraction may differ: 1e-5).
-TEST(OctreepackSample, CudaMatchesCpuReference) {
+TEST(OctreepackSample, cuda_MatchesCpuReference) {
 #ifndef CANOPY_HAS_CUDA
   GTEST_SKIP() << "CPU-only build";
 #else
