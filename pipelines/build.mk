@@ -1,11 +1,12 @@
 # build.mk: the targets of pipelines/Makefile, run inside an output directory (make -C OUT -f
 # build.mk ...). Sources are found through vpath, so every output lands in the current directory.
 PIPELINES ?= $(patsubst %/,%,$(dir $(abspath $(lastword $(MAKEFILE_LIST)))))
-include $(PIPELINES)/canopy.mk
 
-# Small defaults so that every target also runs on a CPU-only machine in minutes.
+# Smaller defaults than canopy.mk's, so that every target also runs on a CPU-only machine in
+# minutes (set before the include: canopy.mk only fills what is still unset).
 RESOLUTION ?= 64
 PLAY_SIZE ?= 512x512
+include $(PIPELINES)/canopy.mk
 PLAY_FLAGS = --size $(PLAY_SIZE)
 
 .PHONY: demo plants scene forest sweep
