@@ -19,7 +19,8 @@ test: build
 	ctest --test-dir $(BUILD) --output-on-failure -j $(JOBS)
 
 demo: build
-	$(MAKE) -C pipelines demo BIN=$(abspath $(BUILD))/bin
+	$(MAKE) -C pipelines demo BIN=$(abspath $(BUILD))/bin O=$(abspath out)
+	@echo "demo: out/demo/sample.png"
 
 clean:
 	rm -rf $(BUILD)
