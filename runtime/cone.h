@@ -220,13 +220,20 @@ CANOPY_HD inline float sceneLightFactor(const SceneLightView& L, V3 p) {
   return v;
 }
 
+// B_0's boundary holds f_i = 1 on all 19 directions, so where nothing occludes the 18 moving
+// populations arrive whole and B_0 = 18 (f_0 stays 0 in empty space). Scaling B_0 by 1/18 makes it
+// the unoccluded-sky fraction: the same unit as the density-only path's B_0 = 1 (ambientOnly), so
+// `--ambient` means the same with and without LB light. (A sun base B_j is 1 in open space.)
+constexpr float kAmbientB0Scale = 1.0f / 18.0f;
+
 // The LB indirect light of the dissertation §4.2-4.3 at one sample, given the values of the three
 // sun bases chosen by the polyhedron lookup (bases[v] = B_{w.base[v]} there, RGB) and of the
-// ambient base B_0: (sum_v w_v B_v + ambient B_0) * sceneFactor.
+// ambient base B_0: (sum_v w_v B_v + ambient B_0 / 18) * sceneFactor.
 CANOPY_HD inline void lbIndirect(const sun::Weights& w, const float bases[3][3], const float b0[3], float ambient,
                                  float sceneFactor, float out[3]) {
   for (int c = 0; c < 3; ++c)
-    out[c] = (w.weight[0] * bases[0][c] + w.weight[1] * bases[1][c] + w.weight[2] * bases[2][c] + ambient * b0[c]) *
+    out[c] = (w.weight[0] * bases[0][c] + w.weight[1] * bases[1][c] + w.weight[2] * bases[2][c] +
+              ambient * kAmbientB0Scale * b0[c]) *
              sceneFactor;
 }
 
@@ -234,7 +241,7 @@ CANOPY_HD inline void lbIndirect(const sun::Weights& w, const float bases[3][3],
 // light pages is resident): the ambient term alone, B_0 taken as 1: ambient * sceneFactor.
 CANOPY_HD inline void ambientOnly(const SceneView& s, float sceneFactor, float out[3]) {
   const float zero[3][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
-  const float b0[3] = {1.0f, 1.0f, 1.0f};
+  const float b0[3] = {1.0f / kAmbientB0Scale, 1.0f / kAmbientB0Scale, 1.0f / kAmbientB0Scale};
   const sun::Weights none;
   lbIndirect(none, zero, b0, s.shade.ambient, sceneFactor, out);
 }

@@ -72,13 +72,13 @@ const std::string& plainSphere() {
 }
 
 // The expected indirect light / (ambient * albedo-weighted density-only image) per channel for the
-// constant bases: (sum_v w_v (b_v + 1) + ambient * 1) * kRgb[c] / ambient.
+// constant bases: (sum_v w_v (b_v + 1) + ambient * B_0 / 18) * kRgb[c] / ambient, B_0 = 1.
 void expectedRatio(canopy::play::V3 toSun, float ambient, float ratio[3]) {
   canopy::sun::Weights w;
   ASSERT_TRUE(canopy::sun::lookup(-toSun.x, -toSun.y, -toSun.z, w));
   float sum = 0.0f;
   for (int v = 0; v < 3; ++v) sum += w.weight[v] * float(w.base[v] + 1);
-  for (int c = 0; c < 3; ++c) ratio[c] = (sum + ambient) * kRgb[c] / ambient;
+  for (int c = 0; c < 3; ++c) ratio[c] = (sum + ambient * pl::kAmbientB0Scale) * kRgb[c] / ambient;
 }
 
 }  // namespace
@@ -101,7 +101,7 @@ TEST(Light, SampleLbLightIsLbIndirectOfTheTrilinearBases) {
     pl::sampleLbLight(item.data(), w, lx, 0.3f, 0.6f, 0.35f, 0.5f, out);
     const float t = lx * 4.0f + 0.5f;
     for (int c = 0; c < 3; ++c) {
-      float want = 0.35f * t;
+      float want = 0.35f * pl::kAmbientB0Scale * t;
       for (int v = 0; v < 3; ++v) want += w.weight[v] * (float(w.base[v]) + t);
       want *= 0.5f * float(c + 1) / 8.0f;
       EXPECT_NEAR(out[c], want, 1e-5f) << "lx " << lx << " channel " << c;
@@ -133,7 +133,7 @@ TEST(Light, IndirectIsTheLookupWeightedSunBasesPlusAmbientB0) {
     float ratio[3];
     expectedRatio(canopy::play::normalize(canopy::play::v3(x, y, z)), o.ambient, ratio);
     if (std::string(sun) == "0,1,0") {
-      EXPECT_FLOAT_EQ(ratio[0], (5.0f + o.ambient) / o.ambient);  // B04 alone
+      EXPECT_FLOAT_EQ(ratio[0], (5.0f + o.ambient * pl::kAmbientB0Scale) / o.ambient);  // B04 alone
     }
     double peak = 0;
     for (size_t i = 0; i < lit.size(); ++i) {
