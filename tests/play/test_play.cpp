@@ -107,7 +107,7 @@ TEST(Cone, RayBoxAndNodeExit) {
   EXPECT_FLOAT_EQ(pl::nodeExit(pl::v3(0.3f, 0.6f, 0.1f), pl::v3(0, 0, 2), lo, 0.25f), (0.25f - 0.1f) / 2.0f);
 }
 
-TEST(Cone, LbIndirectIsTheWeightedBasesPlusAmbientTimesSceneFactor) {
+TEST(Cone, LbIndirectIsTheWeightedBasesPlusAmbientTimesSceneFactor)  // B_0 in open-sky units (/18) {
   canopy::sun::Weights w;
   ASSERT_TRUE(canopy::sun::lookupToSun(0.3f, 1.0f, 0.2f, w));
   const float bases[3][3] = {{1, 2, 3}, {4, 5, 6}, {7, 8, 9}};
@@ -115,7 +115,7 @@ TEST(Cone, LbIndirectIsTheWeightedBasesPlusAmbientTimesSceneFactor) {
   float out[3];
   pl::lbIndirect(w, bases, b0, 0.4f, 0.5f, out);
   for (int c = 0; c < 3; ++c) {
-    const float expect = (w.weight[0] * bases[0][c] + w.weight[1] * bases[1][c] + w.weight[2] * bases[2][c] + 0.4f * b0[c]) * 0.5f;
+    const float expect = (w.weight[0] * bases[0][c] + w.weight[1] * bases[1][c] + w.weight[2] * bases[2][c] + 0.4f * b0[c] / 18.0f) * 0.5f;
     EXPECT_NEAR(out[c], expect, 1e-6f);
   }
 }
