@@ -107,7 +107,8 @@ TEST(Cone, RayBoxAndNodeExit) {
   EXPECT_FLOAT_EQ(pl::nodeExit(pl::v3(0.3f, 0.6f, 0.1f), pl::v3(0, 0, 2), lo, 0.25f), (0.25f - 0.1f) / 2.0f);
 }
 
-TEST(Cone, LbIndirectIsTheWeightedBasesPlusAmbientTimesSceneFactor)  // B_0 in open-sky units (/18) {
+// B_0 enters in open-sky units (divided by 18, see kAmbientB0Scale).
+TEST(Cone, LbIndirectIsTheWeightedBasesPlusAmbientTimesSceneFactor) {
   canopy::sun::Weights w;
   ASSERT_TRUE(canopy::sun::lookupToSun(0.3f, 1.0f, 0.2f, w));
   const float bases[3][3] = {{1, 2, 3}, {4, 5, 6}, {7, 8, 9}};
