@@ -60,7 +60,8 @@ endif
 # --- forest: scatter the plants, pack, render a short flight ------------------------------------
 FOREST_N ?= 400
 FOREST_SEED ?= 1
-FOREST_RADIUS ?= 40
+# The shared plants are 30-65 model units tall: 400 of them on a 450-unit disk stand ~40 apart.
+FOREST_RADIUS ?= 450
 FOREST_PLANTS ?= $(filter-out %.draco,$(PLANT_NAMES))
 FOREST_FRAMES ?= 24
 forest: forest/f_0000.png
