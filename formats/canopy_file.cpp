@@ -401,20 +401,15 @@ std::vector<unsigned char> CanopyFile::readPage(uint32_t index) const {
   return page;
 }
 
-std::vector<std::string> verifyCanopyFile(const std::string& path) {
+std::vector<std::string> verifyCanopyPages(const CanopyFile& f) {
   std::vector<std::string> problems;
-  try {
-    CanopyFile f = CanopyFile::open(path);
-    std::vector<unsigned char> page(f.header().pageBytes);
-    for (uint32_t i = 0; i < f.pageCount(); ++i) {
-      try {
-        f.readPage(i, page.data());
-      } catch (const Error& e) {
-        problems.push_back(e.what());
-      }
+  std::vector<unsigned char> page(f.header().pageBytes);
+  for (uint32_t i = 0; i < f.pageCount(); ++i) {
+    try {
+      f.readPage(i, page.data());
+    } catch (const Error& e) {
+      problems.push_back(e.what());
     }
-  } catch (const Error& e) {
-    problems.push_back(e.what());
   }
   return problems;
 }

@@ -407,6 +407,22 @@ inline uint16_t canopyFloatToHalf(float f) {
   return uint16_t(sign | h);
 }
 
+// One step down the octree: x (the point in the current node, [0,1)^3) becomes the point in the
+// child that holds it, lo and size (the node's corner and edge in octree unit space) become the
+// child's. Returns the child index c = x + 2y + 4z. Shared by canopyDescend and the player.
+CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyStepDown(float x[3], float lo[3], float& size) {
+  uint32_t c = 0;
+  size *= 0.5f;
+  for (int a = 0; a < 3; ++a) {
+    const float t = x[a] * 2.0f;
+    const uint32_t off = t >= 1.0f ? 1u : 0u;
+    x[a] = t - float(off);
+    c |= off << a;
+    lo[a] += float(off) * size;
+  }
+  return c;
+}
+
 // The result of descending the octree to a point.
 struct CanopyLookup {
   CanopyNode node;       // the node reached
@@ -434,15 +450,7 @@ CANOPY_HD inline CanopyLookup canopyDescend(const CanopyNode* tiles, uint32_t ti
   r.nodeMin[0] = r.nodeMin[1] = r.nodeMin[2] = 0.0f;
   if (maxLevel > depth) maxLevel = depth;
   while (r.level < maxLevel && r.node.child != kCanopyNone && r.node.child < tileCount) {
-    uint32_t c = 0;
-    r.nodeSize *= 0.5f;
-    for (int a = 0; a < 3; ++a) {
-      const float t = x[a] * 2.0f;
-      const uint32_t off = t >= 1.0f ? 1u : 0u;
-      x[a] = t - float(off);
-      c |= off << a;
-      r.nodeMin[a] += float(off) * r.nodeSize;
-    }
+    const uint32_t c = canopyStepDown(x, r.nodeMin, r.nodeSize);
     r.parent = r.node;
     r.node = tiles[size_t(r.node.child) * 8 + c];
     ++r.level;
@@ -560,10 +568,10 @@ class CanopyFile {
   std::string metadata_;
 };
 
-// Full check for `canopy-octreepack verify`: opens the file (resident checks) and reads and checks
-// every page. Returns the problems found, one line each (empty = file is good); never throws for
-// a problem in the file's content.
-std::vector<std::string> verifyCanopyFile(const std::string& path);
+// Page check for `canopy-octreepack verify`: reads and checks every page of an opened file (whose
+// resident part CanopyFile::open already validated). Returns the problems found, one line each
+// (empty = every page is good); never throws for a problem in a page's content.
+std::vector<std::string> verifyCanopyPages(const CanopyFile& file);
 
 // CRC-32 of a page image with its crc field read as 0.
 uint32_t canopyPageCrc(const void* page, uint32_t pageBytes);

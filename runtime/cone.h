@@ -372,15 +372,7 @@ CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m,
       }
     }
     if (last) break;
-    uint32_t c = 0;
-    d.size *= 0.5f;
-    for (int a = 0; a < 3; ++a) {
-      const float t = x[a] * 2.0f;
-      const uint32_t off = t >= 1.0f ? 1u : 0u;
-      x[a] = t - float(off);
-      c |= off << a;
-      d.lo[a] += float(off) * d.size;
-    }
+    const uint32_t c = canopyStepDown(x, d.lo, d.size);
     d.node = m.tiles[size_t(d.node.child) * 8 + c];
     ++d.level;
   }

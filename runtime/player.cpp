@@ -12,6 +12,7 @@
 #include "canopy/atomic_file.h"
 #include "canopy/cli.h"
 #include "canopy/errors.h"
+#include "canopy/json_file.h"
 #include "formats/canopy_file.h"
 #include "runtime/backend.h"
 #include "runtime/image_io.h"
@@ -72,13 +73,7 @@ struct Key {
 
 // Keyframes {"keyframes": [{"frame": F, <fieldA>: [..], <fieldB>: [..], "fov": deg}, ...]}, sorted.
 std::vector<Key> readKeyframes(const std::string& path, const char* fieldA, const char* fieldB) {
-  const std::vector<unsigned char> bytes = readFile(path);
-  nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(bytes.begin(), bytes.end());
-  } catch (const std::exception& e) {
-    throw invalidInput(path + ": not valid JSON: " + e.what());
-  }
+  nlohmann::json j = readJsonFile(path);
   if (!j.is_object() || !j.contains("keyframes") || !j["keyframes"].is_array() || j["keyframes"].empty())
     throw invalidInput(path + ": expected {\"keyframes\": [...]} with at least one keyframe");
   std::vector<Key> keys;

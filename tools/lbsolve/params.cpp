@@ -1,3 +1,4 @@
+
 // params.cpp: see params.h.
 #include "params.h"
 
@@ -5,6 +6,7 @@
 
 #include "canopy/atomic_file.h"
 #include "canopy/errors.h"
+#include "canopy/json_file.h"
 
 namespace canopy::lb {
 namespace {
@@ -96,14 +98,7 @@ std::array<double, 3> LightParams::luminance() const {
 }
 
 LightParams loadParams(const std::string& path) {
-  const auto bytes = readFile(path);
-  nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(bytes.begin(), bytes.end());
-  } catch (const std::exception& e) {
-    std::string what = e.what();
-    throw invalidInput(path + ": not valid JSON (" + what.substr(0, what.find('\n')) + ")");
-  }
+  const nlohmann::json j = readJsonFile(path);
   LightParams p;
   applyParams(p, j, path);
   return p;

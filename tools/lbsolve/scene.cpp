@@ -17,6 +17,7 @@
 #include "canopy/atomic_file.h"
 #include "canopy/cli.h"
 #include "canopy/errors.h"
+#include "canopy/json_file.h"
 #include "canopy/lattice_dirs.h"
 #include "lattice_io.h"
 #include "lbsolve_internal.h"
@@ -35,14 +36,7 @@ struct Scene {
 };
 
 Scene readScene(const std::string& path) {
-  const auto bytes = readFile(path);
-  nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(bytes.begin(), bytes.end());
-  } catch (const std::exception& e) {
-    std::string what = e.what();
-    throw invalidInput(path + ": not valid JSON (" + what.substr(0, what.find('\n')) + ")");
-  }
+  nlohmann::json j = readJsonFile(path);
   auto bad = [&](const std::string& why) { return invalidInput(path + ": " + why); };
   if (!j.is_object() || !j.contains("canopy_scene")) throw bad("not a Canopy scene (no \"canopy_scene\")");
   if (!j["canopy_scene"].is_number_integer() || j["canopy_scene"].get<int>() != 1)

@@ -11,6 +11,7 @@
 
 #include "canopy/atomic_file.h"
 #include "canopy/errors.h"
+#include "canopy/json_file.h"
 #include "formats/lattice_vdb.h"
 
 #if __has_include("formats/chaar.h")  // the chaar decoder (canopy-haar's branch) is in this tree
@@ -154,13 +155,7 @@ LightVdb readChaarLight(const std::string& path, const ModelSource& model) {
 }
 
 SceneDesc readSceneJson(const std::string& path) {
-  const std::vector<unsigned char> bytes = readFile(path);
-  nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(bytes.begin(), bytes.end());
-  } catch (const std::exception& e) {
-    throw invalidInput(path + ": not valid JSON (" + std::string(e.what()) + ")");
-  }
+  nlohmann::json j = readJsonFile(path);
   auto fail = [&](const std::string& what) -> Error { return invalidInput(path + ": " + what); };
   if (!j.is_object() || !j.contains("canopy_scene") || !j["canopy_scene"].is_number_integer())
     throw fail("not a Canopy scene (no integer 'canopy_scene')");

@@ -212,15 +212,7 @@ std::string formatInfo(const nlohmann::json& j) {
 
 void canopyVerify(const std::string& path, nlohmann::json& report) {
   CanopyFile f = CanopyFile::open(path);  // resident problems throw with their own exit code
-  std::vector<std::string> problems;
-  std::vector<unsigned char> page(f.header().pageBytes);
-  for (uint32_t i = 0; i < f.pageCount(); ++i) {
-    try {
-      f.readPage(i, page.data());
-    } catch (const Error& e) {
-      problems.push_back(e.what());
-    }
-  }
+  const std::vector<std::string> problems = verifyCanopyPages(f);
   report["file"] = path;
   report["pages_checked"] = f.pageCount();
   report["problems"] = problems;
