@@ -51,7 +51,8 @@ LatticeMeta readLatticeMeta(const openvdb::GridBase& g, const std::string& path)
 }
 
 std::string describeSource(const std::string& path) {
-  return path + " xxh64:" + hex64(hashFile(path));
+  const size_t slash = path.find_last_of('/');
+  return (slash == std::string::npos ? path : path.substr(slash + 1)) + " xxh64:" + hex64(hashFile(path));
 }
 
 namespace {

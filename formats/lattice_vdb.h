@@ -29,7 +29,8 @@ void stampGrid(openvdb::GridBase& grid, const LatticeMeta& meta);
 // Reads it back; throws invalidInput naming `path` if missing or inconsistent.
 LatticeMeta readLatticeMeta(const openvdb::GridBase& grid, const std::string& path);
 
-// "<path> xxh64:<hash of the file's bytes>"
+// "<file name> xxh64:<hash of the file's bytes>". The name without its folder: the same input gives
+// the same output bytes wherever it lies (a cluster node may mount the library elsewhere).
 std::string describeSource(const std::string& path);
 
 // Writes grids (and optional file-level metadata) atomically with a content-derived UUID.

@@ -9,7 +9,7 @@ PLAY_SIZE ?= 512x512
 include $(PIPELINES)/canopy.mk
 PLAY_FLAGS = --size $(PLAY_SIZE)
 
-.PHONY: demo plants scene forest sweep
+.PHONY: demo plants library scene forest sweep
 .DEFAULT_GOAL := demo
 
 # --- demo: the built-in sample plant, end to end, to a PNG ------------------------------------
@@ -26,6 +26,13 @@ vpath %.gltf $(PLANTS)
 vpath %.obj $(PLANTS)
 vpath %.ply $(PLANTS)
 plants: $(addsuffix .canopy,$(PLANT_NAMES))
+
+# --- library: the plants plus an index of them (name, file, size, SHA-256, octreepack info) -----
+# A cluster builds the plants as a job array and this index as the job that depends on them
+# (pipelines/slurm/submit-library).
+library: library.json
+library.json: $(addsuffix .canopy,$(PLANT_NAMES)) $(PIPELINES)/library_index.py
+	python3 $(PIPELINES)/library_index.py --octreepack $(CANOPY_OCTREEPACK) -o $@ $(filter %.canopy,$^)
 
 # --- scene: a glTF scene whose nodes share meshes ----------------------------------------------
 # Each distinct mesh is voxelised (in its own model space), lit and compressed once; the instance
