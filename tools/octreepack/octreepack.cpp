@@ -72,12 +72,14 @@ Scene singlePlant(const std::vector<std::string>& inputs) {
 Scene gltfScene(const std::string& glb, const std::vector<std::string>& inputs) {
   Scene scene = mesh::sceneFromGltf(glb);
   auto meshLabel = [&](const SceneModel& m) { return "mesh " + std::to_string(m.mesh) + " ('" + m.name + "')"; };
-  auto voxelizeHint = [&](const SceneModel& m) {
-    return "canopy-voxelize " + glb + " --mesh " + std::to_string(m.mesh) + " -o " + m.name + ".density.vdb";
+  Scene named = scene;  // canopy-voxelize's default lattice names, for the hints
+  mesh::applyModelPattern(named, glb, "{stem}.mesh{N}.density.vdb");
+  auto voxelizeHint = [&](size_t model) {
+    return "canopy-voxelize " + glb + " --mesh " + std::to_string(named.models[model].mesh) + " -o " + named.models[model].density;
   };
   if (inputs.empty())
     throw usageError(glb + ": give the density lattice of each of its " + std::to_string(scene.models.size()) +
-                     " meshes (e.g. " + voxelizeHint(scene.models[0]) + "), each followed by its optional lighting");
+                     " meshes (e.g. " + voxelizeHint(0) + "), each followed by its optional lighting");
   const std::string sceneHash = contentHashOf(scene.source);
   std::map<int, size_t> modelOfMesh;
   for (size_t i = 0; i < scene.models.size(); ++i) modelOfMesh[scene.models[i].mesh] = i;
@@ -98,11 +100,12 @@ Scene gltfScene(const std::string& glb, const std::vector<std::string>& inputs) 
     if (it == modelOfMesh.end())
       throw invalidInput(in + ": voxelised from mesh " + std::to_string(origin.meshIndex) + ", which no node of " + glb + " uses");
     last = &scene.models[it->second];
-    if (!last->density.empty()) throw invalidInput(in + ": " + meshLabel(*last) + " already has a lattice, " + last->density);
+    if (!last->density.empty()) throw invalidInput(in + ": " + meshLabel(*last) + " already has a lattice (" + last->density + ")");
     last->density = in;
   }
-  for (const SceneModel& m : scene.models)
-    if (m.density.empty()) throw invalidInput(glb + ": " + meshLabel(m) + " has no lattice among the inputs (" + voxelizeHint(m) + ")");
+  for (size_t i = 0; i < scene.models.size(); ++i)
+    if (scene.models[i].density.empty())
+      throw invalidInput(glb + ": " + meshLabel(scene.models[i]) + " has no lattice among the inputs (" + voxelizeHint(i) + ")");
   return scene;
 }
 
