@@ -97,7 +97,9 @@ Scene sceneFromJson(const nlohmann::json& j, const std::string& name, const std:
   const std::function<Error(const std::string&)> fail = [&](const std::string& what) { return invalidInput(name + ": " + what); };
   if (!j.is_object() || !j.contains("canopy_scene") || !j["canopy_scene"].is_number_integer())
     throw fail("not a Canopy scene (no integer 'canopy_scene')");
-  if (!j["canopy_scene"].is_number_unsigned() || j["canopy_scene"].get<uint64_t>() != uint64_t(kSceneJsonVersion))
+  const nlohmann::json& version = j["canopy_scene"];
+  if (version.is_number_unsigned() ? version.get<uint64_t>() != uint64_t(kSceneJsonVersion)
+                                   : version.get<int64_t>() != kSceneJsonVersion)
     throw unsupported(name + ": scene format version " + j["canopy_scene"].dump() + " is not supported (" +
                       std::to_string(kSceneJsonVersion) + ")");
   if (!j.contains("models") || !j["models"].is_array() || j["models"].empty()) throw fail("'models' must be a non-empty array");
