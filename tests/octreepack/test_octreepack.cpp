@@ -418,6 +418,8 @@ TEST(OctreepackGltf, LatticesThatDoNotFitTheSceneAreRejected) {
               "a lighting input must follow the density lattice it lights");
   expectError({}, canopy::ExitCode::Usage, "give the density lattice of each of its 3 meshes");
   expectError({g.lattice(0), g.dir + "/missing.density.vdb"}, canopy::ExitCode::Io, "missing.density.vdb");
+  canopy::writeFileAtomic(g.dir + "/garbage.density.vdb", std::string("this is not a vdb"));
+  expectError({g.dir + "/garbage.density.vdb"}, canopy::ExitCode::InvalidInput, "garbage.density.vdb: not a readable OpenVDB file");
 }
 
 TEST(OctreepackGltf, CliExitCodesAndNoOutputLeftBehind) {
@@ -539,6 +541,42 @@ TEST(OctreepackCli, BadInputsFailCleanlyAndLeaveNoOutput) {
   EXPECT_EQ(run("'" + dir + "/cli.density.vdb' '" + dir + "/p.light.chaar' --ignore-light -o '" + out + "'"), 0);
   EXPECT_TRUE(exists(out));
   EXPECT_EQ(run("verify '" + out + "'"), 0);
+}
+
+// canopy-lbsolve and canopy-octreepack read scene lists with the same reader (formats/scene_json.h):
+// the same bad list gets the same exit code and the same one-line message from both.
+TEST(OctreepackCli, SceneListErrorsAreTheSameAsLbsolves) {
+  const std::string lbsolve = std::string(CANOPY_BINARY_DIR) + "/bin/canopy-lbsolve";
+  if (!exists(lbsolve)) GTEST_SKIP() << "canopy-lbsolve is not built";
+  const std::string dir = tmpDir();
+  writeSourceVdb(dir + "/same.density.vdb", syntheticPlant(16, 0, "same", 0));
+  // Runs a tool; returns its exit code and its stderr from "error: " on.
+  auto errorOf = [](const std::string& cmd) {
+    FILE* p = popen((cmd + " 2>&1 >/dev/null").c_str(), "r");
+    std::string text;
+    char buf[512];
+    while (p && std::fgets(buf, sizeof buf, p)) text += buf;
+    const int rc = p ? pclose(p) : -1;
+    const auto at = text.find("error: ");
+    return std::make_pair(WIFEXITED(rc) ? WEXITSTATUS(rc) : -1, at == std::string::npos ? text : text.substr(at));
+  };
+  const std::string identity = "[1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1]";
+  const std::pair<std::string, int> cases[] = {
+      {R"({"canopy_scene": 1, "models": [{"density": "same.density.vdb"}], "instances": [{"model": 3, "matrix": )" + identity + "}]}", 3},
+      {R"({"canopy_scene": 1, "models": [{"density": "same.density.vdb"}], "instances": [{"model": 0, "matrix": [1,0,0,0, 0,0,0,0, 0,0,1,0, 0,0,0,1]}]})", 3},
+      {R"({"canopy_scene": 2, "models": [{"density": "same.density.vdb"}], "instances": [{"model": 0, "matrix": )" + identity + "}]}", 5},
+      {R"({"canopy_scene": 1, "models": [{"density": "same.density.vdb"}], "instances": [{"model": 0, "matrix": )" + identity, 3},
+  };
+  for (const auto& [text, code] : cases) {
+    canopy::writeFileAtomic(dir + "/same.scene.json", text);
+    const auto a = errorOf(std::string(CANOPY_BINARY_DIR) + "/bin/canopy-octreepack --scene '" + dir + "/same.scene.json' -o '" + dir + "/same.canopy'");
+    const auto b = errorOf(lbsolve + " --scene '" + dir + "/same.scene.json' -o '" + dir + "/same.light.vdb'");
+    EXPECT_EQ(a.first, code) << text;
+    EXPECT_EQ(a, b) << text;
+    EXPECT_NE(a.second.find(dir + "/same.scene.json: "), std::string::npos) << a.second;
+    EXPECT_FALSE(exists(dir + "/same.canopy"));
+    EXPECT_FALSE(exists(dir + "/same.light.vdb"));
+  }
 }
 
 TEST(OctreepackCli, NonFiniteDensityIsRejected) {
