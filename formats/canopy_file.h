@@ -80,6 +80,7 @@
 #include <string>
 #include <vector>
 
+#include "canopy/half.h"
 #include "canopy/hd.h"
 
 namespace canopy {
@@ -331,25 +332,6 @@ CANOPY_HD inline CanopySample canopySampleBrick(CanopyBrickView b, float lx, flo
   return s;
 }
 
-// IEEE 754 binary16 -> float (light items).
-CANOPY_HD CANOPY_FORCEINLINE float canopyHalfToFloat(uint16_t h) {
-  const uint32_t sign = uint32_t(h & 0x8000u) << 16;
-  const uint32_t exp = (h >> 10) & 0x1Fu;
-  const uint32_t man = h & 0x3FFu;
-  uint32_t bits;
-  if (exp == 0) {  // zero or subnormal: man * 2^-24
-    const float v = float(man) * (1.0f / 16777216.0f);
-    return sign ? -v : v;
-  } else if (exp == 31) {
-    bits = sign | 0x7F800000u | (man << 13);
-  } else {
-    bits = sign | ((exp + 112u) << 23) | (man << 13);
-  }
-  float f;
-  memcpy(&f, &bits, 4);
-  return f;
-}
-
 // The light item `slot` (= item id % lightItemsPerPage) of a light page image.
 CANOPY_HD CANOPY_FORCEINLINE const uint16_t* canopyLightInPage(const void* page, uint32_t slot) {
   return reinterpret_cast<const uint16_t*>(static_cast<const unsigned char*>(page) + sizeof(CanopyPageHeader) +
@@ -376,36 +358,16 @@ CANOPY_HD inline void canopySampleLight(const uint16_t* item, uint32_t base, flo
       const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
       const float wt = (dx ? f[0] : 1.0f - f[0]) * (dy ? f[1] : 1.0f - f[1]) * (dz ? f[2] : 1.0f - f[2]);
       if (wt == 0.0f) continue;
-      v += wt * canopyHalfToFloat(plane[(i0[0] + dx) + kCanopyLightVoxels * ((i0[1] + dy) + kCanopyLightVoxels * (i0[2] + dz))]);
+      v += wt * halfToFloat(plane[(i0[0] + dx) + kCanopyLightVoxels * ((i0[1] + dy) + kCanopyLightVoxels * (i0[2] + dz))]);
     }
     rgb[ch] = v;
   }
 }
 
-// float -> IEEE binary16, round to nearest even; values beyond the half range become +-65504
-// (lighting is never infinite), NaN stays NaN. Host only (the writer).
-inline uint16_t canopyFloatToHalf(float f) {
-  uint32_t x;
-  memcpy(&x, &f, 4);
-  const uint16_t sign = uint16_t((x >> 16) & 0x8000u);
-  const uint32_t absx = x & 0x7FFFFFFFu;
-  if (absx > 0x7F800000u) return uint16_t(sign | 0x7E00u);          // NaN
-  if (absx >= 0x477FF000u) return uint16_t(sign | 0x7BFFu);         // >= 65520 rounds past max: clamp
-  if (absx < 0x38800000u) {                                         // subnormal half (or zero)
-    if (absx < 0x33000000u) return sign;                            // < 2^-25: rounds to 0
-    const uint32_t e = absx >> 23;                                  // 102..112
-    const uint32_t m = (absx & 0x7FFFFFu) | 0x800000u;
-    const uint32_t shift = 126 - e;                                 // value / 2^-24 = m >> shift
-    uint32_t h = m >> shift;
-    const uint32_t rem = m & ((1u << shift) - 1), halfway = 1u << (shift - 1);
-    if (rem > halfway || (rem == halfway && (h & 1u))) ++h;
-    return uint16_t(sign | h);
-  }
-  uint32_t h = ((absx >> 13) - (112u << 10));
-  const uint32_t rem = absx & 0x1FFFu;
-  if (rem > 0x1000u || (rem == 0x1000u && (h & 1u))) ++h;
-  return uint16_t(sign | h);
-}
+// float -> IEEE binary16 for light items: canopy::floatToHalf (round to nearest even, NaN stays
+// NaN) with values beyond the half range clamped to +-65504 (lighting is never infinite). Readers
+// decode with canopy::halfToFloat.
+inline uint16_t canopyFloatToHalf(float f) { return floatToHalf(f > kHalfMax ? kHalfMax : (f < -kHalfMax ? -kHalfMax : f)); }
 
 // One step down the octree: x (the point in the current node, [0,1)^3) becomes the point in the
 // child that holds it, lo and size (the node's corner and edge in octree unit space) become the

@@ -8,6 +8,7 @@
 
 #include <cstdlib>
 #include <cstring>
+#include <limits>
 #include <string>
 
 #include "canopy/atomic_file.h"
@@ -229,4 +230,22 @@ TEST(CanopyFile, OutOfRangePointersAreRejectedEvenWithValidChecksums) {
     const std::string m = expectRejected(bad, false);
     EXPECT_NE(m.find(c.expect), std::string::npos) << m;
   }
+}
+
+// Light items are float16 through canopy/half.h; the writer's policy on top is saturation: out of
+// range lighting becomes +-65504, never infinity. Pins the bits the frozen file and the player use.
+TEST(CanopyFile, LightItemsAreSaturatingFloat16) {
+  EXPECT_EQ(canopy::canopyFloatToHalf(1.0f), 0x3c00);
+  EXPECT_EQ(canopy::canopyFloatToHalf(65504.0f), 0x7bff);
+  EXPECT_EQ(canopy::canopyFloatToHalf(65519.0f), 0x7bff);  // rounds down to the largest half
+  EXPECT_EQ(canopy::canopyFloatToHalf(65520.0f), 0x7bff);  // would round to infinity: clamped
+  EXPECT_EQ(canopy::canopyFloatToHalf(1e30f), 0x7bff);
+  EXPECT_EQ(canopy::canopyFloatToHalf(-std::numeric_limits<float>::infinity()), 0xfbff);
+  EXPECT_EQ(canopy::canopyFloatToHalf(std::numeric_limits<float>::quiet_NaN()), 0x7e00);
+  EXPECT_EQ(canopy::canopyFloatToHalf(5.9604645e-8f), 0x0001);  // smallest subnormal
+  EXPECT_EQ(canopy::canopyFloatToHalf(2.9802322e-8f), 0x0000);  // half of it: tie to even
+  EXPECT_EQ(canopy::canopyFloatToHalf(-0.0f), 0x8000);
+  EXPECT_EQ(canopy::canopyFloatToHalf(1.0f + 3.0f / 2048), 0x3c02);  // tie to even (up)
+  for (uint32_t h = 0; h < 0x7c00; ++h)  // every finite non-negative half survives the round trip
+    ASSERT_EQ(canopy::canopyFloatToHalf(canopy::halfToFloat(uint16_t(h))), h);
 }

@@ -23,6 +23,8 @@
 #include "formats/canopy_file.h"
 #include "formats/canopy_write.h"
 #include "formats/lattice_vdb.h"
+#include "formats/scene_json.h"
+#include "gltf_scene.h"
 #include "tests/octreepack/packed_sampler.h"
 #include "tests/octreepack/synthetic.h"
 #include "tools/octreepack/inputs.h"
@@ -48,7 +50,11 @@ std::string tmpDir() {
   return dir;
 }
 
-void writeSourceVdb(const std::string& path, const op::ModelSource& s) {
+// A lattice as canopy-voxelize writes it; `source` is its canopy_source ("<mesh file> xxh64:<hash>")
+// and meshIndex (>= -1) its file's canopy_mesh_index (none where kNoMesh).
+constexpr int kNoMesh = -2;
+void writeSourceVdb(const std::string& path, const op::ModelSource& s, const std::string& source = "test",
+                    int meshIndex = kNoMesh) {
   canopy::vdbio::initialize();
   auto density = openvdb::FloatGrid::create(0.0f);
   auto wood = openvdb::FloatGrid::create(0.0f);
@@ -72,12 +78,35 @@ void writeSourceVdb(const std::string& path, const op::ModelSource& s) {
   canopy::vdbio::LatticeMeta meta;
   meta.min = openvdb::Coord(s.latticeMin[0], s.latticeMin[1], s.latticeMin[2]);
   meta.max = openvdb::Coord(s.latticeMax[0], s.latticeMax[1], s.latticeMax[2]);
-  meta.source = "test";
+  meta.source = source;
   for (openvdb::GridBase::Ptr g : {openvdb::GridBase::Ptr(density), openvdb::GridBase::Ptr(wood), openvdb::GridBase::Ptr(albedo)}) {
     g->setTransform(xf);
     canopy::vdbio::stampGrid(*g, meta);
   }
-  canopy::vdbio::writeVdb(path, {density, wood, albedo});
+  openvdb::MetaMap fileMeta;
+  if (meshIndex != kNoMesh) fileMeta.insertMeta("canopy_mesh_index", openvdb::Int32Metadata(meshIndex));
+  canopy::vdbio::writeVdb(path, {density, wood, albedo}, fileMeta);
+}
+
+// An lbsolve-style light VDB: 19 Vec3 grids B00..B18 holding analyticLight over an n^3 lattice.
+void writeLightVdb(const std::string& path, int n) {
+  openvdb::GridPtrVec grids;
+  float tmp[canopy::kCanopyLightChannels];
+  for (uint32_t b = 0; b < canopy::kCanopyLightBases; ++b) {
+    auto g = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
+    char name[8];
+    std::snprintf(name, sizeof name, "B%02u", b);
+    g->setName(name);
+    auto acc = g->getAccessor();
+    for (int k = 0; k < n; ++k)
+      for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i) {
+          op::testing::analyticLight(i, j, k, tmp);
+          acc.setValue(openvdb::Coord(i, j, k), openvdb::Vec3s(tmp[3 * b], tmp[3 * b + 1], tmp[3 * b + 2]));
+        }
+    grids.push_back(g);
+  }
+  canopy::vdbio::writeVdb(path, grids);
 }
 
 std::string packVdb(const std::string& vdb, const std::string& out) {
@@ -295,6 +324,117 @@ TEST(Octreepack, SceneJsonPacksModelsInstancesAndSceneLight) {
   for (const auto& c : b.cells) ASSERT_EQ(S.sampleLattice(1, float(c.ijk[0]), float(c.ijk[1]), float(c.ijk[2])).density, c.density);
 }
 
+// ---- --scene SCENE.glb: lattices matched to the glTF meshes by their metadata --------------------
+// Synthetic lattices stamped as canopy-voxelize grove.glb --mesh N stamps them (canopy_source with
+// grove.glb's hash, canopy_mesh_index N); grove.glb's nodes use meshes 0, 1, 2 (12 instances).
+struct GroveLattices {
+  std::string dir, glb, source;
+  std::string lattice(int mesh) const { return dir + "/grove.mesh" + std::to_string(mesh) + ".density.vdb"; }
+};
+
+const GroveLattices& groveLattices() {
+  static const GroveLattices g = [] {
+    GroveLattices r;
+    r.dir = tmpDir() + "/glb";
+    EXPECT_EQ(std::system(("mkdir -p '" + r.dir + "'").c_str()), 0);
+    r.glb = std::string(CANOPY_SHARED_DIR) + "/assets/scenes/grove.glb";
+    r.source = "elsewhere/grove.glb xxh64:" + canopy::hex64(canopy::hashFile(r.glb));  // the path may differ
+    for (int m = 0; m < 3; ++m) writeSourceVdb(r.lattice(m), syntheticPlant(16 + 4 * m, 0, "g", 0), r.source, m);
+    writeLightVdb(r.dir + "/grove.mesh1.light.vdb", 20);
+    return r;
+  }();
+  return g;
+}
+
+// octreepack() on a glb scene; returns the error's code and message, or Ok.
+std::pair<canopy::ExitCode, std::string> packGlb(const std::vector<std::string>& inputs, const std::string& out) {
+  op::OctreepackOptions o;
+  o.scene = groveLattices().glb;
+  o.inputs = inputs;
+  o.output = out;
+  try {
+    op::octreepack(o);
+  } catch (const canopy::Error& e) {
+    return {e.code(), e.what()};
+  }
+  return {canopy::ExitCode::Ok, ""};
+}
+
+TEST(OctreepackGltf, SceneGlbPacksLikeItsInstanceListByteForByte) {
+  const GroveLattices& g = groveLattices();
+  // Any order; the lighting follows its lattice.
+  const std::string fromGlb = g.dir + "/from_glb.canopy";
+  ASSERT_EQ(packGlb({g.lattice(2), g.lattice(0), g.lattice(1), g.dir + "/grove.mesh1.light.vdb"}, fromGlb).second, "");
+  // The instance list canopy-voxelize --instances writes (same function), with the same paths.
+  canopy::Scene list = canopy::mesh::sceneFromGltf(g.glb);
+  canopy::mesh::applyModelPattern(list, g.glb, g.dir + "/{stem}.mesh{N}.density.vdb");
+  list.models[1].light = g.dir + "/grove.mesh1.light.vdb";
+  canopy::writeSceneJson(g.dir + "/grove.scene.json", list);
+  op::OctreepackOptions o;
+  o.scene = g.dir + "/grove.scene.json";
+  o.output = g.dir + "/from_json.canopy";
+  op::octreepack(o);
+  EXPECT_EQ(bytesOf(fromGlb), bytesOf(o.output));
+
+  CanopyFile f = CanopyFile::open(fromGlb);
+  ASSERT_EQ(f.modelCount(), 3u);
+  ASSERT_EQ(f.instanceCount(), 12u);
+  EXPECT_EQ(std::string(f.model(0).name), "Oak Medium");
+  EXPECT_EQ(f.model(2).latticeMax[0], 16 + 4 * 2 - 1);  // mesh 2's lattice went to model 2
+  EXPECT_TRUE(f.model(1).flags & canopy::kCanopyModelHasLight);
+  EXPECT_FALSE(f.model(0).flags & canopy::kCanopyModelHasLight);
+  for (uint32_t i = 0; i < f.instanceCount(); ++i) {
+    ASSERT_EQ(f.instance(i).model, list.instances[i].model);
+    for (int k = 0; k < 12; ++k) ASSERT_EQ(f.instance(i).modelToWorld[k], float(list.instances[i].matrix[size_t(k)]));
+  }
+  EXPECT_EQ(nlohmann::json::parse(f.metadata())["scene"], list.source);
+}
+
+TEST(OctreepackGltf, LatticesThatDoNotFitTheSceneAreRejected) {
+  const GroveLattices& g = groveLattices();
+  const std::string out = g.dir + "/bad.canopy";
+  std::remove(out.c_str());
+  auto expectError = [&](const std::vector<std::string>& inputs, canopy::ExitCode code, const std::string& want) {
+    const auto [c, what] = packGlb(inputs, out);
+    EXPECT_EQ(c, code) << what;
+    EXPECT_NE(what.find(want), std::string::npos) << what;
+    EXPECT_EQ(what.find('\n'), std::string::npos) << what;
+    EXPECT_FALSE(exists(out));
+  };
+  expectError({g.lattice(0), g.lattice(2)}, canopy::ExitCode::InvalidInput,
+              "grove.glb: mesh 1 ('Pine Small') has no lattice among the inputs (canopy-voxelize ");
+  expectError({g.lattice(0), g.lattice(2)}, canopy::ExitCode::InvalidInput, "--mesh 1 -o grove.mesh1.density.vdb)");
+  expectError({g.lattice(0), g.lattice(1), g.lattice(2), g.lattice(1)}, canopy::ExitCode::InvalidInput,
+              "grove.mesh1.density.vdb: mesh 1 ('Pine Small') already has a lattice (");
+  writeSourceVdb(g.dir + "/foreign.density.vdb", syntheticPlant(16, 0, "f", 0), "oak.glb xxh64:0123456789abcdef", 0);
+  expectError({g.lattice(0), g.lattice(1), g.lattice(2), g.dir + "/foreign.density.vdb"}, canopy::ExitCode::InvalidInput,
+              "foreign.density.vdb: voxelised from 'oak.glb xxh64:0123456789abcdef', not from the scene ");
+  writeSourceVdb(g.dir + "/whole.density.vdb", syntheticPlant(16, 0, "w", 0), g.source, -1);
+  expectError({g.dir + "/whole.density.vdb"}, canopy::ExitCode::InvalidInput, "whole.density.vdb: voxelised from the whole of ");
+  writeSourceVdb(g.dir + "/unused.density.vdb", syntheticPlant(16, 0, "u", 0), g.source, 7);
+  expectError({g.dir + "/unused.density.vdb"}, canopy::ExitCode::InvalidInput,
+              "unused.density.vdb: voxelised from mesh 7, which no node of ");
+  expectError({g.dir + "/grove.mesh1.light.vdb", g.lattice(1)}, canopy::ExitCode::Usage,
+              "a lighting input must follow the density lattice it lights");
+  expectError({}, canopy::ExitCode::Usage, "give the density lattice of each of its 3 meshes");
+  expectError({g.lattice(0), g.dir + "/missing.density.vdb"}, canopy::ExitCode::Io, "missing.density.vdb");
+  canopy::writeFileAtomic(g.dir + "/garbage.density.vdb", std::string("this is not a vdb"));
+  expectError({g.dir + "/garbage.density.vdb"}, canopy::ExitCode::InvalidInput, "garbage.density.vdb: not a readable OpenVDB file");
+}
+
+TEST(OctreepackGltf, CliExitCodesAndNoOutputLeftBehind) {
+  const GroveLattices& g = groveLattices();
+  const std::string out = g.dir + "/cli.canopy";
+  std::remove(out.c_str());
+  const std::string scene = "--scene '" + g.glb + "' ";
+  EXPECT_EQ(run(scene + "'" + g.lattice(0) + "' '" + g.lattice(1) + "' -o '" + out + "'"), 3);  // mesh 2 missing
+  EXPECT_EQ(run(scene + "-o '" + out + "'"), 1);                                                   // no lattices
+  EXPECT_EQ(run("--scene '" + g.dir + "/grove.scene.json' '" + g.lattice(0) + "' -o '" + out + "'"), 1);  // JSON + lattices
+  EXPECT_FALSE(exists(out));
+  EXPECT_EQ(run(scene + "'" + g.lattice(1) + "' '" + g.lattice(2) + "' '" + g.lattice(0) + "' -o '" + out + "'"), 0);
+  EXPECT_EQ(run("verify '" + out + "'"), 0);
+}
+
 // The parallel builder's bytes do not depend on the number of threads (lit, to cover the light
 // pyramid too).
 TEST(Octreepack, BytesDoNotDependOnTheThreadCount) {
@@ -391,7 +531,9 @@ TEST(OctreepackCli, BadInputsFailCleanlyAndLeaveNoOutput) {
   std::ofstream(dir + "/p.light.chaar") << "x";
   // Without the chaar decoder a .chaar is unsupported (5); with it, this one is corrupt (3).
   EXPECT_EQ(run("'" + dir + "/cli.density.vdb' '" + dir + "/p.light.chaar' -o '" + out + "'"), op::chaarSupported() ? 3 : 5);
-  EXPECT_EQ(run("--scene '" + std::string(CANOPY_SHARED_DIR) + "/assets/scenes/grove.glb' -o '" + out + "'"), 5);
+  EXPECT_EQ(run("--scene '" + dir + "/not-a-scene.glb' -o '" + out + "'"), 2);  // missing glTF
+  std::ofstream(dir + "/corrupt.glb") << "glTF garbage";
+  EXPECT_EQ(run("--scene '" + dir + "/corrupt.glb' '" + dir + "/cli.density.vdb' -o '" + out + "'"), 3);
   std::ofstream(dir + "/bad.scene.json") << R"({"canopy_scene": 1, "models": [{"density": "cli.density.vdb"}], "instances": [{"model": 3, "matrix": [1,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1]}]})";
   EXPECT_EQ(run("--scene '" + dir + "/bad.scene.json' -o '" + out + "'"), 3);
   EXPECT_FALSE(exists(out));
@@ -399,6 +541,42 @@ TEST(OctreepackCli, BadInputsFailCleanlyAndLeaveNoOutput) {
   EXPECT_EQ(run("'" + dir + "/cli.density.vdb' '" + dir + "/p.light.chaar' --ignore-light -o '" + out + "'"), 0);
   EXPECT_TRUE(exists(out));
   EXPECT_EQ(run("verify '" + out + "'"), 0);
+}
+
+// canopy-lbsolve and canopy-octreepack read scene lists with the same reader (formats/scene_json.h):
+// the same bad list gets the same exit code and the same one-line message from both.
+TEST(OctreepackCli, SceneListErrorsAreTheSameAsLbsolves) {
+  const std::string lbsolve = std::string(CANOPY_BINARY_DIR) + "/bin/canopy-lbsolve";
+  if (!exists(lbsolve)) GTEST_SKIP() << "canopy-lbsolve is not built";
+  const std::string dir = tmpDir();
+  writeSourceVdb(dir + "/same.density.vdb", syntheticPlant(16, 0, "same", 0));
+  // Runs a tool; returns its exit code and its stderr from "error: " on.
+  auto errorOf = [](const std::string& cmd) {
+    FILE* p = popen((cmd + " 2>&1 >/dev/null").c_str(), "r");
+    std::string text;
+    char buf[512];
+    while (p && std::fgets(buf, sizeof buf, p)) text += buf;
+    const int rc = p ? pclose(p) : -1;
+    const auto at = text.find("error: ");
+    return std::make_pair(WIFEXITED(rc) ? WEXITSTATUS(rc) : -1, at == std::string::npos ? text : text.substr(at));
+  };
+  const std::string identity = "[1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1]";
+  const std::pair<std::string, int> cases[] = {
+      {R"({"canopy_scene": 1, "models": [{"density": "same.density.vdb"}], "instances": [{"model": 3, "matrix": )" + identity + "}]}", 3},
+      {R"({"canopy_scene": 1, "models": [{"density": "same.density.vdb"}], "instances": [{"model": 0, "matrix": [1,0,0,0, 0,0,0,0, 0,0,1,0, 0,0,0,1]}]})", 3},
+      {R"({"canopy_scene": 2, "models": [{"density": "same.density.vdb"}], "instances": [{"model": 0, "matrix": )" + identity + "}]}", 5},
+      {R"({"canopy_scene": 1, "models": [{"density": "same.density.vdb"}], "instances": [{"model": 0, "matrix": )" + identity, 3},
+  };
+  for (const auto& [text, code] : cases) {
+    canopy::writeFileAtomic(dir + "/same.scene.json", text);
+    const auto a = errorOf(std::string(CANOPY_BINARY_DIR) + "/bin/canopy-octreepack --scene '" + dir + "/same.scene.json' -o '" + dir + "/same.canopy'");
+    const auto b = errorOf(lbsolve + " --scene '" + dir + "/same.scene.json' -o '" + dir + "/same.light.vdb'");
+    EXPECT_EQ(a.first, code) << text;
+    EXPECT_EQ(a, b) << text;
+    EXPECT_NE(a.second.find(dir + "/same.scene.json: "), std::string::npos) << a.second;
+    EXPECT_FALSE(exists(dir + "/same.canopy"));
+    EXPECT_FALSE(exists(dir + "/same.light.vdb"));
+  }
 }
 
 TEST(OctreepackCli, NonFiniteDensityIsRejected) {
@@ -508,23 +686,8 @@ TEST(OctreepackLight, LbsolveLightVdbPacksThroughTheCli) {
   const std::string dir = tmpDir();
   const op::ModelSource src = syntheticPlant(16, 0, "litcli", 0);
   writeSourceVdb(dir + "/litcli.density.vdb", src);
-  openvdb::GridPtrVec grids;
+  writeLightVdb(dir + "/litcli.light.vdb", 16);
   float tmp[canopy::kCanopyLightChannels];
-  for (uint32_t b = 0; b < canopy::kCanopyLightBases; ++b) {
-    auto g = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
-    char name[8];
-    std::snprintf(name, sizeof name, "B%02u", b);
-    g->setName(name);
-    auto acc = g->getAccessor();
-    for (int k = 0; k < 16; ++k)
-      for (int j = 0; j < 16; ++j)
-        for (int i = 0; i < 16; ++i) {
-          op::testing::analyticLight(i, j, k, tmp);
-          acc.setValue(openvdb::Coord(i, j, k), openvdb::Vec3s(tmp[3 * b], tmp[3 * b + 1], tmp[3 * b + 2]));
-        }
-    grids.push_back(g);
-  }
-  canopy::vdbio::writeVdb(dir + "/litcli.light.vdb", grids);
   const std::string out = dir + "/litcli.canopy";
   ASSERT_EQ(run("'" + dir + "/litcli.density.vdb' '" + dir + "/litcli.light.vdb' -o '" + out + "'"), 0);
   ASSERT_EQ(run("verify '" + out + "'"), 0);

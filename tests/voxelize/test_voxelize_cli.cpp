@@ -301,12 +301,28 @@ TEST_F(VoxelizeCli, SceneInstanceList) {
   ASSERT_EQ(j["models"].size(), 3u);
   ASSERT_EQ(j["instances"].size(), 12u);
   EXPECT_EQ(j["models"][0]["density"], "grove.Oak_Medium.density.vdb");
+  EXPECT_NE(j["source"].get<std::string>().find("grove.glb xxh64:"), std::string::npos);
+  for (int m = 0; m < 3; ++m) EXPECT_EQ(j["models"][size_t(m)]["mesh"], m);  // grove's meshes 0, 1, 2
   for (const auto& inst : j["instances"]) {
+    EXPECT_TRUE(inst["node"].is_string());
     ASSERT_EQ(inst["matrix"].size(), 16u);
     EXPECT_EQ(inst["matrix"][15], 1.0);
     EXPECT_EQ(inst["matrix"][12], 0.0);
     EXPECT_LT(inst["model"].get<int>(), 3);
   }
+}
+
+// The instance list passes the scene list's checks (formats/scene_json.h checkScene): a node that
+// scales its mesh to nothing is refused, and no list is written.
+TEST_F(VoxelizeCli, SceneInstanceListRefusesASingularNode) {
+  GltfParts g = triangleGltf(oneTriangle(), {0, 1, 2});
+  g.doc["nodes"][0]["scale"] = {1.0, 0.0, 1.0};
+  writeBytes(dir + "/flat.glb", toGlb(g));
+  const RunResult r = run("'" + dir + "/flat.glb' --instances '" + dir + "/flat.scene.json'", dir);
+  EXPECT_EQ(r.code, 3);
+  EXPECT_NE(r.err.find("flat.glb: instances[0].matrix is singular"), std::string::npos) << r.err;
+  EXPECT_EQ(lines(r.err), 1) << r.err;
+  EXPECT_FALSE(std::ifstream(dir + "/flat.scene.json").good());
 }
 
 TEST_F(VoxelizeCli, HelpVersionAndUsage) {

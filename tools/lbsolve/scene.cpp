@@ -11,14 +11,13 @@
 // base is divided by its unoccluded value (19 for B00, 1 for B01..B18), so that each FloatGrid
 // Bjj is the factor (1 = unoccluded) that scales an instance's fine light at run time.
 #include <cmath>
-#include <filesystem>
 #include <limits>
 
 #include "canopy/atomic_file.h"
 #include "canopy/cli.h"
 #include "canopy/errors.h"
-#include "canopy/json_file.h"
 #include "canopy/lattice_dirs.h"
+#include "formats/scene_json.h"
 #include "lattice_io.h"
 #include "lbsolve_internal.h"
 
@@ -35,41 +34,18 @@ struct Scene {
   std::vector<Instance> instances;
 };
 
+// The scene list (formats/scene_json.h reads and checks it) with OpenVDB matrices.
 Scene readScene(const std::string& path) {
-  nlohmann::json j = readJsonFile(path);
-  auto bad = [&](const std::string& why) { return invalidInput(path + ": " + why); };
-  if (!j.is_object() || !j.contains("canopy_scene")) throw bad("not a Canopy scene (no \"canopy_scene\")");
-  if (!j["canopy_scene"].is_number_integer() || j["canopy_scene"].get<int>() != 1)
-    throw Error(ExitCode::Unsupported, path + ": unsupported canopy_scene version (expected 1)");
-  if (!j.contains("models") || !j["models"].is_array() || j["models"].empty()) throw bad("no models");
-  if (!j.contains("instances") || !j["instances"].is_array() || j["instances"].empty()) throw bad("no instances");
+  const canopy::Scene list = readSceneJson(path);
   Scene s;
-  const std::filesystem::path dir = std::filesystem::path(path).parent_path();
-  for (const auto& m : j["models"]) {
-    if (!m.is_object() || !m.contains("density") || !m["density"].is_string())
-      throw bad("every model needs a \"density\" path");
-    s.densityPaths.push_back((dir / m["density"].get<std::string>()).string());
-  }
-  for (const auto& inst : j["instances"]) {
-    if (!inst.is_object() || !inst.contains("model") || !inst["model"].is_number_integer())
-      throw bad("every instance needs an integer \"model\"");
+  for (const SceneModel& m : list.models) s.densityPaths.push_back(m.density);
+  for (const SceneInstance& in : list.instances) {
     Instance I;
-    I.model = inst["model"].get<int>();
-    if (I.model < 0 || I.model >= int(s.densityPaths.size())) throw bad("instance model index out of range");
-    const auto& mat = inst.contains("matrix") ? inst["matrix"] : nlohmann::json();
-    if (!mat.is_array() || mat.size() != 16) throw bad("every instance needs a 16-number \"matrix\"");
-    double a[16];
-    for (int k = 0; k < 16; ++k) {
-      if (!mat[k].is_number() || !std::isfinite(mat[k].get<double>())) throw bad("instance matrix is not finite");
-      a[k] = mat[k].get<double>();
-    }
-    if (std::abs(a[12]) + std::abs(a[13]) + std::abs(a[14]) > 1e-9 || std::abs(a[15] - 1) > 1e-9)
-      throw bad("instance matrix's last row must be 0,0,0,1");
-    // The file is row-major for column vectors (p' = A p); OpenVDB multiplies row vectors, so
+    I.model = int(in.model);
+    // The list is row-major for column vectors (p' = A p); OpenVDB multiplies row vectors, so
     // its matrix is the transpose.
     for (int r = 0; r < 4; ++r)
-      for (int c = 0; c < 4; ++c) I.m[c][r] = a[4 * r + c];
-    if (std::abs(I.m.det()) < 1e-12) throw bad("instance matrix is singular");
+      for (int c = 0; c < 4; ++c) I.m[c][r] = in.matrix[size_t(4 * r + c)];
     s.instances.push_back(I);
   }
   return s;

@@ -3,15 +3,11 @@
 
 #include <cmath>
 #include <cstdio>
-#include <fstream>
-#include <sstream>
 
-#include <nlohmann/json.hpp>
 #include <openvdb/openvdb.h>
 
 #include "canopy/atomic_file.h"
 #include "canopy/errors.h"
-#include "canopy/json_file.h"
 #include "formats/lattice_vdb.h"
 
 #if __has_include("formats/chaar.h")  // the chaar decoder (canopy-haar's branch) is in this tree
@@ -37,11 +33,6 @@ std::array<double, 12> affineOf(const openvdb::math::Transform& xf, const std::s
   }
   for (int r = 0; r < 3; ++r) m[size_t(r * 4 + 3)] = o[r];
   return m;
-}
-
-std::string folderOf(const std::string& p) {
-  const auto s = p.find_last_of('/');
-  return s == std::string::npos ? std::string() : p.substr(0, s + 1);
 }
 
 }  // namespace
@@ -154,55 +145,29 @@ LightVdb readChaarLight(const std::string& path, const ModelSource& model) {
 #endif
 }
 
-SceneDesc readSceneJson(const std::string& path) {
-  nlohmann::json j = readJsonFile(path);
-  auto fail = [&](const std::string& what) -> Error { return invalidInput(path + ": " + what); };
-  if (!j.is_object() || !j.contains("canopy_scene") || !j["canopy_scene"].is_number_integer())
-    throw fail("not a Canopy scene (no integer 'canopy_scene')");
-  if (j["canopy_scene"].get<int64_t>() != 1)
-    throw unsupported(path + ": scene format version " + j["canopy_scene"].dump() + " is not supported (1)");
-  if (!j.contains("models") || !j["models"].is_array() || j["models"].empty()) throw fail("'models' must be a non-empty array");
-  if (!j.contains("instances") || !j["instances"].is_array()) throw fail("'instances' must be an array");
-  const std::string dir = folderOf(path);
-  auto resolve = [&](const std::string& p) { return p.empty() || p[0] == '/' ? p : dir + p; };
-  SceneDesc s;
-  for (size_t i = 0; i < j["models"].size(); ++i) {
-    const auto& m = j["models"][i];
-    if (!m.is_object() || !m.contains("density") || !m["density"].is_string())
-      throw fail("models[" + std::to_string(i) + "] needs a 'density' path");
-    SceneDesc::Model model;
-    model.name = m.value("name", std::string("model") + std::to_string(i));
-    if (!m.contains("name")) model.name = "model" + std::to_string(i);
-    else if (!m["name"].is_string()) throw fail("models[" + std::to_string(i) + "].name must be a string");
-    model.density = resolve(m["density"].get<std::string>());
-    if (m.contains("light")) {
-      if (!m["light"].is_string()) throw fail("models[" + std::to_string(i) + "].light must be a string");
-      model.light = resolve(m["light"].get<std::string>());
-    }
-    s.models.push_back(model);
+LatticeOrigin readLatticeOrigin(const std::string& path) {
+  vdbio::initialize();
+  requireReadableFile(path);
+  openvdb::GridBase::Ptr density;
+  openvdb::MetaMap::Ptr fileMeta;
+  try {
+    openvdb::io::File file(path);
+    file.open(false);
+    if (file.hasGrid("density")) density = file.readGridMetadata("density");
+    fileMeta = file.getMetadata();
+    file.close();
+  } catch (const std::exception& e) {
+    std::string what = e.what();
+    throw invalidInput(path + ": not a readable OpenVDB file (" + what.substr(0, what.find('\n')) + ")");
   }
-  for (size_t i = 0; i < j["instances"].size(); ++i) {
-    const auto& in = j["instances"][i];
-    const std::string at = "instances[" + std::to_string(i) + "]";
-    if (!in.is_object() || !in.contains("model") || !in["model"].is_number_integer()) throw fail(at + " needs an integer 'model'");
-    const int64_t model = in["model"].get<int64_t>();
-    if (model < 0 || model >= int64_t(s.models.size())) throw fail(at + ".model " + std::to_string(model) + " out of range");
-    if (!in.contains("matrix") || !in["matrix"].is_array() || in["matrix"].size() != 16)
-      throw fail(at + ".matrix must be 16 numbers (row-major 4x4)");
-    double m[16];
-    for (int k = 0; k < 16; ++k) {
-      if (!in["matrix"][size_t(k)].is_number()) throw fail(at + ".matrix must be 16 numbers");
-      m[k] = in["matrix"][size_t(k)].get<double>();
-      if (!std::isfinite(m[k])) throw fail(at + ".matrix is not finite");
-    }
-    if (std::abs(m[12]) > 1e-6 || std::abs(m[13]) > 1e-6 || std::abs(m[14]) > 1e-6 || std::abs(m[15] - 1) > 1e-6)
-      throw fail(at + ".matrix last row must be 0,0,0,1");
-    SceneDesc::Instance inst;
-    inst.model = uint32_t(model);
-    for (int k = 0; k < 12; ++k) inst.modelToWorld[size_t(k)] = m[k];
-    s.instances.push_back(inst);
+  if (!density) throw invalidInput(path + ": no grid named 'density'");
+  LatticeOrigin o;
+  o.source = vdbio::readLatticeMeta(*density, path).source;
+  if (auto mesh = fileMeta ? fileMeta->getMetadata<openvdb::Int32Metadata>("canopy_mesh_index") : nullptr) {
+    o.hasMeshIndex = true;
+    o.meshIndex = mesh->value();
   }
-  return s;
+  return o;
 }
 
 SceneLightSource readSceneLightVdb(const std::string& path, const std::string& gridName) {

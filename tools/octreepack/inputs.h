@@ -1,6 +1,6 @@
 // inputs.h: canopy-octreepack's inputs -> plain structures (the only OpenVDB code of the tool).
 //   readDensityVdb:     a canopy-voxelize lattice (grids density, wood, albedo; §0 metadata)
-//   readSceneJson:      a scene instance list (docs/scene-json.md)
+//   readLatticeOrigin:  which mesh (file hash, glTF mesh index) a lattice was voxelised from
 //   readSceneLightVdb:  the coarse scene lighting lattice (lbsolve --scene), one float grid
 // Every failure is a canopy::Error naming the file.
 #pragma once
@@ -30,18 +30,15 @@ LightVdb readLightVdb(const std::string& path, const ModelSource& model);
 bool chaarSupported();
 LightVdb readChaarLight(const std::string& path, const ModelSource& model);
 
-struct SceneDesc {
-  struct Model {
-    std::string name, density, light;  // paths resolved against the JSON file's folder
-  };
-  struct Instance {
-    uint32_t model;
-    std::array<double, 12> modelToWorld;  // 3x4 row-major
-  };
-  std::vector<Model> models;
-  std::vector<Instance> instances;
+// Where a canopy-voxelize lattice came from, read from its metadata only (no voxels): the
+// density grid's canopy_source ("<mesh file> xxh64:<hash>") and the file's canopy_mesh_index
+// (-1: the whole file was voxelised; absent: not written by canopy-voxelize).
+struct LatticeOrigin {
+  std::string source;
+  bool hasMeshIndex = false;
+  int meshIndex = -1;
 };
-SceneDesc readSceneJson(const std::string& path);
+LatticeOrigin readLatticeOrigin(const std::string& path);
 
 struct SceneLightSource {
   CanopySceneLight header{};

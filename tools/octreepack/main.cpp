@@ -9,14 +9,21 @@ int main(int argc, char** argv) {
                     "Packs density lattices (and scene instances) into one streamable .canopy file.\n"
                     "  canopy-octreepack PLANT.density.vdb [PLANT.light.chaar|PLANT.light.vdb] -o PLANT.canopy\n"
                     "  canopy-octreepack --scene SCENE.json -o SCENE.canopy\n"
+                    "  canopy-octreepack --scene SCENE.glb MESH.density.vdb [MESH.light.chaar] ... -o SCENE.canopy\n"
+                    "    (one lattice per mesh the scene uses, from canopy-voxelize SCENE.glb --mesh N; matched to\n"
+                    "     its mesh by the lattice's metadata, in any order; lighting follows its lattice)\n"
                     "  canopy-octreepack info FILE.canopy [--json]\n"
                     "  canopy-octreepack verify FILE.canopy",
                     /*withDevice=*/false);
   CLI::App& app = tool.app();
   canopy::octreepack::OctreepackOptions o;
-  app.add_option("inputs", o.inputs, "PLANT.density.vdb [PLANT.light.chaar | PLANT.light.vdb]");
+  app.add_option("inputs", o.inputs,
+                 "PLANT.density.vdb [PLANT.light.chaar | PLANT.light.vdb]; with --scene SCENE.glb, one such "
+                 "pair per mesh of the scene");
   app.add_option("-o,--output", o.output, "Output .canopy file");
-  app.add_option("--scene", o.scene, "Scene instance list (SCENE.json, docs/scene-json.md)");
+  app.add_option("--scene", o.scene,
+                 "Scene: an instance list (SCENE.json, docs/scene-json.md) or a glTF scene whose nodes share "
+                 "meshes (SCENE.glb/.gltf, with the meshes' lattices as inputs)");
   app.add_option("--scene-light", o.sceneLight, "Coarse scene lighting lattice (VDB, lbsolve --scene)");
   app.add_option("--scene-light-grid", o.sceneLightGrid, "Float grid name in --scene-light")->capture_default_str();
   app.add_flag("--ignore-light", o.ignoreLight, "Pack density only, even where a .chaar is given");

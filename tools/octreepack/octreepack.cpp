@@ -1,14 +1,18 @@
 // octreepack.cpp: see octreepack.h.
 #include "tools/octreepack/octreepack.h"
 
+#include <cctype>
 #include <chrono>
 #include <cstring>
+#include <map>
 #include <sstream>
 
 #include "canopy/atomic_file.h"
 #include "canopy/cli.h"
 #include "canopy/errors.h"
 #include "formats/canopy_write.h"
+#include "formats/scene_json.h"
+#include "gltf_scene.h"
 #include "tools/octreepack/inputs.h"
 #include "tools/octreepack/octree_build.h"
 
@@ -26,51 +30,105 @@ std::string stemOf(const std::string& path) {
   return base;
 }
 
+bool isGltf(std::string path) {
+  for (char& c : path) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return endsWith(path, ".glb") || endsWith(path, ".gltf");
+}
+
+// Lighting inputs: canopy-haar's .chaar or canopy-lbsolve's PLANT.light.vdb.
+bool isLightPath(const std::string& p) { return endsWith(p, ".chaar") || endsWith(p, ".light.vdb"); }
+
+// The hash in a source label "<path> xxh64:<hex>" ("" if there is none).
+std::string contentHashOf(const std::string& label) {
+  const auto at = label.rfind(" xxh64:");
+  return at == std::string::npos ? std::string() : label.substr(at + 7);
+}
+
+// One plant: PLANT.density.vdb [PLANT.light.chaar|.vdb], one identity instance.
+Scene singlePlant(const std::vector<std::string>& inputs) {
+  if (inputs.empty()) throw usageError("no input: give PLANT.density.vdb [PLANT.light.chaar] or --scene SCENE.json|SCENE.glb");
+  if (inputs.size() > 2) throw usageError("one plant takes PLANT.density.vdb and at most one PLANT.light.chaar");
+  SceneModel m;
+  m.name = stemOf(inputs[0]);
+  m.density = inputs[0];
+  if (inputs.size() == 2) {
+    if (!endsWith(inputs[1], ".chaar") && !endsWith(inputs[1], ".vdb"))
+      throw usageError(inputs[1] + ": the second input must be lighting: PLANT.light.chaar (canopy-haar) or PLANT.light.vdb (canopy-lbsolve)");
+    m.light = inputs[1];
+  }
+  SceneInstance identity;
+  identity.matrix = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+  Scene s;
+  s.models.push_back(m);
+  s.instances.push_back(identity);
+  return s;
+}
+
+// --scene SCENE.glb LATTICE.density.vdb [LIGHT] ...: the scene's models and instances as
+// canopy-voxelize --instances lists them (mesh::sceneFromGltf), each model's density being the
+// lattice that canopy-voxelize SCENE.glb --mesh N wrote for its mesh: matched by the lattice's
+// metadata (the glTF's content hash and the mesh index), not by file names. A lighting input
+// (.chaar or .light.vdb) belongs to the lattice just before it.
+Scene gltfScene(const std::string& glb, const std::vector<std::string>& inputs) {
+  Scene scene = mesh::sceneFromGltf(glb);
+  auto meshLabel = [&](const SceneModel& m) { return "mesh " + std::to_string(m.mesh) + " ('" + m.name + "')"; };
+  Scene named = scene;  // canopy-voxelize's default lattice names, for the hints
+  mesh::applyModelPattern(named, glb, "{stem}.mesh{N}.density.vdb");
+  auto voxelizeHint = [&](size_t model) {
+    return "canopy-voxelize " + glb + " --mesh " + std::to_string(named.models[model].mesh) + " -o " + named.models[model].density;
+  };
+  if (inputs.empty())
+    throw usageError(glb + ": give the density lattice of each of its " + std::to_string(scene.models.size()) +
+                     " meshes (e.g. " + voxelizeHint(0) + "), each followed by its optional lighting");
+  const std::string sceneHash = contentHashOf(scene.source);
+  std::map<int, size_t> modelOfMesh;
+  for (size_t i = 0; i < scene.models.size(); ++i) modelOfMesh[scene.models[i].mesh] = i;
+  SceneModel* last = nullptr;  // the model of the previous density input (for its lighting)
+  for (const std::string& in : inputs) {
+    if (isLightPath(in)) {
+      if (!last || !last->light.empty())
+        throw usageError(in + ": a lighting input must follow the density lattice it lights");
+      last->light = in;
+      continue;
+    }
+    const LatticeOrigin origin = readLatticeOrigin(in);
+    if (contentHashOf(origin.source) != sceneHash)
+      throw invalidInput(in + ": voxelised from '" + origin.source + "', not from the scene " + scene.source);
+    if (!origin.hasMeshIndex || origin.meshIndex < 0)
+      throw invalidInput(in + ": voxelised from the whole of " + glb + ", not from one of its meshes (canopy-voxelize --mesh N)");
+    const auto it = modelOfMesh.find(origin.meshIndex);
+    if (it == modelOfMesh.end())
+      throw invalidInput(in + ": voxelised from mesh " + std::to_string(origin.meshIndex) + ", which no node of " + glb + " uses");
+    last = &scene.models[it->second];
+    if (!last->density.empty()) throw invalidInput(in + ": " + meshLabel(*last) + " already has a lattice (" + last->density + ")");
+    last->density = in;
+  }
+  for (size_t i = 0; i < scene.models.size(); ++i)
+    if (scene.models[i].density.empty())
+      throw invalidInput(glb + ": " + meshLabel(scene.models[i]) + " has no lattice among the inputs (" + voxelizeHint(i) + ")");
+  return scene;
+}
 
 }  // namespace
 
 nlohmann::json octreepack(const OctreepackOptions& o) {
   const auto t0 = std::chrono::steady_clock::now();
-  struct ModelIn {
-    std::string name, density, light;
-  };
-  std::vector<ModelIn> modelsIn;
-  std::vector<CanopyInstance> instances;
-  auto identityInstance = [](uint32_t model) {
-    CanopyInstance in{};
-    in.modelToWorld[0] = in.modelToWorld[5] = in.modelToWorld[10] = 1.0f;
-    in.model = model;
-    return in;
-  };
   nlohmann::json meta = {{"tool", "canopy-octreepack"}, {"version", versionString()}};
-  if (!o.scene.empty()) {
-    if (!o.inputs.empty()) throw usageError("give either --scene or PLANT.density.vdb inputs, not both");
-    if (endsWith(o.scene, ".glb") || endsWith(o.scene, ".gltf"))
-      throw unsupported(o.scene + ": glTF scenes need canopy-voxelize's glTF loader, not in this build; "
-                        "run canopy-voxelize --instances to write a SCENE.json and pass that");
-    const SceneDesc s = readSceneJson(o.scene);
-    for (const auto& m : s.models) modelsIn.push_back({m.name, m.density, m.light});
-    for (const auto& in : s.instances) {
-      CanopyInstance ci{};
-      for (int k = 0; k < 12; ++k) ci.modelToWorld[k] = float(in.modelToWorld[size_t(k)]);
-      ci.model = in.model;
-      instances.push_back(ci);
-    }
-    meta["scene"] = o.scene;
+  Scene scene;
+  if (o.scene.empty()) {
+    scene = singlePlant(o.inputs);
+  } else if (isGltf(o.scene)) {
+    scene = gltfScene(o.scene, o.inputs);
   } else {
-    if (o.inputs.empty()) throw usageError("no input: give PLANT.density.vdb [PLANT.light.chaar] or --scene SCENE.json");
-    if (o.inputs.size() > 2) throw usageError("one plant takes PLANT.density.vdb and at most one PLANT.light.chaar");
-    std::string light;
-    if (o.inputs.size() == 2) {
-      if (!endsWith(o.inputs[1], ".chaar") && !endsWith(o.inputs[1], ".vdb"))
-        throw usageError(o.inputs[1] + ": the second input must be lighting: PLANT.light.chaar (canopy-haar) or PLANT.light.vdb (canopy-lbsolve)");
-      light = o.inputs[1];
-    }
-    modelsIn.push_back({stemOf(o.inputs[0]), o.inputs[0], light});
-    instances.push_back(identityInstance(0));
+    if (!o.inputs.empty())
+      throw usageError(o.inputs[0] + ": --scene SCENE.json names its own models; lattice inputs go with --scene SCENE.glb");
+    scene = readSceneJson(o.scene);
   }
+  // The file the instances were computed from: the glTF (directly, or through the "source" of
+  // the list canopy-voxelize --instances wrote from it), else the hand-written list itself.
+  if (!o.scene.empty()) meta["scene"] = scene.source.empty() ? o.scene : scene.source;
   if (o.output.empty()) throw usageError("no output: give -o OUT.canopy");
-  for (const auto& m : modelsIn) {
+  for (const SceneModel& m : scene.models) {
     requireReadableFile(m.density);
     if (!m.light.empty() && !o.ignoreLight) {
       requireReadableFile(m.light);
@@ -89,25 +147,31 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
     meta["scene_light"] = sl.sourceLabel;
   }
   std::vector<BuiltModel> built;
-  built.reserve(modelsIn.size());
+  built.reserve(scene.models.size());
   nlohmann::json sources = nlohmann::json::array();
-  Progress progress("octreepack models", int64_t(modelsIn.size()));
-  for (size_t i = 0; i < modelsIn.size(); ++i) {
-    logInfo("octreepack: model " + std::to_string(i) + " '" + modelsIn[i].name + "' from " + modelsIn[i].density);
-    ModelSource src = readDensityVdb(modelsIn[i].density, modelsIn[i].name);
-    nlohmann::json source = {{"name", modelsIn[i].name}, {"density", src.sourceLabel}};
+  Progress progress("octreepack models", int64_t(scene.models.size()));
+  for (size_t i = 0; i < scene.models.size(); ++i) {
+    const SceneModel& m = scene.models[i];
+    logInfo("octreepack: model " + std::to_string(i) + " '" + m.name + "' from " + m.density);
+    ModelSource src = readDensityVdb(m.density, m.name);
+    nlohmann::json source = {{"name", m.name}, {"density", src.sourceLabel}};
     LightFn light;
-    if (!modelsIn[i].light.empty() && !o.ignoreLight) {
-      LightVdb lv = endsWith(modelsIn[i].light, ".chaar") ? readChaarLight(modelsIn[i].light, src) : readLightVdb(modelsIn[i].light, src);
+    if (!m.light.empty() && !o.ignoreLight) {
+      LightVdb lv = endsWith(m.light, ".chaar") ? readChaarLight(m.light, src) : readLightVdb(m.light, src);
       light = std::move(lv.fn);
       source["light"] = lv.sourceLabel;
     }
-    built.push_back(buildOctree(src, modelsIn[i].density, light));
+    built.push_back(buildOctree(src, m.density, light));
     sources.push_back(source);
     progress.add();
   }
   for (auto& b : built) w.models.push_back({b.record, &b.tiles, &b.bricks, &b.light});
-  w.instances = instances;
+  for (const SceneInstance& in : scene.instances) {
+    CanopyInstance ci{};
+    for (int k = 0; k < 12; ++k) ci.modelToWorld[k] = float(in.matrix[size_t(k)]);  // rows 0..2 of the 4x4
+    ci.model = in.model;
+    w.instances.push_back(ci);
+  }
   meta["models"] = sources;
   progress.done();
   w.metadata = meta.dump();

@@ -14,8 +14,11 @@
 namespace canopy::octreepack {
 
 struct OctreepackOptions {
-  std::vector<std::string> inputs;   // PLANT.density.vdb [PLANT.light.chaar] (one plant)
-  std::string scene;                 // SCENE.json (or .glb: not supported in this build)
+  // One plant: PLANT.density.vdb [PLANT.light.chaar|.vdb]. With scene = SCENE.glb: the density
+  // lattice of every mesh the scene uses (canopy-voxelize SCENE.glb --mesh N), in any order, each
+  // followed by its optional lighting (.chaar or .light.vdb). Empty with scene = SCENE.json.
+  std::vector<std::string> inputs;
+  std::string scene;                 // SCENE.json (docs/scene-json.md) or SCENE.glb|.gltf
   std::string output;                // OUT.canopy
   std::string sceneLight;            // coarse scene lighting lattice (VDB), optional
   std::string sceneLightGrid = "light";

@@ -4,8 +4,8 @@
 // tinygltf compiled with Draco (gltf_loader.cpp); OBJ, PLY, STL, OFF via OpenMesh (obj_loader.cpp).
 // Every loader validates its input and throws canopy::Error naming the file; nothing here trusts
 // the file. Positions are doubles in the file's units (metres for glTF), glTF node transforms
-// already applied. Reusable by other tools: octreepack lists a glTF scene's meshes and instances
-// with listGltfScene().
+// already applied. Reusable by other tools: gltf_scene.h turns listGltfScene() into the Canopy
+// scene (models + instances) that voxelize --instances writes and octreepack --scene packs.
 #pragma once
 #include <array>
 #include <cstdint>

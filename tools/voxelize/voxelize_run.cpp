@@ -1,70 +1,21 @@
 // voxelize_run.cpp: canopy::voxelize() (load, voxelise, write, report) and the scene list writer.
 #include <chrono>
-#include <cctype>
-#include <map>
-#include <set>
 
 #include "canopy/atomic_file.h"
 #include "canopy/cli.h"
 #include "canopy/errors.h"
 #include "formats/lattice_vdb.h"
+#include "formats/scene_json.h"
+#include "gltf_scene.h"
 #include "voxelize.h"
 
 namespace canopy {
-namespace {
-
-std::string baseName(const std::string& p) {
-  const auto s = p.find_last_of('/');
-  return s == std::string::npos ? p : p.substr(s + 1);
-}
-
-std::string stemOf(const std::string& p) {
-  std::string b = baseName(p);
-  const auto d = b.find_last_of('.');
-  return d == std::string::npos || d == 0 ? b : b.substr(0, d);
-}
-
-std::string sanitize(const std::string& s) {
-  std::string r;
-  for (char c : s) r += (std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_') ? c : '_';
-  return r.empty() ? "mesh" : r;
-}
-
-std::string replaceAll(std::string s, const std::string& from, const std::string& to) {
-  for (size_t at = s.find(from); at != std::string::npos; at = s.find(from, at + to.size()))
-    s.replace(at, from.size(), to);
-  return s;
-}
-
-}  // namespace
 
 void writeInstances(const std::string& gltfPath, const std::string& jsonPath,
                     const std::string& modelPattern) {
-  const mesh::SceneInfo scene = mesh::listGltfScene(gltfPath);
-  if (scene.instances.empty()) throw invalidInput(gltfPath + ": the scene has no node with a mesh");
-  std::set<int> used;
-  for (const auto& inst : scene.instances) used.insert(inst.mesh);
-  std::map<int, int> modelOf;
-  nlohmann::json models = nlohmann::json::array();
-  for (int m : used) {
-    modelOf[m] = int(models.size());
-    const std::string& name = scene.meshes[size_t(m)].name;
-    std::string path = replaceAll(modelPattern, "{stem}", stemOf(gltfPath));
-    path = replaceAll(path, "{N}", std::to_string(m));
-    path = replaceAll(path, "{name}", sanitize(name));
-    models.push_back({{"name", name}, {"mesh", m}, {"density", path}});
-  }
-  nlohmann::json instances = nlohmann::json::array();
-  for (const auto& inst : scene.instances) {
-    nlohmann::json mat = nlohmann::json::array();
-    for (double v : inst.matrix) mat.push_back(v);
-    instances.push_back({{"model", modelOf.at(inst.mesh)}, {"node", inst.nodeName}, {"matrix", mat}});
-  }
-  nlohmann::json doc = {{"canopy_scene", 1},
-                        {"source", vdbio::describeSource(gltfPath)},
-                        {"models", models},
-                        {"instances", instances}};
-  writeFileAtomic(jsonPath, doc.dump(2) + "\n");
+  Scene scene = mesh::sceneFromGltf(gltfPath);
+  mesh::applyModelPattern(scene, gltfPath, modelPattern);
+  writeSceneJson(jsonPath, scene);
 }
 
 VoxelizeResult voxelize(const VoxelizeOptions& o, nlohmann::json* report) {
