@@ -50,11 +50,6 @@ LatticeMeta readLatticeMeta(const openvdb::GridBase& g, const std::string& path)
   return m;
 }
 
-std::string describeSource(const std::string& path) {
-  const size_t slash = path.find_last_of('/');
-  return (slash == std::string::npos ? path : path.substr(slash + 1)) + " xxh64:" + hex64(hashFile(path));
-}
-
 namespace {
 // The UUID Canopy writes: RFC 4122 layout with version nibble 8 ("custom") and the variant bits
 // set, built from the XXH64 of every other byte of the file. A reader recomputes it to detect

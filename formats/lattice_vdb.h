@@ -13,6 +13,7 @@
 #include <openvdb/openvdb.h>
 
 #include "canopy/errors.h"
+#include "canopy/hash.h"
 
 namespace canopy::vdbio {
 
@@ -29,9 +30,7 @@ void stampGrid(openvdb::GridBase& grid, const LatticeMeta& meta);
 // Reads it back; throws invalidInput naming `path` if missing or inconsistent.
 LatticeMeta readLatticeMeta(const openvdb::GridBase& grid, const std::string& path);
 
-// "<file name> xxh64:<hash of the file's bytes>". The name without its folder: the same input gives
-// the same output bytes wherever it lies (a cluster node may mount the library elsewhere).
-std::string describeSource(const std::string& path);
+using canopy::describeSource;  // core/include/canopy/hash.h
 
 // Writes grids (and optional file-level metadata) atomically with a content-derived UUID.
 void writeVdb(const std::string& path, const openvdb::GridPtrVec& grids,

@@ -95,6 +95,11 @@ std::string hex64(uint64_t v) {
   return s;
 }
 
+std::string describeSource(const std::string& path) {
+  const size_t slash = path.find_last_of('/');
+  return (slash == std::string::npos ? path : path.substr(slash + 1)) + " xxh64:" + hex64(hashFile(path));
+}
+
 uint32_t crc32(uint32_t crc, const void* data, size_t size) {
   const Bytef* p = static_cast<const Bytef*>(data);
   uLong c = crc;

@@ -36,7 +36,7 @@ Scene sceneFromGltf(const std::string& path) {
   const SceneInfo info = listGltfScene(path);
   if (info.instances.empty()) throw invalidInput(path + ": the scene has no node with a mesh");
   Scene scene;
-  scene.source = path + " xxh64:" + hex64(hashFile(path));
+  scene.source = describeSource(path);
   std::map<int, uint32_t> modelOf;  // glTF mesh -> model, ascending mesh index
   for (const Instance& inst : info.instances) modelOf[inst.mesh] = 0;
   for (auto& [mesh, model] : modelOf) {

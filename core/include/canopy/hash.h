@@ -29,6 +29,10 @@ uint64_t hash64(const void* data, size_t size, uint64_t seed = 0);
 uint64_t hashFile(const std::string& path);
 // 16 lowercase hex digits.
 std::string hex64(uint64_t v);
+// "<file name> xxh64:<hash of the file's bytes>", how outputs record an input. The name without
+// its folder: the same input gives the same output bytes wherever it lies (a cluster node may
+// mount the library elsewhere).
+std::string describeSource(const std::string& path);
 
 // CRC-32 (the zlib/PNG polynomial), chainable: crc32(crc32(0, a), b) == crc32(0, a+b).
 uint32_t crc32(uint32_t crc, const void* data, size_t size);
