@@ -1,10 +1,16 @@
 #!/bin/sh
-# Runs the lbsolve checks that need a GPU: the CUDA-vs-CPU test and the benchmark (CUDA, then the
-# CPU figure on the same host). Exits non-zero if a step fails or the CUDA tests were skipped.
-# Usage: BIN=build/bin OUT=/some/log/dir sh bench/lbsolve/gpu.sh
+# Runs the lbsolve checks that need a GPU: the CUDA-vs-CPU test (synthetic plants, odd sizes, an
+# occupied boundary layer, the real oak at 40^3; every CUDA scheme), then the benchmark: node
+# updates/s of each scheme on the synthetic plant and on a fully occupied box at 128^3 and 256^3,
+# the 57 solves of the synthetic plant and of oak_medium voxelised at 128^3, the tool itself on
+# that oak (--device cuda, default scheme), and the CPU figure of the same host.
+# Exits non-zero if a step fails or the CUDA tests were skipped.
+# Usage: BIN=build/bin OUT=/some/log/dir [ASSET=.../oak_medium.glb] sh bench/lbsolve/gpu.sh
 set -u
 : "${BIN:?set BIN to the directory holding the built binaries (build/bin)}"
 : "${OUT:?set OUT to a directory for the logs}"
+ASSET=${ASSET:-$(dirname "$0")/../../../shared/assets/plants/oak_medium.glb}
+ITERATIONS=${ITERATIONS:-400}
 mkdir -p "$OUT"
 nvidia-smi > "$OUT/nvidia-smi.txt" 2>&1 || true
 status=0
@@ -19,6 +25,15 @@ if grep -q "SKIPPED" "$OUT/test_lbsolve_cuda.log"; then
   echo "gpu.sh: the CUDA tests were skipped (no GPU visible?)"
   status=1
 fi
-step bench_lbsolve_cuda.md "$BIN/bench_lbsolve" --device cuda --sizes 128,256 --solves-sizes 128,256 --iterations 200
+step voxelize_oak128.log "$BIN/canopy-voxelize" "$ASSET" -o "$OUT/oak128.density.vdb" --resolution 128
+step bench_lbsolve_cuda.md "$BIN/bench_lbsolve" --device cuda --sizes 128,256 --fill plant,full \
+  --schemes shift,push,push-fused --iterations "$ITERATIONS" --solves-sizes 128 --lattices "$OUT/oak128.density.vdb"
+# The tool end to end on the oak (read, 57 solves with the default scheme, write), wall time.
+t0=$(date +%s.%N)
+step lbsolve_oak128_cuda.json "$BIN/canopy-lbsolve" "$OUT/oak128.density.vdb" -o "$OUT/oak128.light.vdb" \
+  --device cuda --json -q
+t1=$(date +%s.%N)
+echo "canopy-lbsolve oak128 --device cuda: $(awk "BEGIN{printf \"%.3f\", $t1 - $t0}") s wall (process, including I/O)" | tee "$OUT/lbsolve_oak128_wall.txt"
+rm -f "$OUT/oak128.light.vdb"
 step bench_lbsolve_cpu.md "$BIN/bench_lbsolve" --device cpu --sizes 128 --solves-sizes 64 --iterations 16
 exit $status
