@@ -65,9 +65,10 @@ std::vector<int> parseList(const std::string& s) {
 }
 
 CudaScheme parseScheme(const std::string& s) {
-  for (CudaScheme c : {CudaScheme::Shift, CudaScheme::Push, CudaScheme::PushFused})
+  for (CudaScheme c : {CudaScheme::Shift, CudaScheme::Push, CudaScheme::PushFused, CudaScheme::PushPartialSectors,
+                       CudaScheme::Push40Registers})
     if (s == cudaSchemeName(c)) return c;
-  throw std::runtime_error("unknown scheme '" + s + "' (shift, push, push-fused)");
+  throw std::runtime_error("unknown scheme '" + s + "' (shift, push, push-fused, push-partial, push-40reg)");
 }
 
 int64_t occupiedNodes(const DenseLattice& L) {

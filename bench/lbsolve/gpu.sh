@@ -27,7 +27,7 @@ if grep -q "SKIPPED" "$OUT/test_lbsolve_cuda.log"; then
 fi
 step voxelize_oak128.log "$BIN/canopy-voxelize" "$ASSET" -o "$OUT/oak128.density.vdb" --resolution 128
 step bench_lbsolve_cuda.md "$BIN/bench_lbsolve" --device cuda --sizes 128,256 --fill plant,full \
-  --schemes shift,push,push-fused --iterations "$ITERATIONS" --solves-sizes 128 --lattices "$OUT/oak128.density.vdb"
+  --schemes shift,push,push-partial,push-40reg,push-fused --iterations "$ITERATIONS" --solves-sizes 128 --lattices "$OUT/oak128.density.vdb"
 # The tool end to end on the oak (read, 57 solves with the default scheme, write), wall time.
 t0=$(date +%s.%N)
 step lbsolve_oak128_cuda.json "$BIN/canopy-lbsolve" "$OUT/oak128.density.vdb" -o "$OUT/oak128.light.vdb" \

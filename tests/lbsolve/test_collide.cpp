@@ -440,7 +440,7 @@ TEST(ShiftStreaming, MatchesThePushUpdateBitForBitAtEveryIteration) {
         initNode(d, boundary, a.data(), x, y, z);
         initNode(d, boundary, b.data(), x, y, z);
       }
-  std::vector<float> state(a.size(), 0.f);
+  std::vector<float> state(a.size(), 0.f), kept(size_t(n), -1.f);
   int64_t collided = 0;
   const int iterations = 40;  // the z-directions' ring (step 117 of 1287 slots) wraps 3 times
   for (int t = 0; t < iterations; ++t) {
@@ -453,26 +453,34 @@ TEST(ShiftStreaming, MatchesThePushUpdateBitForBitAtEveryIteration) {
           const int64_t p = d.index(x, y, z);
           const float c = coded[size_t(p)];
           if (!d.interior(x, y, z)) {
-            shiftBoundaryNode(om, d, boundary, off, c, x, y, z, state.data());
+            if (c == 0.f) {
+              shiftBoundaryNode<true>(om, d, boundary, off, c, x, y, z, state.data());
+            } else {
+              shiftBoundaryNode<false>(om, d, boundary, off, c, x, y, z, state.data());
+            }
           } else if (c < 0.f) {
-            shiftCollideNode<kWoodKind>(om, off, n, c, p, state.data());
+            shiftCollideNode<kWoodKind>(om, off, n, c, p, state.data(), &kept[size_t(p)]);
             ++collided;
           } else if (c != 0.f) {
-            shiftCollideNode<kLeafKind>(om, off, n, c, p, state.data());
+            shiftCollideNode<kLeafKind>(om, off, n, c, p, state.data(), &kept[size_t(p)]);
             ++collided;
           }
         }
-    const ShiftOffsets next = shiftOffsets(d, t + 1);
+    const ShiftOffsets next = shiftOffsets(d, t + 1);  // (off: the offsets before the iteration)
     for (int z = 0; z < d.nz; ++z)
       for (int y = 0; y < d.ny; ++y)
         for (int x = 0; x < d.nx; ++x) {
           const int64_t p = d.index(x, y, z);
           const float want = nodeTotal(a.data(), n, p);
+          if (d.interior(x, y, z)) {  // the residual's previous total, read after the iteration
+            const float previous = coded[size_t(p)] != 0.f ? kept[size_t(p)] : shiftNodeTotal(state.data(), n, off, p);
+            ASSERT_EQ(previous, nodeTotal(b.data(), n, p)) << "iteration " << t << " node " << p;
+          }
           const float got = d.interior(x, y, z) ? shiftNodeTotal(state.data(), n, next, p) : boundaryTotal(boundary);
           ASSERT_EQ(got, want) << "iteration " << t + 1 << " node " << x << "," << y << "," << z;
           if (!d.interior(x, y, z)) continue;
           for (int m = 0; m < kQ; ++m)  // the 19 values themselves, not just their sum
-            ASSERT_EQ(state[size_t(m * n + shifted(p, next.off[m], n))], a[size_t(m * n + p)])
+            ASSERT_EQ(state[size_t(m * n + shifted(uint32_t(p), next.off[m], uint32_t(n)))], a[size_t(m * n + p)])
                 << "iteration " << t + 1 << " node " << p << " direction " << m;
         }
   }
@@ -486,13 +494,13 @@ TEST(ShiftStreaming, OffsetsArePeriodicAndInRange) {
   for (int64_t t : {int64_t(0), int64_t(1), int64_t(209), n - 1, n, 3 * n + 5, int64_t(1) << 40}) {
     const ShiftOffsets s = shiftOffsets(d, t), later = shiftOffsets(d, t + n);
     for (int m = 0; m < kQ; ++m) {
-      ASSERT_GE(s.off[m], 0);
-      ASSERT_LT(s.off[m], n);
+      ASSERT_LT(int64_t(s.off[m]), n);
       ASSERT_EQ(s.off[m], later.off[m]);
       // One more iteration moves node p's slot to node p + s_m's.
       const ShiftOffsets next = shiftOffsets(d, t + 1);
       const int64_t p = d.index(3, 2, 2);
-      ASSERT_EQ(shifted(p + linearStep(d, m), next.off[m], n), shifted(p, s.off[m], n)) << m;
+      ASSERT_EQ(shifted(uint32_t(p + linearStep(d, m)), next.off[m], uint32_t(n)),
+                shifted(uint32_t(p), s.off[m], uint32_t(n))) << m;
     }
   }
 }

@@ -34,8 +34,12 @@
 
 namespace canopy::lb {
 
+// Slots are 32-bit: the scheme requires n < 2^31 nodes (a 1290^3 lattice; at 19 floats per node
+// that is far beyond one GPU's memory). The CUDA solver checks it.
+constexpr int64_t kMaxShiftNodes = (int64_t(1) << 31) - 1;
+
 struct ShiftOffsets {
-  int64_t off[kQ];  // slot of node p for direction m: shifted(p, off[m], n); 0 <= off[m] < n
+  uint32_t off[kQ];  // slot of node p for direction m: shifted(p, off[m], n); 0 <= off[m] < n
 };
 
 // The linear index step of lattice direction m.
@@ -43,56 +47,81 @@ CANOPY_HD CANOPY_FORCEINLINE int64_t linearStep(const Dims& d, int m) {
   return lattice::dir(m, 0) + int64_t(d.nx) * (lattice::dir(m, 1) + int64_t(d.ny) * lattice::dir(m, 2));
 }
 
-// The offsets after t iterations (t >= 0).
+// The offsets after t iterations (t >= 0). Precondition: 0 < d.count() <= kMaxShiftNodes.
 inline ShiftOffsets shiftOffsets(const Dims& d, int64_t t) {
   ShiftOffsets s;
   const int64_t n = d.count();
   for (int m = 0; m < kQ; ++m) {
-    // t mod n < n and |s_m| <= nx*ny + nx + 1 keep the product far inside int64 for any lattice
-    // that fits in memory.
-    int64_t o = -((t % n) * linearStep(d, m)) % n;
-    s.off[m] = o < 0 ? o + n : o;
+    // t mod n < 2^31 and |s_m| <= nx*ny + nx + 1 < 2^31 keep the product inside int64.
+    const int64_t o = -((t % n) * linearStep(d, m)) % n;
+    s.off[m] = uint32_t(o < 0 ? o + n : o);
   }
   return s;
 }
 
-CANOPY_HD CANOPY_FORCEINLINE int64_t shifted(int64_t p, int64_t off, int64_t n) {
-  const int64_t q = p + off;
+// (p + off) mod n for p, off < n < 2^31 (the sum fits in 32 bits).
+CANOPY_HD CANOPY_FORCEINLINE uint32_t shifted(uint32_t p, uint32_t off, uint32_t n) {
+  const uint32_t q = p + off;
   return q >= n ? q - n : q;
 }
 
-// (a): collide occupied interior node p (coded density `coded` != 0) in place.
+// (a): collide occupied interior node p (coded density `coded` != 0) in place. With totalBefore,
+// also stores the node's total before the collision (nodeTotal's order of additions): the
+// residual's previous total of an occupied node, whose slots the collision overwrites.
 template <int Kind = kAnyKind, bool Fused = false>
 CANOPY_HD CANOPY_FORCEINLINE void shiftCollideNode(const OmegaSet& om, const ShiftOffsets& s, int64_t n,
-                                                   float coded, int64_t p, float* state) {
+                                                   float coded, int64_t p, float* state,
+                                                   float* totalBefore = nullptr) {
+  const uint32_t q = uint32_t(p), nn = uint32_t(n);
   float f[kQ], post[kQ];
   CANOPY_UNROLL
-  for (int m = 0; m < kQ; ++m) f[m] = state[m * n + shifted(p, s.off[m], n)];
+  for (int m = 0; m < kQ; ++m) f[m] = state[m * n + shifted(q, s.off[m], nn)];
+  if (totalBefore) {
+    float t = 0.f;
+    CANOPY_UNROLL
+    for (int m = 0; m < kQ; ++m) t += f[m];
+    *totalBefore = t;
+  }
   collide<Kind, Fused>(om, coded, f, post);
   CANOPY_UNROLL
-  for (int m = 0; m < kQ; ++m) state[m * n + shifted(p, s.off[m], n)] = post[m];
+  for (int m = 0; m < kQ; ++m) state[m * n + shifted(q, s.off[m], nn)] = post[m];
 }
 
-// (b): boundary node (x, y, z) with coded density `coded` writes what it sends into the interior.
+// (b): boundary node (x, y, z) with coded density `coded` writes what it sends into the interior:
+// the outputs of its collision of the fixed boundary values. Empty = true is the caller's promise
+// that coded == 0, where that collision is the pass-through (bit for bit): the boundary values
+// themselves are written, with no collision at all.
+template <bool Empty = false>
 CANOPY_HD CANOPY_FORCEINLINE void shiftBoundaryNode(const OmegaSet& om, const Dims& d, const float boundary[kQ],
                                                     const ShiftOffsets& s, float coded, int x, int y, int z,
                                                     float* state) {
   const int64_t n = d.count(), p = d.index(x, y, z);
-  float f[kQ], post[kQ];
-  CANOPY_UNROLL
-  for (int m = 0; m < kQ; ++m) f[m] = boundary[m];
-  collide(om, coded, f, post);
+  float post[kQ];
+  if constexpr (Empty) {
+    CANOPY_UNROLL
+    for (int m = 0; m < kQ; ++m) post[m] = boundary[m];
+  } else {
+    float f[kQ];
+    CANOPY_UNROLL
+    for (int m = 0; m < kQ; ++m) f[m] = boundary[m];
+    collide(om, coded, f, post);
+  }
   CANOPY_UNROLL
   for (int m = 0; m < kQ; ++m)
     if (d.interior(x + lattice::dir(m, 0), y + lattice::dir(m, 1), z + lattice::dir(m, 2)))
-      state[m * n + shifted(p, s.off[m], n)] = post[m];
+      state[m * n + shifted(uint32_t(p), s.off[m], uint32_t(n))] = post[m];
 }
 
 // The total site density of interior node p (nodeTotal of collide.h, same order of additions).
+// The residual needs the totals of two consecutive iterations t-1 and t. An iteration writes only
+// the slots of occupied interior nodes and of boundary nodes (at the offsets of t-1), so after it
+// an empty interior node's total at t-1 is still shiftNodeTotal(state, n, shiftOffsets(d, t-1), p);
+// an occupied node's is the one shiftCollideNode recorded. One pass over the state then gives
+// both (the slots read at t-1 are the ones a neighbour reads at t: mostly cache hits).
 CANOPY_HD CANOPY_FORCEINLINE float shiftNodeTotal(const float* state, int64_t n, const ShiftOffsets& s, int64_t p) {
   float t = 0.f;
   CANOPY_UNROLL
-  for (int m = 0; m < kQ; ++m) t += state[m * n + shifted(p, s.off[m], n)];
+  for (int m = 0; m < kQ; ++m) t += state[m * n + shifted(uint32_t(p), s.off[m], uint32_t(n))];
   return t;
 }
 

@@ -4,8 +4,9 @@
 // Two schemes (solver.h, CudaScheme; measurements in bench/lbsolve/NOTES.md):
 // - Shift (default): streaming by index shift (shift_stream.h). One state buffer of 19 floats per
 //   node, updated in place; an iteration is one launch over the occupied interior nodes (leaf
-//   nodes, then wood nodes, in separate blocks) and the boundary nodes. Before a checked
-//   iteration the totals of all nodes are kept (one float per node) for the residual.
+//   nodes, then wood nodes, in separate blocks) and the empty boundary nodes (occupied boundary
+//   nodes, if any, in a second launch). A checked iteration also keeps the occupied nodes' totals
+//   before their collision; the residual is then one pass over the state.
 // - Push: the push update of listing 5.2 over every node: structure of arrays, state[m * n + idx],
 //   idx = (z*ny + y)*nx + x, one thread per node, x fastest within a block (a warp reads 32
 //   consecutive floats for every m; the pushed writes are shifted by at most one element in x),
@@ -32,6 +33,7 @@ namespace {
 
 constexpr int kBlockX = 128;
 constexpr int kReduceBlocks = 1024, kReduceThreads = 256;
+constexpr int kRowBlocks = 2048, kRowThreads = 128;  // the shift scheme's full passes (forEachNode)
 
 struct Boundary {
   float f[kQ];
@@ -66,16 +68,41 @@ __device__ __forceinline__ void reduceMax2(float dmax, float rmax, unsigned* res
 
 // ---- Push scheme -----------------------------------------------------------------------------
 
-template <bool Fused>
-__global__ void __launch_bounds__(kBlockX) pushLeafKernel(const OmegaSet omega, const Dims d,
-                                                          const float* __restrict__ coded,
-                                                          const float* __restrict__ in,
-                                                          float* __restrict__ out) {
+// Leaf and empty nodes (wood nodes: pushWoodKernel). FillEdges: the threads at x = 0 and
+// x = nx - 1 also write the boundary value into the boundary slot x = 0 / nx - 1 of each interior
+// target row, the value it already holds (boundary nodes are never written otherwise and both
+// buffers hold their fixed values), so that every 32-byte sector of an interior row is written
+// whole rather than in part. MinBlocks: __launch_bounds__'s minimum resident blocks per SM (10: at
+// most 48 registers, 62.5% occupancy, what the compiler picks anyway; 12: at most 40 registers
+// (a few spilled), 75% occupancy).
+template <bool Fused, bool FillEdges, int MinBlocks>
+__global__ void __launch_bounds__(kBlockX, MinBlocks) pushLeafKernel(const OmegaSet omega, const Boundary b,
+                                                                     const Dims d, const float* __restrict__ coded,
+                                                                     const float* __restrict__ in,
+                                                                     float* __restrict__ out) {
   const int x = int(blockIdx.x) * kBlockX + int(threadIdx.x);
   if (x >= d.nx) return;
   const int y = int(blockIdx.y), z = int(blockIdx.z);
+  if (FillEdges && (x == 0 || x == d.nx - 1)) {
+    const int64_t n = d.count();
+    CANOPY_UNROLL
+    for (int m = 0; m < kQ; ++m) {
+      const int ty = y + lattice::dir(m, 1), tz = z + lattice::dir(m, 2);
+      if (ty >= 1 && tz >= 1 && ty <= d.ny - 2 && tz <= d.nz - 2) out[m * n + d.index(x, ty, tz)] = b.f[m];
+    }
+  }
   if (coded[d.index(x, y, z)] < 0.f) return;  // a wood node: pushWoodKernel
   updateNode<kLeafKind, Fused>(omega, d, coded, in, out, x, y, z);
+}
+
+using PushLeafKernel = void (*)(OmegaSet, Boundary, Dims, const float*, const float*, float*);
+PushLeafKernel pushLeafKernelFor(CudaScheme scheme) {
+  switch (scheme) {
+    case CudaScheme::PushFused: return pushLeafKernel<true, true, 10>;
+    case CudaScheme::PushPartialSectors: return pushLeafKernel<false, false, 10>;
+    case CudaScheme::Push40Registers: return pushLeafKernel<false, true, 12>;
+    default: return pushLeafKernel<false, true, 10>;
+  }
 }
 
 template <bool Fused>
@@ -118,8 +145,20 @@ __global__ void pushGatherKernel(const float* __restrict__ cur, int64_t n, const
 
 // ---- Shift scheme ----------------------------------------------------------------------------
 
-// The node lists of one shift iteration, each in its own range of blocks: occupied interior leaf
-// nodes, occupied interior wood nodes (with their coded density), boundary nodes.
+// Boundary nodes are listed by packed coordinates (21 bits each: no division in the kernels).
+constexpr int kCoordBits = 21;
+__host__ __device__ __forceinline__ uint64_t packCoords(int x, int y, int z) {
+  return uint64_t(x) | uint64_t(y) << kCoordBits | uint64_t(z) << (2 * kCoordBits);
+}
+__device__ __forceinline__ void unpackCoords(uint64_t c, int& x, int& y, int& z) {
+  constexpr uint64_t mask = (uint64_t(1) << kCoordBits) - 1;
+  x = int(c & mask), y = int(c >> kCoordBits & mask), z = int(c >> (2 * kCoordBits));
+}
+
+// The node lists of one shift iteration, each in its own range of blocks (so that a block's
+// threads take one path): occupied interior leaf nodes, occupied interior wood nodes (with their
+// coded density), empty boundary nodes. Occupied boundary nodes (none in canopy-voxelize's
+// lattices, which keep the outer layer empty) have their own kernel.
 struct ShiftLists {
   const int64_t* leaf;
   const float* leafCoded;
@@ -127,73 +166,97 @@ struct ShiftLists {
   const int64_t* wood;
   const float* woodCoded;
   int64_t woodCount, woodBlocks;
-  const int64_t* boundary;
-  int64_t boundaryCount;
-  const float* coded;  // dense, for the boundary nodes
+  const uint64_t* edge;  // empty boundary nodes, packed coordinates
+  int64_t edgeCount, edgeBlocks;
 };
 
+// One iteration. With `totals` (an iteration the residual checks), each occupied node also stores
+// its total before the collision at totals[p] (shift_stream.h).
 __global__ void __launch_bounds__(kBlockX) shiftStepKernel(const OmegaSet omega, const Boundary b,
                                                            const ShiftOffsets s, const Dims d, const ShiftLists L,
-                                                           float* __restrict__ state) {
+                                                           float* __restrict__ state, float* __restrict__ totals) {
   const int64_t n = d.count();
   int64_t block = blockIdx.x;
   if (block < L.leafBlocks) {
     const int64_t i = block * kBlockX + threadIdx.x;
-    if (i < L.leafCount) shiftCollideNode<kLeafKind>(omega, s, n, L.leafCoded[i], L.leaf[i], state);
+    if (i >= L.leafCount) return;
+    const int64_t p = L.leaf[i];
+    shiftCollideNode<kLeafKind>(omega, s, n, L.leafCoded[i], p, state, totals ? totals + p : nullptr);
     return;
   }
   block -= L.leafBlocks;
   if (block < L.woodBlocks) {
     const int64_t i = block * kBlockX + threadIdx.x;
-    if (i < L.woodCount) shiftCollideNode<kWoodKind>(omega, s, n, L.woodCoded[i], L.wood[i], state);
+    if (i >= L.woodCount) return;
+    const int64_t p = L.wood[i];
+    shiftCollideNode<kWoodKind>(omega, s, n, L.woodCoded[i], p, state, totals ? totals + p : nullptr);
     return;
   }
   block -= L.woodBlocks;
   const int64_t i = block * kBlockX + threadIdx.x;
-  if (i >= L.boundaryCount) return;
-  const int64_t p = L.boundary[i];
+  if (i >= L.edgeCount) return;
   int x, y, z;
-  coordsOf(d, p, x, y, z);
-  shiftBoundaryNode(omega, d, b.f, s, L.coded[p], x, y, z, state);
+  unpackCoords(L.edge[i], x, y, z);
+  shiftBoundaryNode<true>(omega, d, b.f, s, 0.f, x, y, z, state);
 }
 
-// Total of node p at the offsets s (boundary nodes: the fixed total).
-__device__ __forceinline__ float shiftTotal(const Dims& d, const float* state, const ShiftOffsets& s,
-                                            float fixedTotal, int64_t p) {
+__global__ void __launch_bounds__(kBlockX) shiftOccupiedBoundaryKernel(const OmegaSet omega, const Boundary b,
+                                                                       const ShiftOffsets s, const Dims d,
+                                                                       const uint64_t* __restrict__ nodes,
+                                                                       const float* __restrict__ nodeCoded,
+                                                                       int64_t count, float* __restrict__ state) {
+  const int64_t i = int64_t(blockIdx.x) * kBlockX + threadIdx.x;
+  if (i >= count) return;
   int x, y, z;
-  coordsOf(d, p, x, y, z);
-  return d.interior(x, y, z) ? shiftNodeTotal(state, d.count(), s, p) : fixedTotal;
+  unpackCoords(nodes[i], x, y, z);
+  shiftBoundaryNode<false>(omega, d, b.f, s, nodeCoded[i], x, y, z, state);
 }
 
-__global__ void __launch_bounds__(kReduceThreads) shiftTotalsKernel(const ShiftOffsets s, const Dims d,
-                                                                    float fixedTotal,
-                                                                    const float* __restrict__ state,
-                                                                    float* __restrict__ totals) {
-  const int64_t n = d.count();
-  for (int64_t p = blockIdx.x * int64_t(blockDim.x) + threadIdx.x; p < n; p += int64_t(gridDim.x) * blockDim.x)
-    totals[p] = shiftTotal(d, state, s, fixedTotal, p);
+// The full passes (totals before a checked step, residual): blocks walk rows (y, z) of the
+// lattice, threads walk x, so the interior test needs no per-node division. Boundary nodes have
+// the fixed total.
+template <class F>
+__device__ __forceinline__ void forEachNode(const Dims& d, F&& f) {
+  const int64_t rows = int64_t(d.ny) * d.nz;
+  for (int64_t row = blockIdx.x; row < rows; row += gridDim.x) {
+    const int y = int(row % d.ny), z = int(row / d.ny);
+    const bool rowInterior = y > 0 && z > 0 && y < d.ny - 1 && z < d.nz - 1;
+    for (int x = int(threadIdx.x); x < d.nx; x += int(blockDim.x))
+      f(row * d.nx + x, rowInterior && x > 0 && x < d.nx - 1);
+  }
 }
 
-__global__ void __launch_bounds__(kReduceThreads) shiftResidualKernel(const ShiftOffsets s, const Dims d,
-                                                                      float fixedTotal,
+// The residual after a checked iteration t, in one pass: a node's total at t (offsets `now`) and
+// at t - 1 (offsets `before`; occupied nodes: the total the step kept in `kept`).
+__global__ void __launch_bounds__(kReduceThreads) shiftResidualKernel(const ShiftOffsets now, const ShiftOffsets before,
+                                                                      const Dims d, float fixedTotal,
                                                                       const float* __restrict__ state,
-                                                                      const float* __restrict__ previous,
+                                                                      const float* __restrict__ coded,
+                                                                      const float* __restrict__ kept,
                                                                       unsigned* __restrict__ result) {
   const int64_t n = d.count();
   float dmax = 0.f, rmax = 0.f;
-  for (int64_t p = blockIdx.x * int64_t(blockDim.x) + threadIdx.x; p < n; p += int64_t(gridDim.x) * blockDim.x) {
-    const float a = shiftTotal(d, state, s, fixedTotal, p);
-    dmax = fmaxf(dmax, fabsf(a - previous[p]));
+  forEachNode(d, [&](int64_t p, bool interior) {
+    float a = fixedTotal, b = fixedTotal;
+    if (interior) {
+      a = shiftNodeTotal(state, n, now, p);
+      b = coded[p] != 0.f ? kept[p] : shiftNodeTotal(state, n, before, p);
+    }
+    dmax = fmaxf(dmax, fabsf(a - b));
     rmax = fmaxf(rmax, a);
-  }
+  });
   reduceMax2(dmax, rmax, result);
 }
 
 __global__ void shiftGatherKernel(const ShiftOffsets s, const Dims d, float fixedTotal,
                                   const float* __restrict__ state, const int64_t* __restrict__ stored, int64_t k,
                                   float* __restrict__ values) {
-  for (int64_t i = blockIdx.x * int64_t(blockDim.x) + threadIdx.x; i < k; i += int64_t(gridDim.x) * blockDim.x)
-    values[i] = shiftTotal(d, state, s, fixedTotal, stored[i]);
+  for (int64_t i = blockIdx.x * int64_t(blockDim.x) + threadIdx.x; i < k; i += int64_t(gridDim.x) * blockDim.x) {
+    const int64_t p = stored[i];
+    int x, y, z;
+    coordsOf(d, p, x, y, z);
+    values[i] = d.interior(x, y, z) ? shiftNodeTotal(state, d.count(), s, p) : fixedTotal;
+  }
 }
 
 // ---- The solver ------------------------------------------------------------------------------
@@ -226,15 +289,22 @@ class CudaSolver final : public Solver {
     if (scheme == CudaScheme::Shift) {
       state_.resize(size_t(kQ) * n);
       totals_.resize(size_t(n));
-      std::vector<int64_t> leaf, wood, boundary;
-      std::vector<float> leafCoded, woodCoded;
+      std::vector<int64_t> leaf, wood;
+      std::vector<float> leafCoded, woodCoded, boundaryCoded;
+      std::vector<uint64_t> edge, boundary;
+      if (std::max({d.nx, d.ny, d.nz}) >= (1 << kCoordBits) || n > kMaxShiftNodes)
+        throw runtimeError("the lattice is too large for the CUDA shift scheme (at most 2^31 - 1 nodes)");
       for (int z = 0; z < d.nz; ++z)
         for (int y = 0; y < d.ny; ++y)
           for (int x = 0; x < d.nx; ++x) {
             const int64_t p = d.index(x, y, z);
             const float c = l.coded[size_t(p)];
             if (!d.interior(x, y, z)) {
-              boundary.push_back(p);
+              if (c == 0.f) {
+                edge.push_back(packCoords(x, y, z));
+              } else {
+                boundary.push_back(packCoords(x, y, z)), boundaryCoded.push_back(c);
+              }
             } else if (c < 0.f) {
               wood.push_back(p), woodCoded.push_back(c);
             } else if (c != 0.f) {
@@ -245,10 +315,12 @@ class CudaSolver final : public Solver {
       uploadVector(leafCoded_, leafCoded);
       uploadVector(wood_, wood);
       uploadVector(woodCoded_, woodCoded);
+      uploadVector(edge_, edge);
       uploadVector(boundary_, boundary);
-      lists_ = ShiftLists{leaf_.data(),      leafCoded_.data(),     int64_t(leaf.size()), blocksFor(int64_t(leaf.size())),
-                          wood_.data(),      woodCoded_.data(),     int64_t(wood.size()), blocksFor(int64_t(wood.size())),
-                          boundary_.data(),  int64_t(boundary.size()), coded_.data()};
+      uploadVector(boundaryCoded_, boundaryCoded);
+      lists_ = ShiftLists{leaf_.data(), leafCoded_.data(), int64_t(leaf.size()), blocksFor(int64_t(leaf.size())),
+                          wood_.data(), woodCoded_.data(), int64_t(wood.size()), blocksFor(int64_t(wood.size())),
+                          edge_.data(), int64_t(edge.size()), blocksFor(int64_t(edge.size()))};
     } else {
       bufA_.resize(size_t(kQ) * n);
       bufB_.resize(size_t(kQ) * n);
@@ -284,27 +356,31 @@ class CudaSolver final : public Solver {
     }
   }
 
-  void beforeCheckedStep() override {
-    if (scheme_ != CudaScheme::Shift) return;  // ping-pong keeps the previous state anyway
-    shiftTotalsKernel<<<kReduceBlocks, kReduceThreads, 0, stream_>>>(shiftOffsets(lat_.dims, t_), lat_.dims,
-                                                                    fixedTotal_, state_.data(), totals_.data());
-    CANOPY_CUDA_CHECK(cudaGetLastError());
-    totalsAt_ = t_;
-  }
+  void beforeCheckedStep() override { keepTotals_ = scheme_ == CudaScheme::Shift; }
 
   void step(const OmegaSet& omega) override {
     const Dims d = lat_.dims;
     if (scheme_ == CudaScheme::Shift) {
-      const int64_t blocks = lists_.leafBlocks + lists_.woodBlocks + blocksFor(lists_.boundaryCount);
+      const ShiftOffsets offsets = shiftOffsets(d, t_);
+      const int64_t blocks = lists_.leafBlocks + lists_.woodBlocks + lists_.edgeBlocks;
       if (blocks > 0) {
-        shiftStepKernel<<<unsigned(blocks), kBlockX, 0, stream_>>>(omega, boundary_values_, shiftOffsets(d, t_), d,
-                                                                   lists_, state_.data());
+        shiftStepKernel<<<unsigned(blocks), kBlockX, 0, stream_>>>(omega, boundary_values_, offsets, d, lists_,
+                                                                   state_.data(), keepTotals_ ? totals_.data() : nullptr);
+        CANOPY_CUDA_CHECK(cudaGetLastError());
+      }
+      totalsAt_ = keepTotals_ ? t_ : -1;
+      keepTotals_ = false;
+      const int64_t occupiedBoundary = int64_t(boundary_.size());
+      if (occupiedBoundary > 0) {
+        shiftOccupiedBoundaryKernel<<<unsigned(blocksFor(occupiedBoundary)), kBlockX, 0, stream_>>>(
+            omega, boundary_values_, offsets, d, boundary_.data(), boundaryCoded_.data(), occupiedBoundary,
+            state_.data());
         CANOPY_CUDA_CHECK(cudaGetLastError());
       }
     } else {
       const bool fused = scheme_ == CudaScheme::PushFused;
-      (fused ? pushLeafKernel<true> : pushLeafKernel<false>)<<<grid(), kBlockX, 0, stream_>>>(
-          omega, d, coded_.data(), cur_, prev_);
+      pushLeafKernelFor(scheme_)<<<grid(), kBlockX, 0, stream_>>>(omega, boundary_values_, d, coded_.data(), cur_,
+                                                                  prev_);
       CANOPY_CUDA_CHECK(cudaGetLastError());
       const int64_t woodCount = int64_t(wood_.size());
       if (woodCount > 0) {
@@ -320,10 +396,10 @@ class CudaSolver final : public Solver {
   float residual() override {
     CANOPY_CUDA_CHECK(cudaMemsetAsync(result_.data(), 0, 2 * sizeof(unsigned), stream_));
     if (scheme_ == CudaScheme::Shift) {
-      if (totalsAt_ != t_ - 1) throw runtimeError("internal: shift residual without the previous totals");
-      shiftResidualKernel<<<kReduceBlocks, kReduceThreads, 0, stream_>>>(shiftOffsets(lat_.dims, t_), lat_.dims,
-                                                                        fixedTotal_, state_.data(), totals_.data(),
-                                                                        result_.data());
+      if (t_ < 1 || totalsAt_ != t_ - 1) throw runtimeError("internal: shift residual without the kept totals");
+      shiftResidualKernel<<<kRowBlocks, kRowThreads, 0, stream_>>>(
+          shiftOffsets(lat_.dims, t_), shiftOffsets(lat_.dims, t_ - 1), lat_.dims, fixedTotal_, state_.data(),
+          coded_.data(), totals_.data(), result_.data());
     } else {
       pushResidualKernel<<<kReduceBlocks, kReduceThreads, 0, stream_>>>(cur_, prev_, lat_.dims.count(),
                                                                        result_.data());
@@ -364,7 +440,8 @@ class CudaSolver final : public Solver {
   Boundary boundary_values_{};
   float fixedTotal_ = 0.f;   // total of a boundary node
   int64_t t_ = 0;            // iterations done in this solve
-  int64_t totalsAt_ = -1;    // shift: the iteration whose totals totals_ holds
+  bool keepTotals_ = false;  // shift: the next step keeps the occupied nodes' totals
+  int64_t totalsAt_ = -1;    // shift: the iteration whose occupied-node totals totals_ holds
   cuda::DeviceBuffer<float> coded_, values_;
   cuda::DeviceBuffer<int64_t> stored_, wood_;
   cuda::DeviceBuffer<unsigned> result_;
@@ -372,9 +449,10 @@ class CudaSolver final : public Solver {
   cuda::DeviceBuffer<float> bufA_, bufB_;
   float* cur_ = nullptr;   // the current state (one of bufA_/bufB_)
   float* prev_ = nullptr;  // the previous state; the next step writes here
-  // Shift: one state, the totals before a checked step, the node lists.
-  cuda::DeviceBuffer<float> state_, totals_, leafCoded_, woodCoded_;
-  cuda::DeviceBuffer<int64_t> leaf_, boundary_;
+  // Shift: one state, occupied nodes' totals before a checked step, the node lists.
+  cuda::DeviceBuffer<float> state_, totals_, leafCoded_, woodCoded_, boundaryCoded_;
+  cuda::DeviceBuffer<int64_t> leaf_;
+  cuda::DeviceBuffer<uint64_t> edge_, boundary_;  // empty / occupied boundary nodes, packed coordinates
   ShiftLists lists_{};
 };
 

@@ -65,8 +65,10 @@ class Solver {
 //   Push:      the push update of collide.h over every node, ping-pong buffers (listing 5.2).
 //   PushFused: Push with fused multiply-adds (fmaf) in the collision: a benchmark variant that
 //              measures what the unfused arithmetic costs; not bitwise equal to the CPU reference.
-// Shift and Push compute the CPU reference's bits (same IEEE operations in the same order).
-enum class CudaScheme { Shift, Push, PushFused };
+//   PushPartialSectors, Push40Registers: benchmark variants of Push (its row-edge sectors written
+//              in part; a 40-register cap for 75% occupancy), see solve_cuda.cu.
+// All but PushFused compute the CPU reference's bits (same IEEE operations in the same order).
+enum class CudaScheme { Shift, Push, PushFused, PushPartialSectors, Push40Registers };
 const char* cudaSchemeName(CudaScheme scheme);
 
 std::unique_ptr<Solver> makeCpuSolver(const DenseLattice& lattice);
