@@ -2,7 +2,7 @@
 // wall time of the 57 solves (19 bases x RGB) of one plant. Prints Markdown tables on stdout.
 //
 //   bench_lbsolve [--device cpu|cuda|cuda:N] [--sizes 128,256] [--solves-sizes 128]
-//                 [--iterations 64] [--schemes shift,push,push-fused] [--fill plant|full|plant,full]
+//                 [--iterations 64] [--schemes shift,shift-split,push,push-fused] [--fill plant|full|plant,full]
 //                 [--lattices a.density.vdb,b.density.vdb]
 //
 // Throughput: one solve run for I/4 and for I iterations (tolerance 0); the difference divided by
@@ -65,10 +65,9 @@ std::vector<int> parseList(const std::string& s) {
 }
 
 CudaScheme parseScheme(const std::string& s) {
-  for (CudaScheme c : {CudaScheme::Shift, CudaScheme::Push, CudaScheme::PushFused, CudaScheme::PushPartialSectors,
-                       CudaScheme::Push40Registers})
+  for (CudaScheme c : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::PushFused})
     if (s == cudaSchemeName(c)) return c;
-  throw std::runtime_error("unknown scheme '" + s + "' (shift, push, push-fused, push-partial, push-40reg)");
+  throw std::runtime_error("unknown scheme '" + s + "' (shift, shift-split, push, push-fused)");
 }
 
 int64_t occupiedNodes(const DenseLattice& L) {
@@ -79,7 +78,7 @@ int64_t occupiedNodes(const DenseLattice& L) {
 
 // Nominal device-memory bytes per lattice node and iteration (see the header comment).
 double bytesPerUpdate(const DenseLattice& L, const Device& dev, CudaScheme scheme) {
-  if (!dev.isCuda() || scheme != CudaScheme::Shift) return (2 * kQ + 1) * 4.0;
+  if (!dev.isCuda() || scheme == CudaScheme::Push || scheme == CudaScheme::PushFused) return (2 * kQ + 1) * 4.0;
   const Dims d = L.dims;
   double bytes = 0;
   for (int z = 0; z < d.nz; ++z)
@@ -190,7 +189,7 @@ int main(int argc, char** argv) try {
     else {
       std::fprintf(stderr,
                    "usage: bench_lbsolve [--device D] [--sizes 128,256] [--solves-sizes 128] [--iterations 64]\n"
-                   "                     [--schemes shift,push,push-fused] [--fill plant,full] [--lattices a.vdb,...]\n");
+                   "                     [--schemes shift,shift-split,push,push-fused] [--fill plant,full] [--lattices a.vdb,...]\n");
       return 1;
     }
   }

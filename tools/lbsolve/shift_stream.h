@@ -65,6 +65,17 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t shifted(uint32_t p, uint32_t off, uint32_t
   return q >= n ? q - n : q;
 }
 
+// Returns v; on the GPU the compiler must then assume it is a new value (an empty asm statement,
+// no instruction). shiftCollideNode recomputes its 19 store addresses from such a copy of the
+// node index instead of keeping the 19 load addresses live across the collision: 38 fewer
+// registers, more resident threads (bench/lbsolve/NOTES.md).
+CANOPY_HD CANOPY_FORCEINLINE uint32_t opaqueCopy(uint32_t v) {
+#if defined(__CUDA_ARCH__)
+  asm volatile("" : "+r"(v));
+#endif
+  return v;
+}
+
 // (a): collide occupied interior node p (coded density `coded` != 0) in place. With totalBefore,
 // also stores the node's total before the collision (nodeTotal's order of additions): the
 // residual's previous total of an occupied node, whose slots the collision overwrites.
@@ -83,8 +94,9 @@ CANOPY_HD CANOPY_FORCEINLINE void shiftCollideNode(const OmegaSet& om, const Shi
     *totalBefore = t;
   }
   collide<Kind, Fused>(om, coded, f, post);
+  const uint32_t r = opaqueCopy(q);
   CANOPY_UNROLL
-  for (int m = 0; m < kQ; ++m) state[m * n + shifted(q, s.off[m], nn)] = post[m];
+  for (int m = 0; m < kQ; ++m) state[m * n + shifted(r, s.off[m], nn)] = post[m];
 }
 
 // (b): boundary node (x, y, z) with coded density `coded` writes what it sends into the interior:

@@ -68,41 +68,17 @@ __device__ __forceinline__ void reduceMax2(float dmax, float rmax, unsigned* res
 
 // ---- Push scheme -----------------------------------------------------------------------------
 
-// Leaf and empty nodes (wood nodes: pushWoodKernel). FillEdges: the threads at x = 0 and
-// x = nx - 1 also write the boundary value into the boundary slot x = 0 / nx - 1 of each interior
-// target row, the value it already holds (boundary nodes are never written otherwise and both
-// buffers hold their fixed values), so that every 32-byte sector of an interior row is written
-// whole rather than in part. MinBlocks: __launch_bounds__'s minimum resident blocks per SM (10: at
-// most 48 registers, 62.5% occupancy, what the compiler picks anyway; 12: at most 40 registers
-// (a few spilled), 75% occupancy).
-template <bool Fused, bool FillEdges, int MinBlocks>
-__global__ void __launch_bounds__(kBlockX, MinBlocks) pushLeafKernel(const OmegaSet omega, const Boundary b,
-                                                                     const Dims d, const float* __restrict__ coded,
-                                                                     const float* __restrict__ in,
-                                                                     float* __restrict__ out) {
+// Leaf and empty nodes (wood nodes: pushWoodKernel).
+template <bool Fused>
+__global__ void __launch_bounds__(kBlockX) pushLeafKernel(const OmegaSet omega, const Dims d,
+                                                          const float* __restrict__ coded,
+                                                          const float* __restrict__ in,
+                                                          float* __restrict__ out) {
   const int x = int(blockIdx.x) * kBlockX + int(threadIdx.x);
   if (x >= d.nx) return;
   const int y = int(blockIdx.y), z = int(blockIdx.z);
-  if (FillEdges && (x == 0 || x == d.nx - 1)) {
-    const int64_t n = d.count();
-    CANOPY_UNROLL
-    for (int m = 0; m < kQ; ++m) {
-      const int ty = y + lattice::dir(m, 1), tz = z + lattice::dir(m, 2);
-      if (ty >= 1 && tz >= 1 && ty <= d.ny - 2 && tz <= d.nz - 2) out[m * n + d.index(x, ty, tz)] = b.f[m];
-    }
-  }
   if (coded[d.index(x, y, z)] < 0.f) return;  // a wood node: pushWoodKernel
   updateNode<kLeafKind, Fused>(omega, d, coded, in, out, x, y, z);
-}
-
-using PushLeafKernel = void (*)(OmegaSet, Boundary, Dims, const float*, const float*, float*);
-PushLeafKernel pushLeafKernelFor(CudaScheme scheme) {
-  switch (scheme) {
-    case CudaScheme::PushFused: return pushLeafKernel<true, true, 10>;
-    case CudaScheme::PushPartialSectors: return pushLeafKernel<false, false, 10>;
-    case CudaScheme::Push40Registers: return pushLeafKernel<false, true, 12>;
-    default: return pushLeafKernel<false, true, 10>;
-  }
 }
 
 template <bool Fused>
@@ -200,6 +176,29 @@ __global__ void __launch_bounds__(kBlockX) shiftStepKernel(const OmegaSet omega,
   shiftBoundaryNode<true>(omega, d, b.f, s, 0.f, x, y, z, state);
 }
 
+// The same iteration in three launches (CudaScheme::ShiftSplit): occupied nodes of one kind, and
+// empty boundary nodes, each kernel with only its own path (fewer registers than the one above).
+template <int Kind>
+__global__ void __launch_bounds__(kBlockX) shiftCollideKernel(const OmegaSet omega, const ShiftOffsets s, int64_t n,
+                                                              const int64_t* __restrict__ nodes,
+                                                              const float* __restrict__ nodeCoded, int64_t count,
+                                                              float* __restrict__ state, float* __restrict__ totals) {
+  const int64_t i = int64_t(blockIdx.x) * kBlockX + threadIdx.x;
+  if (i >= count) return;
+  const int64_t p = nodes[i];
+  shiftCollideNode<Kind>(omega, s, n, nodeCoded[i], p, state, totals ? totals + p : nullptr);
+}
+
+__global__ void __launch_bounds__(kBlockX) shiftEdgeKernel(const OmegaSet omega, const Boundary b, const ShiftOffsets s,
+                                                           const Dims d, const uint64_t* __restrict__ edge,
+                                                           int64_t count, float* __restrict__ state) {
+  const int64_t i = int64_t(blockIdx.x) * kBlockX + threadIdx.x;
+  if (i >= count) return;
+  int x, y, z;
+  unpackCoords(edge[i], x, y, z);
+  shiftBoundaryNode<true>(omega, d, b.f, s, 0.f, x, y, z, state);
+}
+
 __global__ void __launch_bounds__(kBlockX) shiftOccupiedBoundaryKernel(const OmegaSet omega, const Boundary b,
                                                                        const ShiftOffsets s, const Dims d,
                                                                        const uint64_t* __restrict__ nodes,
@@ -269,6 +268,8 @@ void uploadVector(cuda::DeviceBuffer<T>& buffer, const std::vector<T>& v) {
 
 int64_t blocksFor(int64_t count) { return (count + kBlockX - 1) / kBlockX; }
 
+bool isShift(CudaScheme scheme) { return scheme == CudaScheme::Shift || scheme == CudaScheme::ShiftSplit; }
+
 class CudaSolver final : public Solver {
  public:
   CudaSolver(const DenseLattice& l, int gpu, CudaScheme scheme) : lat_(l), gpu_(gpu), scheme_(scheme) {
@@ -286,7 +287,7 @@ class CudaSolver final : public Solver {
     uploadVector(stored_, l.stored);
     values_.resize(l.stored.size());
     result_.resize(2);
-    if (scheme == CudaScheme::Shift) {
+    if (isShift(scheme)) {
       state_.resize(size_t(kQ) * n);
       totals_.resize(size_t(n));
       std::vector<int64_t> leaf, wood;
@@ -347,7 +348,7 @@ class CudaSolver final : public Solver {
     std::memcpy(boundary_values_.f, boundary, sizeof boundary_values_.f);
     fixedTotal_ = boundaryTotal(boundary);
     t_ = 0;
-    if (scheme_ == CudaScheme::Shift) {
+    if (isShift(scheme_)) {
       // Interior nodes start at 0; boundary slots are never read (shift_stream.h).
       CANOPY_CUDA_CHECK(cudaMemsetAsync(state_.data(), 0, state_.size() * sizeof(float), stream_));
     } else {
@@ -356,16 +357,28 @@ class CudaSolver final : public Solver {
     }
   }
 
-  void beforeCheckedStep() override { keepTotals_ = scheme_ == CudaScheme::Shift; }
+  void beforeCheckedStep() override { keepTotals_ = isShift(scheme_); }
 
   void step(const OmegaSet& omega) override {
     const Dims d = lat_.dims;
-    if (scheme_ == CudaScheme::Shift) {
+    if (isShift(scheme_)) {
       const ShiftOffsets offsets = shiftOffsets(d, t_);
-      const int64_t blocks = lists_.leafBlocks + lists_.woodBlocks + lists_.edgeBlocks;
-      if (blocks > 0) {
-        shiftStepKernel<<<unsigned(blocks), kBlockX, 0, stream_>>>(omega, boundary_values_, offsets, d, lists_,
-                                                                   state_.data(), keepTotals_ ? totals_.data() : nullptr);
+      float* totals = keepTotals_ ? totals_.data() : nullptr;
+      const ShiftLists& L = lists_;
+      if (scheme_ == CudaScheme::ShiftSplit) {
+        if (L.leafCount > 0)
+          shiftCollideKernel<kLeafKind><<<unsigned(L.leafBlocks), kBlockX, 0, stream_>>>(
+              omega, offsets, d.count(), L.leaf, L.leafCoded, L.leafCount, state_.data(), totals);
+        if (L.woodCount > 0)
+          shiftCollideKernel<kWoodKind><<<unsigned(L.woodBlocks), kBlockX, 0, stream_>>>(
+              omega, offsets, d.count(), L.wood, L.woodCoded, L.woodCount, state_.data(), totals);
+        if (L.edgeCount > 0)
+          shiftEdgeKernel<<<unsigned(L.edgeBlocks), kBlockX, 0, stream_>>>(omega, boundary_values_, offsets, d, L.edge,
+                                                                           L.edgeCount, state_.data());
+        CANOPY_CUDA_CHECK(cudaGetLastError());
+      } else if (const int64_t blocks = L.leafBlocks + L.woodBlocks + L.edgeBlocks; blocks > 0) {
+        shiftStepKernel<<<unsigned(blocks), kBlockX, 0, stream_>>>(omega, boundary_values_, offsets, d, L,
+                                                                   state_.data(), totals);
         CANOPY_CUDA_CHECK(cudaGetLastError());
       }
       totalsAt_ = keepTotals_ ? t_ : -1;
@@ -379,8 +392,8 @@ class CudaSolver final : public Solver {
       }
     } else {
       const bool fused = scheme_ == CudaScheme::PushFused;
-      pushLeafKernelFor(scheme_)<<<grid(), kBlockX, 0, stream_>>>(omega, boundary_values_, d, coded_.data(), cur_,
-                                                                  prev_);
+      (fused ? pushLeafKernel<true> : pushLeafKernel<false>)<<<grid(), kBlockX, 0, stream_>>>(
+          omega, d, coded_.data(), cur_, prev_);
       CANOPY_CUDA_CHECK(cudaGetLastError());
       const int64_t woodCount = int64_t(wood_.size());
       if (woodCount > 0) {
@@ -395,7 +408,7 @@ class CudaSolver final : public Solver {
 
   float residual() override {
     CANOPY_CUDA_CHECK(cudaMemsetAsync(result_.data(), 0, 2 * sizeof(unsigned), stream_));
-    if (scheme_ == CudaScheme::Shift) {
+    if (isShift(scheme_)) {
       if (t_ < 1 || totalsAt_ != t_ - 1) throw runtimeError("internal: shift residual without the kept totals");
       shiftResidualKernel<<<kRowBlocks, kRowThreads, 0, stream_>>>(
           shiftOffsets(lat_.dims, t_), shiftOffsets(lat_.dims, t_ - 1), lat_.dims, fixedTotal_, state_.data(),
@@ -417,7 +430,7 @@ class CudaSolver final : public Solver {
     const int64_t k = int64_t(lat_.stored.size());
     std::vector<float> out(size_t(k), 0.f);
     if (k > 0) {
-      if (scheme_ == CudaScheme::Shift) {
+      if (isShift(scheme_)) {
         shiftGatherKernel<<<kReduceBlocks, kReduceThreads, 0, stream_>>>(
             shiftOffsets(lat_.dims, t_), lat_.dims, fixedTotal_, state_.data(), stored_.data(), k, values_.data());
       } else {

@@ -16,9 +16,8 @@ const char* cudaSchemeName(CudaScheme scheme) {
   switch (scheme) {
     case CudaScheme::Shift: return "shift";
     case CudaScheme::Push: return "push";
+    case CudaScheme::ShiftSplit: return "shift-split";
     case CudaScheme::PushFused: return "push-fused";
-    case CudaScheme::PushPartialSectors: return "push-partial";
-    case CudaScheme::Push40Registers: return "push-40reg";
   }
   return "?";
 }

@@ -60,15 +60,15 @@ class Solver {
 };
 
 // How the CUDA backend advances the lattice (bench/lbsolve/NOTES.md has the measurements):
-//   Shift:     streaming by index shift (shift_stream.h): one state buffer updated in place, work
-//              only at occupied and boundary nodes. The default.
-//   Push:      the push update of collide.h over every node, ping-pong buffers (listing 5.2).
-//   PushFused: Push with fused multiply-adds (fmaf) in the collision: a benchmark variant that
-//              measures what the unfused arithmetic costs; not bitwise equal to the CPU reference.
-//   PushPartialSectors, Push40Registers: benchmark variants of Push (its row-edge sectors written
-//              in part; a 40-register cap for 75% occupancy), see solve_cuda.cu.
+//   Shift:      streaming by index shift (shift_stream.h): one state buffer updated in place, work
+//               only at occupied and boundary nodes, one launch per iteration. The default.
+//   ShiftSplit: the same in three launches per iteration (leaf nodes, wood nodes, boundary nodes),
+//               each kernel holding only its own path (fewer registers).
+//   Push:       the push update of collide.h over every node, ping-pong buffers (listing 5.2).
+//   PushFused:  Push with fused multiply-adds (fmaf) in the collision: a benchmark variant that
+//               measures what the unfused arithmetic costs; not bitwise equal to the CPU reference.
 // All but PushFused compute the CPU reference's bits (same IEEE operations in the same order).
-enum class CudaScheme { Shift, Push, PushFused, PushPartialSectors, Push40Registers };
+enum class CudaScheme { Shift, ShiftSplit, Push, PushFused };
 const char* cudaSchemeName(CudaScheme scheme);
 
 std::unique_ptr<Solver> makeCpuSolver(const DenseLattice& lattice);
@@ -77,8 +77,8 @@ std::unique_ptr<Solver> makeCudaSolver(const DenseLattice& lattice, int gpu,
                                        CudaScheme scheme = CudaScheme::Shift);
 
 // Bytes of device memory a CUDA solver needs for this lattice. Push: 2 x 19 floats + coded density
-// per node, the wood-node list, plus the stored-node index list and its values. Shift: 19 floats +
-// coded density + the previous total per node, the occupied and boundary node lists, and the
+// per node, the wood-node list, plus the stored-node index list and its values. Shift (both): 19
+// floats + coded density + a kept total per node, the occupied and boundary node lists, and the
 // stored nodes.
 int64_t cudaSolverBytes(const DenseLattice& lattice, CudaScheme scheme = CudaScheme::Shift);
 
