@@ -31,12 +31,21 @@ step bench_lbsolve_cuda.md "$BIN/bench_lbsolve" --device cuda --sizes 128,256 --
   --schemes shift,shift-split,push,push-fused --iterations "$ITERATIONS" --solves-sizes 128 --lattices "$OUT/oak128.density.vdb"
 # The 57 solves of the synthetic 256^3 plant with the shift schemes (push: ~50 s, see RESULTS.md).
 step bench_lbsolve_cuda256.md "$BIN/bench_lbsolve" --device cuda --sizes "" --schemes shift,shift-split --solves-sizes 256
-# The tool end to end on the oak (read, 57 solves with the default scheme, write), wall time.
-t0=$(date +%s.%N)
-step lbsolve_oak128_cuda.json "$BIN/canopy-lbsolve" "$OUT/oak128.density.vdb" -o "$OUT/oak128.light.vdb" \
-  --device cuda --json -q
-t1=$(date +%s.%N)
-echo "canopy-lbsolve oak128 --device cuda: $(awk "BEGIN{printf \"%.3f\", $t1 - $t0}") s wall (process, including I/O)" | tee "$OUT/lbsolve_oak128_wall.txt"
-rm -f "$OUT/oak128.light.vdb"
+# The tool end to end on the oak (read, 57 solves, write), wall time, with each CUDA scheme; the
+# light files of all schemes must be byte-identical (same bits, deterministic writer).
+: > "$OUT/lbsolve_oak128_wall.txt"
+for scheme in shift shift-split push; do
+  t0=$(date +%s.%N)
+  step "lbsolve_oak128_$scheme.json" "$BIN/canopy-lbsolve" "$OUT/oak128.density.vdb" -o "$OUT/oak128.$scheme.light.vdb" \
+    --device cuda --cuda-scheme "$scheme" --json -q
+  t1=$(date +%s.%N)
+  echo "canopy-lbsolve oak128 --device cuda --cuda-scheme $scheme: $(awk "BEGIN{printf \"%.3f\", $t1 - $t0}") s wall (process, including I/O)" | tee -a "$OUT/lbsolve_oak128_wall.txt"
+done
+if cmp "$OUT/oak128.shift.light.vdb" "$OUT/oak128.push.light.vdb" && cmp "$OUT/oak128.shift.light.vdb" "$OUT/oak128.shift-split.light.vdb"; then
+  echo "light files of the three schemes: byte-identical" | tee -a "$OUT/lbsolve_oak128_wall.txt"
+else
+  echo "gpu.sh: FAILED: the schemes' light files differ" | tee -a "$OUT/lbsolve_oak128_wall.txt"; status=1
+fi
+rm -f "$OUT"/oak128.*.light.vdb
 step bench_lbsolve_cpu.md "$BIN/bench_lbsolve" --device cpu --sizes 128 --solves-sizes 64 --iterations 16
 exit $status
