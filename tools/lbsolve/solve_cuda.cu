@@ -1,12 +1,13 @@
 // solve_cuda.cu: the CUDA backend. The kernels call the CANOPY_HD functions of collide.h and
 // shift_stream.h, the same ones the CPU reference (solve_cpu.cpp) and the CPU tests run.
 //
-// Two schemes (solver.h, CudaScheme; measurements in bench/lbsolve/NOTES.md):
+// Schemes (solver.h, CudaScheme; measurements in bench/lbsolve/NOTES.md):
 // - Shift (default): streaming by index shift (shift_stream.h). One state buffer of 19 floats per
 //   node, updated in place; an iteration is one launch over the occupied interior nodes (leaf
 //   nodes, then wood nodes, in separate blocks) and the empty boundary nodes (occupied boundary
 //   nodes, if any, in a second launch). A checked iteration also keeps the occupied nodes' totals
-//   before their collision; the residual is then one pass over the state.
+//   before their collision; the residual is then one pass over the state. ShiftSplit: the same
+//   iteration as three launches of leaner kernels (measured slower: the parts no longer overlap).
 // - Push: the push update of listing 5.2 over every node: structure of arrays, state[m * n + idx],
 //   idx = (z*ny + y)*nx + x, one thread per node, x fastest within a block (a warp reads 32
 //   consecutive floats for every m; the pushed writes are shifted by at most one element in x),
