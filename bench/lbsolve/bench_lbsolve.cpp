@@ -1,21 +1,33 @@
 // bench_lbsolve: throughput of the LB lighting update against the device's copy bandwidth, and the
-// wall time of the 57 solves (19 bases x RGB) of one plant. Prints a Markdown table on stdout.
+// wall time of the 57 solves (19 bases x RGB) of one plant. Prints Markdown tables on stdout.
 //
 //   bench_lbsolve [--device cpu|cuda|cuda:N] [--sizes 128,256] [--solves-sizes 128]
-//                 [--iterations 64]
+//                 [--iterations 64] [--schemes shift,shift-split,push,push-fused] [--fill plant|full|plant,full]
+//                 [--lattices a.density.vdb,b.density.vdb]
 //
 // Throughput: one solve run for I/4 and for I iterations (tolerance 0); the difference divided by
-// 3I/4 x nodes removes fixed costs (initialisation, gathering the result). Bytes per update are the
-// nominal traffic of collide.h's push update: 19 floats read + 19 floats written + 4 bytes of
-// coded density = 156 B. Copy bandwidth: a cudaMemcpy device-to-device of 1 GiB, counted as bytes
-// read + bytes written, best of 10, measured in the same run (on the CPU: std::memcpy of 1 GiB with
-// all threads, counted the same way). The 57-solve wall time uses the tool's defaults (tolerance
-// 1e-4 checked every 16 iterations, cap 2 x the edge) on the chosen device: "cuda" = every GPU.
+// 3I/4 x nodes removes fixed costs (initialisation, gathering the result). "Node updates/s" counts
+// lattice nodes advanced by one iteration, whatever the scheme does at each node. Bytes per update:
+// - push: the nominal traffic of collide.h's push update: 19 floats read + 19 floats written +
+//   4 bytes of coded density = 156 B per node;
+// - shift (shift_stream.h): per iteration, each occupied interior node reads and writes its 19
+//   values in place and reads its index and coded density (164 B); each boundary node reads its
+//   index and coded density (12 B) and writes one float per direction pointing into the interior;
+//   divided by the number of nodes. Empty interior nodes cost nothing.
+// Copy bandwidth: a cudaMemcpy device-to-device of 1 GiB, counted as bytes read + bytes written,
+// best of 10, measured in the same run (on the CPU: std::memcpy of 1 GiB with all threads, counted
+// the same way). The 57-solve wall time uses the tool's defaults (tolerance 1e-4 checked every 16
+// iterations, cap 2 x the longest edge) on the chosen device: "cuda" = every GPU. Lattices:
+// "plant" is tests/lbsolve/fixtures.h's synthetic plant, "full" the same box with every interior
+// node occupied (random density, 10% wood: the most arithmetic per node), and --lattices reads
+// canopy-voxelize outputs (e.g. oak_medium at 128^3).
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -24,6 +36,7 @@
 #endif
 
 #include "canopy/device.h"
+#include "canopy/lattice_dirs.h"
 #include "canopy/parallel.h"
 #include "fixtures.h"
 #include "lattice_io.h"
@@ -37,13 +50,69 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
-constexpr double kBytesPerUpdate = (2 * kQ + 1) * 4.0;
+std::vector<std::string> parseWords(const std::string& s) {
+  std::vector<std::string> v;
+  std::stringstream ss(s);
+  for (std::string item; std::getline(ss, item, ',');)
+    if (!item.empty()) v.push_back(item);
+  return v;
+}
 
 std::vector<int> parseList(const std::string& s) {
   std::vector<int> v;
-  std::stringstream ss(s);
-  for (std::string item; std::getline(ss, item, ',');) v.push_back(std::stoi(item));
+  for (const auto& w : parseWords(s)) v.push_back(std::stoi(w));
   return v;
+}
+
+CudaScheme parseScheme(const std::string& s) {
+  for (CudaScheme c : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::PushFused})
+    if (s == cudaSchemeName(c)) return c;
+  throw std::runtime_error("unknown scheme '" + s + "' (shift, shift-split, push, push-fused)");
+}
+
+int64_t occupiedNodes(const DenseLattice& L) {
+  int64_t k = 0;
+  for (float c : L.coded) k += c != 0.f;
+  return k;
+}
+
+// Nominal device-memory bytes per lattice node and iteration (see the header comment).
+double bytesPerUpdate(const DenseLattice& L, const Device& dev, CudaScheme scheme) {
+  if (!dev.isCuda() || scheme == CudaScheme::Push || scheme == CudaScheme::PushFused) return (2 * kQ + 1) * 4.0;
+  const Dims d = L.dims;
+  double bytes = 0;
+  for (int z = 0; z < d.nz; ++z)
+    for (int y = 0; y < d.ny; ++y)
+      for (int x = 0; x < d.nx; ++x) {
+        const float c = L.coded[size_t(d.index(x, y, z))];
+        if (d.interior(x, y, z)) {
+          if (c != 0.f) bytes += 2 * kQ * 4 + 8 + 4;
+          continue;
+        }
+        bytes += 8 + 4;
+        for (int m = 0; m < kQ; ++m)
+          bytes += 4 * d.interior(x + lattice::dir(m, 0), y + lattice::dir(m, 1), z + lattice::dir(m, 2));
+      }
+  return bytes / double(d.count());
+}
+
+// The synthetic plant, or ("full") every interior node occupied.
+DenseLattice makeLattice(int n, const std::string& fill) {
+  fixtures::Plant plant = fixtures::makePlant(n);
+  if (fill == "full") {
+    for (int z = 1; z < n - 1; ++z)
+      for (int y = 1; y < n - 1; ++y)
+        for (int x = 1; x < n - 1; ++x) {
+          const size_t i = (size_t(z) * n + y) * n + x;
+          plant.density[i] = 0.05f + 0.95f * fixtures::hashUnit(i, 21);
+          plant.wood[i] = fixtures::hashUnit(i, 22) < 0.1f ? 1.f : 0.f;
+        }
+  } else if (fill != "plant") {
+    throw std::runtime_error("unknown fill '" + fill + "' (plant, full)");
+  }
+  DenseLattice L = fixtures::denseOf(n, n, n, plant.density, plant.wood);
+  L.stored = storedNodes(L.dims, plant.density);
+  return L;
 }
 
 SolveSpec baseSpec(int b, int c, int iterations, float tolerance) {
@@ -96,16 +165,17 @@ double copyBandwidth(const Device& dev) {
   return 2.0 * bytes / best;
 }
 
-double solveSeconds(const DenseLattice& L, const Device& dev, int iterations) {
+double solveSeconds(const DenseLattice& L, const Device& dev, CudaScheme scheme, int iterations) {
   const auto t0 = Clock::now();
-  runSolves(L, {baseSpec(4, 1, iterations, 0.f)}, dev);
+  runSolves(L, {baseSpec(4, 1, iterations, 0.f)}, dev, {}, scheme);
   return since(t0);
 }
 }  // namespace
 
-int main(int argc, char** argv) {
+int main(int argc, char** argv) try {
   std::string deviceSpec = "auto";
   std::vector<int> sizes{128, 256}, solveSizes{128};
+  std::vector<std::string> schemeNames{"shift"}, fills{"plant"}, lattices;
   int iterations = 64;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string k = argv[i], v = argv[i + 1];
@@ -113,8 +183,13 @@ int main(int argc, char** argv) {
     else if (k == "--sizes") sizes = parseList(v);
     else if (k == "--solves-sizes") solveSizes = parseList(v);
     else if (k == "--iterations") iterations = std::stoi(v);
+    else if (k == "--schemes") schemeNames = parseWords(v);
+    else if (k == "--fill") fills = parseWords(v);
+    else if (k == "--lattices") lattices = parseWords(v);
     else {
-      std::fprintf(stderr, "usage: bench_lbsolve [--device D] [--sizes 128,256] [--solves-sizes 128] [--iterations 64]\n");
+      std::fprintf(stderr,
+                   "usage: bench_lbsolve [--device D] [--sizes 128,256] [--solves-sizes 128] [--iterations 64]\n"
+                   "                     [--schemes shift,shift-split,push,push-fused] [--fill plant,full] [--lattices a.vdb,...]\n");
       return 1;
     }
   }
@@ -125,6 +200,10 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "bench_lbsolve: %s\n", e.what());
     return 5;
   }
+  std::vector<CudaScheme> schemes;
+  for (const auto& w : schemeNames) schemes.push_back(parseScheme(w));
+  if (!dev.isCuda()) schemes = {CudaScheme::Shift};  // the CPU has one scheme (the reference)
+  auto schemeLabel = [&](CudaScheme c) { return dev.isCuda() ? std::string(cudaSchemeName(c)) : std::string("cpu"); };
   std::string devName = dev.str();
 #ifdef CANOPY_HAS_CUDA
   if (dev.isCuda()) {
@@ -137,47 +216,63 @@ int main(int argc, char** argv) {
   const double bw = copyBandwidth(one);
   std::printf("# bench_lbsolve: device %s\n\n", devName.c_str());
   std::printf("copy bandwidth (one device, read+write): %.1f GB/s\n\n", bw / 1e9);
-  std::printf("| lattice | nodes | node updates/s | bytes/update | GB/s | fraction of copy bandwidth |\n");
+  std::printf("| lattice | scheme | nodes | occupied | node updates/s | bytes/update | GB/s | fraction of copy bandwidth |\n");
+  std::printf("|---|---|---|---|---|---|---|---|\n");
+  for (const auto& fill : fills)
+    for (int n : sizes) {
+      const DenseLattice L = makeLattice(n, fill);
+      const double occupied = double(occupiedNodes(L)) / double(L.dims.count());
+      for (CudaScheme scheme : schemes) {
+        solveSeconds(L, one, scheme, 2);  // warm-up (allocation, first launch)
+        const int i1 = std::max(1, iterations / 4), i2 = std::max(i1 + 1, iterations);
+        const double t1 = solveSeconds(L, one, scheme, i1), t2 = solveSeconds(L, one, scheme, i2);
+        const double rate = double(L.dims.count()) * (i2 - i1) / std::max(t2 - t1, 1e-9);
+        const double bytes = bytesPerUpdate(L, one, scheme);
+        std::printf("| %s %d^3 | %s | %lld | %.1f%% | %.3g | %.1f | %.1f | %.1f%% |\n", fill.c_str(), n,
+                    schemeLabel(scheme).c_str(), (long long)L.dims.count(), 100.0 * occupied, rate, bytes,
+                    rate * bytes / 1e9, 100.0 * rate * bytes / bw);
+        std::fflush(stdout);
+      }
+    }
+  std::printf("\n| lattice | scheme | device | 57 solves wall time | iterations (min..max) | node updates/s |\n");
   std::printf("|---|---|---|---|---|---|\n");
-  for (int n : sizes) {
-    const fixtures::Plant plant = fixtures::makePlant(n);
-    DenseLattice L = fixtures::denseOf(n, n, n, plant.density, plant.wood);
-    L.stored = storedNodes(L.dims, plant.density);
-    solveSeconds(L, one, 2);  // warm-up (allocation, first launch)
-    const int i1 = std::max(1, iterations / 4), i2 = std::max(i1 + 1, iterations);
-    const double t1 = solveSeconds(L, one, i1), t2 = solveSeconds(L, one, i2);
-    const double rate = double(L.dims.count()) * (i2 - i1) / std::max(t2 - t1, 1e-9);
-    std::printf("| %d^3 | %lld | %.3g | %.0f | %.1f | %.1f%% |\n", n, (long long)L.dims.count(), rate,
-                kBytesPerUpdate, rate * kBytesPerUpdate / 1e9, 100.0 * rate * kBytesPerUpdate / bw);
-    std::fflush(stdout);
-  }
-  std::printf("\n| lattice | device | 57 solves wall time | iterations (min..max) | node updates/s |\n");
-  std::printf("|---|---|---|---|---|\n");
-  for (int n : solveSizes) {
-    const fixtures::Plant plant = fixtures::makePlant(n);
-    DenseLattice L = fixtures::denseOf(n, n, n, plant.density, plant.wood);
-    L.stored = storedNodes(L.dims, plant.density);
+  auto solveAll = [&](const std::string& label, const DenseLattice& L) {
+    const int edge = std::max({L.dims.nx, L.dims.ny, L.dims.nz});
     std::vector<SolveSpec> specs;
     for (int b = 0; b < kQ; ++b)
-      for (int c = 0; c < 3; ++c) specs.push_back(baseSpec(b, c, 2 * n, 1e-4f));
+      for (int c = 0; c < 3; ++c) specs.push_back(baseSpec(b, c, 2 * edge, 1e-4f));
     std::vector<Device> devices{dev};
     if (dev.isCuda() && dev.index < 0 && cudaDeviceCount() > 1) devices.insert(devices.begin(), one);
-    for (const Device& d : devices) {
-      const auto t0 = Clock::now();
-      const auto r = runSolves(L, specs, d);
-      const double s = since(t0);
-      int lo = 1 << 30, hi = 0;
-      double updates = 0;
-      for (const auto& x : r) {
-        lo = std::min(lo, x.iterations);
-        hi = std::max(hi, x.iterations);
-        updates += double(x.iterations) * L.dims.count();
+    for (CudaScheme scheme : schemes)
+      for (const Device& d : devices) {
+        const auto t0 = Clock::now();
+        const auto r = runSolves(L, specs, d, {}, scheme);
+        const double s = since(t0);
+        int lo = 1 << 30, hi = 0;
+        double updates = 0;
+        for (const auto& x : r) {
+          lo = std::min(lo, x.iterations);
+          hi = std::max(hi, x.iterations);
+          updates += double(x.iterations) * L.dims.count();
+        }
+        const std::string devLabel =
+            d.isCuda() && d.index < 0 ? "cuda x" + std::to_string(cudaDeviceCount()) : d.str();
+        std::printf("| %s | %s | %s | %.3f s | %d..%d | %.3g |\n", label.c_str(), schemeLabel(scheme).c_str(),
+                    devLabel.c_str(), s, lo, hi, updates / s);
+        std::fflush(stdout);
       }
-      std::printf("| %d^3 | %s | %.3f s | %d..%d | %.3g |\n", n,
-                  d.isCuda() && d.index < 0 ? ("cuda x" + std::to_string(cudaDeviceCount())).c_str() : d.str().c_str(),
-                  s, lo, hi, updates / s);
-      std::fflush(stdout);
-    }
+  };
+  for (int n : solveSizes) solveAll("plant " + std::to_string(n) + "^3", makeLattice(n, "plant"));
+  for (const auto& path : lattices) {
+    const LoadedLattice loaded = loadDensityLattice(path, LightParams().woodThreshold);
+    const Dims d = loaded.dense.dims;
+    char label[512];
+    std::snprintf(label, sizeof label, "%s %dx%dx%d (%.1f%% occupied)", path.substr(path.find_last_of('/') + 1).c_str(),
+                  d.nx, d.ny, d.nz, 100.0 * double(occupiedNodes(loaded.dense)) / double(d.count()));
+    solveAll(label, loaded.dense);
   }
   return 0;
+} catch (const std::exception& e) {
+  std::fprintf(stderr, "bench_lbsolve: %s\n", e.what());
+  return 4;
 }

@@ -11,6 +11,7 @@
 #include "canopy/parallel.h"
 #include "collide.h"
 #include "fixtures.h"
+#include "shift_stream.h"
 #include "params.h"
 #include "solver.h"
 
@@ -412,4 +413,94 @@ TEST(Collide, EightLaneAndOneLaneUpdatesAreBitIdentical) {
   }
   for (int64_t i = 0; i < L.dims.count(); ++i)
     ASSERT_EQ(solver.values[size_t(i)], nodeTotal(a.data(), L.dims.count(), i)) << i;
+}
+
+// The CUDA backend's default scheme (shift_stream.h): streaming by index shift, collision only at
+// occupied interior nodes, boundary nodes writing what they send inwards. Run here serially with
+// the same CANOPY_HD functions the kernels call, it must give the push update's bits at every node
+// after every iteration, on an odd-sized box whose boundary layer is occupied too (leaf and wood),
+// for long enough that every direction's ring wraps around several times.
+TEST(ShiftStreaming, MatchesThePushUpdateBitForBitAtEveryIteration) {
+  const Dims d{13, 9, 11};
+  const int64_t n = d.count();
+  std::vector<float> coded(static_cast<size_t>(n));
+  for (int64_t i = 0; i < n; ++i) {
+    const float r = fixtures::hashUnit(uint64_t(i), 3);
+    const float rho = r < 0.5f ? 0.f : (r - 0.5f) * 2.f;               // half the nodes empty
+    coded[size_t(i)] = fixtures::hashUnit(uint64_t(i), 4) < 0.2f ? -rho : rho;  // some wood
+  }
+  const OmegaSet om = makeOmegaSet(0.109, 0.891, 0.3);
+  float boundary[kQ];
+  for (int m = 0; m < kQ; ++m) boundary[m] = 0.05f * float(m + 1);
+  // Reference: the push update over every node, ping-pong.
+  std::vector<float> a(size_t(kQ) * n), b(a.size());
+  for (int z = 0; z < d.nz; ++z)
+    for (int y = 0; y < d.ny; ++y)
+      for (int x = 0; x < d.nx; ++x) {
+        initNode(d, boundary, a.data(), x, y, z);
+        initNode(d, boundary, b.data(), x, y, z);
+      }
+  std::vector<float> state(a.size(), 0.f), kept(size_t(n), -1.f);
+  int64_t collided = 0;
+  const int iterations = 40;  // the z-directions' ring (step 117 of 1287 slots) wraps 3 times
+  for (int t = 0; t < iterations; ++t) {
+    stepLattice(om, d, coded, a, b);
+    std::swap(a, b);
+    const ShiftOffsets off = shiftOffsets(d, t);
+    for (int z = 0; z < d.nz; ++z)
+      for (int y = 0; y < d.ny; ++y)
+        for (int x = 0; x < d.nx; ++x) {
+          const int64_t p = d.index(x, y, z);
+          const float c = coded[size_t(p)];
+          if (!d.interior(x, y, z)) {
+            if (c == 0.f) {
+              shiftBoundaryNode<true>(om, d, boundary, off, c, x, y, z, state.data());
+            } else {
+              shiftBoundaryNode<false>(om, d, boundary, off, c, x, y, z, state.data());
+            }
+          } else if (c < 0.f) {
+            shiftCollideNode<kWoodKind>(om, off, n, c, p, state.data(), &kept[size_t(p)]);
+            ++collided;
+          } else if (c != 0.f) {
+            shiftCollideNode<kLeafKind>(om, off, n, c, p, state.data(), &kept[size_t(p)]);
+            ++collided;
+          }
+        }
+    const ShiftOffsets next = shiftOffsets(d, t + 1);  // (off: the offsets before the iteration)
+    for (int z = 0; z < d.nz; ++z)
+      for (int y = 0; y < d.ny; ++y)
+        for (int x = 0; x < d.nx; ++x) {
+          const int64_t p = d.index(x, y, z);
+          const float want = nodeTotal(a.data(), n, p);
+          if (d.interior(x, y, z)) {  // the residual's previous total, read after the iteration
+            const float previous = coded[size_t(p)] != 0.f ? kept[size_t(p)] : shiftNodeTotal(state.data(), n, off, p);
+            ASSERT_EQ(previous, nodeTotal(b.data(), n, p)) << "iteration " << t << " node " << p;
+          }
+          const float got = d.interior(x, y, z) ? shiftNodeTotal(state.data(), n, next, p) : boundaryTotal(boundary);
+          ASSERT_EQ(got, want) << "iteration " << t + 1 << " node " << x << "," << y << "," << z;
+          if (!d.interior(x, y, z)) continue;
+          for (int m = 0; m < kQ; ++m)  // the 19 values themselves, not just their sum
+            ASSERT_EQ(state[size_t(m * n + shifted(uint32_t(p), next.off[m], uint32_t(n)))], a[size_t(m * n + p)])
+                << "iteration " << t + 1 << " node " << p << " direction " << m;
+        }
+  }
+  EXPECT_GT(collided, 0);
+  EXPECT_GT(nodeTotal(a.data(), n, d.index(6, 4, 5)), 0.f);  // light reached the middle
+}
+
+TEST(ShiftStreaming, OffsetsArePeriodicAndInRange) {
+  const Dims d{7, 5, 6};
+  const int64_t n = d.count();
+  for (int64_t t : {int64_t(0), int64_t(1), int64_t(209), n - 1, n, 3 * n + 5, int64_t(1) << 40}) {
+    const ShiftOffsets s = shiftOffsets(d, t), later = shiftOffsets(d, t + n);
+    for (int m = 0; m < kQ; ++m) {
+      ASSERT_LT(int64_t(s.off[m]), n);
+      ASSERT_EQ(s.off[m], later.off[m]);
+      // One more iteration moves node p's slot to node p + s_m's.
+      const ShiftOffsets next = shiftOffsets(d, t + 1);
+      const int64_t p = d.index(3, 2, 2);
+      ASSERT_EQ(shifted(uint32_t(p + linearStep(d, m)), next.off[m], uint32_t(n)),
+                shifted(uint32_t(p), s.off[m], uint32_t(n))) << m;
+    }
+  }
 }

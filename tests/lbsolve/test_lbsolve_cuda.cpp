@@ -1,15 +1,21 @@
 // CUDA backend vs the CPU reference (skips without a GPU). Issue 3: on a 64^3 plant lattice, all
-// 19 bases x RGB agree per node within 1e-5 relative. The CUDA build compiles solve_cuda.cu
-// without FMA contraction, so the two backends execute the same IEEE operations in the same
-// order; agreement is expected to be exact, and 1e-5 is the bound the issue sets.
+// 19 bases x RGB agree per node within 1e-5 relative. The exact CUDA schemes (shift, the default,
+// shift-split and push; solver.h) are checked, on the synthetic plant and on the real oak (oak_medium.glb
+// voxelised at 40^3 by canopy-voxelize; shift-split there and on the odd sizes). solve_cuda.cu is built without FMA contraction, so the
+// schemes execute the CPU's IEEE operations in the same order; agreement is expected to be exact
+// (the test prints how many values are bit-identical), and 1e-5 is the bound the issue sets.
+// The benchmark-only push-fused variant rounds differently: it is held to a looser, stated bound.
 #include <gtest/gtest.h>
 
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <string>
 
 #include "canopy/device.h"
 #include "fixtures.h"
+#include "lattice_io.h"
 #include "params.h"
 #include "solver.h"
 
@@ -17,6 +23,9 @@ using namespace canopy;
 using namespace canopy::lb;
 
 namespace {
+const Device kCpu{Device::Kind::Cpu, 0};
+const Device kGpu0{Device::Kind::Cuda, 0};
+
 std::vector<SolveSpec> allSpecs(int iterations, float tolerance) {
   const LightParams p;
   std::vector<SolveSpec> specs;
@@ -32,24 +41,41 @@ std::vector<SolveSpec> allSpecs(int iterations, float tolerance) {
   return specs;
 }
 
-void compare(const std::vector<SolveResult>& cpu, const std::vector<SolveResult>& gpu, const char* what) {
+// Per node: |cpu - cuda| / max(|cpu|, |cuda|) <= 1e-5 (exact schemes), or, for push-fused,
+// |cpu - cuda| <= 1e-4 x the largest value of that solve (fused multiply-adds round each of the
+// ~20 terms of a row once instead of twice; after ~100 iterations that stays orders of magnitude
+// under 1e-4 of the field's scale, while an indexing or race error moves values by O(1)).
+void compare(const std::vector<SolveResult>& cpu, const std::vector<SolveResult>& gpu, const std::string& what,
+             bool exactScheme = true) {
   ASSERT_EQ(cpu.size(), gpu.size());
   int64_t exact = 0, total = 0;
   double worst = 0;
   for (size_t k = 0; k < cpu.size(); ++k) {
     EXPECT_EQ(cpu[k].iterations, gpu[k].iterations) << what << " solve " << k;
+    if (exactScheme) {
+      EXPECT_EQ(cpu[k].residual, gpu[k].residual) << what << " solve " << k;
+    }
     ASSERT_EQ(cpu[k].values.size(), gpu[k].values.size());
+    double scale = 0;
+    for (float v : cpu[k].values) scale = std::max(scale, double(std::abs(v)));
     for (size_t i = 0; i < cpu[k].values.size(); ++i) {
       const double a = cpu[k].values[i], b = gpu[k].values[i];
-      const double rel = std::abs(a - b) / std::max({std::abs(a), std::abs(b), 1e-30});
+      ASSERT_FALSE(std::isnan(b)) << what << " solve " << k << " node " << i;
+      const double rel = exactScheme ? std::abs(a - b) / std::max({std::abs(a), std::abs(b), 1e-30})
+                                     : std::abs(a - b) / std::max(scale, 1e-30);
       worst = std::max(worst, rel);
       exact += a == b;
       ++total;
-      ASSERT_LE(rel, 1e-5) << what << " solve " << k << " node " << i << ": cpu " << a << " cuda " << b;
+      ASSERT_LE(rel, exactScheme ? 1e-5 : 1e-4)
+          << what << " solve " << k << " node " << i << ": cpu " << a << " cuda " << b;
     }
   }
-  std::printf("%s: %lld values, %lld bit-identical, worst relative difference %.3g\n", what,
-              (long long)total, (long long)exact, worst);
+  std::printf("%s: %lld values, %lld bit-identical, worst %s difference %.3g\n", what.c_str(), (long long)total,
+              (long long)exact, exactScheme ? "relative" : "scaled", worst);
+}
+
+double seconds(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 }  // namespace
 
@@ -61,27 +87,69 @@ TEST(LbsolveCuda, cuda_MatchesCpuPerNodeOn64CubedPlantForAll19BasesRGB) {
   // Default convergence rule: tolerance 1e-4 checked every 16 iterations, cap 2 x 64.
   const auto specs = allSpecs(2 * n, 1e-4f);
   auto t0 = std::chrono::steady_clock::now();
-  const auto cpu = runSolves(L, specs, Device{Device::Kind::Cpu, 0});
-  const double cpuSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const auto cpu = runSolves(L, specs, kCpu);
+  const double cpuSeconds = seconds(t0);
   t0 = std::chrono::steady_clock::now();
-  const auto gpu = runSolves(L, specs, Device{Device::Kind::Cuda, -1});  // every GPU
-  const double gpuSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  compare(cpu, gpu, "64^3 plant, all GPUs");
+  const auto gpu = runSolves(L, specs, Device{Device::Kind::Cuda, -1});  // every GPU, default scheme
+  const double gpuSeconds = seconds(t0);
+  compare(cpu, gpu, "64^3 plant, shift, all GPUs");
   std::printf("57 solves: cpu %.2f s, cuda (%d GPU) %.2f s\n", cpuSeconds, cudaDeviceCount(), gpuSeconds);
-  // One GPU explicitly (the queue with a single worker).
-  const auto gpu0 = runSolves(L, specs, Device{Device::Kind::Cuda, 0});
-  compare(cpu, gpu0, "64^3 plant, GPU 0");
+  // One GPU explicitly (the queue with a single worker), both exact schemes.
+  compare(cpu, runSolves(L, specs, kGpu0, {}, CudaScheme::Shift), "64^3 plant, shift, GPU 0");
+  compare(cpu, runSolves(L, specs, kGpu0, {}, CudaScheme::Push), "64^3 plant, push, GPU 0");
 }
 
-TEST(LbsolveCuda, cuda_EmptyAndOddSizedLatticesMatchCpu) {
+TEST(LbsolveCuda, cuda_EmptyOddSizedAndOccupiedBoundaryLatticesMatchCpu) {
   if (cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA GPU";
-  // Odd sizes exercise the partial thread block in x and the boundary tests in every direction.
-  const std::vector<float> zero(size_t(131) * 5 * 7, 0.f);
-  const DenseLattice empty = fixtures::denseOf(131, 5, 7, zero, zero);
-  compare(runSolves(empty, allSpecs(40, 0.f), Device{Device::Kind::Cpu, 0}),
-          runSolves(empty, allSpecs(40, 0.f), Device{Device::Kind::Cuda, 0}), "empty 131x5x7");
-  const fixtures::Plant plant = fixtures::makePlant(37, 99);
-  const DenseLattice L = fixtures::denseOf(37, 37, 37, plant.density, plant.wood);
-  compare(runSolves(L, allSpecs(50, 0.f), Device{Device::Kind::Cpu, 0}),
-          runSolves(L, allSpecs(50, 0.f), Device{Device::Kind::Cuda, 0}), "plant 37^3");
+  for (CudaScheme scheme : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push}) {
+    const std::string name = cudaSchemeName(scheme);
+    // Odd sizes exercise the partial thread block in x and the boundary tests in every direction.
+    const std::vector<float> zero(size_t(131) * 5 * 7, 0.f);
+    const DenseLattice empty = fixtures::denseOf(131, 5, 7, zero, zero);
+    compare(runSolves(empty, allSpecs(40, 0.f), kCpu), runSolves(empty, allSpecs(40, 0.f), kGpu0, {}, scheme),
+            "empty 131x5x7, " + name);
+    const fixtures::Plant plant = fixtures::makePlant(37, 99);
+    const DenseLattice L = fixtures::denseOf(37, 37, 37, plant.density, plant.wood);
+    compare(runSolves(L, allSpecs(50, 0.f), kCpu), runSolves(L, allSpecs(50, 0.f), kGpu0, {}, scheme),
+            "plant 37^3, " + name);
+    // Density (leaf and wood) on the boundary layer too, non-cubic, with convergence checks:
+    // the shift scheme's boundary sources and residual path.
+    const int nx = 45, ny = 23, nz = 31;
+    std::vector<float> density(size_t(nx) * ny * nz), wood(density.size());
+    for (size_t i = 0; i < density.size(); ++i) {
+      const float r = fixtures::hashUnit(i, 11);
+      density[i] = r < 0.6f ? 0.f : (r - 0.6f) * 2.5f;
+      wood[i] = fixtures::hashUnit(i, 12) < 0.25f ? 1.f : 0.f;
+    }
+    const DenseLattice B = fixtures::denseOf(nx, ny, nz, density, wood);
+    compare(runSolves(B, allSpecs(70, 1e-4f), kCpu), runSolves(B, allSpecs(70, 1e-4f), kGpu0, {}, scheme),
+            "occupied boundary 45x23x31, " + name);
+  }
+}
+
+// The real plant: oak_medium.glb voxelised at 40^3 (canopy-voxelize), all 57 solves with the
+// default convergence rule, every CUDA scheme against the CPU.
+TEST(LbsolveCuda, cuda_MatchesCpuOnTheRealOakLattice) {
+  if (cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA GPU";
+  const std::string dir = fixtures::scratch("cuda_oak");
+  const std::string lattice = dir + "/oak40.density.vdb";
+  const std::string cmd = std::string("'") + CANOPY_BINARY_DIR + "/bin/canopy-voxelize' '" + CANOPY_SHARED_DIR +
+                          "/assets/plants/oak_medium.glb' -o '" + lattice + "' --resolution 40 -q";
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
+  const LoadedLattice oak = loadDensityLattice(lattice, LightParams().woodThreshold);
+  const DenseLattice& L = oak.dense;
+  int64_t occupied = 0, wood = 0;
+  for (float c : L.coded) occupied += c != 0.f, wood += c < 0.f;
+  std::printf("oak_medium at %dx%dx%d: %lld occupied nodes (%lld wood), %zu stored\n", L.dims.nx, L.dims.ny,
+              L.dims.nz, (long long)occupied, (long long)wood, L.stored.size());
+  ASSERT_GT(occupied, 0);
+  const int cap = 2 * std::max({L.dims.nx, L.dims.ny, L.dims.nz});
+  const auto specs = allSpecs(cap, 1e-4f);
+  const auto cpu = runSolves(L, specs, kCpu);
+  for (CudaScheme scheme : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push})
+    compare(cpu, runSolves(L, specs, kGpu0, {}, scheme), std::string("oak 40, ") + cudaSchemeName(scheme));
+  // push-fused: fixed iterations (its residuals differ in the last bits, which could move a stop).
+  const auto fixed = allSpecs(cap, 0.f);
+  compare(runSolves(L, fixed, kCpu), runSolves(L, fixed, kGpu0, {}, CudaScheme::PushFused), "oak 40, push-fused",
+          false);
 }

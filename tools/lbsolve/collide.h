@@ -14,6 +14,7 @@
 // Invariants (tests/lbsolve/test_collide.cpp): every column of Omega sums to 0 (a step conserves
 // energy where sigma_a = 0); rho = 0 is a pure pass-through; sigma_a = 0 with g = 1 is a pass-through.
 #pragma once
+#include <cmath>
 #include <cstdint>
 
 #include "canopy/hd.h"
@@ -39,17 +40,22 @@ struct Dims {
   }
 };
 
-// The collision of L nodes of the same kind (all leaf/empty, or all wood), one per lane:
-//   out_i = max(0, f_i + rho * sum_j Omega_ij f_j),  f_0 zeroed first at leaf nodes.
+// The collision of L nodes of one kind known at compile time (Wood: all wood, else all leaf/empty),
+// one per lane:   out_i = max(0, f_i + rho * sum_j Omega_ij f_j),  f_0 zeroed first at leaf nodes.
 // f is modified (f_0 zeroing). Every lane computes the same IEEE operations in the same order
 // (j ascending) whatever L is: L = 1 on the GPU (one thread per node), L = 8 on the CPU (the
 // compiler vectorises across lanes), so both backends produce the same bits (solve_cuda.cu is
 // built without FMA contraction). When every lane has rho == 0 the product is skipped; that is
 // bit-identical to the general path (f + 0 * x == f for finite x and f >= 0).
-template <int L>
-CANOPY_HD CANOPY_FORCEINLINE void collideLanes(const OmegaSet& om, bool wood, const float rho[L],
-                                               float f[kQ][L], float out[kQ][L]) {
-  if (!wood) {
+// The kind is a template parameter so that every Omega entry is read at a compile-time offset: on
+// the GPU the matrix is a kernel parameter (constant memory) and a run-time kind would turn its
+// 361 uniform operands into per-thread indexed constant loads (measured: bench/lbsolve/NOTES.md).
+// Fused = true uses fmaf (one rounding per term instead of two): a benchmark variant only; the
+// reference (CPU) and the default CUDA path use Fused = false.
+template <int L, bool Wood, bool Fused = false>
+CANOPY_HD CANOPY_FORCEINLINE void collideKind(const OmegaSet& om, const float rho[L], float f[kQ][L],
+                                              float out[kQ][L]) {
+  if (!Wood) {
     for (int l = 0; l < L; ++l) f[0][l] = 0.f;  // absorbed light leaves the visible spectrum
   }
   bool empty = true;
@@ -60,7 +66,7 @@ CANOPY_HD CANOPY_FORCEINLINE void collideLanes(const OmegaSet& om, bool wood, co
       for (int l = 0; l < L; ++l) out[i][l] = f[i][l];
     return;
   }
-  const float(*col)[kQ] = om.col[wood ? 1 : 0];
+  const float(*col)[kQ] = om.col[Wood ? 1 : 0];
   CANOPY_UNROLL
   for (int i = 0; i < kQ; ++i) {
     float acc[L];
@@ -68,23 +74,50 @@ CANOPY_HD CANOPY_FORCEINLINE void collideLanes(const OmegaSet& om, bool wood, co
     CANOPY_UNROLL
     for (int j = 0; j < kQ; ++j) {
       const float c = col[j][i];
-      for (int l = 0; l < L; ++l) acc[l] += c * f[j][l];
+      for (int l = 0; l < L; ++l) {
+        if constexpr (Fused) {
+          acc[l] = fmaf(c, f[j][l], acc[l]);
+        } else {
+          acc[l] += c * f[j][l];
+        }
+      }
     }
     for (int l = 0; l < L; ++l) {
-      const float v = f[i][l] + rho[l] * acc[l];
+      const float v = Fused ? fmaf(rho[l], acc[l], f[i][l]) : f[i][l] + rho[l] * acc[l];
       out[i][l] = v > 0.f ? v : 0.f;
     }
   }
 }
 
-// One node's collision; `coded` is rho (leaf/empty) or -rho (wood).
+// The same with the kind known at run time (all L lanes wood, or none).
+template <int L, bool Fused = false>
+CANOPY_HD CANOPY_FORCEINLINE void collideLanes(const OmegaSet& om, bool wood, const float rho[L],
+                                               float f[kQ][L], float out[kQ][L]) {
+  if (wood) {
+    collideKind<L, true, Fused>(om, rho, f, out);
+  } else {
+    collideKind<L, false, Fused>(om, rho, f, out);
+  }
+}
+
+// Kind of the nodes an update is instantiated for: known at compile time (leaf/empty, or wood), or
+// read from the coded density at run time.
+enum NodeKind : int { kAnyKind = -1, kLeafKind = 0, kWoodKind = 1 };
+
+// One node's collision; `coded` is rho (leaf/empty) or -rho (wood). With Kind != kAnyKind the
+// caller guarantees the node is of that kind.
+template <int Kind = kAnyKind, bool Fused = false>
 CANOPY_HD CANOPY_FORCEINLINE void collide(const OmegaSet& om, float coded, float f[kQ], float out[kQ]) {
-  const bool wood = coded < 0.f;
+  const bool wood = Kind == kAnyKind ? coded < 0.f : Kind == kWoodKind;
   const float rho[1] = {wood ? -coded : coded};
   float fl[kQ][1], ol[kQ][1];
   CANOPY_UNROLL
   for (int m = 0; m < kQ; ++m) fl[m][0] = f[m];
-  collideLanes<1>(om, wood, rho, fl, ol);
+  if constexpr (Kind == kAnyKind) {
+    collideLanes<1, Fused>(om, wood, rho, fl, ol);
+  } else {
+    collideKind<1, Kind == kWoodKind, Fused>(om, rho, fl, ol);
+  }
   CANOPY_UNROLL
   for (int m = 0; m < kQ; ++m) f[m] = fl[m][0], out[m] = ol[m][0];
 }
@@ -93,19 +126,24 @@ CANOPY_HD CANOPY_FORCEINLINE void collide(const OmegaSet& om, float coded, float
 // their 19 arriving values from `in`, collide, and write value m to the neighbour r + c_m in `out`
 // if that neighbour is interior. Every node, boundary included, is a source; only interior nodes
 // are targets, and each (target, m) pair has exactly one source, so the update is race-free with
-// separate in/out buffers (ping-pong). Precondition: all L nodes are wood, or none is.
-template <int L>
+// separate in/out buffers (ping-pong). Precondition: all L nodes are wood, or none is (and, with
+// Kind != kAnyKind, they are of that kind).
+template <int L, int Kind = kAnyKind, bool Fused = false>
 CANOPY_HD CANOPY_FORCEINLINE void updateLanes(const OmegaSet& om, const Dims& d, const float* coded,
                                               const float* in, float* out, int x, int y, int z) {
   const int64_t n = d.count();
   const int64_t idx = d.index(x, y, z);
   float f[kQ][L], post[kQ][L], rho[L];
-  const bool wood = coded[idx] < 0.f;
+  const bool wood = Kind == kAnyKind ? coded[idx] < 0.f : Kind == kWoodKind;
   for (int l = 0; l < L; ++l) rho[l] = wood ? -coded[idx + l] : coded[idx + l];
   CANOPY_UNROLL
   for (int m = 0; m < kQ; ++m)
     for (int l = 0; l < L; ++l) f[m][l] = in[m * n + idx + l];
-  collideLanes<L>(om, wood, rho, f, post);
+  if constexpr (Kind == kAnyKind) {
+    collideLanes<L, Fused>(om, wood, rho, f, post);
+  } else {
+    collideKind<L, Kind == kWoodKind, Fused>(om, rho, f, post);
+  }
   CANOPY_UNROLL
   for (int m = 0; m < kQ; ++m) {
     const int ty = y + lattice::dir(m, 1), tz = z + lattice::dir(m, 2);
@@ -119,9 +157,10 @@ CANOPY_HD CANOPY_FORCEINLINE void updateLanes(const OmegaSet& om, const Dims& d,
   }
 }
 
+template <int Kind = kAnyKind, bool Fused = false>
 CANOPY_HD CANOPY_FORCEINLINE void updateNode(const OmegaSet& om, const Dims& d, const float* coded,
                                              const float* in, float* out, int x, int y, int z) {
-  updateLanes<1>(om, d, coded, in, out, x, y, z);
+  updateLanes<1, Kind, Fused>(om, d, coded, in, out, x, y, z);
 }
 
 // Initial state of node idx for a solve: boundary nodes hold the fixed boundary values, interior

@@ -39,6 +39,9 @@ struct LbsolveOptions {
   std::optional<double> woodThreshold;  // overrides the parameter file
   int sceneResolution = 32;  // scene mode: coarse nodes along the scene's longest axis (interior)
   Device device;           // cpu, one GPU, or all GPUs
+  // CUDA scheme (solver.h, CudaScheme): "shift" (default), "shift-split" or "push"; all compute
+  // the CPU reference's bits. Ignored on the CPU.
+  std::string cudaScheme = "shift";
 };
 
 struct LbsolveSolve {

@@ -52,6 +52,10 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--check-every", o.checkEvery, "Residual check interval (iterations)")->capture_default_str();
   app.add_option("--wood-threshold", woodThreshold, "Wood fraction at or above which a node is wood (default 0.5 or the parameter file's)");
+  app.add_option("--cuda-scheme", o.cudaScheme,
+                 "CUDA streaming scheme: shift (index shift, work at occupied nodes only), shift-split, or push "
+                 "(listing 5.2 over every node); all give the CPU's bits")
+      ->capture_default_str();
   app.add_option("--scene", o.scene, "Scene instance list (docs/scene-json.md): solve the coarse scene-level lattice instead");
   app.add_option("--scene-resolution", o.sceneResolution, "Scene mode: coarse cells along the scene's longest axis")
       ->capture_default_str();

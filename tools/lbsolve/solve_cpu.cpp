@@ -98,13 +98,24 @@ std::unique_ptr<Solver> makeCpuSolver(const DenseLattice& lattice) {
   return std::make_unique<CpuSolver>(lattice);
 }
 
-int64_t cudaSolverBytes(const DenseLattice& l) {
-  const int64_t n = l.dims.count(), k = int64_t(l.stored.size());
-  return n * (2 * kQ + 1) * int64_t(sizeof(float)) + k * int64_t(sizeof(int64_t) + sizeof(float));
+int64_t cudaSolverBytes(const DenseLattice& l, CudaScheme scheme) {
+  const Dims d = l.dims;
+  const int64_t n = d.count(), k = int64_t(l.stored.size());
+  const int64_t stored = k * int64_t(sizeof(int64_t) + sizeof(float));
+  int64_t wood = 0, occupied = 0;
+  for (int64_t i = 0; i < n; ++i) {
+    wood += l.coded[size_t(i)] < 0.f;
+    occupied += l.coded[size_t(i)] != 0.f;
+  }
+  if (scheme == CudaScheme::Push || scheme == CudaScheme::PushFused)
+    return n * (2 * kQ + 1) * int64_t(sizeof(float)) + wood * int64_t(sizeof(int64_t)) + stored;
+  const int64_t boundary = n - int64_t(std::max(d.nx - 2, 0)) * std::max(d.ny - 2, 0) * std::max(d.nz - 2, 0);
+  return n * (kQ + 2) * int64_t(sizeof(float)) + occupied * int64_t(sizeof(int64_t) + sizeof(float)) +
+         boundary * int64_t(sizeof(int64_t)) + stored;
 }
 
 #ifndef CANOPY_HAS_CUDA
-std::unique_ptr<Solver> makeCudaSolver(const DenseLattice&, int) {
+std::unique_ptr<Solver> makeCudaSolver(const DenseLattice&, int, CudaScheme) {
   throw unsupported("--device cuda: this build of Canopy has no CUDA backend");
 }
 #endif

@@ -12,6 +12,16 @@
 
 namespace canopy::lb {
 
+const char* cudaSchemeName(CudaScheme scheme) {
+  switch (scheme) {
+    case CudaScheme::Shift: return "shift";
+    case CudaScheme::Push: return "push";
+    case CudaScheme::ShiftSplit: return "shift-split";
+    case CudaScheme::PushFused: return "push-fused";
+  }
+  return "?";
+}
+
 SolveResult Solver::solve(const SolveSpec& spec) {
   const auto t0 = std::chrono::steady_clock::now();
   SolveResult r;
@@ -20,10 +30,12 @@ SolveResult Solver::solve(const SolveSpec& spec) {
   const int cap = spec.maxIterations < 1 ? 1 : spec.maxIterations;
   const int every = spec.checkEvery < 1 ? 1 : spec.checkEvery;
   while (r.iterations < cap) {
+    const int it = r.iterations + 1;
+    const bool last = it == cap;
+    const bool check = spec.tolerance > 0.f ? (it % every == 0 || last) : last;
+    if (check) beforeCheckedStep();
     step(spec.omega);
-    ++r.iterations;
-    const bool last = r.iterations == cap;
-    const bool check = spec.tolerance > 0.f ? (r.iterations % every == 0 || last) : last;
+    r.iterations = it;
     if (!check) continue;
     r.residual = residual();
     if (spec.tolerance > 0.f && r.residual <= spec.tolerance) break;
@@ -35,7 +47,8 @@ SolveResult Solver::solve(const SolveSpec& spec) {
 
 std::vector<SolveResult> runSolves(const DenseLattice& lattice, const std::vector<SolveSpec>& specs,
                                    const Device& device,
-                                   const std::function<void(size_t, const SolveResult&)>& onDone) {
+                                   const std::function<void(size_t, const SolveResult&)>& onDone,
+                                   CudaScheme scheme) {
   std::vector<SolveResult> results(specs.size());
   std::mutex doneMutex;
   auto finished = [&](size_t k) {
@@ -64,7 +77,7 @@ std::vector<SolveResult> runSolves(const DenseLattice& lattice, const std::vecto
   for (size_t t = 0; t < gpus.size(); ++t) {
     threads.emplace_back([&, t] {
       try {
-        auto solver = makeCudaSolver(lattice, gpus[t]);
+        auto solver = makeCudaSolver(lattice, gpus[t], scheme);
         for (size_t k = next++; k < specs.size(); k = next++) {
           results[k] = solver->solve(specs[k]);
           finished(k);

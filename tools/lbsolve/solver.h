@@ -51,18 +51,36 @@ class Solver {
 
  protected:
   virtual void init(const float boundary[kQ]) = 0;  // state := boundary on the outer layer, 0 inside
+  // Called before a step whose result residual() will check: a backend that overwrites the state
+  // in place keeps what residual() needs of the current state here (ping-pong backends: nothing).
+  virtual void beforeCheckedStep() {}
   virtual void step(const OmegaSet& omega) = 0;     // one update; afterwards current = new state
   virtual float residual() = 0;                     // between the current and the previous state
   virtual std::vector<float> gather() = 0;          // rho of the current state at stored nodes
 };
 
+// How the CUDA backend advances the lattice (bench/lbsolve/NOTES.md has the measurements):
+//   Shift:      streaming by index shift (shift_stream.h): one state buffer updated in place, work
+//               only at occupied and boundary nodes, one launch per iteration. The default.
+//   ShiftSplit: the same in three launches per iteration (leaf nodes, wood nodes, boundary nodes),
+//               each kernel holding only its own path (fewer registers).
+//   Push:       the push update of collide.h over every node, ping-pong buffers (listing 5.2).
+//   PushFused:  Push with fused multiply-adds (fmaf) in the collision: a benchmark variant that
+//               measures what the unfused arithmetic costs; not bitwise equal to the CPU reference.
+// All but PushFused compute the CPU reference's bits (same IEEE operations in the same order).
+enum class CudaScheme { Shift, ShiftSplit, Push, PushFused };
+const char* cudaSchemeName(CudaScheme scheme);
+
 std::unique_ptr<Solver> makeCpuSolver(const DenseLattice& lattice);
 // Throws canopy::Error(Unsupported) in a build without CUDA.
-std::unique_ptr<Solver> makeCudaSolver(const DenseLattice& lattice, int gpu);
+std::unique_ptr<Solver> makeCudaSolver(const DenseLattice& lattice, int gpu,
+                                       CudaScheme scheme = CudaScheme::Shift);
 
-// Bytes of device memory a CUDA solver needs for this lattice (2 x 19 floats + coded density per
-// node, plus the stored-node index list and its values).
-int64_t cudaSolverBytes(const DenseLattice& lattice);
+// Bytes of device memory a CUDA solver needs for this lattice. Push: 2 x 19 floats + coded density
+// per node, the wood-node list, plus the stored-node index list and its values. Shift (both): 19
+// floats + coded density + a kept total per node, the occupied and boundary node lists, and the
+// stored nodes.
+int64_t cudaSolverBytes(const DenseLattice& lattice, CudaScheme scheme = CudaScheme::Shift);
 
 // Runs every spec; results[k] belongs to specs[k]. CPU: one solver, specs in order. CUDA: one
 // solver per GPU (device.index >= 0: that GPU only; -1: every GPU), each taking the next spec from
@@ -70,6 +88,7 @@ int64_t cudaSolverBytes(const DenseLattice& lattice);
 // as each solve finishes.
 std::vector<SolveResult> runSolves(const DenseLattice& lattice, const std::vector<SolveSpec>& specs,
                                    const Device& device,
-                                   const std::function<void(size_t, const SolveResult&)>& onDone = {});
+                                   const std::function<void(size_t, const SolveResult&)>& onDone = {},
+                                   CudaScheme scheme = CudaScheme::Shift);
 
 }  // namespace canopy::lb
