@@ -29,7 +29,12 @@ int main(int argc, char** argv) {
   app.add_option("--lod-bias", o.lodBias, "Added to the footprint's level (negative = coarser)")->capture_default_str();
   app.add_option("--shadow-aperture", o.shadowAperture, "Shadow cone aperture (radians)")->capture_default_str();
   bool noShadows = false;
-  app.add_flag("--no-shadows", noShadows, "Direct sun without shadow cones");
+  app.add_flag("--no-shadows", noShadows, "Direct sun unshadowed");
+  app.add_option("--shadows", o.shadowMethod, "map: per-frame sun transmittance map; cone: a shadow cone per shadow interval (slow reference)")
+      ->capture_default_str();
+  app.add_option("--shadow-map-cells", o.shadowMapCells, "Shadow map voxel in lattice cells of the finest instance")->capture_default_str();
+  app.add_option("--shadow-map-bias", o.shadowMapBias, "Shadow map lookups move this many blur widths (the larger of a map voxel and a finest node) towards the sun")->capture_default_str();
+  app.add_option("--shadow-map-voxels", o.shadowMapMaxVoxels, "Shadow map size cap (the voxel grows to fit)")->capture_default_str();
   app.add_flag("--converge", o.converge, "Per frame, render passes until no loadable page is missing (reference quality)");
   bool coldStart = false;
   app.add_flag("--no-warm-start", coldStart, "Render the first frame in real-time mode too (node means until pages arrive)");

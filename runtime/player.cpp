@@ -224,6 +224,10 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
     if (!std::isfinite(v)) throw usageError("shading parameters must be finite");
   if (!(o.sigma >= 0.0f) || !(o.stepFactor > 0.01f) || !(o.ambient >= 0.0f) || !(o.sunIntensity >= 0.0f) || !(o.shadowAperture >= 0.0f))
     throw usageError("--sigma, --ambient, --sun-intensity and --shadow-aperture must be >= 0 and --step > 0.01");
+  if (o.shadowMethod != "map" && o.shadowMethod != "cone") throw usageError("--shadows must be map or cone, got '" + o.shadowMethod + "'");
+  if (!(o.shadowMapBias >= 0.0f && o.shadowMapBias <= 64.0f)) throw usageError("--shadow-map-bias must be in [0, 64]");
+  if (!(o.shadowMapCells >= 0.25f && o.shadowMapCells <= 1024.0f) || o.shadowMapMaxVoxels < 27 || o.shadowMapMaxVoxels > (1u << 28))
+    throw usageError("--shadow-map-cells must be in [0.25, 1024] and --shadow-map-voxels in [27, 2^28]");
 
   const CanopyFile file = CanopyFile::open(o.input);
   HostScene scene = buildScene(file);
@@ -244,7 +248,12 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   shade.stepFactor = o.stepFactor;
   shade.lodBias = o.lodBias;
   shade.shadowAperture = o.shadowAperture;
-  shade.shadows = o.shadows ? 1 : 0;
+  shade.shadows = !o.shadows ? kShadowsOff : (o.shadowMethod == "cone" ? kShadowsCone : kShadowsMap);
+  shade.shadowMapCells = o.shadowMapCells;
+  shade.shadowMapBias = o.shadowMapBias;
+  shade.shadowMapMaxVoxels = o.shadowMapMaxVoxels;
+  WorkCounters work{};
+  if (o.countWork) backend->countWork(&work);
 
   std::vector<double> frameMs;
   std::vector<float> image;
@@ -308,6 +317,22 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   r["evictions"] = st.evictions;
   r["corrupt_pages"] = st.corruptPages;
   r["seconds"] = total;
+  r["shadows"] = !o.shadows ? "off" : o.shadowMethod;
+  if (shade.shadows == kShadowsMap) {
+    const ShadowMapView& m = backend->lastShadowMap();
+    r["shadow_map"] = {{"dim", {m.dim[0], m.dim[1], m.dim[2]}}, {"voxel", m.voxel}};
+  }
+  if (o.countWork && backend->name() == "cpu")
+    r["work"] = {{"passes", passes},
+                 {"cones", work.cones},
+                 {"primary_steps", work.primarySteps},
+                 {"shaded_samples", work.shadedSamples},
+                 {"segments", work.segments},
+                 {"brick_samples", work.brickSamples},
+                 {"shadow_cones", work.shadowCones},
+                 {"shadow_steps", work.shadowSteps},
+                 {"shadow_map_lookups", work.shadowMapLookups},
+                 {"shadow_map_steps", work.shadowMapSteps}};
   char line[512];
   std::snprintf(line, sizeof(line),
                 "canopy-play: %d frame(s) %dx%d on %s: median %.2f ms, p95 %.2f ms; cache hit rate %.1f%%; streamed %llu pages "

@@ -22,6 +22,19 @@ struct PixelKernel {
   __device__ void operator()(int64_t i) const { renderPixel(scene, camera, i, out); }
 };
 
+struct ExtinctionKernel {
+  SceneView scene;
+  ExtinctionGridView grid;
+  __device__ void operator()(int64_t i) const { buildExtinctionVoxel(scene, grid, i); }
+};
+
+struct ShadowMapKernel {
+  ShadowMapView map;
+  ExtinctionGridView grid;
+  int sub;
+  __device__ void operator()(int64_t c) const { buildShadowMapColumn(map, grid, sub, c); }
+};
+
 template <class T>
 void uploadVector(cuda::DeviceBuffer<T>& d, const std::vector<T>& h) {
   d.resize(h.empty() ? 1 : h.size());
@@ -113,6 +126,29 @@ class CudaBackend final : public Backend {
     v.pageWanted = pageWanted_.data();
     v.stamp = stamp;
     v.shade = shade;
+    if (shade.shadows == kShadowsMap) {
+      // the extinction grid: once per scene (it depends on the instances and sigma only)
+      if (extinction_.size() == 0 || gridSigma_ != shade.sigma || gridCells_ != shade.shadowMapCells || gridCap_ != shade.shadowMapMaxVoxels) {
+        grid_ = planExtinctionGrid(scene, shade);
+        const size_t n = size_t(grid_.dim[0]) * grid_.dim[1] * grid_.dim[2];
+        CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
+        extinction_.resize(n);
+        grid_.k = extinction_.data();
+        cuda::parallelFor(int64_t(n), ExtinctionKernel{v, grid_}, compute_, 128);
+        gridSigma_ = shade.sigma, gridCells_ = shade.shadowMapCells, gridCap_ = shade.shadowMapMaxVoxels;
+      }
+      int sub = 1;
+      v.shadowMap = planShadowMap(scene, shade, grid_, sub);
+      const int64_t columns = int64_t(v.shadowMap.dim[0]) * v.shadowMap.dim[1];
+      const size_t n = size_t(columns) * v.shadowMap.dim[2];
+      if (shadowMap_.size() < n) {
+        CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
+        shadowMap_.resize(n + n / 4);  // room for the next frames' slightly larger boxes
+      }
+      v.shadowMap.T = shadowMap_.data();
+      cuda::parallelFor(columns, ShadowMapKernel{v.shadowMap, grid_, sub}, compute_, 128);
+    }
+    lastShadowMap_ = v.shadowMap;
     cuda::parallelFor(int64_t(pixels), PixelKernel{v, camera, image_.data()}, compute_, 128);
     CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
   }
@@ -140,7 +176,10 @@ class CudaBackend final : public Backend {
   cuda::DeviceBuffer<unsigned char> pool_;
   cuda::DeviceBuffer<int32_t> table_;
   cuda::DeviceBuffer<uint32_t> slotUsed_, pageWanted_;
-  cuda::DeviceBuffer<float> image_;
+  cuda::DeviceBuffer<float> image_, shadowMap_, extinction_;
+  ExtinctionGridView grid_{};
+  float gridSigma_ = -1.0f, gridCells_ = -1.0f;
+  uint32_t gridCap_ = 0;
   unsigned char* staging_ = nullptr;
   int32_t* tableHost_[2] = {nullptr, nullptr};
 };
