@@ -34,6 +34,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--shadow-map-cells", o.shadowMapCells, "Shadow map voxel in lattice cells of the finest instance")->capture_default_str();
   app.add_option("--shadow-map-bias", o.shadowMapBias, "Shadow map lookups move this many blur widths (the larger of a map voxel and a finest node) towards the sun")->capture_default_str();
+  bool noDescentCache = false;
+  app.add_flag("--no-descent-cache", noDescentCache, "Descend the octree from the root for every segment (same image; for timing)");
   app.add_option("--shadow-map-voxels", o.shadowMapMaxVoxels, "Shadow map size cap (the voxel grows to fit)")->capture_default_str();
   app.add_flag("--converge", o.converge, "Per frame, render passes until no loadable page is missing (reference quality)");
   bool coldStart = false;
@@ -48,6 +50,7 @@ int main(int argc, char** argv) {
     o.width = w;
     o.height = h;
     o.shadows = !noShadows;
+    o.descentCache = !noDescentCache;
     o.warmStart = !coldStart;
     tool.report() = canopy::play::play(o, tool.device());
   });

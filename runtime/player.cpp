@@ -251,6 +251,7 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   shade.shadows = !o.shadows ? kShadowsOff : (o.shadowMethod == "cone" ? kShadowsCone : kShadowsMap);
   shade.shadowMapCells = o.shadowMapCells;
   shade.shadowMapBias = o.shadowMapBias;
+  shade.descentCache = o.descentCache ? 1 : 0;
   shade.shadowMapMaxVoxels = o.shadowMapMaxVoxels;
   WorkCounters work{};
   if (o.countWork) backend->countWork(&work);
@@ -328,6 +329,7 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
                  {"primary_steps", work.primarySteps},
                  {"shaded_samples", work.shadedSamples},
                  {"segments", work.segments},
+                 {"descents", work.descents},
                  {"brick_samples", work.brickSamples},
                  {"shadow_cones", work.shadowCones},
                  {"shadow_steps", work.shadowSteps},

@@ -15,11 +15,24 @@
 namespace canopy::play {
 namespace {
 
+// One thread per pixel, a warp on an 8x4 tile of pixels (rather than 32 pixels of one row): the
+// rays of a warp stay closer together, so they walk the same instances and nodes longer (less
+// divergence, more shared cache lines). Thread j -> tile j / 32, lane j % 32.
+constexpr int kTileW = 8, kTileH = 4;
+
 struct PixelKernel {
   SceneView scene;
   CameraView camera;
   float* out;
-  __device__ void operator()(int64_t i) const { renderPixel(scene, camera, i, out); }
+  int tilesX;
+  __device__ void operator()(int64_t j) const {
+    const int64_t tile = j / (kTileW * kTileH);
+    const int lane = int(j % (kTileW * kTileH));
+    const int x = int(tile % tilesX) * kTileW + lane % kTileW;
+    const int y = int(tile / tilesX) * kTileH + lane / kTileW;
+    if (x >= camera.width || y >= camera.height) return;
+    renderPixel(scene, camera, int64_t(y) * camera.width + x, out);
+  }
 };
 
 struct ExtinctionKernel {
@@ -149,7 +162,8 @@ class CudaBackend final : public Backend {
       cuda::parallelFor(columns, ShadowMapKernel{v.shadowMap, grid_, sub}, compute_, 128);
     }
     lastShadowMap_ = v.shadowMap;
-    cuda::parallelFor(int64_t(pixels), PixelKernel{v, camera, image_.data()}, compute_, 128);
+    const int tilesX = (camera.width + kTileW - 1) / kTileW, tilesY = (camera.height + kTileH - 1) / kTileH;
+    cuda::parallelFor(int64_t(tilesX) * tilesY * kTileW * kTileH, PixelKernel{v, camera, image_.data(), tilesX}, compute_, 128);
     CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
   }
   void readStamps(std::vector<uint32_t>& slotUsed, std::vector<uint32_t>& pageWanted) override {

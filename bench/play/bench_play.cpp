@@ -63,7 +63,7 @@ int main(int argc, char** argv) {
   app.add_option("--cache-mb", cacheMb, "Cache budget (MiB)")->capture_default_str();
   app.add_option("--instances", instances, "Forest instances")->capture_default_str();
   app.add_option("--extra", extra, "NAME=FILE.canopy: more packed scenes (orbit camera)");
-  app.add_option("--shadows", shadowMethods, "Shadow methods to run, each scene with each (map, cone, off)")->capture_default_str();
+  app.add_option("--shadows", shadowMethods, "Shadow methods to run, each scene with each (map, cone, off; a -nocache suffix turns off the descent cache)")->capture_default_str();
   app.add_flag("--count-work", countWork, "CPU only: count cones, steps, samples and shadow work per frame (results.json \"work\")");
   app.add_flag("--only-extra", skipSynthetic, "Play only the --extra scenes (the synthetic ones are still written)");
   return tool.run(argc, argv, [&] {
@@ -108,8 +108,11 @@ int main(int argc, char** argv) {
       o.camera = s.camera;
       o.sun = "orbit:azimuth=40,elevation=45,turns=0.1";  // the sun moves every frame
       o.cacheMb = cacheMb;
-      o.shadows = method != "off";
-      if (o.shadows) o.shadowMethod = method;
+      // "map-nocache": the map without the per-instance descent cache (timing comparison)
+      o.descentCache = method.find("nocache") == std::string::npos;
+      const std::string shadowMethod = method.substr(0, method.find('-'));
+      o.shadows = shadowMethod != "off";
+      if (o.shadows) o.shadowMethod = shadowMethod;
       o.countWork = countWork;
       std::vector<float> last;
       nlohmann::json r = pl::play(o, tool.device(), &last);
@@ -124,10 +127,11 @@ int main(int argc, char** argv) {
       if (r.contains("work")) {
         const auto& wk = r["work"];
         const double cones = double(wk["cones"]), shaded = std::max(double(wk["shaded_samples"]), 1.0);
-        std::printf("|   work per frame (%s, %s) | cones %.0f, steps/cone %.1f, segments/step %.2f, shaded samples/cone %.1f, brick samples %.0f, "
+        std::printf("|   work per frame (%s, %s) | cones %.0f, steps/cone %.1f, segments/step %.2f, descents/segment %.3f, shaded samples/cone %.1f, brick samples %.0f, "
                     "shadow cones %.0f (%.3f per shaded sample), shadow steps %.0f (%.1f per shaded sample), map lookups %.0f, map steps %.0f |\n",
                     s.name.c_str(), method.c_str(), cones / double(wk["passes"]), double(wk["primary_steps"]) / std::max(cones, 1.0),
-                    double(wk["segments"]) / std::max(double(wk["primary_steps"]), 1.0), double(wk["shaded_samples"]) / std::max(cones, 1.0),
+                    double(wk["segments"]) / std::max(double(wk["primary_steps"]), 1.0),
+                    double(wk["descents"]) / std::max(double(wk["segments"]), 1.0), double(wk["shaded_samples"]) / std::max(cones, 1.0),
                     double(wk["brick_samples"]) / double(wk["passes"]), double(wk["shadow_cones"]) / double(wk["passes"]),
                     double(wk["shadow_cones"]) / shaded, double(wk["shadow_steps"]) / double(wk["passes"]),
                     double(wk["shadow_steps"]) / shaded, double(wk["shadow_map_lookups"]) / double(wk["passes"]),

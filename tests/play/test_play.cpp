@@ -294,6 +294,32 @@ TEST(Render, ShadowMapAgreesWithShadowCones) {
   EXPECT_LT(sumCone / sumOff, 0.95);  // the shadows are visible at all
 }
 
+// The per-instance descent cache (cone.h, DescentCache) reuses a ray's last descent while the
+// ray stays in the node it reached: the image must be the one of descending from the root at every
+// segment, bit for bit (same node, same bricks, same light items), here on a 12-tree forest seen
+// from among the trees (overlapping crowns, several levels) with shadow cones (whose marches use
+// the cache too).
+TEST(Render, DescentCacheLeavesTheImageUnchanged) {
+  const std::string file = pt::tmpDir("scenes") + "/forest-cache.canopy";
+  std::vector<canopy::CanopyInstance> inst;
+  for (int i = 0; i < 12; ++i)
+    inst.push_back(pt::instanceAt(uint32_t(i % 2), float(i % 4) * 2.0f - 3.0f, 0, float(i / 4) * 2.0f - 2.0f, 1.0f, 0.9f * float(i)));
+  pt::writeScene(file, {canopy::octreepack::testing::syntheticPlant(40, 0, "a", 4), canopy::octreepack::testing::syntheticPlant(32, 0, "b", 3)},
+                 inst);
+  for (const char* method : {"map", "cone"}) {
+    pl::PlayOptions o = smallView(file, 48, 32);
+    o.camera = "orbit:azimuth=50,elevation=10,distance=4,turns=0";
+    o.shadowMethod = method;
+    const std::vector<float> cached = render(o);
+    o.descentCache = false;
+    const std::vector<float> fresh = render(o);
+    ASSERT_EQ(cached.size(), fresh.size());
+    size_t differ = 0;
+    for (size_t i = 0; i < cached.size(); ++i) differ += cached[i] != fresh[i];
+    EXPECT_EQ(differ, 0u) << method;
+  }
+}
+
 TEST(Render, OverlappingInstancesAddTheirExtinction) {
   // two copies of the ball at the same place composite like one ball of twice the density
   const std::string two = pt::tmpDir("scenes") + "/two-spheres.canopy";
