@@ -532,12 +532,12 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
 struct Hit {
   uint32_t instance;
   float tin, tout;
-  DescentCache cache;  // this instance's last descent along the ray (valid = 0 when added)
 };
 
 // 3D-DDA over the instance grid plus the hit list.
 struct InstanceWalk {
-  Hit hits[kHitCapacity];
+  Hit hits[kHitCapacity];           // small: the membership checks scan it
+  DescentCache caches[kHitCapacity];  // caches[h]: hit h's last descent along the ray (valid = 0 when added)
   int count;
   int cell[3];
   int stepDir[3];
@@ -566,12 +566,11 @@ CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 
       int far = 0;
       for (int h = 1; h < w.count; ++h) far = w.hits[h].tin > w.hits[far].tin ? h : far;
       if (w.hits[far].tin <= t0) continue;  // dropped; found again from a later cell it overlaps
-      w.hits[far].instance = id, w.hits[far].tin = t0, w.hits[far].tout = t1;
-      w.hits[far].cache.valid = 0;
+      w.hits[far] = Hit{id, t0, t1};
+      w.caches[far].valid = 0;
     } else {
-      Hit& h = w.hits[w.count++];
-      h.instance = id, h.tin = t0, h.tout = t1;
-      h.cache.valid = 0;
+      w.caches[w.count].valid = 0;
+      w.hits[w.count++] = Hit{id, t0, t1};
     }
   }
 }
@@ -647,7 +646,10 @@ CANOPY_HD inline void walkRetire(InstanceWalk& w, float t) {
   int n = 0;
   for (int h = 0; h < w.count; ++h) {
     if (!(w.hits[h].tout > t)) continue;
-    if (n != h) w.hits[n] = w.hits[h];
+    if (n != h) {
+      w.hits[n] = w.hits[h];
+      w.caches[n] = w.caches[h];
+    }
     ++n;
   }
   w.count = n;
@@ -820,14 +822,14 @@ CANOPY_HD inline float shadowTransmittance(const SceneView& s, V3 p, float footp
     float k = 0.0f;
     bool active = false;
     for (int h = 0; h < w.count; ++h) {
-      Hit& hit = w.hits[h];
+      const Hit& hit = w.hits[h];
       if (hit.tin > t) {
         next = hit.tin < next ? hit.tin : next;
         continue;
       }
       active = true;
       const Segment g =
-          instanceSegment(s, s.instances[hit.instance], p, d, t, hit.tout, footprint0 + t * s.shade.shadowAperture, false, hit.cache);
+          instanceSegment(s, s.instances[hit.instance], p, d, t, hit.tout, footprint0 + t * s.shade.shadowAperture, false, w.caches[h]);
       k += g.k;
       next = g.tEnd < next ? g.tEnd : next;
     }
@@ -867,14 +869,14 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
     const float footprint = t * pixelAngle;
     float minCell = 3.0e38f;
     for (int h = 0; h < w.count; ++h) {
-      Hit& hit = w.hits[h];
+      const Hit& hit = w.hits[h];
       if (hit.tin > t) {
         next = hit.tin < next ? hit.tin : next;
         seg[h].k = 0.0f;
         continue;
       }
       active = true;
-      seg[h] = instanceSegment(s, s.instances[hit.instance], o, d, t, hit.tout, footprint, true, hit.cache);
+      seg[h] = instanceSegment(s, s.instances[hit.instance], o, d, t, hit.tout, footprint, true, w.caches[h]);
       minCell = s.instances[hit.instance].cellWorld < minCell ? s.instances[hit.instance].cellWorld : minCell;
       k += seg[h].k;
       next = seg[h].tEnd < next ? seg[h].tEnd : next;

@@ -34,6 +34,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--shadow-map-cells", o.shadowMapCells, "Shadow map voxel in lattice cells of the finest instance")->capture_default_str();
   app.add_option("--shadow-map-bias", o.shadowMapBias, "Shadow map lookups move this many blur widths (the larger of a map voxel and a finest node) towards the sun")->capture_default_str();
+  app.add_option("--warp-tile", o.warpTileWidth, "CUDA: a warp renders a W x (32/W) pixel tile")->capture_default_str();
   bool noDescentCache = false;
   app.add_flag("--no-descent-cache", noDescentCache, "Descend the octree from the root for every segment (same image; for timing)");
   app.add_option("--shadow-map-voxels", o.shadowMapMaxVoxels, "Shadow map size cap (the voxel grows to fit)")->capture_default_str();

@@ -255,6 +255,8 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   shade.shadowMapMaxVoxels = o.shadowMapMaxVoxels;
   WorkCounters work{};
   if (o.countWork) backend->countWork(&work);
+  if (o.warpTileWidth < 1 || o.warpTileWidth > 32 || 32 % o.warpTileWidth != 0) throw usageError("--warp-tile must be 1, 2, 4, 8, 16 or 32");
+  backend->setPixelTile(o.warpTileWidth, 32 / o.warpTileWidth);
 
   std::vector<double> frameMs;
   std::vector<float> image;

@@ -39,6 +39,7 @@ struct PlayOptions {
                                      // and a finest node) towards the sun
   uint32_t shadowMapMaxVoxels = 1u << 23;  // ...grown until the grid (and the map) has at most this many voxels
   bool descentCache = true;          // reuse a ray's last octree descent per instance (same image, fewer descents)
+  int warpTileWidth = 8;             // CUDA: a warp renders a warpTileWidth x (32 / warpTileWidth) tile
   bool countWork = false;            // CPU only: count cones, steps, samples, shadow work (report "work")
   float background[3] = {0.60f, 0.72f, 0.85f};  // linear RGB behind the scene (PNG only)
   bool converge = false;             // per frame, render passes until no loadable page is missing

@@ -15,21 +15,19 @@
 namespace canopy::play {
 namespace {
 
-// One thread per pixel, a warp on an 8x4 tile of pixels (rather than 32 pixels of one row): the
-// rays of a warp stay closer together, so they walk the same instances and nodes longer (less
-// divergence, more shared cache lines). Thread j -> tile j / 32, lane j % 32.
-constexpr int kTileW = 8, kTileH = 4;
-
+// One thread per pixel, a warp on a tileW x tileH tile of pixels (default 8x4 rather than 32
+// pixels of one row: the rays of a warp stay closer together, so they walk the same instances and
+// nodes longer). Thread j -> tile j / (tileW tileH), lane j % (tileW tileH).
 struct PixelKernel {
   SceneView scene;
   CameraView camera;
   float* out;
-  int tilesX;
+  int tilesX, tileW, tileH;
   __device__ void operator()(int64_t j) const {
-    const int64_t tile = j / (kTileW * kTileH);
-    const int lane = int(j % (kTileW * kTileH));
-    const int x = int(tile % tilesX) * kTileW + lane % kTileW;
-    const int y = int(tile / tilesX) * kTileH + lane / kTileW;
+    const int64_t tile = j / (tileW * tileH);
+    const int lane = int(j % (tileW * tileH));
+    const int x = int(tile % tilesX) * tileW + lane % tileW;
+    const int y = int(tile / tilesX) * tileH + lane / tileW;
     if (x >= camera.width || y >= camera.height) return;
     renderPixel(scene, camera, int64_t(y) * camera.width + x, out);
   }
@@ -162,8 +160,8 @@ class CudaBackend final : public Backend {
       cuda::parallelFor(columns, ShadowMapKernel{v.shadowMap, grid_, sub}, compute_, 128);
     }
     lastShadowMap_ = v.shadowMap;
-    const int tilesX = (camera.width + kTileW - 1) / kTileW, tilesY = (camera.height + kTileH - 1) / kTileH;
-    cuda::parallelFor(int64_t(tilesX) * tilesY * kTileW * kTileH, PixelKernel{v, camera, image_.data(), tilesX}, compute_, 128);
+    const int tilesX = (camera.width + tileW_ - 1) / tileW_, tilesY = (camera.height + tileH_ - 1) / tileH_;
+    cuda::parallelFor(int64_t(tilesX) * tilesY * tileW_ * tileH_, PixelKernel{v, camera, image_.data(), tilesX, tileW_, tileH_}, compute_, 128);
     CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
   }
   void readStamps(std::vector<uint32_t>& slotUsed, std::vector<uint32_t>& pageWanted) override {
@@ -172,6 +170,7 @@ class CudaBackend final : public Backend {
     if (slots_) slotUsed_.download(slotUsed.data(), slots_);
     if (pageCount_) pageWanted_.download(pageWanted.data(), pageCount_);
   }
+  void setPixelTile(int w, int h) override { tileW_ = w, tileH_ = h; }
   void readImage(std::vector<float>& rgba) override {
     rgba.resize(image_.size());
     image_.download(rgba.data(), image_.size());
@@ -179,6 +178,7 @@ class CudaBackend final : public Backend {
 
  private:
   uint32_t pageBytes_, pageCount_, slots_ = 0;
+  int tileW_ = 8, tileH_ = 4;
   cudaStream_t compute_ = nullptr, copy_ = nullptr;
   cudaEvent_t tableCopied_[2] = {nullptr, nullptr};
   int mirror_ = 0;

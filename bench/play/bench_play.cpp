@@ -63,7 +63,7 @@ int main(int argc, char** argv) {
   app.add_option("--cache-mb", cacheMb, "Cache budget (MiB)")->capture_default_str();
   app.add_option("--instances", instances, "Forest instances")->capture_default_str();
   app.add_option("--extra", extra, "NAME=FILE.canopy: more packed scenes (orbit camera)");
-  app.add_option("--shadows", shadowMethods, "Shadow methods to run, each scene with each (map, cone, off; a -nocache suffix turns off the descent cache)")->capture_default_str();
+  app.add_option("--shadows", shadowMethods, "Shadow methods to run, each scene with each (map, cone, off; a -nocache suffix turns off the descent cache, -rows puts a warp on 32 pixels of a row)")->capture_default_str();
   app.add_flag("--count-work", countWork, "CPU only: count cones, steps, samples and shadow work per frame (results.json \"work\")");
   app.add_flag("--only-extra", skipSynthetic, "Play only the --extra scenes (the synthetic ones are still written)");
   return tool.run(argc, argv, [&] {
@@ -110,6 +110,7 @@ int main(int argc, char** argv) {
       o.cacheMb = cacheMb;
       // "map-nocache": the map without the per-instance descent cache (timing comparison)
       o.descentCache = method.find("nocache") == std::string::npos;
+      if (method.find("rows") != std::string::npos) o.warpTileWidth = 32;  // "map-rows": a warp on 32 pixels of a row
       const std::string shadowMethod = method.substr(0, method.find('-'));
       o.shadows = shadowMethod != "off";
       if (o.shadows) o.shadowMethod = shadowMethod;
