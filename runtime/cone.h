@@ -532,12 +532,14 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
 struct Hit {
   uint32_t instance;
   float tin, tout;
+  uint32_t slot;  // its descent cache: InstanceWalk::caches[slot] (stays put while hits move)
 };
 
 // 3D-DDA over the instance grid plus the hit list.
 struct InstanceWalk {
-  Hit hits[kHitCapacity];           // small: the membership checks scan it
-  DescentCache caches[kHitCapacity];  // caches[h]: hit h's last descent along the ray (valid = 0 when added)
+  Hit hits[kHitCapacity];             // small: the membership checks scan it, retiring shifts it
+  DescentCache caches[kHitCapacity];  // by slot: a hit's last descent along the ray (valid = 0 when added)
+  uint32_t freeSlots;                 // bit i: caches[i] belongs to no hit
   int count;
   int cell[3];
   int stepDir[3];
@@ -546,6 +548,15 @@ struct InstanceWalk {
   float tGridExit;
   bool done;
 };
+
+// Index of the lowest set bit of a non-zero mask.
+CANOPY_HD CANOPY_FORCEINLINE uint32_t lowestSetBit(uint32_t m) {
+#if defined(__CUDA_ARCH__)
+  return uint32_t(__ffs(int(m)) - 1);
+#else
+  return uint32_t(__builtin_ctz(m));
+#endif
+}
 
 CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 d, float tNow) {
   const int c = w.cell[0] + s.gridDim[0] * (w.cell[1] + s.gridDim[1] * w.cell[2]);
@@ -566,11 +577,13 @@ CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 
       int far = 0;
       for (int h = 1; h < w.count; ++h) far = w.hits[h].tin > w.hits[far].tin ? h : far;
       if (w.hits[far].tin <= t0) continue;  // dropped; found again from a later cell it overlaps
-      w.hits[far] = Hit{id, t0, t1};
-      w.caches[far].valid = 0;
+      w.hits[far] = Hit{id, t0, t1, w.hits[far].slot};
+      w.caches[w.hits[far].slot].valid = 0;
     } else {
-      w.caches[w.count].valid = 0;
-      w.hits[w.count++] = Hit{id, t0, t1};
+      const uint32_t slot = lowestSetBit(w.freeSlots);
+      w.freeSlots &= ~(1u << slot);
+      w.caches[slot].valid = 0;
+      w.hits[w.count++] = Hit{id, t0, t1, slot};
     }
   }
 }
@@ -578,6 +591,7 @@ CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 
 // Starts the walk for the ray o + t d, t in [tStart, tEnd].
 CANOPY_HD inline void walkBegin(const SceneView& s, InstanceWalk& w, V3 o, V3 d, float tStart, float tEnd) {
   w.count = 0;
+  w.freeSlots = kHitCapacity >= 32 ? 0xFFFFFFFFu : (1u << kHitCapacity) - 1u;
   w.done = true;
   w.tCellExit = tEnd;
   if (s.instanceCount == 0) return;
@@ -645,11 +659,11 @@ CANOPY_HD inline void walkAdvance(const SceneView& s, InstanceWalk& w, V3 o, V3 
 CANOPY_HD inline void walkRetire(InstanceWalk& w, float t) {
   int n = 0;
   for (int h = 0; h < w.count; ++h) {
-    if (!(w.hits[h].tout > t)) continue;
-    if (n != h) {
-      w.hits[n] = w.hits[h];
-      w.caches[n] = w.caches[h];
+    if (!(w.hits[h].tout > t)) {
+      w.freeSlots |= 1u << w.hits[h].slot;
+      continue;
     }
+    if (n != h) w.hits[n] = w.hits[h];
     ++n;
   }
   w.count = n;
@@ -829,7 +843,7 @@ CANOPY_HD inline float shadowTransmittance(const SceneView& s, V3 p, float footp
       }
       active = true;
       const Segment g =
-          instanceSegment(s, s.instances[hit.instance], p, d, t, hit.tout, footprint0 + t * s.shade.shadowAperture, false, w.caches[h]);
+          instanceSegment(s, s.instances[hit.instance], p, d, t, hit.tout, footprint0 + t * s.shade.shadowAperture, false, w.caches[hit.slot]);
       k += g.k;
       next = g.tEnd < next ? g.tEnd : next;
     }
@@ -876,7 +890,7 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
         continue;
       }
       active = true;
-      seg[h] = instanceSegment(s, s.instances[hit.instance], o, d, t, hit.tout, footprint, true, w.caches[h]);
+      seg[h] = instanceSegment(s, s.instances[hit.instance], o, d, t, hit.tout, footprint, true, w.caches[hit.slot]);
       minCell = s.instances[hit.instance].cellWorld < minCell ? s.instances[hit.instance].cellWorld : minCell;
       k += seg[h].k;
       next = seg[h].tEnd < next ? seg[h].tEnd : next;

@@ -262,6 +262,7 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   std::vector<float> image;
   uint32_t stamp = 0;
   double firstCompleteS = -1.0;
+  uint64_t coldStartBytes = 0;  // streamed by the first complete frame
   uint64_t passes = 0;
   Progress progress("canopy-play", o.frames);
   for (int f = 0; f < o.frames; ++f) {
@@ -285,7 +286,10 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
       streamer.waitLoader();
     }
     frameMs.push_back(1000.0 * secondsSince(tf));
-    if (missing == 0 && firstCompleteS < 0.0) firstCompleteS = secondsSince(t0);
+    if (missing == 0 && firstCompleteS < 0.0) {
+      firstCompleteS = secondsSince(t0);
+      coldStartBytes = streamer.stats().bytesLoaded;
+    }
     if (!o.output.empty() || lastImage) backend->readImage(image);
     if (!o.output.empty()) writeImage(frameFileName(o.output, f, o.frames), image, o.width, o.height, o.background);
     progress.add();
@@ -314,6 +318,10 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   r["lit_models"] = scene.litModels;
   r["pages_streamed"] = st.pagesLoaded;
   r["mb_streamed"] = double(st.bytesLoaded) / (1024.0 * 1024.0);
+  r["cold_start_mb"] = double(coldStartBytes) / (1024.0 * 1024.0);
+  // the streaming rate of the cold start: what the first complete frame needed, over its time
+  // (open, scene build, every pass and every page read and upload included)
+  r["cold_start_mb_per_s"] = firstCompleteS > 0 ? double(coldStartBytes) / (1024.0 * 1024.0) / firstCompleteS : 0.0;
   r["stream_mb_per_s"] = total > 0 ? double(st.bytesLoaded) / (1024.0 * 1024.0) / total : 0.0;
   r["read_mb_per_s"] = st.loadSeconds > 0 ? double(st.bytesLoaded) / (1024.0 * 1024.0) / st.loadSeconds : 0.0;
   r["pages_deferred"] = st.pagesDeferred;
