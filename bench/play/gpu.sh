@@ -6,7 +6,9 @@
 #    400-instance forest (orbit and walk) and the grove when GROVE is set, each with the shadow map
 #    (the default) and, for comparison, the per-sample shadow cones and no shadows. Writes
 #    $OUT/bench/*.png, results.json and a Markdown table ($OUT/bench_play.md) for bench/RESULTS.md.
-# 3. the forest walk with a cache of 32 MiB (smaller than the forest's pages): it must play.
+# 3. the scenes again with a cache of 32 MiB (less than the forest's file): they must play.
+# FRAMES (default 120) and SHADOW_VARIANTS (default "--shadows map --shadows cone --shadows off";
+# e.g. "--shadows map --shadows map-rows --shadows map-nocache") change the benchmark runs.
 set -u
 : "${BIN:?set BIN to the folder with test_play_cuda and bench-play}"
 : "${OUT:?set OUT to a folder for the logs}"
