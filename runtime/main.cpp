@@ -32,7 +32,7 @@ int main(int argc, char** argv) {
   app.add_flag("--no-shadows", noShadows, "Direct sun unshadowed");
   app.add_option("--shadows", o.shadowMethod, "map: per-frame sun transmittance map; cone: a shadow cone per shadow interval (slow reference)")
       ->capture_default_str();
-  app.add_option("--shadow-map-cells", o.shadowMapCells, "Shadow map voxel in lattice cells of the finest instance")->capture_default_str();
+  app.add_option("--shadow-map-cells", o.shadowMapCells, "Shadow extinction grid voxel in lattice cells of the finest instance")->capture_default_str();
   app.add_option("--shadow-map-bias", o.shadowMapBias, "Shadow map lookups move this many blur widths (the larger of a map voxel and a finest node) towards the sun")->capture_default_str();
   app.add_option("--warp-tile", o.warpTileWidth, "CUDA: a warp renders a W x (32/W) pixel tile")->capture_default_str();
   bool noDescentCache = false;
