@@ -34,6 +34,15 @@ class Backend {
   virtual void readStamps(std::vector<uint32_t>& slotUsed, std::vector<uint32_t>& pageWanted) = 0;
   // The last render's image: width * height RGBA floats (premultiplied RGB, alpha = 1 - T).
   virtual void readImage(std::vector<float>& rgba) = 0;
+  // The pixels one GPU warp renders: a w x h tile, w h = 32 (CUDA only; 8x4 by default).
+  virtual void setPixelTile(int w, int h) { (void)w, (void)h; }
+  // Counts the work of the following renders into `work` (CPU reference only; others ignore it).
+  virtual void countWork(WorkCounters* work) { (void)work; }
+  // The last render's sun transmittance map (kShadowsMap; dim all 1 otherwise).
+  const ShadowMapView& lastShadowMap() const { return lastShadowMap_; }
+
+ protected:
+  ShadowMapView lastShadowMap_{};
 };
 
 std::unique_ptr<Backend> makeCpuBackend(const HostScene& scene, uint32_t slots);

@@ -154,7 +154,36 @@ struct ShadeParams {
   float stepFactor;         // brick step in voxels of the chosen level
   float lodBias;            // added to the chosen level (negative = coarser)
   float shadowAperture;     // shadow cone: footprint growth per unit length (radians)
-  int shadows;              // 0: no shadow cones (Tshadow = 1)
+  int shadows;              // kShadowsOff (Tshadow = 1), kShadowsMap or kShadowsCone
+  float shadowMapCells;     // kShadowsMap: extinction grid voxel in lattice cells of the finest instance
+  float shadowMapBias;      // kShadowsMap: lookup offset towards the sun, in blur widths (planShadowMap)
+  uint32_t shadowMapMaxVoxels;  // kShadowsMap: voxels grow until a grid has at most this many
+  int descentCache;         // 1: reuse a ray's last descent per instance (DescentCache); 0: always descend
+};
+
+// How a sample's sun transmittance Tshadow is found (ShadeParams::shadows).
+constexpr int kShadowsOff = 0;
+constexpr int kShadowsMap = 1;   // looked up in the frame's sun transmittance map (ShadowMapView)
+constexpr int kShadowsCone = 2;  // a shadow cone marched per shadow interval (shadowTransmittance)
+
+// The sun transmittance map of one frame (kShadowsMap): a grid in light space whose third axis
+// points along the light's travel (-toSun), so that a column of voxels is a ray from the sun.
+// T[u + dim0 (v + dim1 w)] is the transmittance from the sun to the centre of voxel (u, v, w).
+// It is built per render pass from the scene's extinction grid (buildShadowMapColumn) and looked
+// up per sample (shadowMapLookup): view-independent, so the sun may move every frame.
+struct ShadowMapView {
+  float* T;                 // dim[0] * dim[1] * dim[2] values, u fastest
+  V3 origin;                // world position of voxel (0, 0, 0)'s centre
+  V3 axis[3];               // unit axes u, v, w (w = -toSun)
+  float voxel;              // voxel edge (world)
+  int32_t dim[3];
+  float bias;               // lookups move this far towards the sun (world), see shadowMapLookup
+};
+
+// Work done by the CPU reference (bench-play --count-work; never counted on the GPU).
+struct WorkCounters {
+  uint64_t cones, primarySteps, shadedSamples, segments, descents, brickSamples, shadowCones, shadowSteps, shadowMapLookups,
+      shadowMapSteps;
 };
 
 struct SceneView {
@@ -177,7 +206,17 @@ struct SceneView {
   uint32_t lightItemsPerPage;
   SceneLightView light;
   ShadeParams shade;
+  ShadowMapView shadowMap;       // kShadowsMap: this pass's sun transmittance map
+  WorkCounters* work;            // CPU only, optional (nullptr: not counted)
 };
+
+// Adds n to a work counter (host code only; compiled out of the CUDA kernels).
+#if defined(__CUDA_ARCH__)
+#define CANOPY_PLAY_COUNT(s, field, n) ((void)0)
+#else
+#define CANOPY_PLAY_COUNT(s, field, n) \
+  ((s).work ? (void)__atomic_fetch_add(&(s).work->field, uint64_t(n), __ATOMIC_RELAXED) : (void)0)
+#endif
 
 // Stamp stores are benign races (every writer writes the same value); relaxed atomics on the host.
 CANOPY_HD CANOPY_FORCEINLINE void writeStamp(uint32_t* p, uint32_t v) {
@@ -379,6 +418,29 @@ CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m,
   return d;
 }
 
+// The last descent of one instance along one ray: a later point inside the node reached, with the
+// same level asked for, reaches the same node with the same resident bricks (the page table does
+// not change during a pass), so instanceSegment() reuses it instead of descending from the root
+// again: a brick node is crossed in about 2 x 8 steps of half a voxel, one descent instead of ~16.
+// The result is exactly that of a fresh descent (same node, same brick, same light item).
+struct DescentCache {
+  Descent d;
+  uint32_t maxLevel;
+  uint32_t valid;  // 0: empty (a new hit)
+};
+
+// The point u (unit space, clamped as descendResident clamps it) is inside the cached node.
+CANOPY_HD CANOPY_FORCEINLINE bool descentCovers(const DescentCache& c, V3 u, uint32_t maxLevel) {
+  if (!c.valid || c.maxLevel != maxLevel) return false;
+  float x[3] = {u.x, u.y, u.z};
+  bool in = true;
+  for (int a = 0; a < 3; ++a) {
+    x[a] = x[a] < 0.0f ? 0.0f : (x[a] >= 1.0f ? 0.99999994f : x[a]);
+    in = in && x[a] >= c.d.lo[a] && x[a] < c.d.lo[a] + c.d.size;
+  }
+  return in;
+}
+
 // A shading segment's light at unit point um (world ray parameter tm): the descent's light item and
 // the node-local coordinates of um in it. Light pages are used and asked for here, only by
 // segments with matter (not by empty space).
@@ -411,7 +473,7 @@ CANOPY_HD inline void segmentIndirect(const SceneView& s, const InstanceView& in
 // The segment of instance `inst` at ray position t (world), the cone footprint there being
 // `footprint` (world units). tout is the end of the instance's box interval.
 CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView& inst, V3 o, V3 dir, float t,
-                                         float tout, float footprint, bool shading) {
+                                         float tout, float footprint, bool shading, DescentCache& cache) {
   const ModelView& m = s.models[inst.model];
   const V3 uo = applyPoint(inst.worldToUnit, o);
   const V3 ud = applyVector(inst.worldToUnit, dir);
@@ -419,7 +481,15 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
   // a thousandth of a cell, but at least a few float ulps of t (progress far from the origin)
   const float eps = fmaxf(1e-3f / cellsPerWorld, fabsf(t) * 1e-6f);
   const uint32_t level = levelForFootprint(m.depth, footprint / inst.cellWorld, s.shade.lodBias);
-  const Descent d = descendResident(s, m, uo + ud * (t + eps), level, shading);
+  const V3 up = uo + ud * (t + eps);
+  CANOPY_PLAY_COUNT(s, segments, 1);
+  if (!s.shade.descentCache || !descentCovers(cache, up, level)) {
+    cache.d = descendResident(s, m, up, level, shading);
+    cache.maxLevel = level;
+    cache.valid = 1;
+    CANOPY_PLAY_COUNT(s, descents, 1);
+  }
+  const Descent& d = cache.d;
   Segment g;
   float tExit = nodeExit(uo, ud, d.lo, d.size);
   if (tExit < t + eps) tExit = t + eps;
@@ -440,6 +510,7 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
     return g;
   }
   writeStamp(s.slotUsed + d.brickPoolSlot, s.stamp);
+  CANOPY_PLAY_COUNT(s, brickSamples, 1);
   const float voxelCells = float(m.rootCells >> 3) * d.size;  // this level's voxel, in cells
   float tEnd = t + s.shade.stepFactor * voxelCells / cellsPerWorld;
   tEnd = tEnd < tExit ? tEnd : tExit;
@@ -461,11 +532,14 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
 struct Hit {
   uint32_t instance;
   float tin, tout;
+  uint32_t slot;  // its descent cache: InstanceWalk::caches[slot] (stays put while hits move)
 };
 
 // 3D-DDA over the instance grid plus the hit list.
 struct InstanceWalk {
-  Hit hits[kHitCapacity];
+  Hit hits[kHitCapacity];             // small: the membership checks scan it, retiring shifts it
+  DescentCache caches[kHitCapacity];  // by slot: a hit's last descent along the ray (valid = 0 when added)
+  uint32_t freeSlots;                 // bit i: caches[i] belongs to no hit
   int count;
   int cell[3];
   int stepDir[3];
@@ -474,6 +548,15 @@ struct InstanceWalk {
   float tGridExit;
   bool done;
 };
+
+// Index of the lowest set bit of a non-zero mask.
+CANOPY_HD CANOPY_FORCEINLINE uint32_t lowestSetBit(uint32_t m) {
+#if defined(__CUDA_ARCH__)
+  return uint32_t(__ffs(int(m)) - 1);
+#else
+  return uint32_t(__builtin_ctz(m));
+#endif
+}
 
 CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 d, float tNow) {
   const int c = w.cell[0] + s.gridDim[0] * (w.cell[1] + s.gridDim[1] * w.cell[2]);
@@ -494,9 +577,13 @@ CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 
       int far = 0;
       for (int h = 1; h < w.count; ++h) far = w.hits[h].tin > w.hits[far].tin ? h : far;
       if (w.hits[far].tin <= t0) continue;  // dropped; found again from a later cell it overlaps
-      w.hits[far] = Hit{id, t0, t1};
+      w.hits[far] = Hit{id, t0, t1, w.hits[far].slot};
+      w.caches[w.hits[far].slot].valid = 0;
     } else {
-      w.hits[w.count++] = Hit{id, t0, t1};
+      const uint32_t slot = lowestSetBit(w.freeSlots);
+      w.freeSlots &= ~(1u << slot);
+      w.caches[slot].valid = 0;
+      w.hits[w.count++] = Hit{id, t0, t1, slot};
     }
   }
 }
@@ -504,6 +591,7 @@ CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 
 // Starts the walk for the ray o + t d, t in [tStart, tEnd].
 CANOPY_HD inline void walkBegin(const SceneView& s, InstanceWalk& w, V3 o, V3 d, float tStart, float tEnd) {
   w.count = 0;
+  w.freeSlots = kHitCapacity >= 32 ? 0xFFFFFFFFu : (1u << kHitCapacity) - 1u;
   w.done = true;
   w.tCellExit = tEnd;
   if (s.instanceCount == 0) return;
@@ -570,9 +658,162 @@ CANOPY_HD inline void walkAdvance(const SceneView& s, InstanceWalk& w, V3 o, V3 
 // Drops hits that ended before t.
 CANOPY_HD inline void walkRetire(InstanceWalk& w, float t) {
   int n = 0;
-  for (int h = 0; h < w.count; ++h)
-    if (w.hits[h].tout > t) w.hits[n++] = w.hits[h];
+  for (int h = 0; h < w.count; ++h) {
+    if (!(w.hits[h].tout > t)) {
+      w.freeSlots |= 1u << w.hits[h].slot;
+      continue;
+    }
+    if (n != h) w.hits[n] = w.hits[h];
+    ++n;
+  }
   w.count = n;
+}
+
+// ------------------------------------------------------------------------------------------------
+// The sun transmittance map (kShadowsMap)
+// ------------------------------------------------------------------------------------------------
+// Two grids. (1) The scene's EXTINCTION GRID (world axes, built once per scene by the backend):
+// at each voxel centre the sum, over the instances whose lattice box holds the point (found
+// through the instance grid), of sigma x the node mean density / the instance's cell, the node
+// being the one of edge <= 2 voxels on the descent (node tiles are always resident, so the grid
+// needs no page, is the same for every cache state and is ready at the first frame). (2) The
+// frame's TRANSMITTANCE MAP (light space, per render pass): each column is a ray from the sun,
+// marched front to back through the extinction grid (trilinear, steps of at most one extinction
+// voxel); T at a voxel centre = exp(-optical depth from the sun). A sample reads T trilinearly.
+// The cost per frame is one march per map column (independent of the image and of the number of
+// samples) and 8 reads per shaded sample, instead of a shadow cone through every instance per
+// shadow interval. Shadows are resolved to about one finest node (8 lattice cells) and the map
+// voxel; the cone mode (kShadowsCone) keeps the brick-resolution reference.
+struct ExtinctionGridView {
+  float* k;           // dim[0] * dim[1] * dim[2] values, x fastest (extinction per world unit)
+  float lo[3];        // world position of voxel (0, 0, 0)'s centre
+  float voxel;        // voxel edge (world)
+  int32_t dim[3];
+};
+
+// The node-mean extinction of every instance at world point x (per world unit), nodes of edge at
+// most `maxNode` (world).
+CANOPY_HD inline float sceneMeanExtinctionAt(const SceneView& s, V3 x, float maxNode) {
+  if (s.instanceCount == 0) return 0.0f;
+  int c[3];
+  for (int a = 0; a < 3; ++a) {
+    const float g = (comp(x, a) - s.gridLo[a]) / s.gridCell[a];
+    if (!(g >= 0.0f) || g >= float(s.gridDim[a])) return 0.0f;  // outside every instance box
+    c[a] = int(g);
+  }
+  const int cell = c[0] + s.gridDim[0] * (c[1] + s.gridDim[1] * c[2]);
+  float k = 0.0f;
+  for (uint32_t it = s.gridStart[cell]; it < s.gridStart[cell + 1]; ++it) {
+    const InstanceView& inst = s.instances[s.gridItems[it]];
+    const V3 u = applyPoint(inst.worldToUnit, x);
+    if (u.x < inst.unitLo[0] || u.y < inst.unitLo[1] || u.z < inst.unitLo[2] || !(u.x < inst.unitHi[0]) ||
+        !(u.y < inst.unitHi[1]) || !(u.z < inst.unitHi[2]))
+      continue;
+    const ModelView& m = s.models[inst.model];
+    // the finest level whose node edge (rootCells 2^-L cells) is at most maxNode
+    const float rootWorld = float(m.rootCells) * inst.cellWorld;
+    const float L = ceilf(log2f(rootWorld / maxNode));
+    const uint32_t level = L <= 0.0f ? 0u : (L >= float(m.depth) ? m.depth : uint32_t(L));
+    const CanopyLookup n = canopyDescend(m.tiles, m.tileCount, m.root, m.depth, u.x, u.y, u.z, level);
+    k += s.shade.sigma * canopyUnpack(n.node.density, n.node.material).density / inst.cellWorld;
+  }
+  return k;
+}
+
+// The extinction grid's voxel i (x fastest): the mean of 2x2x2 samples at +-voxel/4 about its
+// centre (a box filter, so that a face of matter that falls on a voxel centre keeps its mass once
+// the grid is read trilinearly).
+CANOPY_HD inline void buildExtinctionVoxel(const SceneView& s, const ExtinctionGridView& g, int64_t i) {
+  const int x = int(i % g.dim[0]);
+  const int y = int((i / g.dim[0]) % g.dim[1]);
+  const int z = int(i / (int64_t(g.dim[0]) * g.dim[1]));
+  const V3 c = v3(g.lo[0] + float(x) * g.voxel, g.lo[1] + float(y) * g.voxel, g.lo[2] + float(z) * g.voxel);
+  const float q = 0.25f * g.voxel;
+  float k = 0.0f;
+  for (int j = 0; j < 8; ++j)
+    k += sceneMeanExtinctionAt(s, c + v3((j & 1) ? q : -q, (j & 2) ? q : -q, (j & 4) ? q : -q), 2.0f * g.voxel);
+  g.k[i] = 0.125f * k;
+}
+
+// Trilinear extinction at world point p (0 outside the grid, whose border voxels are empty).
+CANOPY_HD inline float extinctionAt(const ExtinctionGridView& g, V3 p) {
+  const float inv = 1.0f / g.voxel;
+  int i0[3];
+  float f[3];
+  for (int a = 0; a < 3; ++a) {
+    const float x = (comp(p, a) - g.lo[a]) * inv;
+    if (!(x >= 0.0f) || !(x < float(g.dim[a] - 1))) return 0.0f;
+    const float fl = floorf(x);
+    i0[a] = int(fl);
+    f[a] = x - fl;
+  }
+  const int64_t sy = g.dim[0], sz = int64_t(g.dim[0]) * g.dim[1];
+  const float* b = g.k + i0[0] + sy * i0[1] + sz * i0[2];
+  const float c00 = b[0] + (b[1] - b[0]) * f[0];
+  const float c10 = b[sy] + (b[sy + 1] - b[sy]) * f[0];
+  const float c01 = b[sz] + (b[sz + 1] - b[sz]) * f[0];
+  const float c11 = b[sz + sy] + (b[sz + sy + 1] - b[sz + sy]) * f[0];
+  const float c0 = c00 + (c10 - c00) * f[1];
+  const float c1 = c01 + (c11 - c01) * f[1];
+  return c0 + (c1 - c0) * f[2];
+}
+
+// The world point of map voxel (u, v, w)'s centre.
+CANOPY_HD CANOPY_FORCEINLINE V3 shadowMapPoint(const ShadowMapView& m, float u, float v, float w) {
+  return m.origin + m.axis[0] * (u * m.voxel) + m.axis[1] * (v * m.voxel) + m.axis[2] * (w * m.voxel);
+}
+
+// Map column c = u + dim0 v: marched front to back from the sun through the extinction grid, T
+// stored at each voxel centre; between two centres `sub` midpoint steps (voxel 0 lies outside the
+// scene's box, so its T is 1).
+CANOPY_HD inline void buildShadowMapColumn(const ShadowMapView& m, const ExtinctionGridView& g, int sub, int64_t c) {
+  const int u = int(c % m.dim[0]), v = int(c / m.dim[0]);
+  const int64_t stride = int64_t(m.dim[0]) * m.dim[1];
+  const float ds = m.voxel / float(sub);
+  const V3 step = m.axis[2] * ds;
+  V3 p = shadowMapPoint(m, float(u), float(v), 0.0f) + step * 0.5f;
+  float tau = 0.0f;  // optical depth from the sun to the current voxel centre
+  for (int w = 0; w < m.dim[2]; ++w) {
+    m.T[c + stride * w] = expf(-tau);
+    for (int j = 0; j < sub; ++j, p = p + step) tau += extinctionAt(g, p) * ds;
+  }
+}
+
+// Tshadow at world point p: trilinear in the map (clamped to its box, whose border voxels are
+// empty: outside it the value is 1), read at p moved `bias` towards the sun. The map spreads each
+// node's matter over about a node and a voxel in every direction, so without the bias a sample
+// near a crown's sunlit surface would be shadowed by matter that lies behind it (away from the
+// sun), by an amount that depends on where the sample falls between the map's voxel centres:
+// banding ("shadow acne"). The price is that matter within `bias` of the sample towards the sun
+// does not shadow it.
+CANOPY_HD inline float shadowMapLookup(const ShadowMapView& m, V3 p) {
+  const V3 q = p - m.axis[2] * m.bias - m.origin;
+  const float inv = 1.0f / m.voxel;
+  int i0[3];
+  float f[3];
+  for (int a = 0; a < 3; ++a) {
+    float x = dot(q, m.axis[a]) * inv;
+    const float hi = float(m.dim[a] - 1);
+    x = x > 0.0f ? x : 0.0f;
+    x = x < hi ? x : hi;
+    const float fl = floorf(x);
+    i0[a] = int(fl);
+    f[a] = x - fl;
+    if (i0[a] >= m.dim[a] - 1) {
+      i0[a] = m.dim[a] > 1 ? m.dim[a] - 2 : 0;
+      f[a] = m.dim[a] > 1 ? 1.0f : 0.0f;
+    }
+  }
+  const int64_t sx = 1, sy = m.dim[0], sz = int64_t(m.dim[0]) * m.dim[1];
+  const float* b = m.T + i0[0] + sy * i0[1] + sz * i0[2];
+  const int64_t dx = m.dim[0] > 1 ? sx : 0, dy = m.dim[1] > 1 ? sy : 0, dz = m.dim[2] > 1 ? sz : 0;
+  const float c00 = b[0] + (b[dx] - b[0]) * f[0];
+  const float c10 = b[dy] + (b[dy + dx] - b[dy]) * f[0];
+  const float c01 = b[dz] + (b[dz + dx] - b[dz]) * f[0];
+  const float c11 = b[dz + dy] + (b[dz + dy + dx] - b[dz + dy]) * f[0];
+  const float c0 = c00 + (c10 - c00) * f[1];
+  const float c1 = c01 + (c11 - c01) * f[1];
+  return c0 + (c1 - c0) * f[2];
 }
 
 struct ConeResult {
@@ -583,6 +824,7 @@ struct ConeResult {
 // Transmittance from p towards the sun (shadow cone, footprint starts at `footprint0`).
 CANOPY_HD inline float shadowTransmittance(const SceneView& s, V3 p, float footprint0) {
   const V3 d = s.shade.toSun;
+  CANOPY_PLAY_COUNT(s, shadowCones, 1);
   InstanceWalk w;
   walkBegin(s, w, p, d, 0.0f, 3.0e38f);
   float T = 1.0f;
@@ -600,7 +842,8 @@ CANOPY_HD inline float shadowTransmittance(const SceneView& s, V3 p, float footp
         continue;
       }
       active = true;
-      const Segment g = instanceSegment(s, s.instances[hit.instance], p, d, t, hit.tout, footprint0 + t * s.shade.shadowAperture, false);
+      const Segment g =
+          instanceSegment(s, s.instances[hit.instance], p, d, t, hit.tout, footprint0 + t * s.shade.shadowAperture, false, w.caches[hit.slot]);
       k += g.k;
       next = g.tEnd < next ? g.tEnd : next;
     }
@@ -610,6 +853,7 @@ CANOPY_HD inline float shadowTransmittance(const SceneView& s, V3 p, float footp
       continue;
     }
     if (next >= 3.0e38f) break;
+    CANOPY_PLAY_COUNT(s, shadowSteps, 1);
     T *= expf(-k * (next - t));
     t = next;
     if (T < kShadowStopT) return 0.0f;
@@ -623,6 +867,7 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
   ConeResult r;
   r.rgb[0] = r.rgb[1] = r.rgb[2] = 0.0f;
   r.transmittance = 1.0f;
+  CANOPY_PLAY_COUNT(s, cones, 1);
   InstanceWalk w;
   walkBegin(s, w, o, d, 0.0f, tMax);
   float t = 0.0f;
@@ -645,7 +890,7 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
         continue;
       }
       active = true;
-      seg[h] = instanceSegment(s, s.instances[hit.instance], o, d, t, hit.tout, footprint, true);
+      seg[h] = instanceSegment(s, s.instances[hit.instance], o, d, t, hit.tout, footprint, true, w.caches[hit.slot]);
       minCell = s.instances[hit.instance].cellWorld < minCell ? s.instances[hit.instance].cellWorld : minCell;
       k += seg[h].k;
       next = seg[h].tEnd < next ? seg[h].tEnd : next;
@@ -657,14 +902,19 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
       continue;
     }
     if (next > tMax) next = tMax;
+    CANOPY_PLAY_COUNT(s, primarySteps, 1);
     const float dt = next - t;
     const float alpha = 1.0f - expf(-k * dt);
     if (alpha > 0.0f && T * alpha > kMinContribution) {
       const float tm = t + 0.5f * dt;
       const V3 p = o + d * tm;
-      // One shadow cone per shadow interval: samples closer than about a voxel (1.5 cells of the
-      // nearest active instance, or two footprints) to the last shadow origin reuse its value.
-      if (s.shade.shadows && !(tm - shadowT < shadowSpacing)) {
+      CANOPY_PLAY_COUNT(s, shadedSamples, 1);
+      if (s.shade.shadows == kShadowsMap) {
+        sunT = shadowMapLookup(s.shadowMap, p);
+        CANOPY_PLAY_COUNT(s, shadowMapLookups, 1);
+      } else if (s.shade.shadows == kShadowsCone && !(tm - shadowT < shadowSpacing)) {
+        // One shadow cone per shadow interval: samples closer than about a voxel (1.5 cells of the
+        // nearest active instance, or two footprints) to the last shadow origin reuse its value.
         sunT = shadowTransmittance(s, p, footprint);
         shadowT = tm;
         shadowSpacing = 2.0f * footprint > 1.5f * minCell ? 2.0f * footprint : 1.5f * minCell;

@@ -29,7 +29,15 @@ int main(int argc, char** argv) {
   app.add_option("--lod-bias", o.lodBias, "Added to the footprint's level (negative = coarser)")->capture_default_str();
   app.add_option("--shadow-aperture", o.shadowAperture, "Shadow cone aperture (radians)")->capture_default_str();
   bool noShadows = false;
-  app.add_flag("--no-shadows", noShadows, "Direct sun without shadow cones");
+  app.add_flag("--no-shadows", noShadows, "Direct sun unshadowed");
+  app.add_option("--shadows", o.shadowMethod, "map: per-frame sun transmittance map; cone: a shadow cone per shadow interval (slow reference)")
+      ->capture_default_str();
+  app.add_option("--shadow-map-cells", o.shadowMapCells, "Shadow extinction grid voxel in lattice cells of the finest instance")->capture_default_str();
+  app.add_option("--shadow-map-bias", o.shadowMapBias, "Shadow map lookups move this many blur widths (the larger of a map voxel and a finest node) towards the sun")->capture_default_str();
+  app.add_option("--warp-tile", o.warpTileWidth, "CUDA: a warp renders a W x (32/W) pixel tile")->capture_default_str();
+  bool noDescentCache = false;
+  app.add_flag("--no-descent-cache", noDescentCache, "Descend the octree from the root for every segment (same image; for timing)");
+  app.add_option("--shadow-map-voxels", o.shadowMapMaxVoxels, "Shadow map size cap (the voxel grows to fit)")->capture_default_str();
   app.add_flag("--converge", o.converge, "Per frame, render passes until no loadable page is missing (reference quality)");
   bool coldStart = false;
   app.add_flag("--no-warm-start", coldStart, "Render the first frame in real-time mode too (node means until pages arrive)");
@@ -43,6 +51,7 @@ int main(int argc, char** argv) {
     o.width = w;
     o.height = h;
     o.shadows = !noShadows;
+    o.descentCache = !noDescentCache;
     o.warmStart = !coldStart;
     tool.report() = canopy::play::play(o, tool.device());
   });

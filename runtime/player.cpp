@@ -224,6 +224,11 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
     if (!std::isfinite(v)) throw usageError("shading parameters must be finite");
   if (!(o.sigma >= 0.0f) || !(o.stepFactor > 0.01f) || !(o.ambient >= 0.0f) || !(o.sunIntensity >= 0.0f) || !(o.shadowAperture >= 0.0f))
     throw usageError("--sigma, --ambient, --sun-intensity and --shadow-aperture must be >= 0 and --step > 0.01");
+  if (o.warpTileWidth < 1 || o.warpTileWidth > 32 || 32 % o.warpTileWidth != 0) throw usageError("--warp-tile must be 1, 2, 4, 8, 16 or 32");
+  if (o.shadowMethod != "map" && o.shadowMethod != "cone") throw usageError("--shadows must be map or cone, got '" + o.shadowMethod + "'");
+  if (!(o.shadowMapBias >= 0.0f && o.shadowMapBias <= 64.0f)) throw usageError("--shadow-map-bias must be in [0, 64]");
+  if (!(o.shadowMapCells >= 0.25f && o.shadowMapCells <= 1024.0f) || o.shadowMapMaxVoxels < 27 || o.shadowMapMaxVoxels > (1u << 28))
+    throw usageError("--shadow-map-cells must be in [0.25, 1024] and --shadow-map-voxels in [27, 2^28]");
 
   const CanopyFile file = CanopyFile::open(o.input);
   HostScene scene = buildScene(file);
@@ -244,12 +249,20 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   shade.stepFactor = o.stepFactor;
   shade.lodBias = o.lodBias;
   shade.shadowAperture = o.shadowAperture;
-  shade.shadows = o.shadows ? 1 : 0;
+  shade.shadows = !o.shadows ? kShadowsOff : (o.shadowMethod == "cone" ? kShadowsCone : kShadowsMap);
+  shade.shadowMapCells = o.shadowMapCells;
+  shade.shadowMapBias = o.shadowMapBias;
+  shade.descentCache = o.descentCache ? 1 : 0;
+  shade.shadowMapMaxVoxels = o.shadowMapMaxVoxels;
+  WorkCounters work{};
+  if (o.countWork) backend->countWork(&work);
+  backend->setPixelTile(o.warpTileWidth, 32 / o.warpTileWidth);
 
   std::vector<double> frameMs;
   std::vector<float> image;
   uint32_t stamp = 0;
   double firstCompleteS = -1.0;
+  uint64_t coldStartBytes = 0;  // streamed by the first complete frame
   uint64_t passes = 0;
   Progress progress("canopy-play", o.frames);
   for (int f = 0; f < o.frames; ++f) {
@@ -273,7 +286,10 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
       streamer.waitLoader();
     }
     frameMs.push_back(1000.0 * secondsSince(tf));
-    if (missing == 0 && firstCompleteS < 0.0) firstCompleteS = secondsSince(t0);
+    if (missing == 0 && firstCompleteS < 0.0) {
+      firstCompleteS = secondsSince(t0);
+      coldStartBytes = streamer.stats().bytesLoaded;
+    }
     if (!o.output.empty() || lastImage) backend->readImage(image);
     if (!o.output.empty()) writeImage(frameFileName(o.output, f, o.frames), image, o.width, o.height, o.background);
     progress.add();
@@ -302,12 +318,33 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   r["lit_models"] = scene.litModels;
   r["pages_streamed"] = st.pagesLoaded;
   r["mb_streamed"] = double(st.bytesLoaded) / (1024.0 * 1024.0);
+  r["cold_start_mb"] = double(coldStartBytes) / (1024.0 * 1024.0);
+  // the streaming rate of the cold start: what the first complete frame needed, over its time
+  // (open, scene build, every pass and every page read and upload included)
+  r["cold_start_mb_per_s"] = firstCompleteS > 0 ? double(coldStartBytes) / (1024.0 * 1024.0) / firstCompleteS : 0.0;
   r["stream_mb_per_s"] = total > 0 ? double(st.bytesLoaded) / (1024.0 * 1024.0) / total : 0.0;
   r["read_mb_per_s"] = st.loadSeconds > 0 ? double(st.bytesLoaded) / (1024.0 * 1024.0) / st.loadSeconds : 0.0;
   r["pages_deferred"] = st.pagesDeferred;
   r["evictions"] = st.evictions;
   r["corrupt_pages"] = st.corruptPages;
   r["seconds"] = total;
+  r["shadows"] = !o.shadows ? "off" : o.shadowMethod;
+  if (shade.shadows == kShadowsMap) {
+    const ShadowMapView& m = backend->lastShadowMap();
+    r["shadow_map"] = {{"dim", {m.dim[0], m.dim[1], m.dim[2]}}, {"voxel", m.voxel}};
+  }
+  if (o.countWork && backend->name() == "cpu")
+    r["work"] = {{"passes", passes},
+                 {"cones", work.cones},
+                 {"primary_steps", work.primarySteps},
+                 {"shaded_samples", work.shadedSamples},
+                 {"segments", work.segments},
+                 {"descents", work.descents},
+                 {"brick_samples", work.brickSamples},
+                 {"shadow_cones", work.shadowCones},
+                 {"shadow_steps", work.shadowSteps},
+                 {"shadow_map_lookups", work.shadowMapLookups},
+                 {"shadow_map_steps", work.shadowMapSteps}};
   char line[512];
   std::snprintf(line, sizeof(line),
                 "canopy-play: %d frame(s) %dx%d on %s: median %.2f ms, p95 %.2f ms; cache hit rate %.1f%%; streamed %llu pages "

@@ -32,6 +32,15 @@ struct PlayOptions {
   float shadowAperture = 0.03f;      // shadow cone growth per unit length (soft shadows, coarser
                                      // levels and longer steps far from the receiver)
   bool shadows = true;
+  std::string shadowMethod = "map";  // map: per-frame sun transmittance map; cone: a shadow cone per
+                                     // shadow interval (the exact, slow reference)
+  float shadowMapCells = 4.0f;       // extinction grid voxel in lattice cells of the finest instance...
+  float shadowMapBias = 1.5f;        // map lookups move this many blur widths (the larger of a map voxel
+                                     // and a finest node) towards the sun
+  uint32_t shadowMapMaxVoxels = 1u << 23;  // ...grown until the grid (and the map) has at most this many voxels
+  bool descentCache = true;          // reuse a ray's last octree descent per instance (same image, fewer descents)
+  int warpTileWidth = 8;             // CUDA: a warp renders a warpTileWidth x (32 / warpTileWidth) tile
+  bool countWork = false;            // CPU only: count cones, steps, samples, shadow work (report "work")
   float background[3] = {0.60f, 0.72f, 0.85f};  // linear RGB behind the scene (PNG only)
   bool converge = false;             // per frame, render passes until no loadable page is missing
   bool warmStart = true;             // the first frame converges (a complete first image), the

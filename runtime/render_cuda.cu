@@ -15,11 +15,35 @@
 namespace canopy::play {
 namespace {
 
+// One thread per pixel, a warp on a tileW x tileH tile of pixels (default 8x4 rather than 32
+// pixels of one row: the rays of a warp stay closer together, so they walk the same instances and
+// nodes longer). Thread j -> tile j / (tileW tileH), lane j % (tileW tileH).
 struct PixelKernel {
   SceneView scene;
   CameraView camera;
   float* out;
-  __device__ void operator()(int64_t i) const { renderPixel(scene, camera, i, out); }
+  int tilesX, tileW, tileH;
+  __device__ void operator()(int64_t j) const {
+    const int64_t tile = j / (tileW * tileH);
+    const int lane = int(j % (tileW * tileH));
+    const int x = int(tile % tilesX) * tileW + lane % tileW;
+    const int y = int(tile / tilesX) * tileH + lane / tileW;
+    if (x >= camera.width || y >= camera.height) return;
+    renderPixel(scene, camera, int64_t(y) * camera.width + x, out);
+  }
+};
+
+struct ExtinctionKernel {
+  SceneView scene;
+  ExtinctionGridView grid;
+  __device__ void operator()(int64_t i) const { buildExtinctionVoxel(scene, grid, i); }
+};
+
+struct ShadowMapKernel {
+  ShadowMapView map;
+  ExtinctionGridView grid;
+  int sub;
+  __device__ void operator()(int64_t c) const { buildShadowMapColumn(map, grid, sub, c); }
 };
 
 template <class T>
@@ -113,7 +137,31 @@ class CudaBackend final : public Backend {
     v.pageWanted = pageWanted_.data();
     v.stamp = stamp;
     v.shade = shade;
-    cuda::parallelFor(int64_t(pixels), PixelKernel{v, camera, image_.data()}, compute_, 128);
+    if (shade.shadows == kShadowsMap) {
+      // the extinction grid: once per scene (it depends on the instances and sigma only)
+      if (extinction_.size() == 0 || gridSigma_ != shade.sigma || gridCells_ != shade.shadowMapCells || gridCap_ != shade.shadowMapMaxVoxels) {
+        grid_ = planExtinctionGrid(scene, shade);
+        const size_t n = size_t(grid_.dim[0]) * grid_.dim[1] * grid_.dim[2];
+        CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
+        extinction_.resize(n);
+        grid_.k = extinction_.data();
+        cuda::parallelFor(int64_t(n), ExtinctionKernel{v, grid_}, compute_, 128);
+        gridSigma_ = shade.sigma, gridCells_ = shade.shadowMapCells, gridCap_ = shade.shadowMapMaxVoxels;
+      }
+      int sub = 1;
+      v.shadowMap = planShadowMap(scene, shade, grid_, sub);
+      const int64_t columns = int64_t(v.shadowMap.dim[0]) * v.shadowMap.dim[1];
+      const size_t n = size_t(columns) * v.shadowMap.dim[2];
+      if (shadowMap_.size() < n) {
+        CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
+        shadowMap_.resize(n + n / 4);  // room for the next frames' slightly larger boxes
+      }
+      v.shadowMap.T = shadowMap_.data();
+      cuda::parallelFor(columns, ShadowMapKernel{v.shadowMap, grid_, sub}, compute_, 128);
+    }
+    lastShadowMap_ = v.shadowMap;
+    const int tilesX = (camera.width + tileW_ - 1) / tileW_, tilesY = (camera.height + tileH_ - 1) / tileH_;
+    cuda::parallelFor(int64_t(tilesX) * tilesY * tileW_ * tileH_, PixelKernel{v, camera, image_.data(), tilesX, tileW_, tileH_}, compute_, 128);
     CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
   }
   void readStamps(std::vector<uint32_t>& slotUsed, std::vector<uint32_t>& pageWanted) override {
@@ -122,6 +170,7 @@ class CudaBackend final : public Backend {
     if (slots_) slotUsed_.download(slotUsed.data(), slots_);
     if (pageCount_) pageWanted_.download(pageWanted.data(), pageCount_);
   }
+  void setPixelTile(int w, int h) override { tileW_ = w, tileH_ = h; }
   void readImage(std::vector<float>& rgba) override {
     rgba.resize(image_.size());
     image_.download(rgba.data(), image_.size());
@@ -129,6 +178,7 @@ class CudaBackend final : public Backend {
 
  private:
   uint32_t pageBytes_, pageCount_, slots_ = 0;
+  int tileW_ = 8, tileH_ = 4;
   cudaStream_t compute_ = nullptr, copy_ = nullptr;
   cudaEvent_t tableCopied_[2] = {nullptr, nullptr};
   int mirror_ = 0;
@@ -140,7 +190,10 @@ class CudaBackend final : public Backend {
   cuda::DeviceBuffer<unsigned char> pool_;
   cuda::DeviceBuffer<int32_t> table_;
   cuda::DeviceBuffer<uint32_t> slotUsed_, pageWanted_;
-  cuda::DeviceBuffer<float> image_;
+  cuda::DeviceBuffer<float> image_, shadowMap_, extinction_;
+  ExtinctionGridView grid_{};
+  float gridSigma_ = -1.0f, gridCells_ = -1.0f;
+  uint32_t gridCap_ = 0;
   unsigned char* staging_ = nullptr;
   int32_t* tableHost_[2] = {nullptr, nullptr};
 };

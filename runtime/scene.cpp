@@ -199,6 +199,70 @@ void HostScene::setSun(V3 toSun) {
   }
 }
 
+namespace {
+
+// The voxel edge h0 grown until (ceil(extent / h) + 3) per axis fits in maxVoxels; dims out.
+double fitVoxel(const double extent[3], double h, uint32_t maxVoxels, int32_t dim[3]) {
+  const double cap = std::max(double(maxVoxels), 27.0);
+  for (;;) {
+    double n = 1.0;
+    for (int a = 0; a < 3; ++a) {
+      dim[a] = int32_t(std::ceil(extent[a] / h)) + 3;
+      n *= double(dim[a]);
+    }
+    if (n <= cap) return h;
+    h *= std::max(std::cbrt(n / cap), 1.0001);
+  }
+}
+
+}  // namespace
+
+ExtinctionGridView planExtinctionGrid(const HostScene& s, const ShadeParams& shade) {
+  ExtinctionGridView g{};
+  g.dim[0] = g.dim[1] = g.dim[2] = 1;
+  g.voxel = 1.0f;
+  if (s.empty) return g;
+  float cell = 3e38f;
+  for (const InstanceView& i : s.instances) cell = std::min(cell, i.cellWorld);
+  double extent[3];
+  for (int a = 0; a < 3; ++a) extent[a] = double(s.boundsHi[a]) - s.boundsLo[a];
+  const double h = fitVoxel(extent, std::max(double(shade.shadowMapCells) * cell, 1e-6), shade.shadowMapMaxVoxels, g.dim);
+  g.voxel = float(h);
+  for (int a = 0; a < 3; ++a) g.lo[a] = float(s.boundsLo[a] - h);  // voxel 1's centre at the low corner
+  return g;
+}
+
+ShadowMapView planShadowMap(const HostScene& s, const ShadeParams& shade, const ExtinctionGridView& grid, int& sub) {
+  ShadowMapView m{};
+  m.dim[0] = m.dim[1] = m.dim[2] = 1;
+  m.voxel = 1.0f;
+  sub = 1;
+  if (s.empty) return m;
+  const V3 w = normalize(shade.toSun * -1.0f);
+  const V3 helper = std::fabs(w.x) > 0.9f ? v3(0, 0, 1) : v3(1, 0, 0);
+  const V3 u = normalize(cross(helper, w));
+  m.axis[0] = u;
+  m.axis[1] = cross(w, u);
+  m.axis[2] = w;
+  double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
+  for (int c = 0; c < 8; ++c) {
+    const V3 p = v3((c & 1) ? s.boundsHi[0] : s.boundsLo[0], (c & 2) ? s.boundsHi[1] : s.boundsLo[1], (c & 4) ? s.boundsHi[2] : s.boundsLo[2]);
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], double(dot(p, m.axis[a])));
+      hi[a] = std::max(hi[a], double(dot(p, m.axis[a])));
+    }
+  }
+  const double extent[3] = {hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]};
+  const double h = fitVoxel(extent, double(grid.voxel), shade.shadowMapMaxVoxels, m.dim);
+  m.voxel = float(h);
+  sub = std::max(1, int(std::ceil(h / double(grid.voxel) - 1e-6)));
+  // the map's blur: a node (2 extinction voxels, sceneMeanExtinctionAt) or a map voxel, whichever is larger
+  m.bias = float(double(shade.shadowMapBias) * std::max(h, 2.0 * double(grid.voxel)));
+  // voxel 1's centre at the box's low corner: voxel 0 lies wholly outside it
+  m.origin = m.axis[0] * float(lo[0] - h) + m.axis[1] * float(lo[1] - h) + m.axis[2] * float(lo[2] - h);
+  return m;
+}
+
 SceneView hostSceneView(const HostScene& s) {
   SceneView v{};
   v.models = s.models.data();

@@ -40,6 +40,20 @@ struct HostScene {
 // Builds the scene; throws canopy::Error(InvalidInput) for a degenerate transform.
 HostScene buildScene(const CanopyFile& file);
 
+// The scene's extinction grid (kShadowsMap, cone.h): world axes over the scene's bounds with one
+// empty voxel of margin on every side; voxel edge shade.shadowMapCells x the smallest instance
+// cell, grown until the grid has at most shade.shadowMapMaxVoxels voxels. k is left null.
+ExtinctionGridView planExtinctionGrid(const HostScene& scene, const ShadeParams& shade);
+
+// The frame's sun transmittance map: its light-space frame (w = -toSun; u, v orthonormal,
+// continuous in the sun direction except where -toSun comes within 26 degrees of the x axis, where
+// the helper axis switches from x to z), the box around the scene's bounds with one empty voxel of
+// margin, and the extinction grid's voxel, grown until the map has at most
+// shade.shadowMapMaxVoxels voxels; the lookup bias is shade.shadowMapBias x the larger of a map
+// voxel and a finest node (2 extinction voxels). T is left null. `sub` receives the march steps per map voxel
+// (at most one extinction voxel each).
+ShadowMapView planShadowMap(const HostScene& scene, const ShadeParams& shade, const ExtinctionGridView& grid, int& sub);
+
 // The SceneView over the host arrays (cache pointers left null: the backend sets them).
 SceneView hostSceneView(const HostScene& scene);
 

@@ -67,13 +67,17 @@ bool Streamer::idle() {
   return todo_.empty() && busy_ == 0 && done_.empty();
 }
 
-void Streamer::beginPass(uint32_t frameStart) {
-  // staging buffers of the previous pass's uploads are free once the copies completed
+void Streamer::recycleStaging() {
+  // staging buffers of earlier uploads are free once the copies completed
   if (!uploadedBuffers_.empty()) {
     backend_.waitUploads();
     freeBuffers_.insert(freeBuffers_.end(), uploadedBuffers_.begin(), uploadedBuffers_.end());
     uploadedBuffers_.clear();
   }
+}
+
+void Streamer::beginPass(uint32_t frameStart) {
+  recycleStaging();
   std::deque<Job> finished;
   {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -108,6 +112,10 @@ void Streamer::beginPass(uint32_t frameStart) {
 }
 
 uint32_t Streamer::endPass(uint32_t stamp) {
+  // this pass's kernel waited for the uploads of its beginPass (the page table is published after
+  // them), so their staging buffers are free now at no cost; without this a pass that installed a
+  // full batch could queue nothing, and a converging frame would stop after two batches
+  recycleStaging();
   backend_.readStamps(slotUsed_, pageWanted_);
   for (uint32_t s = 0; s < slotUsed_.size(); ++s)
     if (slotUsed_[s] == stamp) {

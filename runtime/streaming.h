@@ -62,6 +62,7 @@ class Streamer {
     double seconds;
   };
   void loaderMain();
+  void recycleStaging();
 
   const CanopyFile& file_;
   Backend& backend_;

@@ -9,6 +9,7 @@
 // The scenes are built in-process from synthetic plants (bench/play/forest.h); --extra adds packed
 // scenes from the pipeline (e.g. the grove, or pipelines/scatter.py's forest packed by
 // canopy-octreepack --scene).
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -54,13 +55,17 @@ int main(int argc, char** argv) {
   int frames = 120;
   double cacheMb = 1024;
   uint32_t instances = 400;
-  std::vector<std::string> extra;
+  std::vector<std::string> extra, shadowMethods{"map"};
+  bool countWork = false, skipSynthetic = false;
   app.add_option("outdir", outDir, "Folder for scenes, PNG frames and results.json")->required();
   app.add_option("--size", size, "Frame size")->capture_default_str();
   app.add_option("--frames", frames, "Frames per scene")->capture_default_str();
   app.add_option("--cache-mb", cacheMb, "Cache budget (MiB)")->capture_default_str();
   app.add_option("--instances", instances, "Forest instances")->capture_default_str();
   app.add_option("--extra", extra, "NAME=FILE.canopy: more packed scenes (orbit camera)");
+  app.add_option("--shadows", shadowMethods, "Shadow methods to run, each scene with each (map, cone, off; a -nocache suffix turns off the descent cache, -rows puts a warp on 32 pixels of a row)")->capture_default_str();
+  app.add_flag("--count-work", countWork, "CPU only: count cones, steps, samples and shadow work per frame (results.json \"work\")");
+  app.add_flag("--only-extra", skipSynthetic, "Play only the --extra scenes (the synthetic ones are still written)");
   return tool.run(argc, argv, [&] {
     int w = 0, h = 0;
     if (std::sscanf(size.c_str(), "%dx%d", &w, &h) != 2) throw canopy::usageError("--size WxH");
@@ -80,17 +85,20 @@ int main(int argc, char** argv) {
     std::ofstream(walk) << R"({"keyframes":[{"frame":0,"position":[-45,6,-10],"target":[0,2,0],"fov":60},)"
                         << R"({"frame":)" << frames / 2 << R"(,"position":[0,3,-5],"target":[30,2,10],"fov":60},)"
                         << R"({"frame":)" << frames << R"(,"position":[40,4,15],"target":[0,2,0],"fov":60}]})";
-    scenes.push_back({"plant", plant, "orbit:elevation=15"});
-    scenes.push_back({"forest-orbit", forest, "orbit:elevation=30,distance=55"});
-    scenes.push_back({"forest-walk", forest, walk});
+    if (!skipSynthetic) {
+      scenes.push_back({"plant", plant, "orbit:elevation=15"});
+      scenes.push_back({"forest-orbit", forest, "orbit:elevation=30,distance=55"});
+      scenes.push_back({"forest-walk", forest, walk});
+    }
     for (const std::string& e : extra) {
       const size_t eq = e.find('=');
       if (eq == std::string::npos) throw canopy::usageError("--extra NAME=FILE.canopy");
       scenes.push_back({e.substr(0, eq), e.substr(eq + 1), "orbit:elevation=20"});
     }
     nlohmann::json results = nlohmann::json::array();
-    std::printf("| scene | device | size | frames | median ms | p95 ms | target 16.7 ms | first complete frame s | target 2 s | "
-                "hit rate | MB streamed | stream MB/s | disk read MB/s |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    std::printf("| scene | shadows | device | size | frames | median ms | p95 ms | target 16.7 ms | first complete frame s | target 2 s | "
+                "hit rate | MB streamed | stream MB/s | cold start MB (MB/s) | disk read MB/s |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    for (const std::string& method : shadowMethods)
     for (const Scene& s : scenes) {
       pl::PlayOptions o;
       o.input = s.file;
@@ -100,16 +108,36 @@ int main(int argc, char** argv) {
       o.camera = s.camera;
       o.sun = "orbit:azimuth=40,elevation=45,turns=0.1";  // the sun moves every frame
       o.cacheMb = cacheMb;
+      // "map-nocache": the map without the per-instance descent cache (timing comparison)
+      o.descentCache = method.find("nocache") == std::string::npos;
+      if (method.find("rows") != std::string::npos) o.warpTileWidth = 32;  // "map-rows": a warp on 32 pixels of a row
+      const std::string shadowMethod = method.substr(0, method.find('-'));
+      o.shadows = shadowMethod != "off";
+      if (o.shadows) o.shadowMethod = shadowMethod;
+      o.countWork = countWork;
       std::vector<float> last;
       nlohmann::json r = pl::play(o, tool.device(), &last);
-      pl::writePng(outDir + "/" + s.name + ".png", last, w, h, o.background);
+      pl::writePng(outDir + "/" + s.name + (method == "map" ? "" : "-" + method) + ".png", last, w, h, o.background);
       r["scene"] = s.name;
       results.push_back(r);
       const double med = r["frame_ms_median"], fc = r["first_complete_frame_s"];
-      std::printf("| %s | %s | %dx%d | %d | %.2f | %.2f | %s | %.3f | %s | %.1f%% | %.1f | %.1f | %.1f |\n", s.name.c_str(),
-                  std::string(r["device"]).c_str(), w, h, frames, med, double(r["frame_ms_p95"]), med <= 16.7 ? "met" : "missed", fc,
+      std::printf("| %s | %s | %s | %dx%d | %d | %.2f | %.2f | %s | %.3f | %s | %.1f%% | %.1f | %.1f | %.1f (%.0f) | %.1f |\n", s.name.c_str(),
+                  method.c_str(), std::string(r["device"]).c_str(), w, h, frames, med, double(r["frame_ms_p95"]), med <= 16.7 ? "met" : "missed", fc,
                   fc >= 0 && fc <= 2.0 ? "met" : "missed", 100.0 * double(r["cache_hit_rate"]), double(r["mb_streamed"]),
-                  double(r["stream_mb_per_s"]), double(r["read_mb_per_s"]));
+                  double(r["stream_mb_per_s"]), double(r["cold_start_mb"]), double(r["cold_start_mb_per_s"]), double(r["read_mb_per_s"]));
+      if (r.contains("work")) {
+        const auto& wk = r["work"];
+        const double cones = double(wk["cones"]), shaded = std::max(double(wk["shaded_samples"]), 1.0);
+        std::printf("|   work per frame (%s, %s) | cones %.0f, steps/cone %.1f, segments/step %.2f, descents/segment %.3f, shaded samples/cone %.1f, brick samples %.0f, "
+                    "shadow cones %.0f (%.3f per shaded sample), shadow steps %.0f (%.1f per shaded sample), map lookups %.0f, map steps %.0f |\n",
+                    s.name.c_str(), method.c_str(), cones / double(wk["passes"]), double(wk["primary_steps"]) / std::max(cones, 1.0),
+                    double(wk["segments"]) / std::max(double(wk["primary_steps"]), 1.0),
+                    double(wk["descents"]) / std::max(double(wk["segments"]), 1.0), double(wk["shaded_samples"]) / std::max(cones, 1.0),
+                    double(wk["brick_samples"]) / double(wk["passes"]), double(wk["shadow_cones"]) / double(wk["passes"]),
+                    double(wk["shadow_cones"]) / shaded, double(wk["shadow_steps"]) / double(wk["passes"]),
+                    double(wk["shadow_steps"]) / shaded, double(wk["shadow_map_lookups"]) / double(wk["passes"]),
+                    double(wk["shadow_map_steps"]) / double(wk["passes"]));
+      }
       std::fflush(stdout);
     }
     std::ofstream(outDir + "/results.json") << results.dump(2) << "\n";

@@ -129,6 +129,10 @@ TEST(PlayCli, ErrorsHaveDocumentedExitCodesAndLeaveNoOutput) {
       {"'" + sceneFile() + "' -o '" + out + "' --camera orbit:zoom=2 --device cpu", 1, "zoom"},
       {"'" + sceneFile() + "' -o '" + dir + "/no-such-dir/x.png' --size 8x8 --device cpu", 2, "no-such-dir"},
       {"'" + sceneFile() + "' -o '" + out + "' --camera '" + dir + "/missing.json' --device cpu", 2, "missing.json"},
+      {"'" + sceneFile() + "' -o '" + out + "' --shadows rays --device cpu", 1, "--shadows"},
+      {"'" + sceneFile() + "' -o '" + out + "' --shadow-map-cells 0 --device cpu", 1, "--shadow-map-cells"},
+      {"'" + sceneFile() + "' -o '" + out + "' --shadow-map-bias -1 --device cpu", 1, "--shadow-map-bias"},
+      {"'" + sceneFile() + "' -o '" + out + "' --warp-tile 3 --device cpu", 1, "--warp-tile"},
   };
   for (const Case& c : cases) {
     std::remove(out.c_str());

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <string>
 #include <vector>
@@ -75,11 +76,13 @@ TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
     std::string file;
     float sunIntensity;
     int litModels;
+    const char* shadows;  // the sun transmittance map (default) or the per-sample shadow cones
   };
-  const std::string lit = litForestFile();
-  for (const Case& k : {Case{forestFile(), 1.0f, 0}, Case{lit, 1.0f, 2}, Case{lit, 0.0f, 2}}) {
+  const std::string lit = litForestFile(), unlit = forestFile();
+  for (const Case& k : {Case{unlit, 1.0f, 0, "map"}, Case{unlit, 1.0f, 0, "cone"}, Case{lit, 1.0f, 2, "map"}, Case{lit, 0.0f, 2, "map"}}) {
     pl::PlayOptions o;
     o.input = k.file;
+    o.shadowMethod = k.shadows;
     o.width = 96;
     o.height = 64;
     o.converge = true;
@@ -94,8 +97,10 @@ TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
       const nlohmann::json rg = pl::play(o, cuda(), &gpu);
       EXPECT_EQ(int(rg["lit_models"]), k.litModels) << k.file;
       ASSERT_EQ(cpu.size(), gpu.size());
-      EXPECT_LT(rms(cpu, gpu), 2e-3) << k.file << " " << camera << " sun " << k.sunIntensity;
-      EXPECT_GT(fractionWithin(cpu, gpu, 1e-2f), 0.99) << k.file << " " << camera << " sun " << k.sunIntensity;
+      std::printf("%s %s shadows %s sun %.0f: RMS %.2e, within 1e-2: %.4f\n", k.file.c_str(), camera, k.shadows, k.sunIntensity,
+                  rms(cpu, gpu), fractionWithin(cpu, gpu, 1e-2f));
+      EXPECT_LT(rms(cpu, gpu), 2e-3) << k.file << " " << camera << " sun " << k.sunIntensity << " " << k.shadows;
+      EXPECT_GT(fractionWithin(cpu, gpu, 1e-2f), 0.99) << k.file << " " << camera << " sun " << k.sunIntensity << " " << k.shadows;
     }
   }
 }
