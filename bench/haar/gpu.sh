@@ -6,7 +6,8 @@
 # 2. bench_haar (CPU): size at 1% volume RMS vs dense fp32, the dissertation and ZFP; writes the
 #    .chaar the GPU benchmark samples.
 # 3. bench_haar_gpu: random trilinear lookups/s, compressed bricks vs a 3D texture and a plain array.
-# Logs: $OUT/test_haar_cuda.log, $OUT/bench_haar.md, $OUT/bench_haar_gpu.md.
+# 4. steps 2-3 again with fp16 coefficients.
+# Logs: $OUT/test_haar_cuda.log, $OUT/bench_haar{,_fp16}.md, $OUT/bench_haar_gpu{,_fp16}.md.
 set -euo pipefail
 : "${BIN:?set BIN to the directory holding the built binaries}"
 : "${OUT:?set OUT to a directory for the logs}"
@@ -32,4 +33,15 @@ tail -8 "$OUT/bench_haar.md" >&2
 echo "== bench_haar_gpu" >&2
 "$BIN/bench_haar_gpu" "$OUT/bench.chaar" > "$OUT/bench_haar_gpu.md" || status=1
 cat "$OUT/bench_haar_gpu.md" >&2
+
+# The same with fp16 coefficients (half the coefficient bytes; a different size/speed trade-off).
+echo "== fp16 coefficients" >&2
+if [[ -n "$LIGHT" ]]; then
+  "$BIN/bench_haar" "$LIGHT" --precision fp16 --write-chaar "$OUT/bench16.chaar" > "$OUT/bench_haar_fp16.md" || status=1
+else
+  "$BIN/bench_haar" --synthetic 128 --precision fp16 --write-chaar "$OUT/bench16.chaar" > "$OUT/bench_haar_fp16.md" || status=1
+fi
+tail -8 "$OUT/bench_haar_fp16.md" >&2
+"$BIN/bench_haar_gpu" "$OUT/bench16.chaar" > "$OUT/bench_haar_gpu_fp16.md" || status=1
+tail -4 "$OUT/bench_haar_gpu_fp16.md" >&2
 exit $status

@@ -2,8 +2,10 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <cstring>
 
 #include "canopy/device.h"
+#include "canopy/half.h"
 #include "canopy/parallel.h"
 #include "saxpy.h"
 
@@ -40,5 +42,20 @@ TEST(Dispatch, cuda_SaxpyMatchesCpu) {
   // Inputs are small multiples of 1/4, so a*x+y is exact in fp32 with or without FMA contraction:
   // the GPU must agree bit for bit.
   EXPECT_EQ(y, ref);
+#endif
+}
+
+TEST(Dispatch, cuda_HalfToFloatMatchesCpuForEveryHalf) {
+  if (canopy::cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA GPU";
+#ifdef CANOPY_HAS_CUDA
+  // The device converts with the hardware instruction (NaN/Inf excepted), the host in software:
+  // the same bits for all 65536 inputs, NaN payloads included.
+  const std::vector<uint32_t> gpu = halfToFloatAllCuda();
+  for (uint32_t h = 0; h < 65536; ++h) {
+    const float f = canopy::halfToFloat(uint16_t(h));
+    uint32_t cpu;
+    std::memcpy(&cpu, &f, sizeof cpu);
+    ASSERT_EQ(gpu[h], cpu) << "half 0x" << std::hex << h;
+  }
 #endif
 }

@@ -35,6 +35,16 @@ CANOPY_HD CANOPY_FORCEINLINE float bitsToFloat(uint32_t u) {
 constexpr float kHalfMax = 65504.0f;  // largest finite binary16
 
 CANOPY_HD CANOPY_FORCEINLINE float halfToFloat(uint16_t h) {
+#if defined(__CUDA_ARCH__)
+  // Every finite binary16 is exactly a float, so the hardware conversion gives the bits of the
+  // code below in one instruction (with the code below, sampling fp16 .chaar bricks on an H100 was
+  // 11x slower than fp32). Inf/NaN take the portable path, which keeps a NaN's payload.
+  if ((h & 0x7c00u) != 0x7c00u) {
+    float f;
+    asm("cvt.f32.f16 %0, %1;" : "=f"(f) : "h"(h));
+    return f;
+  }
+#endif
   const uint32_t sign = uint32_t(h & 0x8000u) << 16;
   const uint32_t exp = (h >> 10) & 0x1fu;
   uint32_t mant = h & 0x3ffu;
