@@ -159,6 +159,7 @@ struct ShadeParams {
   float shadowMapBias;      // kShadowsMap: lookup offset towards the sun, in blur widths (planShadowMap)
   uint32_t shadowMapMaxVoxels;  // kShadowsMap: voxels grow until a grid has at most this many
   int descentCache;         // 1: reuse a ray's last descent per instance (DescentCache); 0: always descend
+  int holdEmpty;            // 1: a primary ray keeps an instance's empty leaf segment to its end (EmptyHold)
 };
 
 // How a sample's sun transmittance Tshadow is found (ShadeParams::shadows).
@@ -183,7 +184,7 @@ struct ShadowMapView {
 // Work done by the CPU reference (bench-play --count-work; never counted on the GPU).
 struct WorkCounters {
   uint64_t cones, primarySteps, shadedSamples, segments, descents, brickSamples, shadowCones, shadowSteps, shadowMapLookups,
-      shadowMapSteps;
+      shadowMapSteps, heldSegments;
 };
 
 struct SceneView {
@@ -470,18 +471,42 @@ CANOPY_HD inline void segmentIndirect(const SceneView& s, const InstanceView& in
   sampleLbLight(g.lightItem, inst.sunWeights, g.light[0], g.light[1], g.light[2], s.shade.ambient, factor, out);
 }
 
+// An instance's segment that stays what it is (k = 0, the same end) over later steps: the primary
+// march keeps it instead of evaluating the instance again at each step of its neighbours (another
+// instance's brick steps, while this one crosses an empty node). instanceSegment() fills it for an
+// EMPTY LEAF (no children, no brick, density 0): evaluating the instance again at any t' with
+//   t' < until   and   the footprint's level at t' >= level (the leaf's level)
+// descends to the same leaf (the point is inside it, and a leaf ends every descent that reaches its
+// level) and returns k = 0 with the same end, bit for bit: `until` stops 3 epsilons (instanceSegment's
+// eps at the segment's end, which bounds the eps at t') short of the end, far more than the float
+// rounding of the point (a few ulps of unit coordinates, < 1e-3 cell) and of the exit. Everything
+// else (bricks, uniform nodes, misses, shadow cones) is evaluated at every step as before.
+struct EmptyHold {
+  float until;     // -inf: nothing held
+  float end;       // the held segment's end (its tEnd)
+  uint32_t level;  // the leaf's level
+};
+
+// The octree level instanceSegment() picks for footprint (world) at instance `inst`.
+CANOPY_HD CANOPY_FORCEINLINE uint32_t segmentLevel(const SceneView& s, const InstanceView& inst, uint32_t depth, float footprint) {
+  return levelForFootprint(depth, footprint / inst.cellWorld, s.shade.lodBias);
+}
+
 // The segment of instance `inst` at ray position t (world), the cone footprint there being
-// `footprint` (world units). tout is the end of the instance's box interval.
+// `footprint` (world units). tout is the end of the instance's box interval. `hold` (optional): set
+// for an empty leaf's segment, else cleared (see EmptyHold).
 CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView& inst, V3 o, V3 dir, float t,
-                                         float tout, float footprint, bool shading, DescentCache& cache) {
+                                         float tout, float footprint, bool shading, DescentCache& cache,
+                                         EmptyHold* hold = nullptr) {
   const ModelView& m = s.models[inst.model];
   const V3 uo = applyPoint(inst.worldToUnit, o);
   const V3 ud = applyVector(inst.worldToUnit, dir);
   const float cellsPerWorld = length(ud) * float(m.rootCells);
   // a thousandth of a cell, but at least a few float ulps of t (progress far from the origin)
   const float eps = fmaxf(1e-3f / cellsPerWorld, fabsf(t) * 1e-6f);
-  const uint32_t level = levelForFootprint(m.depth, footprint / inst.cellWorld, s.shade.lodBias);
+  const uint32_t level = segmentLevel(s, inst, m.depth, footprint);
   const V3 up = uo + ud * (t + eps);
+  if (hold) hold->until = -3.0e38f;
   CANOPY_PLAY_COUNT(s, segments, 1);
   if (!s.shade.descentCache || !descentCovers(cache, up, level)) {
     cache.d = descendResident(s, m, up, level, shading);
@@ -507,6 +532,12 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
     }
     g.tEnd = tEnd < tout ? tEnd : tout;
     if (shading && g.k > 0.0f) segmentLight(s, d, uo + ud * (0.5f * (t + g.tEnd)), 0.5f * (t + g.tEnd), g);
+    if (hold && c.density == 0.0f && d.node.brick == kCanopyNone && !(d.node.child != kCanopyNone && d.node.child < m.tileCount)) {
+      const float epsEnd = fmaxf(1e-3f / cellsPerWorld, fabsf(g.tEnd) * 1e-6f);
+      hold->until = g.tEnd - 3.0f * epsEnd;
+      hold->end = g.tEnd;
+      hold->level = d.level;
+    }
     return g;
   }
   writeStamp(s.slotUsed + d.brickPoolSlot, s.stamp);
@@ -532,7 +563,8 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
 struct Hit {
   uint32_t instance;
   float tin, tout;
-  uint32_t slot;  // its descent cache: InstanceWalk::caches[slot] (stays put while hits move)
+  uint32_t slot;    // its descent cache: InstanceWalk::caches[slot] (stays put while hits move)
+  EmptyHold hold;   // primary march: its current empty leaf segment (until = -inf: none)
 };
 
 // 3D-DDA over the instance grid plus the hit list.
@@ -577,13 +609,13 @@ CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 
       int far = 0;
       for (int h = 1; h < w.count; ++h) far = w.hits[h].tin > w.hits[far].tin ? h : far;
       if (w.hits[far].tin <= t0) continue;  // dropped; found again from a later cell it overlaps
-      w.hits[far] = Hit{id, t0, t1, w.hits[far].slot};
+      w.hits[far] = Hit{id, t0, t1, w.hits[far].slot, EmptyHold{-3.0e38f, 0.0f, 0u}};
       w.caches[w.hits[far].slot].valid = 0;
     } else {
       const uint32_t slot = lowestSetBit(w.freeSlots);
       w.freeSlots &= ~(1u << slot);
       w.caches[slot].valid = 0;
-      w.hits[w.count++] = Hit{id, t0, t1, slot};
+      w.hits[w.count++] = Hit{id, t0, t1, slot, EmptyHold{-3.0e38f, 0.0f, 0u}};
     }
   }
 }
@@ -863,6 +895,10 @@ CANOPY_HD inline float shadowTransmittance(const SceneView& s, V3 p, float footp
 }
 
 // One primary cone: origin o, unit direction d, footprint(t) = footprint0 + t * pixelAngle.
+// kWithCones: compiled with the shadow-cone path (kShadowsCone); without it that mode is treated
+// as kShadowsOff, so the CUDA kernel of the other modes carries neither the shadow cone's instance
+// walk (its hit list and descent caches in local memory) nor its registers. Same code otherwise.
+template <bool kWithCones>
 CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixelAngle, float tMax) {
   ConeResult r;
   r.rgb[0] = r.rgb[1] = r.rgb[2] = 0.0f;
@@ -883,15 +919,24 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
     const float footprint = t * pixelAngle;
     float minCell = 3.0e38f;
     for (int h = 0; h < w.count; ++h) {
-      const Hit& hit = w.hits[h];
+      Hit& hit = w.hits[h];
       if (hit.tin > t) {
         next = hit.tin < next ? hit.tin : next;
         seg[h].k = 0.0f;
         continue;
       }
       active = true;
-      seg[h] = instanceSegment(s, s.instances[hit.instance], o, d, t, hit.tout, footprint, true, w.caches[hit.slot]);
-      minCell = s.instances[hit.instance].cellWorld < minCell ? s.instances[hit.instance].cellWorld : minCell;
+      const InstanceView& inst = s.instances[hit.instance];
+      minCell = inst.cellWorld < minCell ? inst.cellWorld : minCell;
+      if (t < hit.hold.until && segmentLevel(s, inst, s.models[inst.model].depth, footprint) >= hit.hold.level) {
+        // the same empty segment as at the previous step (EmptyHold): k = 0 up to its end
+        CANOPY_PLAY_COUNT(s, heldSegments, 1);
+        seg[h].k = 0.0f;
+        next = hit.hold.end < next ? hit.hold.end : next;
+        continue;
+      }
+      seg[h] = instanceSegment(s, inst, o, d, t, hit.tout, footprint, true, w.caches[hit.slot],
+                               s.shade.holdEmpty ? &hit.hold : nullptr);
       k += seg[h].k;
       next = seg[h].tEnd < next ? seg[h].tEnd : next;
     }
@@ -912,7 +957,7 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
       if (s.shade.shadows == kShadowsMap) {
         sunT = shadowMapLookup(s.shadowMap, p);
         CANOPY_PLAY_COUNT(s, shadowMapLookups, 1);
-      } else if (s.shade.shadows == kShadowsCone && !(tm - shadowT < shadowSpacing)) {
+      } else if (kWithCones && s.shade.shadows == kShadowsCone && !(tm - shadowT < shadowSpacing)) {
         // One shadow cone per shadow interval: samples closer than about a voxel (1.5 cells of the
         // nearest active instance, or two footprints) to the last shadow origin reuse its value.
         sunT = shadowTransmittance(s, p, footprint);
@@ -956,16 +1001,26 @@ CANOPY_HD inline V3 cameraRay(const CameraView& c, int x, int y, float& footprin
   return d * (1.0f / len);
 }
 
-// Renders pixel i of the frame into rgba (premultiplied RGB, alpha = 1 - T).
-CANOPY_HD inline void renderPixel(const SceneView& s, const CameraView& c, int64_t i, float* rgba) {
+// Renders pixel i of the frame into rgba (premultiplied RGB, alpha = 1 - T). kWithCones must be
+// true when s.shade.shadows == kShadowsCone (renderPixel() picks it; the CUDA backend launches the
+// kernel of the mode).
+template <bool kWithCones>
+CANOPY_HD inline void renderPixelT(const SceneView& s, const CameraView& c, int64_t i, float* rgba) {
   const int x = int(i % c.width), y = int(i / c.width);
   float fpPerT;
   const V3 d = cameraRay(c, x, y, fpPerT);
-  const ConeResult r = traceCone(s, c.position, d, fpPerT, 3.0e37f);
+  const ConeResult r = traceCone<kWithCones>(s, c.position, d, fpPerT, 3.0e37f);
   rgba[4 * i + 0] = r.rgb[0];
   rgba[4 * i + 1] = r.rgb[1];
   rgba[4 * i + 2] = r.rgb[2];
   rgba[4 * i + 3] = 1.0f - r.transmittance;
+}
+
+CANOPY_HD inline void renderPixel(const SceneView& s, const CameraView& c, int64_t i, float* rgba) {
+  if (s.shade.shadows == kShadowsCone)
+    renderPixelT<true>(s, c, i, rgba);
+  else
+    renderPixelT<false>(s, c, i, rgba);
 }
 
 }  // namespace canopy::play
