@@ -45,6 +45,11 @@
 #include <math.h>
 #include <stdint.h>
 
+#if defined(__CUDA_ARCH__)
+#include <cuda_fp16.h>
+#endif
+
+#include "canopy/half.h"
 #include "canopy/hd.h"
 #include "canopy/sun_lookup.h"
 #include "formats/canopy_file.h"
@@ -205,6 +210,7 @@ struct SceneView {
   uint32_t pageBytes;
   uint32_t bricksPerPage;
   uint32_t lightItemsPerPage;
+  uint32_t litModels;            // models with LB light (0: renderPixel takes the path without light code)
   SceneLightView light;
   ShadeParams shade;
   ShadowMapView shadowMap;       // kShadowsMap: this pass's sun transmittance map
@@ -286,17 +292,72 @@ CANOPY_HD inline void ambientOnly(const SceneView& s, float sceneFactor, float o
   lbIndirect(none, zero, b0, s.shade.ambient, sceneFactor, out);
 }
 
+// fp16 -> float of a light value: the GPU's conversion instruction, halfToFloat on the host (both
+// exact: every binary16 value is a float). halfToFloat's branches and subnormal loop, inlined 96
+// times per light sample, were the bulk of the kernel's light code.
+CANOPY_HD CANOPY_FORCEINLINE float lightHalfToFloat(uint16_t h) {
+#if defined(__CUDA_ARCH__)
+  return __half2float(__ushort_as_half(h));
+#else
+  return halfToFloat(h);
+#endif
+}
+
+// The trilinear corners of node-local l in a light item: canopySampleLight's index and weight
+// arithmetic, done once for all the bases sampled at one point.
+struct LightCorners {
+  uint32_t offset[8];  // voxel index of corner c (x + 6 (y + 6 z))
+  float weight[8];     // its trilinear weight (0: skipped, as canopySampleLight skips it)
+};
+
+CANOPY_HD inline LightCorners lightCorners(float lx, float ly, float lz) {
+  const float l[3] = {lx, ly, lz};
+  int i0[3];
+  float f[3];
+  for (int a = 0; a < 3; ++a) {
+    float t = l[a] * float(kCanopyLightSize) + 0.5f;  // light voxel centres (i + 0.5) / 4 -> index i + 1
+    const float hi = float(kCanopyLightVoxels - 1) - 1e-6f;
+    t = t < 0.0f ? 0.0f : (t > hi ? hi : t);
+    const float fl = floorf(t);
+    i0[a] = int(fl);
+    f[a] = t - fl;
+  }
+  LightCorners k;
+  for (int c = 0; c < 8; ++c) {
+    const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+    k.weight[c] = (dx ? f[0] : 1.0f - f[0]) * (dy ? f[1] : 1.0f - f[1]) * (dz ? f[2] : 1.0f - f[2]);
+    k.offset[c] = uint32_t((i0[0] + dx) + int(kCanopyLightVoxels) * ((i0[1] + dy) + int(kCanopyLightVoxels) * (i0[2] + dz)));
+  }
+  return k;
+}
+
+// Base `base` (RGB) of a light item at the corners k: canopySampleLight's sums in its order (the same
+// value bit for bit on the host; tests/play compares them).
+CANOPY_HD CANOPY_FORCEINLINE void sampleLightBase(const uint16_t* item, uint32_t base, const LightCorners& k, float rgb[3]) {
+  for (int ch = 0; ch < 3; ++ch) {
+    const uint16_t* plane = item + size_t(base * 3 + uint32_t(ch)) * kCanopyLightVoxelCount;
+    float v = 0.0f;
+    for (int c = 0; c < 8; ++c) {
+      if (k.weight[c] == 0.0f) continue;
+      v += k.weight[c] * lightHalfToFloat(plane[k.offset[c]]);
+    }
+    rgb[ch] = v;
+  }
+}
+
 // The LB indirect light from a light item at node-local l in [0,1]^3: the (up to) three sun bases
-// of the instance's lookup and B_0, each trilinear (canopySampleLight), then lbIndirect().
+// of the instance's lookup and B_0, each trilinear (canopySampleLight's interpolation, the corners
+// found once), then lbIndirect().
 CANOPY_HD inline void sampleLbLight(const uint16_t* item, const sun::Weights& w, float lx, float ly, float lz, float ambient,
                                     float sceneFactor, float out[3]) {
+  const LightCorners k = lightCorners(lx, ly, lz);
   float bases[3][3];
   for (int v = 0; v < 3; ++v) {
     bases[v][0] = bases[v][1] = bases[v][2] = 0.0f;
-    if (w.weight[v] > 0.0f) canopySampleLight(item, uint32_t(w.base[v]), lx, ly, lz, bases[v]);
+    if (w.weight[v] > 0.0f) sampleLightBase(item, uint32_t(w.base[v]), k, bases[v]);
   }
   float b0[3];
-  canopySampleLight(item, 0, lx, ly, lz, b0);
+  sampleLightBase(item, 0, k, b0);
   lbIndirect(w, bases, b0, ambient, sceneFactor, out);
 }
 
@@ -462,9 +523,12 @@ CANOPY_HD inline void segmentLight(const SceneView& s, const Descent& d, V3 um, 
 
 // The indirect light of a shading segment of instance `inst` on the ray o + t dir: the LB light of
 // its light item, else the density-only ambient term; times the scene factor at its sample.
+// kWithLight = false: compiled without the LB light code, for scenes without lit models (where no
+// segment has a light item, so the result is the same).
+template <bool kWithLight = true>
 CANOPY_HD inline void segmentIndirect(const SceneView& s, const InstanceView& inst, const Segment& g, V3 o, V3 dir, float out[3]) {
   const float factor = sceneLightFactor(s.light, o + dir * g.tSample);
-  if (!g.lightItem) {
+  if (!kWithLight || !g.lightItem) {
     ambientOnly(s, factor, out);
     return;
   }
@@ -898,7 +962,7 @@ CANOPY_HD inline float shadowTransmittance(const SceneView& s, V3 p, float footp
 // kWithCones: compiled with the shadow-cone path (kShadowsCone); without it that mode is treated
 // as kShadowsOff, so the CUDA kernel of the other modes carries neither the shadow cone's instance
 // walk (its hit list and descent caches in local memory) nor its registers. Same code otherwise.
-template <bool kWithCones>
+template <bool kWithCones, bool kWithLight = true>
 CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixelAngle, float tMax) {
   ConeResult r;
   r.rgb[0] = r.rgb[1] = r.rgb[2] = 0.0f;
@@ -967,7 +1031,7 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
       for (int h = 0; h < w.count; ++h) {
         if (w.hits[h].tin > t || seg[h].k <= 0.0f) continue;
         float ind[3];
-        segmentIndirect(s, s.instances[w.hits[h].instance], seg[h], o, d, ind);
+        segmentIndirect<kWithLight>(s, s.instances[w.hits[h].instance], seg[h], o, d, ind);
         for (int c = 0; c < 3; ++c) kc[c] += seg[h].k * seg[h].albedo[c] * (s.shade.sun[c] * sunT + ind[c]);
       }
       const float scale = T * alpha / k;
@@ -1002,14 +1066,14 @@ CANOPY_HD inline V3 cameraRay(const CameraView& c, int x, int y, float& footprin
 }
 
 // Renders pixel i of the frame into rgba (premultiplied RGB, alpha = 1 - T). kWithCones must be
-// true when s.shade.shadows == kShadowsCone (renderPixel() picks it; the CUDA backend launches the
-// kernel of the mode).
-template <bool kWithCones>
+// true when s.shade.shadows == kShadowsCone, kWithLight when s.litModels > 0 (renderPixel() picks
+// them; the CUDA backend launches the kernel of the mode and scene).
+template <bool kWithCones, bool kWithLight>
 CANOPY_HD inline void renderPixelT(const SceneView& s, const CameraView& c, int64_t i, float* rgba) {
   const int x = int(i % c.width), y = int(i / c.width);
   float fpPerT;
   const V3 d = cameraRay(c, x, y, fpPerT);
-  const ConeResult r = traceCone<kWithCones>(s, c.position, d, fpPerT, 3.0e37f);
+  const ConeResult r = traceCone<kWithCones, kWithLight>(s, c.position, d, fpPerT, 3.0e37f);
   rgba[4 * i + 0] = r.rgb[0];
   rgba[4 * i + 1] = r.rgb[1];
   rgba[4 * i + 2] = r.rgb[2];
@@ -1017,10 +1081,11 @@ CANOPY_HD inline void renderPixelT(const SceneView& s, const CameraView& c, int6
 }
 
 CANOPY_HD inline void renderPixel(const SceneView& s, const CameraView& c, int64_t i, float* rgba) {
-  if (s.shade.shadows == kShadowsCone)
-    renderPixelT<true>(s, c, i, rgba);
+  const bool cones = s.shade.shadows == kShadowsCone, light = s.litModels > 0;
+  if (cones)
+    light ? renderPixelT<true, true>(s, c, i, rgba) : renderPixelT<true, false>(s, c, i, rgba);
   else
-    renderPixelT<false>(s, c, i, rgba);
+    light ? renderPixelT<false, true>(s, c, i, rgba) : renderPixelT<false, false>(s, c, i, rgba);
 }
 
 }  // namespace canopy::play

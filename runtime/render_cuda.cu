@@ -19,7 +19,7 @@ namespace {
 // pixels of one row: the rays of a warp stay closer together, so they walk the same instances and
 // nodes longer). Thread j -> tile j / (tileW tileH), lane j % (tileW tileH). One kernel per shadow
 // path (renderPixelT): the map's and no-shadow kernel has no shadow-cone code.
-template <bool kWithCones>
+template <bool kWithCones, bool kWithLight>
 struct PixelKernel {
   SceneView scene;
   CameraView camera;
@@ -31,24 +31,26 @@ struct PixelKernel {
     const int x = int(tile % tilesX) * tileW + lane % tileW;
     const int y = int(tile / tilesX) * tileH + lane / tileW;
     if (x >= camera.width || y >= camera.height) return;
-    renderPixelT<kWithCones>(scene, camera, int64_t(y) * camera.width + x, out);
+    renderPixelT<kWithCones, kWithLight>(scene, camera, int64_t(y) * camera.width + x, out);
   }
 };
 
 // The pixel kernel: 128 threads per block; kMinBlocks > 0 asks ptxas for at least that many
 // resident blocks per SM (__launch_bounds__: fewer registers, maybe spills), 0 leaves it free.
-// A timing knob (setPixelOccupancy): measured, not assumed.
+// Map kernels: 6 by default (ptxas -v, sm_90: 77 registers and no spill without light, 80 and 12
+// bytes of spills with it, against 81 and 128 unconstrained; see bench/play/NOTES.md for the
+// timings); 0 and 8 are timing knobs (setPixelOccupancy). Shadow-cone kernel: 5.
 constexpr int kPixelBlock = 128;
-template <bool kWithCones, int kMinBlocks>
-__global__ void __launch_bounds__(kPixelBlock, kMinBlocks > 0 ? kMinBlocks : 1) pixelKernel(PixelKernel<kWithCones> k, int64_t n) {
+template <bool kWithCones, bool kWithLight, int kMinBlocks>
+__global__ void __launch_bounds__(kPixelBlock, kMinBlocks > 0 ? kMinBlocks : 1) pixelKernel(PixelKernel<kWithCones, kWithLight> k, int64_t n) {
   const int64_t i = blockIdx.x * int64_t(kPixelBlock) + threadIdx.x;
   if (i < n) k(i);
 }
 
-template <bool kWithCones, int kMinBlocks>
-void launchPixels(const PixelKernel<kWithCones>& k, int64_t n, cudaStream_t stream) {
+template <bool kWithCones, bool kWithLight, int kMinBlocks>
+void launchPixels(const PixelKernel<kWithCones, kWithLight>& k, int64_t n, cudaStream_t stream) {
   if (n <= 0) return;
-  pixelKernel<kWithCones, kMinBlocks><<<unsigned((n + kPixelBlock - 1) / kPixelBlock), kPixelBlock, 0, stream>>>(k, n);
+  pixelKernel<kWithCones, kWithLight, kMinBlocks><<<unsigned((n + kPixelBlock - 1) / kPixelBlock), kPixelBlock, 0, stream>>>(k, n);
   CANOPY_CUDA_CHECK(cudaGetLastError());
 }
 
@@ -181,18 +183,25 @@ class CudaBackend final : public Backend {
     lastShadowMap_ = v.shadowMap;
     const int tilesX = (camera.width + tileW_ - 1) / tileW_, tilesY = (camera.height + tileH_ - 1) / tileH_;
     const int64_t threads = int64_t(tilesX) * tilesY * tileW_ * tileH_;
+    // one kernel per shadow path and per light (renderPixelT): the map's kernel for a scene
+    // without lit models has neither shadow-cone nor LB light code
     if (shade.shadows == kShadowsCone) {
-      launchPixels<true, 0>(PixelKernel<true>{v, camera, image_.data(), tilesX, tileW_, tileH_}, threads, compute_);
+      launchPixels<true, true, 5>(PixelKernel<true, true>{v, camera, image_.data(), tilesX, tileW_, tileH_}, threads, compute_);
+    } else if (scene.litModels > 0) {
+      launchMap(PixelKernel<false, true>{v, camera, image_.data(), tilesX, tileW_, tileH_}, threads);
     } else {
-      const PixelKernel<false> k{v, camera, image_.data(), tilesX, tileW_, tileH_};
-      if (minBlocks_ >= 8)
-        launchPixels<false, 8>(k, threads, compute_);
-      else if (minBlocks_ >= 6)
-        launchPixels<false, 6>(k, threads, compute_);
-      else
-        launchPixels<false, 0>(k, threads, compute_);
+      launchMap(PixelKernel<false, false>{v, camera, image_.data(), tilesX, tileW_, tileH_}, threads);
     }
     CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
+  }
+  template <bool kWithLight>
+  void launchMap(const PixelKernel<false, kWithLight>& k, int64_t threads) {
+    if (minBlocks_ == 0)
+      launchPixels<false, kWithLight, 0>(k, threads, compute_);
+    else if (minBlocks_ >= 8)
+      launchPixels<false, kWithLight, 8>(k, threads, compute_);
+    else
+      launchPixels<false, kWithLight, 6>(k, threads, compute_);
   }
   void readStamps(std::vector<uint32_t>& slotUsed, std::vector<uint32_t>& pageWanted) override {
     slotUsed.resize(slots_);
@@ -210,7 +219,7 @@ class CudaBackend final : public Backend {
  private:
   uint32_t pageBytes_, pageCount_, slots_ = 0;
   int tileW_ = 8, tileH_ = 4;
-  int minBlocks_ = 0;
+  int minBlocks_ = 6;
   cudaStream_t compute_ = nullptr, copy_ = nullptr;
   cudaEvent_t tableCopied_[2] = {nullptr, nullptr};
   int mirror_ = 0;
