@@ -37,9 +37,10 @@ struct PixelKernel {
 
 // The pixel kernel: 128 threads per block; kMinBlocks > 0 asks ptxas for at least that many
 // resident blocks per SM (__launch_bounds__: fewer registers, maybe spills), 0 leaves it free.
-// Map kernels: 6 by default (ptxas -v, sm_90: 77 registers and no spill without light, 80 and 12
-// bytes of spills with it, against 81 and 128 unconstrained; see bench/play/NOTES.md for the
-// timings); 0 and 8 are timing knobs (setPixelOccupancy). Shadow-cone kernel: 5.
+// Map kernels: unconstrained by default (ptxas -v, sm_90: 81 registers without light, 128 with it),
+// which measured 1-4% faster on the forest and the grove than 6 blocks (77 registers; 80 and 12
+// bytes of spills with light) and 8 (64, with spills) (bench/play/NOTES.md); 6 and 8 remain timing
+// knobs (setPixelOccupancy). Shadow-cone kernel: 5 (96 registers, as before the light change).
 constexpr int kPixelBlock = 128;
 template <bool kWithCones, bool kWithLight, int kMinBlocks>
 __global__ void __launch_bounds__(kPixelBlock, kMinBlocks > 0 ? kMinBlocks : 1) pixelKernel(PixelKernel<kWithCones, kWithLight> k, int64_t n) {
@@ -196,12 +197,12 @@ class CudaBackend final : public Backend {
   }
   template <bool kWithLight>
   void launchMap(const PixelKernel<false, kWithLight>& k, int64_t threads) {
-    if (minBlocks_ == 0)
-      launchPixels<false, kWithLight, 0>(k, threads, compute_);
-    else if (minBlocks_ >= 8)
+    if (minBlocks_ >= 8)
       launchPixels<false, kWithLight, 8>(k, threads, compute_);
-    else
+    else if (minBlocks_ >= 6)
       launchPixels<false, kWithLight, 6>(k, threads, compute_);
+    else
+      launchPixels<false, kWithLight, 0>(k, threads, compute_);
   }
   void readStamps(std::vector<uint32_t>& slotUsed, std::vector<uint32_t>& pageWanted) override {
     slotUsed.resize(slots_);
@@ -219,7 +220,7 @@ class CudaBackend final : public Backend {
  private:
   uint32_t pageBytes_, pageCount_, slots_ = 0;
   int tileW_ = 8, tileH_ = 4;
-  int minBlocks_ = 6;
+  int minBlocks_ = 0;
   cudaStream_t compute_ = nullptr, copy_ = nullptr;
   cudaEvent_t tableCopied_[2] = {nullptr, nullptr};
   int mirror_ = 0;
