@@ -45,6 +45,11 @@
 #include <math.h>
 #include <stdint.h>
 
+#if defined(__CUDA_ARCH__)
+#include <cuda_fp16.h>
+#endif
+
+#include "canopy/half.h"
 #include "canopy/hd.h"
 #include "canopy/sun_lookup.h"
 #include "formats/canopy_file.h"
@@ -159,6 +164,7 @@ struct ShadeParams {
   float shadowMapBias;      // kShadowsMap: lookup offset towards the sun, in blur widths (planShadowMap)
   uint32_t shadowMapMaxVoxels;  // kShadowsMap: voxels grow until a grid has at most this many
   int descentCache;         // 1: reuse a ray's last descent per instance (DescentCache); 0: always descend
+  int holdEmpty;            // 1: a primary ray keeps an instance's empty leaf segment to its end (EmptyHold)
 };
 
 // How a sample's sun transmittance Tshadow is found (ShadeParams::shadows).
@@ -183,7 +189,7 @@ struct ShadowMapView {
 // Work done by the CPU reference (bench-play --count-work; never counted on the GPU).
 struct WorkCounters {
   uint64_t cones, primarySteps, shadedSamples, segments, descents, brickSamples, shadowCones, shadowSteps, shadowMapLookups,
-      shadowMapSteps;
+      shadowMapSteps, heldSegments;
 };
 
 struct SceneView {
@@ -204,6 +210,7 @@ struct SceneView {
   uint32_t pageBytes;
   uint32_t bricksPerPage;
   uint32_t lightItemsPerPage;
+  uint32_t litModels;            // models with LB light (0: renderPixel takes the path without light code)
   SceneLightView light;
   ShadeParams shade;
   ShadowMapView shadowMap;       // kShadowsMap: this pass's sun transmittance map
@@ -285,17 +292,72 @@ CANOPY_HD inline void ambientOnly(const SceneView& s, float sceneFactor, float o
   lbIndirect(none, zero, b0, s.shade.ambient, sceneFactor, out);
 }
 
+// fp16 -> float of a light value: the GPU's conversion instruction, halfToFloat on the host (both
+// exact: every binary16 value is a float). halfToFloat's branches and subnormal loop, inlined 96
+// times per light sample, were the bulk of the kernel's light code.
+CANOPY_HD CANOPY_FORCEINLINE float lightHalfToFloat(uint16_t h) {
+#if defined(__CUDA_ARCH__)
+  return __half2float(__ushort_as_half(h));
+#else
+  return halfToFloat(h);
+#endif
+}
+
+// The trilinear corners of node-local l in a light item: canopySampleLight's index and weight
+// arithmetic, done once for all the bases sampled at one point.
+struct LightCorners {
+  uint32_t offset[8];  // voxel index of corner c (x + 6 (y + 6 z))
+  float weight[8];     // its trilinear weight (0: skipped, as canopySampleLight skips it)
+};
+
+CANOPY_HD inline LightCorners lightCorners(float lx, float ly, float lz) {
+  const float l[3] = {lx, ly, lz};
+  int i0[3];
+  float f[3];
+  for (int a = 0; a < 3; ++a) {
+    float t = l[a] * float(kCanopyLightSize) + 0.5f;  // light voxel centres (i + 0.5) / 4 -> index i + 1
+    const float hi = float(kCanopyLightVoxels - 1) - 1e-6f;
+    t = t < 0.0f ? 0.0f : (t > hi ? hi : t);
+    const float fl = floorf(t);
+    i0[a] = int(fl);
+    f[a] = t - fl;
+  }
+  LightCorners k;
+  for (int c = 0; c < 8; ++c) {
+    const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+    k.weight[c] = (dx ? f[0] : 1.0f - f[0]) * (dy ? f[1] : 1.0f - f[1]) * (dz ? f[2] : 1.0f - f[2]);
+    k.offset[c] = uint32_t((i0[0] + dx) + int(kCanopyLightVoxels) * ((i0[1] + dy) + int(kCanopyLightVoxels) * (i0[2] + dz)));
+  }
+  return k;
+}
+
+// Base `base` (RGB) of a light item at the corners k: canopySampleLight's sums in its order (the same
+// value bit for bit on the host; tests/play compares them).
+CANOPY_HD CANOPY_FORCEINLINE void sampleLightBase(const uint16_t* item, uint32_t base, const LightCorners& k, float rgb[3]) {
+  for (int ch = 0; ch < 3; ++ch) {
+    const uint16_t* plane = item + size_t(base * 3 + uint32_t(ch)) * kCanopyLightVoxelCount;
+    float v = 0.0f;
+    for (int c = 0; c < 8; ++c) {
+      if (k.weight[c] == 0.0f) continue;
+      v += k.weight[c] * lightHalfToFloat(plane[k.offset[c]]);
+    }
+    rgb[ch] = v;
+  }
+}
+
 // The LB indirect light from a light item at node-local l in [0,1]^3: the (up to) three sun bases
-// of the instance's lookup and B_0, each trilinear (canopySampleLight), then lbIndirect().
+// of the instance's lookup and B_0, each trilinear (canopySampleLight's interpolation, the corners
+// found once), then lbIndirect().
 CANOPY_HD inline void sampleLbLight(const uint16_t* item, const sun::Weights& w, float lx, float ly, float lz, float ambient,
                                     float sceneFactor, float out[3]) {
+  const LightCorners k = lightCorners(lx, ly, lz);
   float bases[3][3];
   for (int v = 0; v < 3; ++v) {
     bases[v][0] = bases[v][1] = bases[v][2] = 0.0f;
-    if (w.weight[v] > 0.0f) canopySampleLight(item, uint32_t(w.base[v]), lx, ly, lz, bases[v]);
+    if (w.weight[v] > 0.0f) sampleLightBase(item, uint32_t(w.base[v]), k, bases[v]);
   }
   float b0[3];
-  canopySampleLight(item, 0, lx, ly, lz, b0);
+  sampleLightBase(item, 0, k, b0);
   lbIndirect(w, bases, b0, ambient, sceneFactor, out);
 }
 
@@ -461,27 +523,54 @@ CANOPY_HD inline void segmentLight(const SceneView& s, const Descent& d, V3 um, 
 
 // The indirect light of a shading segment of instance `inst` on the ray o + t dir: the LB light of
 // its light item, else the density-only ambient term; times the scene factor at its sample.
+// kWithLight = false: compiled without the LB light code, for scenes without lit models (where no
+// segment has a light item, so the result is the same).
+template <bool kWithLight = true>
 CANOPY_HD inline void segmentIndirect(const SceneView& s, const InstanceView& inst, const Segment& g, V3 o, V3 dir, float out[3]) {
   const float factor = sceneLightFactor(s.light, o + dir * g.tSample);
-  if (!g.lightItem) {
+  if (!kWithLight || !g.lightItem) {
     ambientOnly(s, factor, out);
     return;
   }
   sampleLbLight(g.lightItem, inst.sunWeights, g.light[0], g.light[1], g.light[2], s.shade.ambient, factor, out);
 }
 
+// An instance's segment that stays what it is (k = 0, the same end) over later steps: the primary
+// march keeps it instead of evaluating the instance again at each step of its neighbours (another
+// instance's brick steps, while this one crosses an empty node). instanceSegment() fills it for an
+// EMPTY LEAF (no children, no brick, density 0): evaluating the instance again at any t' with
+//   t' < until   and   the footprint's level at t' >= level (the leaf's level)
+// descends to the same leaf (the point is inside it, and a leaf ends every descent that reaches its
+// level) and returns k = 0 with the same end, bit for bit: `until` stops 3 epsilons (instanceSegment's
+// eps at the segment's end, which bounds the eps at t') short of the end, far more than the float
+// rounding of the point (a few ulps of unit coordinates, < 1e-3 cell) and of the exit. Everything
+// else (bricks, uniform nodes, misses, shadow cones) is evaluated at every step as before.
+struct EmptyHold {
+  float until;     // -inf: nothing held
+  float end;       // the held segment's end (its tEnd)
+  uint32_t level;  // the leaf's level
+};
+
+// The octree level instanceSegment() picks for footprint (world) at instance `inst`.
+CANOPY_HD CANOPY_FORCEINLINE uint32_t segmentLevel(const SceneView& s, const InstanceView& inst, uint32_t depth, float footprint) {
+  return levelForFootprint(depth, footprint / inst.cellWorld, s.shade.lodBias);
+}
+
 // The segment of instance `inst` at ray position t (world), the cone footprint there being
-// `footprint` (world units). tout is the end of the instance's box interval.
+// `footprint` (world units). tout is the end of the instance's box interval. `hold` (optional): set
+// for an empty leaf's segment, else cleared (see EmptyHold).
 CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView& inst, V3 o, V3 dir, float t,
-                                         float tout, float footprint, bool shading, DescentCache& cache) {
+                                         float tout, float footprint, bool shading, DescentCache& cache,
+                                         EmptyHold* hold = nullptr) {
   const ModelView& m = s.models[inst.model];
   const V3 uo = applyPoint(inst.worldToUnit, o);
   const V3 ud = applyVector(inst.worldToUnit, dir);
   const float cellsPerWorld = length(ud) * float(m.rootCells);
   // a thousandth of a cell, but at least a few float ulps of t (progress far from the origin)
   const float eps = fmaxf(1e-3f / cellsPerWorld, fabsf(t) * 1e-6f);
-  const uint32_t level = levelForFootprint(m.depth, footprint / inst.cellWorld, s.shade.lodBias);
+  const uint32_t level = segmentLevel(s, inst, m.depth, footprint);
   const V3 up = uo + ud * (t + eps);
+  if (hold) hold->until = -3.0e38f;
   CANOPY_PLAY_COUNT(s, segments, 1);
   if (!s.shade.descentCache || !descentCovers(cache, up, level)) {
     cache.d = descendResident(s, m, up, level, shading);
@@ -507,6 +596,12 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
     }
     g.tEnd = tEnd < tout ? tEnd : tout;
     if (shading && g.k > 0.0f) segmentLight(s, d, uo + ud * (0.5f * (t + g.tEnd)), 0.5f * (t + g.tEnd), g);
+    if (hold && c.density == 0.0f && d.node.brick == kCanopyNone && !(d.node.child != kCanopyNone && d.node.child < m.tileCount)) {
+      const float epsEnd = fmaxf(1e-3f / cellsPerWorld, fabsf(g.tEnd) * 1e-6f);
+      hold->until = g.tEnd - 3.0f * epsEnd;
+      hold->end = g.tEnd;
+      hold->level = d.level;
+    }
     return g;
   }
   writeStamp(s.slotUsed + d.brickPoolSlot, s.stamp);
@@ -532,7 +627,8 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
 struct Hit {
   uint32_t instance;
   float tin, tout;
-  uint32_t slot;  // its descent cache: InstanceWalk::caches[slot] (stays put while hits move)
+  uint32_t slot;    // its descent cache: InstanceWalk::caches[slot] (stays put while hits move)
+  EmptyHold hold;   // primary march: its current empty leaf segment (until = -inf: none)
 };
 
 // 3D-DDA over the instance grid plus the hit list.
@@ -577,13 +673,13 @@ CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 
       int far = 0;
       for (int h = 1; h < w.count; ++h) far = w.hits[h].tin > w.hits[far].tin ? h : far;
       if (w.hits[far].tin <= t0) continue;  // dropped; found again from a later cell it overlaps
-      w.hits[far] = Hit{id, t0, t1, w.hits[far].slot};
+      w.hits[far] = Hit{id, t0, t1, w.hits[far].slot, EmptyHold{-3.0e38f, 0.0f, 0u}};
       w.caches[w.hits[far].slot].valid = 0;
     } else {
       const uint32_t slot = lowestSetBit(w.freeSlots);
       w.freeSlots &= ~(1u << slot);
       w.caches[slot].valid = 0;
-      w.hits[w.count++] = Hit{id, t0, t1, slot};
+      w.hits[w.count++] = Hit{id, t0, t1, slot, EmptyHold{-3.0e38f, 0.0f, 0u}};
     }
   }
 }
@@ -863,6 +959,10 @@ CANOPY_HD inline float shadowTransmittance(const SceneView& s, V3 p, float footp
 }
 
 // One primary cone: origin o, unit direction d, footprint(t) = footprint0 + t * pixelAngle.
+// kWithCones: compiled with the shadow-cone path (kShadowsCone); without it that mode is treated
+// as kShadowsOff, so the CUDA kernel of the other modes carries neither the shadow cone's instance
+// walk (its hit list and descent caches in local memory) nor its registers. Same code otherwise.
+template <bool kWithCones, bool kWithLight = true>
 CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixelAngle, float tMax) {
   ConeResult r;
   r.rgb[0] = r.rgb[1] = r.rgb[2] = 0.0f;
@@ -883,15 +983,24 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
     const float footprint = t * pixelAngle;
     float minCell = 3.0e38f;
     for (int h = 0; h < w.count; ++h) {
-      const Hit& hit = w.hits[h];
+      Hit& hit = w.hits[h];
       if (hit.tin > t) {
         next = hit.tin < next ? hit.tin : next;
         seg[h].k = 0.0f;
         continue;
       }
       active = true;
-      seg[h] = instanceSegment(s, s.instances[hit.instance], o, d, t, hit.tout, footprint, true, w.caches[hit.slot]);
-      minCell = s.instances[hit.instance].cellWorld < minCell ? s.instances[hit.instance].cellWorld : minCell;
+      const InstanceView& inst = s.instances[hit.instance];
+      minCell = inst.cellWorld < minCell ? inst.cellWorld : minCell;
+      if (t < hit.hold.until && segmentLevel(s, inst, s.models[inst.model].depth, footprint) >= hit.hold.level) {
+        // the same empty segment as at the previous step (EmptyHold): k = 0 up to its end
+        CANOPY_PLAY_COUNT(s, heldSegments, 1);
+        seg[h].k = 0.0f;
+        next = hit.hold.end < next ? hit.hold.end : next;
+        continue;
+      }
+      seg[h] = instanceSegment(s, inst, o, d, t, hit.tout, footprint, true, w.caches[hit.slot],
+                               s.shade.holdEmpty ? &hit.hold : nullptr);
       k += seg[h].k;
       next = seg[h].tEnd < next ? seg[h].tEnd : next;
     }
@@ -912,7 +1021,7 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
       if (s.shade.shadows == kShadowsMap) {
         sunT = shadowMapLookup(s.shadowMap, p);
         CANOPY_PLAY_COUNT(s, shadowMapLookups, 1);
-      } else if (s.shade.shadows == kShadowsCone && !(tm - shadowT < shadowSpacing)) {
+      } else if (kWithCones && s.shade.shadows == kShadowsCone && !(tm - shadowT < shadowSpacing)) {
         // One shadow cone per shadow interval: samples closer than about a voxel (1.5 cells of the
         // nearest active instance, or two footprints) to the last shadow origin reuse its value.
         sunT = shadowTransmittance(s, p, footprint);
@@ -922,7 +1031,7 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
       for (int h = 0; h < w.count; ++h) {
         if (w.hits[h].tin > t || seg[h].k <= 0.0f) continue;
         float ind[3];
-        segmentIndirect(s, s.instances[w.hits[h].instance], seg[h], o, d, ind);
+        segmentIndirect<kWithLight>(s, s.instances[w.hits[h].instance], seg[h], o, d, ind);
         for (int c = 0; c < 3; ++c) kc[c] += seg[h].k * seg[h].albedo[c] * (s.shade.sun[c] * sunT + ind[c]);
       }
       const float scale = T * alpha / k;
@@ -956,16 +1065,27 @@ CANOPY_HD inline V3 cameraRay(const CameraView& c, int x, int y, float& footprin
   return d * (1.0f / len);
 }
 
-// Renders pixel i of the frame into rgba (premultiplied RGB, alpha = 1 - T).
-CANOPY_HD inline void renderPixel(const SceneView& s, const CameraView& c, int64_t i, float* rgba) {
+// Renders pixel i of the frame into rgba (premultiplied RGB, alpha = 1 - T). kWithCones must be
+// true when s.shade.shadows == kShadowsCone, kWithLight when s.litModels > 0 (renderPixel() picks
+// them; the CUDA backend launches the kernel of the mode and scene).
+template <bool kWithCones, bool kWithLight>
+CANOPY_HD inline void renderPixelT(const SceneView& s, const CameraView& c, int64_t i, float* rgba) {
   const int x = int(i % c.width), y = int(i / c.width);
   float fpPerT;
   const V3 d = cameraRay(c, x, y, fpPerT);
-  const ConeResult r = traceCone(s, c.position, d, fpPerT, 3.0e37f);
+  const ConeResult r = traceCone<kWithCones, kWithLight>(s, c.position, d, fpPerT, 3.0e37f);
   rgba[4 * i + 0] = r.rgb[0];
   rgba[4 * i + 1] = r.rgb[1];
   rgba[4 * i + 2] = r.rgb[2];
   rgba[4 * i + 3] = 1.0f - r.transmittance;
+}
+
+CANOPY_HD inline void renderPixel(const SceneView& s, const CameraView& c, int64_t i, float* rgba) {
+  const bool cones = s.shade.shadows == kShadowsCone, light = s.litModels > 0;
+  if (cones)
+    light ? renderPixelT<true, true>(s, c, i, rgba) : renderPixelT<true, false>(s, c, i, rgba);
+  else
+    light ? renderPixelT<false, true>(s, c, i, rgba) : renderPixelT<false, false>(s, c, i, rgba);
 }
 
 }  // namespace canopy::play

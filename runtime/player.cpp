@@ -253,10 +253,12 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   shade.shadowMapCells = o.shadowMapCells;
   shade.shadowMapBias = o.shadowMapBias;
   shade.descentCache = o.descentCache ? 1 : 0;
+  shade.holdEmpty = o.holdEmpty ? 1 : 0;
   shade.shadowMapMaxVoxels = o.shadowMapMaxVoxels;
   WorkCounters work{};
   if (o.countWork) backend->countWork(&work);
   backend->setPixelTile(o.warpTileWidth, 32 / o.warpTileWidth);
+  backend->setPixelOccupancy(o.pixelMinBlocks);
 
   std::vector<double> frameMs;
   std::vector<float> image;
@@ -344,7 +346,8 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
                  {"shadow_cones", work.shadowCones},
                  {"shadow_steps", work.shadowSteps},
                  {"shadow_map_lookups", work.shadowMapLookups},
-                 {"shadow_map_steps", work.shadowMapSteps}};
+                 {"shadow_map_steps", work.shadowMapSteps},
+                 {"held_segments", work.heldSegments}};
   char line[512];
   std::snprintf(line, sizeof(line),
                 "canopy-play: %d frame(s) %dx%d on %s: median %.2f ms, p95 %.2f ms; cache hit rate %.1f%%; streamed %llu pages "

@@ -17,7 +17,9 @@ namespace {
 
 // One thread per pixel, a warp on a tileW x tileH tile of pixels (default 8x4 rather than 32
 // pixels of one row: the rays of a warp stay closer together, so they walk the same instances and
-// nodes longer). Thread j -> tile j / (tileW tileH), lane j % (tileW tileH).
+// nodes longer). Thread j -> tile j / (tileW tileH), lane j % (tileW tileH). One kernel per shadow
+// path (renderPixelT): the map's and no-shadow kernel has no shadow-cone code.
+template <bool kWithCones, bool kWithLight>
 struct PixelKernel {
   SceneView scene;
   CameraView camera;
@@ -29,9 +31,29 @@ struct PixelKernel {
     const int x = int(tile % tilesX) * tileW + lane % tileW;
     const int y = int(tile / tilesX) * tileH + lane / tileW;
     if (x >= camera.width || y >= camera.height) return;
-    renderPixel(scene, camera, int64_t(y) * camera.width + x, out);
+    renderPixelT<kWithCones, kWithLight>(scene, camera, int64_t(y) * camera.width + x, out);
   }
 };
+
+// The pixel kernel: 128 threads per block; kMinBlocks > 0 asks ptxas for at least that many
+// resident blocks per SM (__launch_bounds__: fewer registers, maybe spills), 0 leaves it free.
+// Map kernels: unconstrained by default (ptxas -v, sm_90: 81 registers without light, 128 with it),
+// which measured 1-4% faster on the forest and the grove than 6 blocks (77 registers; 80 and 12
+// bytes of spills with light) and 8 (64, with spills) (bench/play/NOTES.md); 6 and 8 remain timing
+// knobs (setPixelOccupancy). Shadow-cone kernel: 5 (96 registers, as before the light change).
+constexpr int kPixelBlock = 128;
+template <bool kWithCones, bool kWithLight, int kMinBlocks>
+__global__ void __launch_bounds__(kPixelBlock, kMinBlocks > 0 ? kMinBlocks : 1) pixelKernel(PixelKernel<kWithCones, kWithLight> k, int64_t n) {
+  const int64_t i = blockIdx.x * int64_t(kPixelBlock) + threadIdx.x;
+  if (i < n) k(i);
+}
+
+template <bool kWithCones, bool kWithLight, int kMinBlocks>
+void launchPixels(const PixelKernel<kWithCones, kWithLight>& k, int64_t n, cudaStream_t stream) {
+  if (n <= 0) return;
+  pixelKernel<kWithCones, kWithLight, kMinBlocks><<<unsigned((n + kPixelBlock - 1) / kPixelBlock), kPixelBlock, 0, stream>>>(k, n);
+  CANOPY_CUDA_CHECK(cudaGetLastError());
+}
 
 struct ExtinctionKernel {
   SceneView scene;
@@ -161,8 +183,26 @@ class CudaBackend final : public Backend {
     }
     lastShadowMap_ = v.shadowMap;
     const int tilesX = (camera.width + tileW_ - 1) / tileW_, tilesY = (camera.height + tileH_ - 1) / tileH_;
-    cuda::parallelFor(int64_t(tilesX) * tilesY * tileW_ * tileH_, PixelKernel{v, camera, image_.data(), tilesX, tileW_, tileH_}, compute_, 128);
+    const int64_t threads = int64_t(tilesX) * tilesY * tileW_ * tileH_;
+    // one kernel per shadow path and per light (renderPixelT): the map's kernel for a scene
+    // without lit models has neither shadow-cone nor LB light code
+    if (shade.shadows == kShadowsCone) {
+      launchPixels<true, true, 5>(PixelKernel<true, true>{v, camera, image_.data(), tilesX, tileW_, tileH_}, threads, compute_);
+    } else if (scene.litModels > 0) {
+      launchMap(PixelKernel<false, true>{v, camera, image_.data(), tilesX, tileW_, tileH_}, threads);
+    } else {
+      launchMap(PixelKernel<false, false>{v, camera, image_.data(), tilesX, tileW_, tileH_}, threads);
+    }
     CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
+  }
+  template <bool kWithLight>
+  void launchMap(const PixelKernel<false, kWithLight>& k, int64_t threads) {
+    if (minBlocks_ >= 8)
+      launchPixels<false, kWithLight, 8>(k, threads, compute_);
+    else if (minBlocks_ >= 6)
+      launchPixels<false, kWithLight, 6>(k, threads, compute_);
+    else
+      launchPixels<false, kWithLight, 0>(k, threads, compute_);
   }
   void readStamps(std::vector<uint32_t>& slotUsed, std::vector<uint32_t>& pageWanted) override {
     slotUsed.resize(slots_);
@@ -171,6 +211,7 @@ class CudaBackend final : public Backend {
     if (pageCount_) pageWanted_.download(pageWanted.data(), pageCount_);
   }
   void setPixelTile(int w, int h) override { tileW_ = w, tileH_ = h; }
+  void setPixelOccupancy(int minBlocks) override { minBlocks_ = minBlocks; }
   void readImage(std::vector<float>& rgba) override {
     rgba.resize(image_.size());
     image_.download(rgba.data(), image_.size());
@@ -179,6 +220,7 @@ class CudaBackend final : public Backend {
  private:
   uint32_t pageBytes_, pageCount_, slots_ = 0;
   int tileW_ = 8, tileH_ = 4;
+  int minBlocks_ = 0;
   cudaStream_t compute_ = nullptr, copy_ = nullptr;
   cudaEvent_t tableCopied_[2] = {nullptr, nullptr};
   int mirror_ = 0;

@@ -63,7 +63,7 @@ int main(int argc, char** argv) {
   app.add_option("--cache-mb", cacheMb, "Cache budget (MiB)")->capture_default_str();
   app.add_option("--instances", instances, "Forest instances")->capture_default_str();
   app.add_option("--extra", extra, "NAME=FILE.canopy: more packed scenes (orbit camera)");
-  app.add_option("--shadows", shadowMethods, "Shadow methods to run, each scene with each (map, cone, off; a -nocache suffix turns off the descent cache, -rows puts a warp on 32 pixels of a row)")->capture_default_str();
+  app.add_option("--shadows", shadowMethods, "Shadow methods to run, each scene with each (map, cone, off; a -nocache suffix turns off the descent cache, -nohold the held empty segments, -occ6/-occ8 the CUDA pixel kernel for 6/8 blocks per SM (default: unconstrained), -rows puts a warp on 32 pixels of a row)")->capture_default_str();
   app.add_flag("--count-work", countWork, "CPU only: count cones, steps, samples and shadow work per frame (results.json \"work\")");
   app.add_flag("--only-extra", skipSynthetic, "Play only the --extra scenes (the synthetic ones are still written)");
   return tool.run(argc, argv, [&] {
@@ -110,6 +110,9 @@ int main(int argc, char** argv) {
       o.cacheMb = cacheMb;
       // "map-nocache": the map without the per-instance descent cache (timing comparison)
       o.descentCache = method.find("nocache") == std::string::npos;
+      o.holdEmpty = method.find("nohold") == std::string::npos;  // "map-nohold": no EmptyHold
+      if (method.find("occ8") != std::string::npos) o.pixelMinBlocks = 8;  // "map-occ8": kernel for 8 blocks/SM
+      if (method.find("occ6") != std::string::npos) o.pixelMinBlocks = 6;  // "map-occ6": kernel for 6 blocks/SM
       if (method.find("rows") != std::string::npos) o.warpTileWidth = 32;  // "map-rows": a warp on 32 pixels of a row
       const std::string shadowMethod = method.substr(0, method.find('-'));
       o.shadows = shadowMethod != "off";
@@ -128,10 +131,11 @@ int main(int argc, char** argv) {
       if (r.contains("work")) {
         const auto& wk = r["work"];
         const double cones = double(wk["cones"]), shaded = std::max(double(wk["shaded_samples"]), 1.0);
-        std::printf("|   work per frame (%s, %s) | cones %.0f, steps/cone %.1f, segments/step %.2f, descents/segment %.3f, shaded samples/cone %.1f, brick samples %.0f, "
+        std::printf("|   work per frame (%s, %s) | cones %.0f, steps/cone %.1f, segments/step %.2f (held %.2f), descents/segment %.3f, shaded samples/cone %.1f, brick samples %.0f, "
                     "shadow cones %.0f (%.3f per shaded sample), shadow steps %.0f (%.1f per shaded sample), map lookups %.0f, map steps %.0f |\n",
                     s.name.c_str(), method.c_str(), cones / double(wk["passes"]), double(wk["primary_steps"]) / std::max(cones, 1.0),
                     double(wk["segments"]) / std::max(double(wk["primary_steps"]), 1.0),
+                    double(wk["held_segments"]) / std::max(double(wk["primary_steps"]), 1.0),
                     double(wk["descents"]) / std::max(double(wk["segments"]), 1.0), double(wk["shaded_samples"]) / std::max(cones, 1.0),
                     double(wk["brick_samples"]) / double(wk["passes"]), double(wk["shadow_cones"]) / double(wk["passes"]),
                     double(wk["shadow_cones"]) / shaded, double(wk["shadow_steps"]) / double(wk["passes"]),

@@ -8,7 +8,8 @@
 #    $OUT/bench/*.png, results.json and a Markdown table ($OUT/bench_play.md) for bench/RESULTS.md.
 # 3. the scenes again with a cache of 32 MiB (less than the forest's file): they must play.
 # FRAMES (default 120) and SHADOW_VARIANTS (default "--shadows map --shadows cone --shadows off";
-# e.g. "--shadows map --shadows map-rows --shadows map-nocache") change the benchmark runs.
+# e.g. "--shadows map --shadows map-rows --shadows map-nocache --shadows map-nohold --shadows map-occ8")
+# change the benchmark runs; SMALL_CACHE=0 skips step 3.
 set -u
 : "${BIN:?set BIN to the folder with test_play_cuda and bench-play}"
 : "${OUT:?set OUT to a folder for the logs}"
@@ -22,6 +23,6 @@ if [ -n "${GROVE:-}" ]; then EXTRA="--extra grove=$GROVE"; fi
 # shellcheck disable=SC2086
 "$BIN/bench-play" "$OUT/bench" --device cuda --size 1920x1080 --frames "$FRAMES" --cache-mb 1024 $EXTRA \
   ${SHADOW_VARIANTS:---shadows map --shadows cone --shadows off} 2> "$OUT/bench_play.err" | tee "$OUT/bench_play.md"
-"$BIN/bench-play" "$OUT/bench-small-cache" --device cuda --size 1920x1080 --frames "$FRAMES" --cache-mb 32 \
+[ "${SMALL_CACHE:-1}" = 0 ] || "$BIN/bench-play" "$OUT/bench-small-cache" --device cuda --size 1920x1080 --frames "$FRAMES" --cache-mb 32 \
   2> "$OUT/bench_play_small_cache.err" | tee "$OUT/bench_play_small_cache.md"
 echo "gpu.sh: done; see $OUT/bench_play.md"

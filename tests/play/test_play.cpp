@@ -320,6 +320,38 @@ TEST(Render, DescentCacheLeavesTheImageUnchanged) {
   }
 }
 
+// Held empty segments (cone.h, EmptyHold): a primary ray keeps an instance's empty leaf segment
+// over the steps of its neighbours instead of evaluating it again; the image must be the one of
+// evaluating every active instance at every step, bit for bit. Same 12-tree forest (crowns
+// overlapping along the rays, empty nodes of several levels beside bricks of the neighbours), from
+// among the trees and from afar (coarser levels, the level changing along the ray), with and
+// without the descent cache. The work counters show that segments were held at all.
+TEST(Render, HeldEmptySegmentsLeaveTheImageUnchanged) {
+  const std::string file = pt::tmpDir("scenes") + "/forest-hold.canopy";
+  std::vector<canopy::CanopyInstance> inst;
+  for (int i = 0; i < 12; ++i)
+    inst.push_back(pt::instanceAt(uint32_t(i % 2), float(i % 4) * 1.2f - 2.0f, 0.1f * float(i % 3), float(i / 4) * 1.2f - 1.2f, 1.0f,
+                                  0.9f * float(i)));
+  pt::writeScene(file, {canopy::octreepack::testing::syntheticPlant(40, 0, "a", 4), canopy::octreepack::testing::syntheticPlant(32, 0, "b", 3)},
+                 inst);
+  for (const char* camera : {"orbit:azimuth=50,elevation=10,distance=4,turns=0", "orbit:azimuth=-20,elevation=30,distance=14,turns=0"})
+    for (const bool cache : {true, false}) {
+      pl::PlayOptions o = smallView(file, 48, 32);
+      o.camera = camera;
+      o.descentCache = cache;
+      o.countWork = true;
+      nlohmann::json report;
+      const std::vector<float> held = render(o, &report);
+      EXPECT_GT(double(report["work"]["held_segments"]), 0.0) << camera;
+      o.holdEmpty = false;
+      const std::vector<float> evaluated = render(o);
+      ASSERT_EQ(held.size(), evaluated.size());
+      size_t differ = 0;
+      for (size_t i = 0; i < held.size(); ++i) differ += held[i] != evaluated[i];
+      EXPECT_EQ(differ, 0u) << camera << " cache " << cache;
+    }
+}
+
 TEST(Render, OverlappingInstancesAddTheirExtinction) {
   // two copies of the ball at the same place composite like one ball of twice the density
   const std::string two = pt::tmpDir("scenes") + "/two-spheres.canopy";
