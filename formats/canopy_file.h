@@ -338,8 +338,14 @@ CANOPY_HD CANOPY_FORCEINLINE const uint16_t* canopyLightInPage(const void* page,
                                            size_t(slot) * kCanopyLightItemBytes);
 }
 
-// Trilinear sample of base `base` (0..18) of a light item at node-local l in [0,1]^3, RGB into rgb.
-CANOPY_HD inline void canopySampleLight(const uint16_t* item, uint32_t base, float lx, float ly, float lz, float rgb[3]) {
+// The trilinear corners of node-local l in [0,1]^3 in a light item: voxel indices and weights,
+// computed once for all the bases sampled at one point (the player samples four).
+struct CanopyLightCorners {
+  uint32_t offset[8];  // voxel index of corner c (x + 6 (y + 6 z)), c = dx + 2 dy + 4 dz
+  float weight[8];     // its trilinear weight (0: the corner is skipped)
+};
+
+CANOPY_HD inline CanopyLightCorners canopyLightCorners(float lx, float ly, float lz) {
   const float l[3] = {lx, ly, lz};
   int i0[3];
   float f[3];
@@ -351,17 +357,32 @@ CANOPY_HD inline void canopySampleLight(const uint16_t* item, uint32_t base, flo
     i0[a] = int(fl);
     f[a] = t - fl;
   }
+  CanopyLightCorners k;
+  for (int c = 0; c < 8; ++c) {
+    const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+    k.weight[c] = (dx ? f[0] : 1.0f - f[0]) * (dy ? f[1] : 1.0f - f[1]) * (dz ? f[2] : 1.0f - f[2]);
+    k.offset[c] = uint32_t((i0[0] + dx) + int(kCanopyLightVoxels) * ((i0[1] + dy) + int(kCanopyLightVoxels) * (i0[2] + dz)));
+  }
+  return k;
+}
+
+// Base `base` (0..18) of a light item at the corners k, RGB into rgb.
+CANOPY_HD CANOPY_FORCEINLINE void canopySampleLightAt(const uint16_t* item, uint32_t base, const CanopyLightCorners& k,
+                                                      float rgb[3]) {
   for (int ch = 0; ch < 3; ++ch) {
-    const uint16_t* plane = item + size_t(base * 3 + ch) * kCanopyLightVoxelCount;
+    const uint16_t* plane = item + size_t(base * 3 + uint32_t(ch)) * kCanopyLightVoxelCount;
     float v = 0.0f;
     for (int c = 0; c < 8; ++c) {
-      const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
-      const float wt = (dx ? f[0] : 1.0f - f[0]) * (dy ? f[1] : 1.0f - f[1]) * (dz ? f[2] : 1.0f - f[2]);
-      if (wt == 0.0f) continue;
-      v += wt * halfToFloat(plane[(i0[0] + dx) + kCanopyLightVoxels * ((i0[1] + dy) + kCanopyLightVoxels * (i0[2] + dz))]);
+      if (k.weight[c] == 0.0f) continue;
+      v += k.weight[c] * halfToFloat(plane[k.offset[c]]);
     }
     rgb[ch] = v;
   }
+}
+
+// Trilinear sample of base `base` (0..18) of a light item at node-local l in [0,1]^3, RGB into rgb.
+CANOPY_HD inline void canopySampleLight(const uint16_t* item, uint32_t base, float lx, float ly, float lz, float rgb[3]) {
+  canopySampleLightAt(item, base, canopyLightCorners(lx, ly, lz), rgb);
 }
 
 // float -> IEEE binary16 for light items: canopy::floatToHalf (round to nearest even, NaN stays

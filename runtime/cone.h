@@ -45,10 +45,6 @@
 #include <math.h>
 #include <stdint.h>
 
-#if defined(__CUDA_ARCH__)
-#include <cuda_fp16.h>
-#endif
-
 #include "canopy/half.h"
 #include "canopy/hd.h"
 #include "canopy/sun_lookup.h"
@@ -292,72 +288,19 @@ CANOPY_HD inline void ambientOnly(const SceneView& s, float sceneFactor, float o
   lbIndirect(none, zero, b0, s.shade.ambient, sceneFactor, out);
 }
 
-// fp16 -> float of a light value: the GPU's conversion instruction, halfToFloat on the host (both
-// exact: every binary16 value is a float). halfToFloat's branches and subnormal loop, inlined 96
-// times per light sample, were the bulk of the kernel's light code.
-CANOPY_HD CANOPY_FORCEINLINE float lightHalfToFloat(uint16_t h) {
-#if defined(__CUDA_ARCH__)
-  return __half2float(__ushort_as_half(h));
-#else
-  return halfToFloat(h);
-#endif
-}
-
-// The trilinear corners of node-local l in a light item: canopySampleLight's index and weight
-// arithmetic, done once for all the bases sampled at one point.
-struct LightCorners {
-  uint32_t offset[8];  // voxel index of corner c (x + 6 (y + 6 z))
-  float weight[8];     // its trilinear weight (0: skipped, as canopySampleLight skips it)
-};
-
-CANOPY_HD inline LightCorners lightCorners(float lx, float ly, float lz) {
-  const float l[3] = {lx, ly, lz};
-  int i0[3];
-  float f[3];
-  for (int a = 0; a < 3; ++a) {
-    float t = l[a] * float(kCanopyLightSize) + 0.5f;  // light voxel centres (i + 0.5) / 4 -> index i + 1
-    const float hi = float(kCanopyLightVoxels - 1) - 1e-6f;
-    t = t < 0.0f ? 0.0f : (t > hi ? hi : t);
-    const float fl = floorf(t);
-    i0[a] = int(fl);
-    f[a] = t - fl;
-  }
-  LightCorners k;
-  for (int c = 0; c < 8; ++c) {
-    const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
-    k.weight[c] = (dx ? f[0] : 1.0f - f[0]) * (dy ? f[1] : 1.0f - f[1]) * (dz ? f[2] : 1.0f - f[2]);
-    k.offset[c] = uint32_t((i0[0] + dx) + int(kCanopyLightVoxels) * ((i0[1] + dy) + int(kCanopyLightVoxels) * (i0[2] + dz)));
-  }
-  return k;
-}
-
-// Base `base` (RGB) of a light item at the corners k: canopySampleLight's sums in its order (the same
-// value bit for bit on the host; tests/play compares them).
-CANOPY_HD CANOPY_FORCEINLINE void sampleLightBase(const uint16_t* item, uint32_t base, const LightCorners& k, float rgb[3]) {
-  for (int ch = 0; ch < 3; ++ch) {
-    const uint16_t* plane = item + size_t(base * 3 + uint32_t(ch)) * kCanopyLightVoxelCount;
-    float v = 0.0f;
-    for (int c = 0; c < 8; ++c) {
-      if (k.weight[c] == 0.0f) continue;
-      v += k.weight[c] * lightHalfToFloat(plane[k.offset[c]]);
-    }
-    rgb[ch] = v;
-  }
-}
-
 // The LB indirect light from a light item at node-local l in [0,1]^3: the (up to) three sun bases
 // of the instance's lookup and B_0, each trilinear (canopySampleLight's interpolation, the corners
 // found once), then lbIndirect().
 CANOPY_HD inline void sampleLbLight(const uint16_t* item, const sun::Weights& w, float lx, float ly, float lz, float ambient,
                                     float sceneFactor, float out[3]) {
-  const LightCorners k = lightCorners(lx, ly, lz);
+  const CanopyLightCorners k = canopyLightCorners(lx, ly, lz);
   float bases[3][3];
   for (int v = 0; v < 3; ++v) {
     bases[v][0] = bases[v][1] = bases[v][2] = 0.0f;
-    if (w.weight[v] > 0.0f) sampleLightBase(item, uint32_t(w.base[v]), k, bases[v]);
+    if (w.weight[v] > 0.0f) canopySampleLightAt(item, uint32_t(w.base[v]), k, bases[v]);
   }
   float b0[3];
-  sampleLightBase(item, 0, k, b0);
+  canopySampleLightAt(item, 0, k, b0);
   lbIndirect(w, bases, b0, ambient, sceneFactor, out);
 }
 

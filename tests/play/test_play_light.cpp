@@ -10,7 +10,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <fstream>
 #include <string>
 #include <vector>
@@ -106,32 +105,6 @@ TEST(Light, SampleLbLightIsLbIndirectOfTheTrilinearBases) {
       for (int v = 0; v < 3; ++v) want += w.weight[v] * (float(w.base[v]) + t);
       want *= 0.5f * float(c + 1) / 8.0f;
       EXPECT_NEAR(out[c], want, 1e-5f) << "lx " << lx << " channel " << c;
-    }
-  }
-}
-
-// The player's light sampler (cone.h: the corners found once for all bases, the GPU's fp16
-// conversion) gives canopySampleLight's values bit for bit on the host, for every base, at points
-// inside, on the faces and outside the node (clamped), on an item of pseudo-random fp16 values
-// (subnormals, zeros and negative values included).
-TEST(Light, PlayerLightSamplerEqualsCanopySampleLight) {
-  std::vector<uint16_t> item(canopy::kCanopyLightItemBytes / 2);
-  uint32_t x = 12345u;
-  for (uint16_t& h : item) {
-    x = x * 1664525u + 1013904223u;
-    const uint32_t r = x >> 8;
-    h = (r % 17u == 0u) ? uint16_t(r & 0x83ffu)                                       // +-subnormal or zero
-                        : canopy::canopyFloatToHalf((float(r % 100000u) / 1000.0f - 20.0f));  // [-20, 80)
-  }
-  const float pts[][3] = {{0.0f, 0.0f, 0.0f}, {1.0f, 1.0f, 1.0f}, {0.37f, 0.81f, 0.05f}, {0.5f, 0.25f, 0.75f},
-                          {-0.2f, 1.3f, 0.6f},  {0.999f, 0.001f, 0.5f}, {0.125f, 0.375f, 0.625f}};
-  for (const auto& p : pts) {
-    const pl::LightCorners k = pl::lightCorners(p[0], p[1], p[2]);
-    for (uint32_t base = 0; base < canopy::kCanopyLightBases; ++base) {
-      float want[3], got[3];
-      canopy::canopySampleLight(item.data(), base, p[0], p[1], p[2], want);
-      pl::sampleLightBase(item.data(), base, k, got);
-      for (int c = 0; c < 3; ++c) EXPECT_EQ(std::memcmp(&got[c], &want[c], sizeof(float)), 0) << base << " " << c << ": " << got[c] << " vs " << want[c];
     }
   }
 }
