@@ -37,14 +37,15 @@ constexpr float kHalfMax = 65504.0f;  // largest finite binary16
 CANOPY_HD CANOPY_FORCEINLINE float halfToFloat(uint16_t h) {
 #if defined(__CUDA_ARCH__)
   // Every finite binary16 is exactly a float, so the hardware conversion gives the bits of the
-  // code below in one instruction (with the code below, sampling fp16 .chaar bricks on an H100 was
-  // 11x slower than fp32). Inf/NaN take the portable path, which keeps a NaN's payload.
-  if ((h & 0x7c00u) != 0x7c00u) {
-    float f;
-    asm("cvt.f32.f16 %0, %1;" : "=f"(f) : "h"(h));
-    return f;
-  }
-#endif
+  // portable code below in one instruction; Inf/NaN are rebuilt by a branch-free select, which keeps
+  // a NaN's payload as the portable code does. Measured on an H100: with the portable code inlined
+  // here fp16 .chaar sampling ran 11x slower than fp32; with a branch to it per value the player's
+  // grove frame took 22.7 ms, with this select 16.2 ms.
+  float f;
+  asm("cvt.f32.f16 %0, %1;" : "=f"(f) : "h"(h));
+  const uint32_t special = (uint32_t(h & 0x8000u) << 16) | 0x7f800000u | (uint32_t(h & 0x3ffu) << 13);
+  return (h & 0x7c00u) == 0x7c00u ? bitsToFloat(special) : f;
+#else
   const uint32_t sign = uint32_t(h & 0x8000u) << 16;
   const uint32_t exp = (h >> 10) & 0x1fu;
   uint32_t mant = h & 0x3ffu;
@@ -58,6 +59,7 @@ CANOPY_HD CANOPY_FORCEINLINE float halfToFloat(uint16_t h) {
     --e;
   }
   return bitsToFloat(sign | (e << 23) | ((mant & 0x3ffu) << 13));
+#endif
 }
 
 CANOPY_HD CANOPY_FORCEINLINE uint16_t floatToHalf(float f) {
