@@ -40,7 +40,7 @@ struct SceneInstance {
 };
 
 struct Scene {
-  std::string source;  // where the instances were computed from ("<path> xxh64:<hex>"), or ""
+  std::string source;  // where the instances were computed from ("<file name> xxh64:<hex>"), or ""
   std::vector<SceneModel> models;
   std::vector<SceneInstance> instances;
 };

@@ -39,14 +39,20 @@ def write_atomic(path, text):
 
 def sha256(path):
     h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
+    try:
+        with open(path, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                h.update(block)
+    except OSError as e:
+        fail(2, f"{path}: {e.strerror}")
     return h.hexdigest()
 
 
 def octreepack(tool, *args):
-    r = subprocess.run([tool, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        r = subprocess.run([tool, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    except OSError as e:
+        fail(2, f"{tool}: cannot run ({e.strerror})")
     return r.returncode, r.stdout, r.stderr.strip()
 
 

@@ -13,7 +13,7 @@ dir=${1:?bundle folder}
 B=/tmp/canopy-play-bundle
 mkdir -p "$B" && tar xJf "$dir/canopy.tar.xz" -C "$B"
 export PATH=$B/bin:$PATH LD_LIBRARY_PATH=$B/lib BIN=$B/bin
-mkdir -p "${BUILT_AT:-/work/wt-play/build}/tests/play/tmp"
+mkdir -p "${BUILT_AT:?set BUILT_AT to the build folder test_play_cuda was compiled in}/tests/play/tmp"
 [[ -f $dir/grove.canopy ]] && export GROVE=$dir/grove.canopy
 W=/tmp/play-gpu-logs
 mkdir -p "$W"

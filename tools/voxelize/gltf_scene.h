@@ -12,7 +12,7 @@ namespace canopy::mesh {
 // Models: one per glTF mesh that a node of the default scene uses, in ascending mesh index, named
 // after the mesh ("mesh<N>" where it has no name), `mesh` set, `density` left empty for the
 // caller. Instances: one per such node, in scene traversal order, with the node's name and world
-// matrix. `source` is "<path> xxh64:<hash of the file>" (what canopy-voxelize stamps into the
+// matrix. `source` is "<file name> xxh64:<hash of the file>" (what canopy-voxelize stamps into the
 // lattices it writes). Throws canopy::Error naming the file (unreadable, corrupt, no node with a
 // mesh, an instance matrix that checkScene rejects).
 Scene sceneFromGltf(const std::string& path);

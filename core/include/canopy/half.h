@@ -1,7 +1,8 @@
 // half.h: IEEE 754 binary16 ("fp16") <-> float conversion, identical on host and device.
 //
-// Written with integer bit manipulation only (no F16C, no cuda_fp16.h), so a coefficient decoded on
-// the CPU and in a CUDA kernel gives the same float bit for bit. floatToHalf rounds to nearest,
+// Written with integer bit manipulation (no F16C, no cuda_fp16.h; on the device halfToFloat uses the
+// exact hardware conversion, Inf/NaN rebuilt in software), so a coefficient decoded on the CPU and
+// in a CUDA kernel gives the same float bit for bit (tests/core: all 65536 halves). floatToHalf rounds to nearest,
 // ties to even, keeps subnormals, maps overflow to +-inf and NaN to a quiet NaN; halfToFloat is
 // exact (every binary16 value is a float).
 #pragma once
