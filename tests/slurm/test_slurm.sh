@@ -114,7 +114,7 @@ mk -k -j2 O="$T/bad-srun" PLANTS="$B" LAUNCH="$SRUN" GPU_LAUNCH_FLAGS= plants > 
 rc=$?
 set -e
 ((rc != 0)) || fail "make -k through srun exited 0 with a corrupt plant"
-{ grep -E "error" "$T/bad-srun.log" || true; } | sed 's/^/   /'
+{ grep -E "error:" "$T/bad-srun.log" || true; } | sed 's/^/   /'
 grep -q "broken.glb" "$T/bad-srun.log" || { cat "$T/bad-srun.log"; fail "the tool's error does not name broken.glb"; }
 for g in "${good[@]}"; do cmp -s "$REF/$g.canopy" "$T/bad-srun/plants/$g.canopy" || fail "srun: good plant $g not built"; done
 no_leftovers "$T/bad-srun/plants" broken
