@@ -15,26 +15,13 @@ import json
 import os
 import subprocess
 import sys
-import tempfile
+
+from atomic_write import write_atomic
 
 
 def fail(code, msg):
     print(f"library_index.py: error: {msg}", file=sys.stderr)
     sys.exit(code)
-
-
-def write_atomic(path, text):
-    d = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", dir=d)
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def sha256(path):
@@ -60,7 +47,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("-o", "--output", required=True)
     ap.add_argument("--octreepack", default="canopy-octreepack")
-    ap.add_argument("files", nargs="+")
+    ap.add_argument("files", nargs="*")
     a = ap.parse_args()
     base = os.path.dirname(os.path.abspath(a.output))
     plants = []

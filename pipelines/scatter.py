@@ -21,7 +21,8 @@ import math
 import os
 import random
 import sys
-import tempfile
+
+from atomic_write import write_atomic
 
 
 def parse_model(spec):
@@ -115,11 +116,7 @@ def main(argv):
             + ",\n  ".join(json.dumps(i) for i in instances)
             + "\n ]\n}\n")
     try:
-        fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(a.output) + ".", dir=out_dir)
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, a.output)
+        write_atomic(a.output, text)
     except OSError as e:
         print(f"scatter.py: error: {a.output}: {e.strerror}", file=sys.stderr)
         return 2
