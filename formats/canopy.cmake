@@ -5,5 +5,6 @@ target_include_directories(canopy_file PUBLIC ${CMAKE_CURRENT_LIST_DIR}/..)
 target_link_libraries(canopy_file PUBLIC canopy_core PRIVATE canopy_warnings)
 
 # canopy_file_write: the .canopy writer (no OpenVDB either).
-add_library(canopy_file_write STATIC ${CMAKE_CURRENT_LIST_DIR}/canopy_write.cpp)
-target_link_libraries(canopy_file_write PUBLIC canopy_file PRIVATE canopy_warnings)
+# canopy_haar_pages.cpp re-pages a .chaar's bricks as a model's Haar light.
+add_library(canopy_file_write STATIC ${CMAKE_CURRENT_LIST_DIR}/canopy_write.cpp ${CMAKE_CURRENT_LIST_DIR}/canopy_haar_pages.cpp)
+target_link_libraries(canopy_file_write PUBLIC canopy_file canopy_chaar PRIVATE canopy_warnings)

@@ -40,6 +40,7 @@ const char* sectionName(uint32_t kind) {
     case CanopySectionKind::PageTable: return "PageTable";
     case CanopySectionKind::SceneLight: return "SceneLight";
     case CanopySectionKind::Metadata: return "Metadata";
+    case CanopySectionKind::HaarIndex: return "HaarIndex";
   }
   return "unknown";
 }
@@ -125,6 +126,7 @@ CanopyFile& CanopyFile::operator=(CanopyFile&& o) noexcept {
     sceneLight_ = o.sceneLight_;
     sceneLightValues_ = std::move(o.sceneLightValues_);
     metadata_ = std::move(o.metadata_);
+    haarIndex_ = std::move(o.haarIndex_);
   }
   return *this;
 }
@@ -194,6 +196,9 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
                       " is newer than this reader (" + std::to_string(kCanopyMajor) + "." +
                       std::to_string(kCanopyMinor) + "); update canopy");
   if (h.major < 1) bad(P, "invalid format version " + std::to_string(h.major) + "." + std::to_string(h.minor));
+  // Everything in a file of an older major, or of this major up to this minor, is known to this
+  // reader; a newer minor may add section and page kinds that are skipped.
+  const bool knownMinor = h.major < kCanopyMajor || h.minor <= kCanopyMinor;
   if (crc32(0, &h, offsetof(CanopyFileHeader, headerCrc)) != h.headerCrc) bad(P, "header checksum mismatch");
   if (h.headerBytes != sizeof(CanopyFileHeader)) bad(P, "header size " + u64s(h.headerBytes) + " != 128");
   if (h.fileBytes != fileBytes)
@@ -283,6 +288,11 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
   }
   if (const CanopySection* md = findSection(CanopySectionKind::Metadata))
     metadata_.assign(reinterpret_cast<const char*>(resident_.data() + md->offset), size_t(md->bytes));
+  if (const CanopySection* hi = findSection(CanopySectionKind::HaarIndex)) {
+    if (h.major < 2) bad(P, "a 1.x file has a HaarIndex section");
+    if (hi->itemBytes != sizeof(uint32_t)) bad(P, "section HaarIndex has the wrong item size");
+    haarIndex_ = copyArray<uint32_t>(resident_, hi->offset, hi->itemCount);
+  }
 
   // --- models: ranges and the tree ------------------------------------------------------------
   const uint64_t tileTotal = st.itemCount;
@@ -307,15 +317,51 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
       bad(P, name + " brick pages out of range");
     const uint64_t lpp = h.lightItemsPerPage;
     const bool lit = (M.flags & kCanopyModelHasLight) != 0;
-    if ((lit ? M.lightCount != M.brickCount : M.lightCount != 0) || M.lightPageCount != (uint64_t(M.lightCount) + lpp - 1) / lpp ||
+    const bool haar = (M.flags & kCanopyModelHaarLight) != 0;
+    // With Haar light the float16 items cover the bricks above the finest level only (checked in
+    // the tree walk below); without, every brick or none.
+    const bool itemsOk = haar ? (lit && M.lightCount <= M.brickCount) : (lit ? M.lightCount == M.brickCount : M.lightCount == 0);
+    if (!itemsOk || M.lightPageCount != (uint64_t(M.lightCount) + lpp - 1) / lpp ||
         uint64_t(M.firstLightPage) + M.lightPageCount > h.pageCount)
       bad(P, name + " light items or pages out of range");
+    if (haar) {
+      if (h.major < 2) bad(P, name + " has Haar light in a 1.x file");
+      if (M.haarPrecision > 1) bad(P, name + " Haar coefficient precision " + u64s(M.haarPrecision) + " is unknown");
+      uint64_t groups = 1;
+      for (int a = 0; a < 3; ++a) {
+        const int64_t dim = int64_t(M.latticeMax[a]) - M.latticeMin[a] + 1;
+        if (M.haarBrickDims[a] != (dim + 2) / 3 || M.haarGroupDims[a] != (uint64_t(M.haarBrickDims[a]) + 3) / 4)
+          bad(P, name + " Haar brick geometry does not match its lattice");
+        groups *= M.haarGroupDims[a];
+      }
+      if (M.haarGroups > groups || uint64_t(M.haarIndexCount) != groups + uint64_t(kCanopyHaarGroupBricks) * M.haarGroups ||
+          uint64_t(M.firstHaarIndex) + M.haarIndexCount > haarIndex_.size())
+        bad(P, name + " Haar index out of range");
+      if (uint64_t(M.firstHaarPage) + M.haarPageCount > h.pageCount || (M.haarItemCount > 0) != (M.haarPageCount > 0) ||
+          M.haarItemCount > uint64_t(M.haarPageCount) * kCanopyHaarMaxItemsPerPage)
+        bad(P, name + " Haar pages out of range");
+      // Every group table entry names a distinct block.
+      std::vector<unsigned char> used(M.haarGroups, 0);
+      const uint32_t* idx = haarIndex_.data() + M.firstHaarIndex;
+      for (uint64_t g = 0; g < groups; ++g) {
+        if (idx[g] == kCanopyNone) continue;
+        if (idx[g] >= M.haarGroups || used[idx[g]]) bad(P, name + " Haar group table entry " + u64s(g) + " is invalid");
+        used[idx[g]] = 1;
+      }
+      for (uint32_t b = 0; b < M.haarGroups; ++b)
+        if (!used[b]) bad(P, name + " Haar block " + u64s(b) + " is not in the group table");
+    } else if (M.haarPrecision || M.haarGroups || M.haarItemCount || M.firstHaarIndex || M.haarIndexCount || M.firstHaarPage ||
+               M.haarPageCount) {
+      bad(P, name + " has Haar fields but no Haar light flag");
+    }
     // Every tile must be reached exactly once from the root, at a level < depth: no cycles, no
     // shared or orphan tiles, every brick id in range.
     std::vector<unsigned char> seen(M.tileCount, 0);
     std::vector<std::pair<uint32_t, uint32_t>> stack;  // (tile, level of its nodes)
     auto checkNode = [&](const CanopyNode& n, uint32_t level) {
       if (n.brick != kCanopyNone && n.brick >= M.brickCount) bad(P, name + ": brick id " + u64s(n.brick) + " out of range");
+      if (haar && level < M.depth && n.brick != kCanopyNone && n.brick >= M.lightCount)
+        bad(P, name + ": brick " + u64s(n.brick) + " above the finest level has no light item");
       if (!(n.density >= 0.0f) || n.density > 3.0e38f) bad(P, name + ": node density is negative or not finite");
       if (n.child == kCanopyNone) return;
       if (n.child >= M.tileCount) bad(P, name + ": child tile " + u64s(n.child) + " out of range");
@@ -338,12 +384,13 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
   {
     std::vector<unsigned char> owner(h.pageCount, 0);
     for (const CanopyModel& M : models_)
-      for (auto [first, count] : {std::pair<uint32_t, uint32_t>{M.firstBrickPage, M.brickPageCount}, {M.firstLightPage, M.lightPageCount}})
+      for (auto [first, count] : {std::pair<uint32_t, uint32_t>{M.firstBrickPage, M.brickPageCount}, {M.firstLightPage, M.lightPageCount},
+                                  {M.firstHaarPage, M.haarPageCount}})
         for (uint32_t p = first; p < first + count; ++p) {
           if (owner[p]) bad(P, "page " + u64s(p) + " is claimed by two model ranges");
           owner[p] = 1;
         }
-    if (h.minor <= kCanopyMinor)  // a newer minor may add page kinds outside the model ranges
+    if (knownMinor)  // a newer minor may add page kinds outside the model ranges
       for (uint32_t p = 0; p < h.pageCount; ++p)
         if (!owner[p]) bad(P, "page " + u64s(p) + " belongs to no model");
   }
@@ -373,10 +420,97 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
       const uint32_t count = std::min<uint32_t>(h.lightItemsPerPage, M.lightCount - first);
       if (e.firstItem != first || e.itemCount != count || e.payloadBytes != count * h.lightItemBytes)
         bad(P, name + ": light item range does not match its model");
-    } else if (h.minor <= kCanopyMinor || h.major < kCanopyMajor) {
+    } else if (e.kind == uint32_t(CanopyPageKind::HaarLight) && (M.flags & kCanopyModelHaarLight)) {
+      if (i < M.firstHaarPage || i >= M.firstHaarPage + M.haarPageCount) bad(P, name + ": Haar page outside its model's range");
+      // Haar pages hold whole items, numbered on from the model's previous Haar page.
+      const uint32_t first = i == M.firstHaarPage ? 0 : pages_[i - 1].firstItem + pages_[i - 1].itemCount;
+      if (e.firstItem != first || e.itemCount == 0 || e.itemCount > kCanopyHaarMaxItemsPerPage ||
+          uint64_t(e.firstItem) + e.itemCount > M.haarItemCount || e.payloadBytes < 4 * (uint64_t(e.itemCount) + 1) ||
+          (i + 1 == M.firstHaarPage + M.haarPageCount && e.firstItem + e.itemCount != M.haarItemCount))
+        bad(P, name + ": Haar item range does not match its model");
+    } else if (knownMinor) {
       bad(P, name + ": unknown page kind " + u64s(e.kind));
     }
   }
+
+  // --- Haar locations: every stored brick's (page, item) is in range and names a distinct item ---
+  for (uint32_t m = 0; m < models_.size(); ++m) {
+    const CanopyModel& M = models_[m];
+    if (!(M.flags & kCanopyModelHaarLight)) continue;
+    const std::string name = "model " + std::to_string(m);
+    const uint64_t groups = uint64_t(M.haarGroupDims[0]) * M.haarGroupDims[1] * M.haarGroupDims[2];
+    const uint32_t* loc = haarIndex_.data() + M.firstHaarIndex + groups;
+    std::vector<unsigned char> seen(M.haarItemCount, 0);
+    uint64_t stored = 0;
+    for (uint64_t i = 0; i < uint64_t(kCanopyHaarGroupBricks) * M.haarGroups; ++i) {
+      if (loc[i] == kCanopyNone) continue;
+      const uint32_t page = loc[i] >> kCanopyHaarItemBits, item = loc[i] & (kCanopyHaarMaxItemsPerPage - 1u);
+      if (page >= M.haarPageCount || item >= pages_[M.firstHaarPage + page].itemCount)
+        bad(P, name + ": Haar brick location " + u64s(i) + " out of range");
+      const uint32_t id = pages_[M.firstHaarPage + page].firstItem + item;
+      if (seen[id]) bad(P, name + ": Haar item " + u64s(id) + " is referenced twice");
+      seen[id] = 1;
+      ++stored;
+    }
+    if (stored != M.haarItemCount) bad(P, name + ": " + u64s(M.haarItemCount - stored) + " Haar items are not referenced");
+  }
+}
+
+CanopyHaarView CanopyFile::haarView(uint32_t m) const {
+  const CanopyModel& M = models_.at(m);
+  CanopyHaarView v{};
+  v.index = haarIndex_.data() + M.firstHaarIndex;
+  for (int a = 0; a < 3; ++a) {
+    v.latticeMin[a] = M.latticeMin[a];
+    v.latticeMax[a] = M.latticeMax[a];
+    v.groupDims[a] = M.haarGroupDims[a];
+  }
+  v.firstPage = M.firstHaarPage;
+  v.fp16 = M.haarPrecision == uint32_t(haar::Precision::Fp16) ? 1u : 0u;
+  return v;
+}
+
+std::string canopyCheckHaarPage(const void* pageImage, uint32_t pageBytes, bool fp16) {
+  const auto* page = static_cast<const unsigned char*>(pageImage);
+  CanopyPageHeader ph;
+  std::memcpy(&ph, page, sizeof ph);
+  const uint64_t n = ph.itemCount, pb = ph.payloadBytes;
+  if (pb > pageBytes - sizeof(CanopyPageHeader) || n == 0 || n > kCanopyHaarMaxItemsPerPage || 4 * (n + 1) > pb)
+    return "Haar page item count or payload size invalid";
+  const unsigned char* payload = page + sizeof(CanopyPageHeader);
+  std::vector<uint32_t> off(size_t(n) + 1);
+  std::memcpy(off.data(), payload, off.size() * sizeof(uint32_t));
+  if (off[0] != 4 * (n + 1) || off[size_t(n)] != pb) return "Haar page item offsets do not span the payload";
+  // Offsets first (so that every item lies inside the payload), then each item.
+  for (size_t i = 0; i < size_t(n); ++i)
+    if (off[i + 1] <= off[i] || off[i + 1] % 4 != 0 || off[i + 1] - off[i] < kCanopyHaarRecordBytes)
+      return "Haar item " + std::to_string(i) + ": bad offset";
+  const uint64_t entryBytes = fp16 ? 6 : 12;
+  for (size_t i = 0; i < size_t(n); ++i) {
+    const std::string what = "Haar item " + std::to_string(i) + ": ";
+    haar::BrickRecord rec[kCanopyLightBases];
+    std::memcpy(rec, payload + off[i], sizeof rec);
+    uint64_t entries = 0;
+    for (uint32_t b = 0; b < kCanopyLightBases; ++b) {
+      if (rec[b].first() != entries) return what + "records are not a running sum of their masks";
+      entries += uint64_t(haar::popcount64(rec[b].mask()));
+    }
+    const uint64_t need = (kCanopyHaarRecordBytes + entries * entryBytes + 3) / 4 * 4;
+    if (need != uint64_t(off[i + 1]) - off[i]) return what + "size does not match its coefficient count";
+    const unsigned char* c = payload + off[i] + kCanopyHaarRecordBytes;
+    for (uint64_t k = 0; k < 3 * entries; ++k) {
+      float v;
+      if (fp16) {
+        uint16_t hv;
+        std::memcpy(&hv, c + 2 * k, 2);
+        v = halfToFloat(hv);
+      } else {
+        std::memcpy(&v, c + 4 * k, 4);
+      }
+      if (!std::isfinite(v)) return what + "non-finite coefficient";
+    }
+  }
+  return "";
 }
 
 CanopyLookup CanopyFile::descend(uint32_t m, float ux, float uy, float uz, uint32_t maxLevel) const {
@@ -393,6 +527,11 @@ void CanopyFile::readPage(uint32_t index, void* dst) const {
   const std::string name = "page " + std::to_string(index);
   if (std::memcmp(&ph, &e, sizeof ph) != 0) bad(path_, name + ": page header differs from the page table");
   if (canopyPageCrc(dst, header_.pageBytes) != ph.crc) bad(path_, name + ": checksum mismatch");
+  // A Haar page's offsets and masks index into it on the device: its structure is checked too.
+  if (ph.kind == uint32_t(CanopyPageKind::HaarLight)) {
+    const std::string problem = canopyCheckHaarPage(dst, header_.pageBytes, models_[ph.model].haarPrecision != 0);
+    if (!problem.empty()) bad(path_, name + ": " + problem);
+  }
 }
 
 std::vector<unsigned char> CanopyFile::readPage(uint32_t index) const {

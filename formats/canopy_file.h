@@ -1,4 +1,4 @@
-// canopy_file.h: the packed, streamable scene file (`.canopy`), version 1.0.
+// canopy_file.h: the packed, streamable scene file (`.canopy`), version 2.0 (reads 1.0 too).
 //
 // A .canopy file holds plant models (each a sparse GigaVoxels-style octree of bricks, thesis ch. 5),
 // instances of those models (model id + transform) and an optional coarse scene lighting lattice.
@@ -17,6 +17,7 @@
 //                       PageTable   CanopyPageEntry[pageCount]       32 B each
 //                       SceneLight  CanopySceneLight + float[dim]    (optional)
 //                       Metadata    UTF-8 JSON: tool version, inputs and their hashes (optional)
+//                       HaarIndex   uint32[]: Haar-lit models' group tables + brick locations (2.0)
 //   pagesOffset       page 0, page 1, ...        pageBytes each (65536), pagesOffset % pageBytes == 0
 //   fileBytes         end of file (== pagesOffset + pageCount * pageBytes; nothing may follow)
 //
@@ -64,12 +65,34 @@
 // A model without lighting (density only) has no light pages; the player then shows direct and
 // ambient light.
 //
+// Haar light pages (kind HaarLight, 2.0; models flagged kCanopyModelHaarLight, packed from a
+// .chaar): the finest level's lighting is the .chaar's own compressed bricks (formats/chaar.h:
+// 3^3 cells + a forward border, 19 records of a 64-bit mask and a first-coefficient index, the
+// kept coefficients), re-paged unchanged, so a sample equals haar::chaarSample bit for bit and the
+// light keeps the .chaar's compression. Such a model has float16 light items only for its bricks
+// above the finest level (lightCount = bricks of levels 0..depth-1 = the first brick ids: they are
+// numbered coarse to fine); those remain the light MIP levels. The chaar bricks are grouped 4^3
+// per group; items are stored group by group (groups in x-fastest order, bricks in a group
+// x-fastest) and pages are filled greedily with whole items. Payload of a Haar page with n items:
+//   uint32 offset[n + 1]   byte offset of item i from the payload start (offset[0] = 4 (n + 1),
+//                          increasing, multiples of 4; offset[n] = payloadBytes)
+//   item i                 BrickRecord rec[19] (12 B each: mask lo, mask hi, first | raw << 31;
+//                          `first` counts coefficient entries from the item's own first entry),
+//                          then the item's coefficient entries (RGB, float32 or float16 after
+//                          model.haarPrecision), zero padded to 4 bytes.
+// HaarIndex entries of a model (from model.firstHaarIndex): groupDims x*y*z entries (x fastest),
+// each the group's block number b or kCanopyNone, then 64 entries per block b (brick x + 4y + 16z
+// in the group): the brick's location (Haar page within the model's Haar pages << 12 | item), or
+// kCanopyNone (no light in any base there). canopyHaarLocate / canopyHaarSampleAt sample it.
+//
 // Checksums: CRC-32 (zlib polynomial, canopy::crc32) of the header bytes [0, 124), of the section
 // table, of every section, and of every page. A reader rejects bad magic, a newer major version,
 // truncation, trailing bytes, any CRC mismatch and any pointer out of range (canopy::Error).
 //
 // Versioning: major changes on any layout change (a reader refuses a newer major); minor adds
-// optional sections/page kinds that older readers may ignore.
+// optional sections/page kinds that older readers may ignore. 2.0 added Haar light (a lit model's
+// lightCount may be smaller than brickCount, which a 1.0 reader would refuse); this reader also
+// reads 1.0 files (no Haar light).
 #pragma once
 #include <math.h>
 #include <string.h>
@@ -82,6 +105,7 @@
 
 #include "canopy/half.h"
 #include "canopy/hd.h"
+#include "formats/haar_view.h"
 
 namespace canopy {
 
@@ -89,7 +113,7 @@ namespace canopy {
 // Constants
 // ------------------------------------------------------------------------------------------------
 constexpr char kCanopyMagic[8] = {'C', 'A', 'N', 'O', 'P', 'Y', 'P', 'K'};
-constexpr uint16_t kCanopyMajor = 1;
+constexpr uint16_t kCanopyMajor = 2;  // 2.0: Haar light pages; a 2.x reader reads 1.0 files too
 constexpr uint16_t kCanopyMinor = 0;
 constexpr uint32_t kCanopyPageBytes = 65536;   // page size written (readers accept powers of two >= 32 KiB)
 constexpr uint32_t kCanopySectionAlign = 64;   // every section starts on a 64-byte boundary
@@ -142,6 +166,7 @@ enum class CanopySectionKind : uint32_t {
   PageTable = 4,   // CanopyPageEntry[pageCount]
   SceneLight = 5,  // CanopySceneLight then float values[dim.x * dim.y * dim.z] (optional)
   Metadata = 6,    // UTF-8 JSON (optional)
+  HaarIndex = 7,   // uint32[]: every Haar-lit model's group table and brick locations (2.0; optional)
 };
 
 struct CanopySection {             // offset
@@ -166,7 +191,10 @@ struct CanopyNode {                // offset
 };
 static_assert(sizeof(CanopyNode) == 16, "CanopyNode layout");
 
-enum CanopyModelFlags : uint32_t { kCanopyModelHasLight = 1u };
+enum CanopyModelFlags : uint32_t {
+  kCanopyModelHasLight = 1u,   // float16 light items: one per brick, or (with HaarLight) one per brick above the finest level
+  kCanopyModelHaarLight = 2u,  // the finest level's light is the .chaar's Haar bricks (Haar pages, HaarIndex)
+};
 
 struct CanopyModel {               // offset
   double indexToModel[12];         //   0  3x4 row-major: model-space position of lattice index
@@ -191,7 +219,19 @@ struct CanopyModel {               // offset
   CanopyNode root;                 // 248  level-0 node
   uint32_t levelBricks[16];        // 264  bricks per level
   uint32_t levelTiles[16];         // 328  child tiles per level (tiles whose nodes are at level d)
-  uint32_t reserved[30];           // 392  zero
+  // Haar light of the finest level (flag kCanopyModelHaarLight, format 2.0; all zero otherwise):
+  // the .chaar's bricks re-paged, see "Haar light pages" above.
+  uint32_t haarPrecision;          // 392  coefficients: 0 float32, 1 float16 (haar::Precision)
+  int32_t haarBrickDims[3];        // 396  chaar bricks per axis: ceil((latticeMax - latticeMin + 1) / 3)
+  uint32_t haarGroupDims[3];       // 408  brick groups per axis: ceil(haarBrickDims / 4)
+  uint32_t haarGroups;             // 420  groups holding at least one stored brick
+  uint32_t haarItemCount;          // 424  stored chaar bricks (Haar items) over all Haar pages
+  uint32_t firstHaarIndex;         // 428  this model's first entry in the HaarIndex section
+  uint32_t haarIndexCount;         // 432  its entries: groupDims x*y*z + 64 * haarGroups
+  uint32_t firstHaarPage;          // 436
+  uint32_t haarPageCount;          // 440
+  float haarThreshold;             // 444  the .chaar's threshold (informative; -1 under --max-error)
+  uint32_t reserved[16];           // 448  zero
 };
 static_assert(sizeof(CanopyModel) == 512, "CanopyModel layout");
 
@@ -203,7 +243,7 @@ struct CanopyInstance {            // offset
 };
 static_assert(sizeof(CanopyInstance) == 64, "CanopyInstance layout");
 
-enum class CanopyPageKind : uint32_t { Brick = 1, Light = 2 };
+enum class CanopyPageKind : uint32_t { Brick = 1, Light = 2, HaarLight = 3 };
 
 // Both the first 32 bytes of every page and (with magic replaced by the same fields) an entry of
 // the resident page table.
@@ -472,6 +512,72 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyLightPage(const CanopyModel& m, uint
   return m.firstLightPage + item / lightItemsPerPage;
 }
 
+// ---- Haar light (format 2.0, models flagged kCanopyModelHaarLight) -----------------------------
+constexpr uint32_t kCanopyHaarGroupEdge = 4;                              // chaar bricks per group edge
+constexpr uint32_t kCanopyHaarGroupBricks = 64;                           // 4^3 per group
+constexpr uint32_t kCanopyHaarItemBits = 12;                              // location = page << 12 | item
+constexpr uint32_t kCanopyHaarMaxItemsPerPage = 1u << kCanopyHaarItemBits;
+constexpr uint32_t kCanopyHaarRecordBytes = kCanopyLightBases * 12;      // 19 BrickRecords = 228 B
+
+// What a sampler needs of one Haar-lit model (resident): its HaarIndex entries and geometry.
+struct CanopyHaarView {
+  const uint32_t* index;  // the model's HaarIndex entries: group table, then 64 locations per group
+  int32_t latticeMin[3];
+  int32_t latticeMax[3];
+  uint32_t groupDims[3];
+  uint32_t firstPage;     // page index of the model's first Haar page
+  uint32_t fp16;          // coefficients are float16 (else float32)
+};
+
+struct CanopyHaarLocation {
+  uint32_t page;         // page holding the chaar brick, or kCanopyNone: no light there (every base 0)
+  uint32_t item;         // item index in that page
+  haar::BrickLookup at;  // the brick-local texel footprint and fractions (at.slot unused)
+};
+
+// Finds the chaar brick of lattice index point p (the rule of haar::chaarSample: p clamped to the
+// lattice, brick floor(p - latticeMin) / 3) through the model's HaarIndex.
+CANOPY_HD inline CanopyHaarLocation canopyHaarLocate(const CanopyHaarView& v, float px, float py, float pz) {
+  int b[3];
+  CanopyHaarLocation r;
+  r.at = haar::locateInLattice(v.latticeMin, v.latticeMax, px, py, pz, b);
+  r.page = kCanopyNone;
+  r.item = 0;
+  const uint32_t E = kCanopyHaarGroupEdge;
+  const uint32_t g = (uint32_t(b[2]) / E * v.groupDims[1] + uint32_t(b[1]) / E) * v.groupDims[0] + uint32_t(b[0]) / E;
+  const uint32_t block = v.index[g];
+  if (block == kCanopyNone) return r;
+  const uint32_t groups = v.groupDims[0] * v.groupDims[1] * v.groupDims[2];
+  const uint32_t local = uint32_t(b[0]) % E + E * (uint32_t(b[1]) % E + E * (uint32_t(b[2]) % E));
+  const uint32_t loc = v.index[groups + kCanopyHaarGroupBricks * block + local];
+  if (loc == kCanopyNone) return r;
+  r.page = v.firstPage + (loc >> kCanopyHaarItemBits);
+  r.item = loc & (kCanopyHaarMaxItemsPerPage - 1u);
+  return r;
+}
+
+// Item `item` of a Haar page image (pageBytes long, header included): its 19 records, then its
+// coefficients.
+CANOPY_HD CANOPY_FORCEINLINE const unsigned char* canopyHaarItemInPage(const void* page, uint32_t item) {
+  const unsigned char* payload = static_cast<const unsigned char*>(page) + sizeof(CanopyPageHeader);
+  return payload + reinterpret_cast<const uint32_t*>(payload)[item];
+}
+
+// Trilinear sample of base `base` of one Haar item at the footprint `at`: haar::sampleBrick on the
+// item's record and coefficients, so it equals haar::chaarSample of the source .chaar bit for bit.
+CANOPY_HD inline haar::Rgb canopyHaarSampleAt(const unsigned char* item, uint32_t fp16, uint32_t base, const haar::BrickLookup& at) {
+  const haar::BrickRecord rec = reinterpret_cast<const haar::BrickRecord*>(item)[base];
+  const unsigned char* coefs = item + kCanopyHaarRecordBytes;
+  if (fp16)
+    return haar::sampleBrick(rec, haar::CoefReader16{reinterpret_cast<const uint16_t*>(coefs)}, at.lx, at.ly, at.lz, at.fx, at.fy, at.fz);
+  return haar::sampleBrick(rec, haar::CoefReader32{reinterpret_cast<const float*>(coefs)}, at.lx, at.ly, at.lz, at.fx, at.fy, at.fz);
+}
+
+// Checks the structure of a Haar page's payload (host): item offsets increasing, 4-aligned and inside
+// the payload, every item's records consistent with its coefficient count (the running sum of the
+// masks' popcounts, as in a .chaar), every coefficient finite. Returns "" or the first problem.
+std::string canopyCheckHaarPage(const void* page, uint32_t pageBytes, bool fp16);
+
 // Host-side matrix helpers (double precision, then rounded to float for the device).
 // The inverse of a 3x4 affine matrix; false if it is singular.
 bool canopyInvertAffine(const double m[12], double out[12]);
@@ -518,6 +624,10 @@ class CanopyFile {
   const CanopySceneLight& sceneLight() const { return sceneLight_; }
   const std::vector<float>& sceneLightValues() const { return sceneLightValues_; }
   const std::string& metadata() const { return metadata_; }
+  // The HaarIndex section (every Haar-lit model's entries, from model.firstHaarIndex; empty if none).
+  const std::vector<uint32_t>& haarIndex() const { return haarIndex_; }
+  // Model m's Haar light view over haarIndex() (m must be flagged kCanopyModelHaarLight).
+  CanopyHaarView haarView(uint32_t m) const;
   // The resident bytes [0, pagesOffset) as read (a player may upload NodeTiles from here).
   const std::vector<unsigned char>& resident() const { return resident_; }
 
@@ -549,6 +659,7 @@ class CanopyFile {
   CanopySceneLight sceneLight_{};
   std::vector<float> sceneLightValues_;
   std::string metadata_;
+  std::vector<uint32_t> haarIndex_;
 };
 
 // Page check for `canopy-octreepack verify`: reads and checks every page of an opened file (whose

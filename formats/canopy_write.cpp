@@ -32,6 +32,7 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
   // Model ranges.
   std::vector<CanopyModel> models;
   std::vector<CanopyNode> tiles;
+  std::vector<uint32_t> haarIndex;
   uint32_t page = 0;
   for (CanopyWriteModel& wm : in.models) {
     CanopyModel m = wm.record;
@@ -43,14 +44,38 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
     m.firstBrickPage = page;
     m.brickPageCount = (m.brickCount + perPage - 1) / perPage;
     page += m.brickPageCount;
-    const bool lit = wm.light && !wm.light->empty();
-    if (lit && (m.lightCount != m.brickCount || wm.light->size() * 2 != size_t(m.lightCount) * kCanopyLightItemBytes))
+    const bool haar = wm.haar != nullptr;
+    const bool lit = haar || (wm.light && !wm.light->empty());
+    const size_t items = wm.light ? wm.light->size() * 2 / kCanopyLightItemBytes : 0;
+    if (lit && ((haar ? m.lightCount > m.brickCount : m.lightCount != m.brickCount) ||
+                (wm.light ? wm.light->size() * 2 : 0) != size_t(m.lightCount) * kCanopyLightItemBytes || items != m.lightCount))
       throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has inconsistent light items");
     m.lightCount = lit ? m.lightCount : 0;
     m.firstLightPage = page;
     m.lightPageCount = (m.lightCount + lightPerPage - 1) / lightPerPage;
     page += m.lightPageCount;
     m.flags = lit ? (m.flags | kCanopyModelHasLight) : (m.flags & ~uint32_t(kCanopyModelHasLight));
+    m.flags &= ~uint32_t(kCanopyModelHaarLight);
+    m.haarPrecision = m.haarGroups = m.haarItemCount = m.firstHaarIndex = m.haarIndexCount = m.firstHaarPage = m.haarPageCount = 0;
+    m.haarThreshold = 0.0f;
+    for (int a = 0; a < 3; ++a) m.haarBrickDims[a] = 0, m.haarGroupDims[a] = 0;
+    if (haar) {
+      const CanopyHaarPages& H = *wm.haar;
+      if (H.payloads.size() != H.itemCounts.size() || H.index.size() < size_t(H.groupDims[0]) * H.groupDims[1] * H.groupDims[2])
+        throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has inconsistent Haar pages");
+      m.flags |= kCanopyModelHaarLight;
+      m.haarPrecision = H.precision;
+      for (int a = 0; a < 3; ++a) m.haarBrickDims[a] = H.brickDims[a], m.haarGroupDims[a] = H.groupDims[a];
+      m.haarGroups = H.groups;
+      m.haarItemCount = H.items;
+      m.haarThreshold = H.threshold;
+      m.firstHaarIndex = uint32_t(haarIndex.size());
+      m.haarIndexCount = uint32_t(H.index.size());
+      haarIndex.insert(haarIndex.end(), H.index.begin(), H.index.end());
+      m.firstHaarPage = page;
+      m.haarPageCount = uint32_t(H.payloads.size());
+      page += m.haarPageCount;
+    }
     models.push_back(m);
   }
   for (const CanopyInstance& inst : in.instances)
@@ -58,8 +83,8 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
 
   // Page table (and page images through emitPage).
   std::vector<unsigned char> img(pageBytes);
-  auto addPage = [&](CanopyPageKind kind, uint32_t index, uint32_t model, uint32_t first, uint32_t count, uint32_t itemBytes,
-                     const unsigned char* items) {
+  auto addPage = [&](CanopyPageKind kind, uint32_t index, uint32_t model, uint32_t first, uint32_t count, const unsigned char* payload,
+                     uint32_t payloadBytes) {
     std::fill(img.begin(), img.end(), 0);
     CanopyPageHeader h{};
     std::memcpy(h.magic, kCanopyPageMagic, 4);
@@ -68,8 +93,9 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
     h.model = model;
     h.firstItem = first;
     h.itemCount = count;
-    h.payloadBytes = count * itemBytes;
-    std::memcpy(img.data() + sizeof h, items + size_t(first) * itemBytes, h.payloadBytes);
+    h.payloadBytes = payloadBytes;
+    if (payloadBytes > pageBytes - sizeof h) throw invalidInput("canopy writer: a page payload is larger than a page");
+    std::memcpy(img.data() + sizeof h, payload, h.payloadBytes);
     std::memcpy(img.data(), &h, sizeof h);
     h.crc = canopyPageCrc(img.data(), pageBytes);
     std::memcpy(img.data(), &h, sizeof h);
@@ -78,12 +104,23 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
   };
   for (uint32_t mi = 0; mi < models.size(); ++mi) {
     const CanopyModel& m = models[mi];
-    for (uint32_t p = 0; p < m.brickPageCount; ++p)
-      addPage(CanopyPageKind::Brick, m.firstBrickPage + p, mi, p * perPage, std::min(perPage, m.brickCount - p * perPage),
-              kCanopyBrickBytes, in.models[mi].bricks->data());
-    for (uint32_t p = 0; p < m.lightPageCount; ++p)
-      addPage(CanopyPageKind::Light, m.firstLightPage + p, mi, p * lightPerPage, std::min(lightPerPage, m.lightCount - p * lightPerPage),
-              kCanopyLightItemBytes, reinterpret_cast<const unsigned char*>(in.models[mi].light->data()));
+    for (uint32_t p = 0; p < m.brickPageCount; ++p) {
+      const uint32_t n = std::min(perPage, m.brickCount - p * perPage);
+      addPage(CanopyPageKind::Brick, m.firstBrickPage + p, mi, p * perPage, n,
+              in.models[mi].bricks->data() + size_t(p) * perPage * kCanopyBrickBytes, n * kCanopyBrickBytes);
+    }
+    for (uint32_t p = 0; p < m.lightPageCount; ++p) {
+      const uint32_t n = std::min(lightPerPage, m.lightCount - p * lightPerPage);
+      addPage(CanopyPageKind::Light, m.firstLightPage + p, mi, p * lightPerPage, n,
+              reinterpret_cast<const unsigned char*>(in.models[mi].light->data()) + size_t(p) * lightPerPage * kCanopyLightItemBytes,
+              n * kCanopyLightItemBytes);
+    }
+    uint32_t item = 0;
+    for (uint32_t p = 0; p < m.haarPageCount; ++p) {
+      const CanopyHaarPages& H = *in.models[mi].haar;
+      addPage(CanopyPageKind::HaarLight, m.firstHaarPage + p, mi, item, H.itemCounts[p], H.payloads[p].data(), uint32_t(H.payloads[p].size()));
+      item += H.itemCounts[p];
+    }
   }
 
   // Resident sections.
@@ -113,6 +150,8 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
     std::memcpy(b.bytes.data() + sizeof(CanopySceneLight), in.sceneLightValues.data(), n * sizeof(float));
     blobs.push_back(std::move(b));
   }
+  if (!haarIndex.empty())
+    blobs.push_back(blobOf(CanopySectionKind::HaarIndex, haarIndex.data(), sizeof(uint32_t), uint32_t(haarIndex.size()), "haar_index"));
   if (!in.metadata.empty()) {
     Blob b{CanopySectionKind::Metadata, 0, 1, {}, "metadata"};
     b.bytes.assign(in.metadata.begin(), in.metadata.end());

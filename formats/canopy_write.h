@@ -14,11 +14,36 @@
 
 namespace canopy {
 
+namespace haar {
+struct ChaarData;
+}
+
+// A model's Haar light (format 2.0, canopy_file.h "Haar light pages"): a .chaar's bricks re-paged.
+struct CanopyHaarPages {
+  uint32_t precision = 0;                  // haar::Precision of the coefficients
+  int32_t brickDims[3] = {0, 0, 0};
+  uint32_t groupDims[3] = {0, 0, 0};
+  uint32_t groups = 0;                     // groups with a stored brick
+  uint32_t items = 0;                      // stored bricks
+  float threshold = 0.0f;
+  std::vector<uint32_t> index;             // the model's HaarIndex entries
+  std::vector<std::vector<unsigned char>> payloads;  // one per page: offsets then items
+  std::vector<uint32_t> itemCounts;        // items per page
+  uint64_t payloadBytes() const;
+};
+
+// Re-pages the 19 bases of a parsed .chaar (lattice = the model's, checked by the caller) into
+// pages of `pageBytes`. Deterministic. Throws canopy::Error(InvalidInput) for a base count != 19.
+CanopyHaarPages canopyHaarPagesFromChaar(const haar::ChaarData& chaar, uint32_t pageBytes = kCanopyPageBytes);
+
 struct CanopyWriteModel {
   CanopyModel record{};                  // firstTile / firstBrickPage / ... are filled by the writer
   const std::vector<CanopyNode>* tiles = nullptr;      // 8 per tile
   const std::vector<unsigned char>* bricks = nullptr;  // record.brickCount * kCanopyBrickBytes
   const std::vector<uint16_t>* light = nullptr;        // null/empty (density only) or record.lightCount items
+  // With Haar light (the finest level's lighting): `light` holds the items of the bricks above the
+  // finest level only (record.lightCount of them, possibly none).
+  const CanopyHaarPages* haar = nullptr;
 };
 
 struct CanopyWriteInput {

@@ -69,12 +69,7 @@ CANOPY_HD CANOPY_FORCEINLINE int popcount64(uint64_t v) {
 #endif
 }
 
-// Full unrolling of the sampler's fixed-size loops on the device keeps its small arrays in registers.
-#if defined(__CUDA_ARCH__)
-#define CANOPY_UNROLL _Pragma("unroll")
-#else
-#define CANOPY_UNROLL
-#endif
+// CANOPY_UNROLL (canopy/hd.h) unrolls fixed-size loops on the device.
 
 // Rounded float arithmetic that a compiler may not fuse (device: __fmul_rn never becomes an FMA).
 CANOPY_HD CANOPY_FORCEINLINE float mulRn(float a, float b) {

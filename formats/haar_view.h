@@ -42,31 +42,39 @@ struct BrickLookup {
   float fx, fy, fz;
 };
 
-CANOPY_HD inline BrickLookup locate(const ChaarView& v, float x, float y, float z) {
+// The brick coordinates b and the lookup of point (x,y,z) in a lattice [lmin, lmax] (slot unset):
+// the one rule that chaarSample and the .canopy file's Haar light (canopy_file.h) share.
+CANOPY_HD inline BrickLookup locateInLattice(const int32_t lmin[3], const int32_t lmax[3], float x, float y, float z, int b[3]) {
   const float p[3] = {x, y, z};
   int l[3];
   float f[3];
-  int b[3];
   for (int a = 0; a < 3; ++a) {
-    const float q = clampf(p[a], float(v.latticeMin[a]), float(v.latticeMax[a]));
+    const float q = clampf(p[a], float(lmin[a]), float(lmax[a]));
 #if defined(__CUDA_ARCH__)
     const float fl = floorf(q);
 #else
     const float fl = __builtin_floorf(q);
 #endif
-    int i = int(fl) - v.latticeMin[a];  // 0 .. dim-1
+    int i = int(fl) - lmin[a];  // 0 .. dim-1
     f[a] = q - fl;
     b[a] = i / kBrickCore;
     l[a] = i - b[a] * kBrickCore;
   }
   BrickLookup r;
-  r.slot = v.slots[(int64_t(b[2]) * v.brickDims[1] + b[1]) * v.brickDims[0] + b[0]];
+  r.slot = kEmptySlot;
   r.lx = l[0];
   r.ly = l[1];
   r.lz = l[2];
   r.fx = f[0];
   r.fy = f[1];
   r.fz = f[2];
+  return r;
+}
+
+CANOPY_HD inline BrickLookup locate(const ChaarView& v, float x, float y, float z) {
+  int b[3];
+  BrickLookup r = locateInLattice(v.latticeMin, v.latticeMax, x, y, z, b);
+  r.slot = v.slots[(int64_t(b[2]) * v.brickDims[1] + b[1]) * v.brickDims[0] + b[0]];
   return r;
 }
 

@@ -127,8 +127,12 @@ struct ModelView {
   uint32_t depth;
   uint32_t rootCells;
   uint32_t firstBrickPage;
-  uint32_t hasLight;        // light items present (kCanopyModelHasLight, lightCount == brickCount)
+  uint32_t hasLight;        // LB light present (kCanopyModelHasLight)
+  uint32_t lightCount;      // bricks 0 .. lightCount-1 have a float16 light item (all, or those above the finest level)
   uint32_t firstLightPage;  // light item b is in page firstLightPage + b / lightItemsPerPage
+  uint32_t haarLight;       // the finest level's light is Haar bricks (kCanopyModelHaarLight): haar below
+  int32_t origin[3];        // octreeOrigin: unit space -> lattice index space (for the Haar lookup)
+  CanopyHaarView haar;
 };
 
 struct InstanceView {
@@ -288,6 +292,28 @@ CANOPY_HD inline void ambientOnly(const SceneView& s, float sceneFactor, float o
   lbIndirect(none, zero, b0, s.shade.ambient, sceneFactor, out);
 }
 
+// The LB indirect light from a Haar item (format 2.0: the finest level of a Haar-lit model) at the
+// brick-local footprint `at`: the (up to) three sun bases of the instance's lookup and B_0, each
+// haar::sampleBrick of the item (bit for bit the .chaar decoder's sample), then lbIndirect().
+// item == nullptr: no light stored there (every base 0).
+CANOPY_HD inline void sampleHaarLbLight(const unsigned char* item, uint32_t fp16, const haar::BrickLookup& at, const sun::Weights& w,
+                                        float ambient, float sceneFactor, float out[3]) {
+  float bases[3][3];
+  float b0[3] = {0.0f, 0.0f, 0.0f};
+  for (int v = 0; v < 3; ++v) {
+    bases[v][0] = bases[v][1] = bases[v][2] = 0.0f;
+    if (item && w.weight[v] > 0.0f) {
+      const haar::Rgb c = canopyHaarSampleAt(item, fp16, uint32_t(w.base[v]), at);
+      bases[v][0] = c.r, bases[v][1] = c.g, bases[v][2] = c.b;
+    }
+  }
+  if (item) {
+    const haar::Rgb c = canopyHaarSampleAt(item, fp16, 0, at);
+    b0[0] = c.r, b0[1] = c.g, b0[2] = c.b;
+  }
+  lbIndirect(w, bases, b0, ambient, sceneFactor, out);
+}
+
 // The LB indirect light from a light item at node-local l in [0,1]^3: the (up to) three sun bases
 // of the instance's lookup and B_0, each trilinear (canopySampleLight's interpolation, the corners
 // found once), then lbIndirect().
@@ -313,9 +339,14 @@ struct Segment {
   float tEnd;       // the value holds on [t, tEnd)
   // shading segments with matter only: where the indirect light is sampled
   const uint16_t* lightItem;  // the light item (nullptr: density-only indirect term)
-  float light[3];             // the sample's node-local coordinates in the light item's node
+  float light[3];             // the sample's node-local coordinates in the light item's node (Haar: fx, fy, fz)
   float tSample;              // the sample's world ray parameter (scene factor)
+  // Haar light (kHaarNone: not used): the item (nullptr: no light stored there) and the packed
+  // footprint lx | ly << 2 | lz << 4 | fp16 << 6; light[] then holds the fractions.
+  const unsigned char* haarItem;
+  uint32_t haarLocal;
 };
+constexpr uint32_t kHaarNone = 0xFFFFFFFFu;
 
 // Finest level whose voxel (2^(depth - L) lattice cells) is no larger than the footprint.
 CANOPY_HD inline uint32_t levelForFootprint(uint32_t depth, float footprintCells, float lodBias) {
@@ -388,7 +419,7 @@ CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m,
   const uint32_t firstFallback = maxLevel > kFallbackLevels ? maxLevel - kFallbackLevels : 0;
   for (;;) {
     const bool last = !(d.level < maxLevel && d.node.child != kCanopyNone && d.node.child < m.tileCount);
-    if (wantLight && d.node.brick != kCanopyNone) {
+    if (wantLight && d.node.brick < m.lightCount) {
       const uint32_t lpage = m.firstLightPage + d.node.brick / s.lightItemsPerPage;
       const int32_t lslot = s.pageSlot[lpage];
       if (d.coarsestLightPage == kCanopyNone) d.coarsestLightPage = lpage;
@@ -449,7 +480,29 @@ CANOPY_HD CANOPY_FORCEINLINE bool descentCovers(const DescentCache& c, V3 u, uin
 // A shading segment's light at unit point um (world ray parameter tm): the descent's light item and
 // the node-local coordinates of um in it. Light pages are used and asked for here, only by
 // segments with matter (not by empty space).
-CANOPY_HD inline void segmentLight(const SceneView& s, const Descent& d, V3 um, float tm, Segment& g) {
+CANOPY_HD inline void segmentLight(const SceneView& s, const ModelView& m, const Descent& d, V3 um, float tm, Segment& g) {
+  g.haarLocal = kHaarNone;
+  g.haarItem = nullptr;
+  if (m.haarLight && d.level == m.depth) {
+    // The finest level of a Haar-lit model: the chaar brick at the sample's lattice point, if its
+    // page is resident (else it is asked for and the float16 item of an ancestor serves).
+    const float rc = float(m.rootCells);
+    const CanopyHaarLocation at =
+        canopyHaarLocate(m.haar, um.x * rc - 0.5f + float(m.origin[0]), um.y * rc - 0.5f + float(m.origin[1]), um.z * rc - 0.5f + float(m.origin[2]));
+    const int32_t slot = at.page != kCanopyNone ? s.pageSlot[at.page] : -1;
+    if (at.page == kCanopyNone || slot >= 0) {
+      if (slot >= 0) {
+        writeStamp(s.slotUsed + slot, s.stamp);
+        g.haarItem = canopyHaarItemInPage(s.pool + size_t(slot) * s.pageBytes, at.item);
+      }
+      g.haarLocal = uint32_t(at.at.lx) | uint32_t(at.at.ly) << 2 | uint32_t(at.at.lz) << 4 | m.haar.fp16 << 6;
+      g.light[0] = at.at.fx, g.light[1] = at.at.fy, g.light[2] = at.at.fz;
+      g.lightItem = nullptr;
+      g.tSample = tm;
+      return;
+    }
+    writeStamp(s.pageWanted + at.page, s.stamp);
+  }
   if (d.missingLightPage != kCanopyNone) writeStamp(s.pageWanted + d.missingLightPage, s.stamp);
   if (d.lightItem) {
     writeStamp(s.slotUsed + d.lightPoolSlot, s.stamp);
@@ -471,6 +524,14 @@ CANOPY_HD inline void segmentLight(const SceneView& s, const Descent& d, V3 um, 
 template <bool kWithLight = true>
 CANOPY_HD inline void segmentIndirect(const SceneView& s, const InstanceView& inst, const Segment& g, V3 o, V3 dir, float out[3]) {
   const float factor = sceneLightFactor(s.light, o + dir * g.tSample);
+  if (kWithLight && g.haarLocal != kHaarNone) {
+    haar::BrickLookup at;
+    at.slot = 0;
+    at.lx = int(g.haarLocal & 3u), at.ly = int((g.haarLocal >> 2) & 3u), at.lz = int((g.haarLocal >> 4) & 3u);
+    at.fx = g.light[0], at.fy = g.light[1], at.fz = g.light[2];
+    sampleHaarLbLight(g.haarItem, (g.haarLocal >> 6) & 1u, at, inst.sunWeights, s.shade.ambient, factor, out);
+    return;
+  }
   if (!kWithLight || !g.lightItem) {
     ambientOnly(s, factor, out);
     return;
@@ -538,7 +599,7 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
       tEnd = tEnd < t + maxLen ? tEnd : t + maxLen;
     }
     g.tEnd = tEnd < tout ? tEnd : tout;
-    if (shading && g.k > 0.0f) segmentLight(s, d, uo + ud * (0.5f * (t + g.tEnd)), 0.5f * (t + g.tEnd), g);
+    if (shading && g.k > 0.0f) segmentLight(s, m, d, uo + ud * (0.5f * (t + g.tEnd)), 0.5f * (t + g.tEnd), g);
     if (hold && c.density == 0.0f && d.node.brick == kCanopyNone && !(d.node.child != kCanopyNone && d.node.child < m.tileCount)) {
       const float epsEnd = fmaxf(1e-3f / cellsPerWorld, fabsf(g.tEnd) * 1e-6f);
       hold->until = g.tEnd - 3.0f * epsEnd;
@@ -560,7 +621,7 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
   g.k = s.shade.sigma * c.density * cellsPerWorld;
   g.albedo[0] = c.albedo[0], g.albedo[1] = c.albedo[1], g.albedo[2] = c.albedo[2];
   g.tEnd = tEnd;
-  if (shading && g.k > 0.0f) segmentLight(s, d, um, 0.5f * (t + tEnd), g);
+  if (shading && g.k > 0.0f) segmentLight(s, m, d, um, 0.5f * (t + tEnd), g);
   return g;
 }
 

@@ -88,8 +88,12 @@ class CudaBackend final : public Backend {
     for (size_t m = 0; m < scene.models.size(); ++m)
       std::memcpy(allTiles.data() + size_t(scene.modelFirstTile[m]) * 8, scene.models[m].tiles, size_t(scene.models[m].tileCount) * 8 * sizeof(CanopyNode));
     uploadVector(tiles_, allTiles);
+    if (scene.haarIndex) uploadVector(haarIndex_, *scene.haarIndex);
     std::vector<ModelView> models = scene.models;
-    for (size_t m = 0; m < models.size(); ++m) models[m].tiles = tiles_.data() + size_t(scene.modelFirstTile[m]) * 8;
+    for (size_t m = 0; m < models.size(); ++m) {
+      models[m].tiles = tiles_.data() + size_t(scene.modelFirstTile[m]) * 8;
+      if (models[m].haarLight) models[m].haar.index = haarIndex_.data() + scene.modelFirstHaarIndex[m];
+    }
     uploadVector(models_, models);
     uploadVector(gridStart_, scene.gridStart);
     uploadVector(gridItems_, scene.gridItems);
@@ -225,6 +229,7 @@ class CudaBackend final : public Backend {
   cudaEvent_t tableCopied_[2] = {nullptr, nullptr};
   int mirror_ = 0;
   cuda::DeviceBuffer<CanopyNode> tiles_;
+  cuda::DeviceBuffer<uint32_t> haarIndex_;  // CanopyFile::haarIndex(): the Haar-lit models' group tables and locations
   cuda::DeviceBuffer<ModelView> models_;
   cuda::DeviceBuffer<InstanceView> instances_;
   cuda::DeviceBuffer<uint32_t> gridStart_, gridItems_;

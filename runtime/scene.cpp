@@ -68,6 +68,7 @@ HostScene buildScene(const CanopyFile& f) {
   s.pageBytes = h.pageBytes;
   s.bricksPerPage = h.bricksPerPage;
   s.lightItemsPerPage = h.lightItemsPerPage;
+  s.haarIndex = &f.haarIndex();
   std::vector<M34> latticeToModel(f.modelCount()), modelToUnit(f.modelCount());
   for (uint32_t m = 0; m < f.modelCount(); ++m) {
     const CanopyModel& M = f.model(m);
@@ -78,17 +79,27 @@ HostScene buildScene(const CanopyFile& f) {
     v.depth = M.depth;
     v.rootCells = M.rootCells;
     v.firstBrickPage = M.firstBrickPage;
-    // the reader has checked the light pages' range; a model flagged lit must have one item per brick
-    v.hasLight = (M.flags & kCanopyModelHasLight) && M.lightCount > 0 && M.lightCount == M.brickCount && h.lightItemsPerPage > 0 ? 1u : 0u;
+    // The reader has checked the light pages' range and that every brick above the finest level
+    // has a light item; a lit model has one per brick, or (Haar light) those and Haar pages.
+    v.haarLight = (M.flags & kCanopyModelHaarLight) ? 1u : 0u;
+    v.hasLight = (M.flags & kCanopyModelHasLight) && h.lightItemsPerPage > 0 &&
+                         (v.haarLight ? M.lightCount <= M.brickCount : (M.lightCount > 0 && M.lightCount == M.brickCount))
+                     ? 1u
+                     : 0u;
+    if (!v.hasLight) v.haarLight = 0;
+    v.lightCount = v.hasLight ? M.lightCount : 0;
     v.firstLightPage = M.firstLightPage;
+    for (int a = 0; a < 3; ++a) v.origin[a] = M.octreeOrigin[a];
+    if (v.haarLight) v.haar = f.haarView(m);
     if ((M.flags & kCanopyModelHasLight) && !v.hasLight)
       logWarn(f.path() + ": model '" + std::string(M.name, strnlen(M.name, sizeof(M.name))) +
               "' is flagged lit but has no light item per brick; it is lit as density-only (direct sun + ambient)");
     s.litModels += v.hasLight;
     s.models.push_back(v);
     s.modelFirstTile.push_back(M.firstTile);
+    s.modelFirstHaarIndex.push_back(M.firstHaarIndex);
     s.brickPageBytes += uint64_t(M.brickPageCount) * h.pageBytes;
-    if (v.hasLight) s.lightPageBytes += uint64_t(M.lightPageCount) * h.pageBytes;
+    if (v.hasLight) s.lightPageBytes += uint64_t(M.lightPageCount + M.haarPageCount) * h.pageBytes;
     M34 i2m;
     for (int k = 0; k < 12; ++k) i2m[size_t(k)] = M.indexToModel[k];
     latticeToModel[m] = i2m;

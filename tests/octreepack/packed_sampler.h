@@ -1,5 +1,5 @@
 // packed_sampler.h: CPU sampling of a packed .canopy model through the format's CANOPY_HD functions
-// (canopyDescend + canopySampleBrick), with a page cache: what a player's CPU reference does.
+// (canopyDescend + canopySampleBrick, canopyHaarSampleAt), with a page cache: what a player's CPU reference does.
 #pragma once
 #include <map>
 #include <vector>
@@ -34,6 +34,14 @@ class PackedSampler {
     const float n = float(kCanopyBrickSize << level);
     const float u[3] = {(float(g[0]) + 0.5f) / n, (float(g[1]) + 0.5f) / n, (float(g[2]) + 0.5f) / n};
     return sampleUnit(model, u, level);
+  }
+  // The finest level's Haar light of a Haar-lit model at lattice index point p, base `base`: the
+  // format's canopyHaarLocate + canopyHaarSampleAt (what the player does), pages read on demand.
+  haar::Rgb sampleHaar(uint32_t model, uint32_t base, float px, float py, float pz) {
+    const CanopyHaarView v = f_.haarView(model);
+    const CanopyHaarLocation at = canopyHaarLocate(v, px, py, pz);
+    if (at.page == kCanopyNone) return haar::Rgb{};
+    return canopyHaarSampleAt(canopyHaarItemInPage(pageData(at.page).data(), at.item), v.fp16, base, at.at);
   }
   const std::vector<unsigned char>& pageData(uint32_t index) {
     auto it = pages_.find(index);

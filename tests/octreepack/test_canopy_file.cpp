@@ -1,7 +1,8 @@
 // test_canopy_file.cpp: the .canopy reader never trusts its input (built with ASan/UBSan: the
 // reader, writer and builder sources are compiled into this test).
-//   - the frozen 1.0 file in data/ still reads, and the writer still produces it byte for byte
-//     (a layout change must be deliberate: bump the version and add a new frozen file);
+//   - the frozen 2.0 file in data/ still reads (its Haar light equal to the .chaar decoder's bit for
+//     bit), and the writer still produces it byte for byte (a layout change must be deliberate:
+//     bump the version and add a new frozen file); the frozen 1.0 file still reads;
 //   - every truncated prefix, flipped bytes (header, table, sections, padding, pages), trailing
 //     bytes, bad magic and a newer major version are rejected with a one-line canopy::Error.
 #include <gtest/gtest.h>
@@ -9,6 +10,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <limits>
+#include <random>
 #include <string>
 
 #include "canopy/atomic_file.h"
@@ -16,6 +18,7 @@
 #include "canopy/hash.h"
 #include "formats/canopy_file.h"
 #include "formats/canopy_write.h"
+#include "formats/chaar.h"
 #include "tests/octreepack/packed_sampler.h"
 #include "tests/octreepack/synthetic.h"
 
@@ -24,62 +27,70 @@ namespace op = canopy::octreepack;
 
 namespace {
 
-const std::string kFrozen = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v1.0.canopy";
+// The current format's frozen file (2.0) and the previous one (1.0), which must still read.
+const std::string kFrozen = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v2.0.canopy";
+const std::string kFrozenV1 = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v1.0.canopy";
+const std::string kFrozenChaar = std::string(CANOPY_SOURCE_DIR) + "/tests/haar/data/small_v1_0.chaar";
 
-// The frozen file's content: a 20-cell synthetic plant (depth 2, density only) and an 8-cell one
-// with analytic lighting (depth 0), three instances.
+// The Haar-lit model of the 2.0 file: every cell of the frozen .chaar's lattice occupied.
+op::ModelSource haarModelSource(const haar::ChaarData& d) {
+  op::ModelSource s;
+  s.name = "haarlit";
+  for (int a = 0; a < 3; ++a) s.latticeMin[a] = d.header.latticeMin[a], s.latticeMax[a] = d.header.latticeMax[a];
+  for (int k = s.latticeMin[2]; k <= s.latticeMax[2]; ++k)
+    for (int j = s.latticeMin[1]; j <= s.latticeMax[1]; ++j)
+      for (int i = s.latticeMin[0]; i <= s.latticeMax[0]; ++i)
+        s.cells.push_back({{i, j, k}, 0.1f + 0.05f * float((i + 2 * j + 3 * k) & 7), 0.0f, {0.3f, 0.6f, 0.2f}});
+  return s;
+}
+
+// The frozen files' content: a 20-cell synthetic plant (depth 2, density only), an 8-cell one with
+// analytic float16 lighting (depth 0) and three instances (1.0); 2.0 adds a fourth instance of a
+// third model lit by the frozen .chaar (Haar pages, depth 0: no float16 items).
 std::vector<unsigned char> smallFileBytes() {
   const op::ModelSource src = op::testing::syntheticPlant(20, 2, "frozen", 0);
   const op::BuiltModel m = op::buildOctree(src, "frozen");
   const op::BuiltModel lit = op::buildOctree(op::testing::syntheticPlant(8, 0, "lit", 0), "lit", op::testing::analyticLight);
+  const haar::ChaarData chaar = haar::readChaar(kFrozenChaar);
+  const haar::ChaarView view = chaar.view();
+  const CanopyHaarPages haarPages = canopyHaarPagesFromChaar(chaar);
+  const op::BuiltModel haarLit = op::buildOctree(
+      haarModelSource(chaar), "haarlit",
+      [&](int32_t i, int32_t j, int32_t k, float* o) {
+        for (uint32_t b = 0; b < kCanopyLightBases; ++b) {
+          const haar::Rgb v = haar::chaarSample(view, int(b), float(i), float(j), float(k));
+          o[3 * b] = v.r, o[3 * b + 1] = v.g, o[3 * b + 2] = v.b;
+        }
+      },
+      true);
   CanopyWriteInput in;
   in.models.push_back({m.record, &m.tiles, &m.bricks, nullptr});
   in.models.push_back({lit.record, &lit.tiles, &lit.bricks, &lit.light});
+  in.models.push_back({haarLit.record, &haarLit.tiles, &haarLit.bricks, &haarLit.light, &haarPages});
   CanopyInstance a{}, b{};
   a.modelToWorld[0] = a.modelToWorld[5] = a.modelToWorld[10] = 1.0f;
   b = a;
   b.modelToWorld[3] = 4.0f;
   CanopyInstance c = a;
   c.model = 1;
-  in.instances = {a, b, c};
-  in.metadata = R"({"tool":"test_canopy_file","note":"frozen .canopy 1.0"})";
+  CanopyInstance d = a;
+  d.model = 2;
+  d.modelToWorld[11] = -6.0f;
+  in.instances = {a, b, c, d};
+  in.metadata = R"({"tool":"test_canopy_file","note":"frozen .canopy 2.0"})";
   return writeCanopyBytes(std::move(in));
 }
 
-std::string expectRejected(const std::vector<unsigned char>& bytes, bool readPages = true) {
-  try {
-    CanopyFile f = CanopyFile::fromMemory(bytes.data(), bytes.size(), "bad.canopy");
-    if (readPages)
-      for (uint32_t i = 0; i < f.pageCount(); ++i) (void)f.readPage(i);
-  } catch (const Error& e) {
-    const std::string m = e.what();
-    EXPECT_EQ(m.rfind("bad.canopy: ", 0), 0u) << m;
-    EXPECT_EQ(m.find('\n'), std::string::npos) << m;
-    return m;
-  }
-  ADD_FAILURE() << "corrupt file was accepted";
-  return "";
-}
-
-}  // namespace
-
-TEST(CanopyFile, FrozenSmallFileStillReads) {
-  if (std::getenv("CANOPY_WRITE_FROZEN")) {  // regenerate deliberately (new format version only)
-    const auto bytes = smallFileBytes();
-    writeFileAtomic(kFrozen, bytes.data(), bytes.size());
-  }
-  CanopyFile f = CanopyFile::open(kFrozen);
-  EXPECT_EQ(f.header().major, 1);
-  EXPECT_EQ(f.header().minor, 0);
-  ASSERT_EQ(f.modelCount(), 2u);
-  ASSERT_EQ(f.instanceCount(), 3u);
+// Checks that the density-only and the float16-lit models of a frozen file read as written.
+void checkDensityAndFloat16Models(CanopyFile& f) {
+  ASSERT_GE(f.modelCount(), 2u);
+  ASSERT_GE(f.instanceCount(), 3u);
   EXPECT_EQ(f.model(0).lightCount, 0u);
   EXPECT_EQ(f.model(1).lightCount, f.model(1).brickCount);
   EXPECT_EQ(f.instance(2).model, 1u);
   EXPECT_FLOAT_EQ(f.instance(1).modelToWorld[3], 4.0f);
   EXPECT_EQ(std::string(f.model(0).name), "frozen");
   EXPECT_EQ(f.model(0).depth, 2u);
-  EXPECT_NE(f.metadata().find("frozen .canopy 1.0"), std::string::npos);
   // Sample every occupied cell of the source through the HD functions.
   op::testing::PackedSampler S(f);
   const op::ModelSource src = op::testing::syntheticPlant(20, 2, "frozen", 0);
@@ -108,8 +119,84 @@ TEST(CanopyFile, FrozenSmallFileStillReads) {
         canopySampleLight(item, base, (float(x) + 0.5f) / 4, 1.5f / 4, (float(z) + 0.5f) / 4, rgb);
         for (int ch = 0; ch < 3; ++ch) ASSERT_NEAR(rgb[ch], ref[ch], std::abs(ref[ch]) * 0.0005 + 1e-6) << base << " " << x << " " << z;
       }
+}
+
+// Makes every section CRC, the table CRC and the header CRC valid again after an edit.
+void reseal(std::vector<unsigned char>& b) {
+  CanopyFileHeader h;
+  std::memcpy(&h, b.data(), sizeof h);
+  for (uint32_t i = 0; i < h.sectionCount; ++i) {
+    CanopySection s;
+    std::memcpy(&s, b.data() + sizeof h + i * sizeof s, sizeof s);
+    s.crc = crc32(0, b.data() + s.offset, size_t(s.bytes));
+    std::memcpy(b.data() + sizeof h + i * sizeof s, &s, sizeof s);
+  }
+  h.sectionTableCrc = crc32(0, b.data() + sizeof h, h.sectionCount * sizeof(CanopySection));
+  h.headerCrc = crc32(0, &h, offsetof(CanopyFileHeader, headerCrc));
+  std::memcpy(b.data(), &h, sizeof h);
+}
+
+std::string expectRejected(const std::vector<unsigned char>& bytes, bool readPages = true) {
+  try {
+    CanopyFile f = CanopyFile::fromMemory(bytes.data(), bytes.size(), "bad.canopy");
+    if (readPages)
+      for (uint32_t i = 0; i < f.pageCount(); ++i) (void)f.readPage(i);
+  } catch (const Error& e) {
+    const std::string m = e.what();
+    EXPECT_EQ(m.rfind("bad.canopy: ", 0), 0u) << m;
+    EXPECT_EQ(m.find('\n'), std::string::npos) << m;
+    return m;
+  }
+  ADD_FAILURE() << "corrupt file was accepted";
+  return "";
+}
+
+}  // namespace
+
+TEST(CanopyFile, FrozenSmallFileStillReads) {
+  if (std::getenv("CANOPY_WRITE_FROZEN")) {  // regenerate deliberately (new format version only)
+    const auto bytes = smallFileBytes();
+    writeFileAtomic(kFrozen, bytes.data(), bytes.size());
+  }
+  CanopyFile f = CanopyFile::open(kFrozen);
+  EXPECT_EQ(f.header().major, 2);
+  EXPECT_EQ(f.header().minor, 0);
+  ASSERT_EQ(f.modelCount(), 3u);
+  ASSERT_EQ(f.instanceCount(), 4u);
+  checkDensityAndFloat16Models(f);
+  EXPECT_NE(f.metadata().find("frozen .canopy 2.0"), std::string::npos);
+  // The Haar-lit model: its light at any point equals the .chaar decoder's sample, bit for bit.
+  const CanopyModel& H = f.model(2);
+  ASSERT_TRUE(H.flags & kCanopyModelHaarLight);
+  ASSERT_EQ(H.lightCount, 0u);  // depth 0: no level above the finest, no float16 items
+  const haar::ChaarData chaar = haar::readChaar(kFrozenChaar);
+  const haar::ChaarView view = chaar.view();
+  EXPECT_EQ(H.haarItemCount, chaar.header.slotCount);
+  EXPECT_EQ(H.haarPrecision, chaar.header.precision);
+  op::testing::PackedSampler S(f);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> U(-1.0f, 7.0f);  // inside and around the 6x5x6 lattice
+  for (int n = 0; n < 4000; ++n) {
+    const float p[3] = {H.latticeMin[0] + U(rng), H.latticeMin[1] + U(rng), H.latticeMin[2] + U(rng)};
+    const uint32_t base = uint32_t(n) % kCanopyLightBases;
+    const haar::Rgb want = haar::chaarSample(view, int(base), p[0], p[1], p[2]);
+    const haar::Rgb got = S.sampleHaar(2, base, p[0], p[1], p[2]);
+    ASSERT_EQ(std::memcmp(&want, &got, sizeof want), 0) << "base " << base << " at " << p[0] << "," << p[1] << "," << p[2];
+  }
   // The writer still produces exactly these bytes.
   EXPECT_EQ(readFile(kFrozen), smallFileBytes()) << "the .canopy layout changed: bump the version";
+}
+
+// The 1.0 file (before Haar light) still reads, with the same content.
+TEST(CanopyFile, FrozenVersion1FileStillReads) {
+  CanopyFile f = CanopyFile::open(kFrozenV1);
+  EXPECT_EQ(f.header().major, 1);
+  EXPECT_EQ(f.header().minor, 0);
+  ASSERT_EQ(f.modelCount(), 2u);
+  ASSERT_EQ(f.instanceCount(), 3u);
+  EXPECT_TRUE(f.haarIndex().empty());
+  checkDensityAndFloat16Models(f);
+  EXPECT_NE(f.metadata().find("frozen .canopy 1.0"), std::string::npos);
 }
 
 TEST(CanopyFile, EveryTruncatedPrefixIsRejected) {
@@ -193,19 +280,6 @@ TEST(CanopyFile, OutOfRangePointersAreRejectedEvenWithValidChecksums) {
   const CanopySection* tiles = f.findSection(CanopySectionKind::NodeTiles);
   ASSERT_NE(tiles, nullptr);
   ASSERT_GT(tiles->itemCount, 0u);
-  auto reseal = [](std::vector<unsigned char>& b) {
-    CanopyFileHeader h;
-    std::memcpy(&h, b.data(), sizeof h);
-    for (uint32_t i = 0; i < h.sectionCount; ++i) {
-      CanopySection s;
-      std::memcpy(&s, b.data() + sizeof h + i * sizeof s, sizeof s);
-      s.crc = crc32(0, b.data() + s.offset, size_t(s.bytes));
-      std::memcpy(b.data() + sizeof h + i * sizeof s, &s, sizeof s);
-    }
-    h.sectionTableCrc = crc32(0, b.data() + sizeof h, h.sectionCount * sizeof(CanopySection));
-    h.headerCrc = crc32(0, &h, offsetof(CanopyFileHeader, headerCrc));
-    std::memcpy(b.data(), &h, sizeof h);
-  };
   struct Case {
     size_t fieldOffset;
     uint32_t value;
@@ -229,6 +303,77 @@ TEST(CanopyFile, OutOfRangePointersAreRejectedEvenWithValidChecksums) {
     reseal(bad);
     const std::string m = expectRejected(bad, false);
     EXPECT_NE(m.find(c.expect), std::string::npos) << m;
+  }
+}
+
+// A Haar page whose structure is wrong but whose CRCs are all valid (a crafted file) is refused by
+// readPage, before any of its offsets could index device memory; so is a HaarIndex location that
+// points past its page's items.
+TEST(CanopyFile, CraftedHaarPagesAndLocationsAreRejectedEvenWithValidChecksums) {
+  const std::vector<unsigned char> good = readFile(kFrozen);
+  CanopyFile f = CanopyFile::fromMemory(good.data(), good.size(), "ok.canopy");
+  const CanopyModel& H = f.model(2);
+  ASSERT_GT(H.haarPageCount, 0u);
+  const CanopyFileHeader& hdr = f.header();
+  const uint32_t pageIndex = H.firstHaarPage;
+  const CanopySection* table = f.findSection(CanopySectionKind::PageTable);
+  ASSERT_NE(table, nullptr);
+  // Edits the payload at `at` (bytes from the payload start), then re-CRCs the page and its table entry.
+  auto craftPage = [&](size_t at, uint32_t value) {
+    std::vector<unsigned char> bad = good;
+    unsigned char* page = bad.data() + hdr.pagesOffset + size_t(pageIndex) * hdr.pageBytes;
+    std::memcpy(page + sizeof(CanopyPageHeader) + at, &value, 4);
+    CanopyPageHeader ph;
+    std::memcpy(&ph, page, sizeof ph);
+    ph.crc = canopyPageCrc(page, hdr.pageBytes);
+    std::memcpy(page, &ph, sizeof ph);
+    std::memcpy(bad.data() + table->offset + size_t(pageIndex) * sizeof(CanopyPageEntry), &ph, sizeof ph);
+    reseal(bad);
+    return bad;
+  };
+  const uint32_t items = f.pageEntry(pageIndex).itemCount;
+  uint32_t off0, off1;
+  std::memcpy(&off0, good.data() + hdr.pagesOffset + size_t(pageIndex) * hdr.pageBytes + sizeof(CanopyPageHeader), 4);
+  std::memcpy(&off1, good.data() + hdr.pagesOffset + size_t(pageIndex) * hdr.pageBytes + sizeof(CanopyPageHeader) + 4, 4);
+  ASSERT_EQ(off0, 4 * (items + 1));
+  struct Case {
+    size_t at;
+    uint32_t value;
+    const char* expect;
+  };
+  for (const Case& c : {Case{0, 0u, "offsets"}, Case{4, off1 + 2, "bad offset"}, Case{4, 0xFFFFFFF0u, "bad offset"},
+                        Case{size_t(off0) + 18 * 12, 0xFFFFFFFFu, "size does not match"},  // item 0's B18 mask lo: more coefficients
+                        Case{size_t(off0) + 8, 5u, "running sum"},                       // item 0's B00 first
+                        Case{size_t(off0) + kCanopyHaarRecordBytes, 0x7f807f80u, "non-finite"}}) {  // fp16 infinities
+    const std::vector<unsigned char> bad = craftPage(c.at, c.value);
+    CanopyFile g = CanopyFile::fromMemory(bad.data(), bad.size(), "bad.canopy");  // the resident part is fine
+    try {
+      (void)g.readPage(pageIndex);
+      ADD_FAILURE() << "crafted Haar page accepted (" << c.expect << ")";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(c.expect), std::string::npos) << e.what();
+      EXPECT_EQ(std::string(e.what()).rfind("bad.canopy: page " + std::to_string(pageIndex), 0), 0u) << e.what();
+    }
+  }
+  // A brick location past its page's items, with valid CRCs, fails at open.
+  const CanopySection* hi = f.findSection(CanopySectionKind::HaarIndex);
+  ASSERT_NE(hi, nullptr);
+  const uint64_t groups = uint64_t(H.haarGroupDims[0]) * H.haarGroupDims[1] * H.haarGroupDims[2];
+  for (uint32_t i = 0; i < kCanopyHaarGroupBricks; ++i) {
+    const size_t at = hi->offset + (H.firstHaarIndex + groups + i) * 4;
+    uint32_t loc;
+    std::memcpy(&loc, good.data() + at, 4);
+    if (loc == kCanopyNone) continue;
+    std::vector<unsigned char> bad = good;
+    const uint32_t past = loc | (kCanopyHaarMaxItemsPerPage - 1u);
+    std::memcpy(bad.data() + at, &past, 4);
+    reseal(bad);
+    EXPECT_NE(expectRejected(bad, false).find("Haar brick location"), std::string::npos);
+    const uint32_t twice = loc == 0 ? 1u : 0u;  // another brick's item: referenced twice
+    std::memcpy(bad.data() + at, &twice, 4);
+    reseal(bad);
+    EXPECT_NE(expectRejected(bad, false).find("twice"), std::string::npos);
+    break;
   }
 }
 

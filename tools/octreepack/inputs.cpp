@@ -126,6 +126,7 @@ LightVdb readChaarLight(const std::string& path, const ModelSource& model) {
       throw invalidInput(path + ": its lattice differs from the density lattice of model '" + model.name + "'");
   LightVdb out;
   out.sourceLabel = vdbio::describeSource(path);
+  out.haar = std::make_shared<const CanopyHaarPages>(canopyHaarPagesFromChaar(*data));
   const haar::ChaarView view = data->view();
   out.fn = [data, view](int32_t i, int32_t j, int32_t k, float* o) {
     const int32_t p[3] = {i, j, k};

@@ -5,10 +5,12 @@
 // Every failure is a canopy::Error naming the file.
 #pragma once
 #include <array>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "formats/canopy_file.h"
+#include "formats/canopy_write.h"
 #include "tools/octreepack/octree_build.h"
 
 namespace canopy::octreepack {
@@ -21,11 +23,15 @@ ModelSource readDensityVdb(const std::string& path, const std::string& name);
 struct LightVdb {
   LightFn fn;
   std::string sourceLabel;
+  // .chaar only: its bricks re-paged as the finest level's Haar light (fn then serves the coarser
+  // levels' float16 items).
+  std::shared_ptr<const CanopyHaarPages> haar;
 };
 LightVdb readLightVdb(const std::string& path, const ModelSource& model);
 
-// Compressed lighting from canopy-haar (.chaar, 19 bases) sampled through the chaar decoder at
-// every lattice cell (0 outside the lattice). Its lattice must equal `model`'s. Throws
+// Compressed lighting from canopy-haar (.chaar, 19 bases): its bricks as Haar pages, and fn samples
+// it through the chaar decoder at every lattice cell (0 outside the lattice) for the coarser light
+// levels. Its lattice must equal `model`'s. Throws
 // Unsupported when this build has no chaar decoder (chaarSupported() == false).
 bool chaarSupported();
 LightVdb readChaarLight(const std::string& path, const ModelSource& model);

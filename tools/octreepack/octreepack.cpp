@@ -156,16 +156,19 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
     ModelSource src = readDensityVdb(m.density, m.name);
     nlohmann::json source = {{"name", m.name}, {"density", src.sourceLabel}};
     LightFn light;
+    std::shared_ptr<const CanopyHaarPages> haar;  // .chaar lighting: its bricks are the finest level's light
     if (!m.light.empty() && !o.ignoreLight) {
       LightVdb lv = endsWith(m.light, ".chaar") ? readChaarLight(m.light, src) : readLightVdb(m.light, src);
       light = std::move(lv.fn);
+      haar = std::move(lv.haar);
       source["light"] = lv.sourceLabel;
     }
-    built.push_back(buildOctree(src, m.density, light));
+    built.push_back(buildOctree(src, m.density, light, haar != nullptr));
+    built.back().haar = std::move(haar);
     sources.push_back(source);
     progress.add();
   }
-  for (auto& b : built) w.models.push_back({b.record, &b.tiles, &b.bricks, &b.light});
+  for (auto& b : built) w.models.push_back({b.record, &b.tiles, &b.bricks, &b.light, b.haar.get()});
   for (const SceneInstance& in : scene.instances) {
     CanopyInstance ci{};
     for (int k = 0; k < 12; ++k) ci.modelToWorld[k] = float(in.matrix[size_t(k)]);  // rows 0..2 of the 4x4
@@ -201,10 +204,10 @@ nlohmann::json canopyInfo(const CanopyFile& f) {
   j["bricks_per_page"] = h.bricksPerPage;
   j["instances"] = h.instanceCount;
   nlohmann::json sections = nlohmann::json::array();
-  const char* names[] = {"", "models", "instances", "node_tiles", "page_table", "scene_light", "metadata"};
+  const char* names[] = {"", "models", "instances", "node_tiles", "page_table", "scene_light", "metadata", "haar_index"};
   for (uint32_t i = 0; i < f.sectionCount(); ++i) {
     const CanopySection& s = f.section(i);
-    sections.push_back({{"name", s.kind < 7 ? names[s.kind] : "unknown"}, {"offset", s.offset}, {"bytes", s.bytes}, {"items", s.itemCount}});
+    sections.push_back({{"name", s.kind < 8 ? names[s.kind] : "unknown"}, {"offset", s.offset}, {"bytes", s.bytes}, {"items", s.itemCount}});
   }
   sections.push_back({{"name", "pages"}, {"offset", h.pagesOffset}, {"bytes", uint64_t(h.pageCount) * h.pageBytes}, {"items", h.pageCount}});
   j["sections"] = sections;
@@ -239,7 +242,12 @@ nlohmann::json canopyInfo(const CanopyFile& f) {
                       {"bricks", M.brickCount},
                       {"brick_pages", M.brickPageCount},
                       {"light_pages", M.lightPageCount},
+                      {"light_items", M.lightCount},
                       {"has_light", (M.flags & kCanopyModelHasLight) != 0},
+                      {"haar_light", (M.flags & kCanopyModelHaarLight) != 0},
+                      {"haar_pages", M.haarPageCount},
+                      {"haar_items", M.haarItemCount},
+                      {"haar_precision", M.haarPrecision ? "fp16" : "fp32"},
                       {"instances", instances},
                       {"levels", levels}});
   }
@@ -265,7 +273,14 @@ std::string formatInfo(const nlohmann::json& j) {
     o << "model '" << m["name"].get<std::string>() << "': depth " << m["depth"].get<uint32_t>() << " (" << m["root_cells"].get<uint32_t>()
       << " cells/axis), " << m["nodes"].get<uint64_t>() << " nodes, " << m["bricks"].get<uint64_t>() << " bricks in "
       << m["brick_pages"].get<uint64_t>() << " pages, " << m["instances"].get<uint64_t>() << " instances, light: "
-      << (m["has_light"].get<bool>() ? "yes (" + std::to_string(m["light_pages"].get<uint64_t>()) + " pages)" : std::string("no")) << "\n";
+      << (m["has_light"].get<bool>() ? "yes (" + std::to_string(m["light_pages"].get<uint64_t>()) + " pages of float16 items" +
+                                           (m["haar_light"].get<bool>() ? ", finest level: " + std::to_string(m["haar_items"].get<uint64_t>()) +
+                                                                              " Haar bricks (" + m["haar_precision"].get<std::string>() + ") in " +
+                                                                              std::to_string(m["haar_pages"].get<uint64_t>()) + " pages"
+                                                                        : std::string()) +
+                                           ")"
+                                     : std::string("no"))
+      << "\n";
     for (const auto& l : m["levels"])
       o << "  level " << l["level"].get<uint32_t>() << " (voxel = " << l["voxel_cells"].get<uint32_t>() << " cells): "
         << l["bricks"].get<uint64_t>() << " bricks, " << l["constant_nodes"].get<uint64_t>() << " constant, "

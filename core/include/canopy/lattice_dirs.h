@@ -25,14 +25,6 @@
 
 #include "canopy/hd.h"
 
-// CANOPY_UNROLL: on the GPU, fully unroll the next fixed-trip loop (over the 19 directions), so
-// that direction components fold into constants and per-node arrays stay in registers (listing
-// 5.2). Host compilers are left to decide: GCC vectorises these loops better when they stay rolled.
-#if defined(__CUDACC__)
-#define CANOPY_UNROLL _Pragma("unroll")
-#else
-#define CANOPY_UNROLL
-#endif
 
 namespace canopy::lattice {
 
