@@ -6,7 +6,10 @@
 #include <string>
 #include <vector>
 
+#include "canopy/lattice_dirs.h"
 #include "formats/canopy_write.h"
+#include "formats/chaar.h"
+#include "formats/haar_encode.h"
 #include "tools/octreepack/octree_build.h"
 
 namespace canopy::play::testing {
@@ -66,6 +69,66 @@ inline void writeLitScene(const std::string& path, const std::vector<octreepack:
     built.push_back(octreepack::buildOctree(sources[m], sources[m].name, m < lights.size() ? lights[m] : nullptr));
   CanopyWriteInput w;
   for (auto& b : built) w.models.push_back({b.record, &b.tiles, &b.bricks, &b.light});
+  w.instances = instances;
+  w.metadata = "{\"tool\":\"tests/play\"}";
+  writeCanopyFile(path, std::move(w));
+}
+
+// The lighting `light` of a model as a .chaar (every lattice cell, 19 bases, Haar threshold T,
+// `precision`): what canopy-haar makes of canopy-lbsolve's output.
+inline haar::ChaarData chaarOf(const octreepack::ModelSource& src, const octreepack::LightFn& light, float T, haar::Precision precision) {
+  const haar::LatticeGeom g = haar::LatticeGeom::fromBounds(src.latticeMin, src.latticeMax, src.name);
+  std::vector<haar::DenseLight> bases(kCanopyLightBases);
+  for (auto& b : bases) b.rgb.assign(3 * g.cells, 0.0f);
+  std::vector<float> v(kCanopyLightChannels);
+  size_t cell = 0;
+  for (int32_t k = src.latticeMin[2]; k <= src.latticeMax[2]; ++k)
+    for (int32_t j = src.latticeMin[1]; j <= src.latticeMax[1]; ++j)
+      for (int32_t i = src.latticeMin[0]; i <= src.latticeMax[0]; ++i, ++cell) {
+        light(i, j, k, v.data());
+        for (uint32_t b = 0; b < kCanopyLightBases; ++b)
+          for (int ch = 0; ch < 3; ++ch) bases[b].rgb[3 * cell + size_t(ch)] = v[3 * b + size_t(ch)];
+      }
+  haar::ChaarAssembly a;
+  a.geom = g;
+  a.precision = precision;
+  a.threshold = T;
+  for (uint32_t b = 0; b < kCanopyLightBases; ++b) {
+    bases[b].activeVoxels = g.cells;
+    const haar::LiftedBase lifted(g, bases[b], precision, src.name + " B" + std::to_string(b));
+    a.codes.push_back(lifted.encode(T));
+    a.directions.push_back({lattice::dir(int(b), 0), lattice::dir(int(b), 1), lattice::dir(int(b), 2)});
+    a.valueMax.push_back(lifted.valueMax());
+  }
+  return haar::assembleChaar(a);
+}
+
+// writeLitScene with each model's lighting Haar-compressed first (chaarOf): the finest level's
+// light is the .chaar's bricks (Haar pages), the levels above float16 items of its decoded values,
+// as canopy-octreepack packs PLANT.light.chaar.
+inline void writeHaarLitScene(const std::string& path, const std::vector<octreepack::ModelSource>& sources,
+                              const std::vector<octreepack::LightFn>& lights, const std::vector<CanopyInstance>& instances, float T,
+                              haar::Precision precision) {
+  std::vector<octreepack::BuiltModel> built;
+  std::vector<CanopyHaarPages> pages(sources.size());
+  built.reserve(sources.size());
+  for (size_t m = 0; m < sources.size(); ++m) {
+    const haar::ChaarData chaar = chaarOf(sources[m], lights[m], T, precision);
+    const haar::ChaarView view = chaar.view();
+    pages[m] = canopyHaarPagesFromChaar(chaar);
+    built.push_back(octreepack::buildOctree(
+        sources[m], sources[m].name,
+        [&](int32_t i, int32_t j, int32_t k, float* o) {
+          const bool inside = i <= sources[m].latticeMax[0] && j <= sources[m].latticeMax[1] && k <= sources[m].latticeMax[2];
+          for (uint32_t b = 0; b < kCanopyLightBases; ++b) {
+            const haar::Rgb v = inside ? haar::chaarSample(view, int(b), float(i), float(j), float(k)) : haar::Rgb{};
+            o[3 * b] = v.r, o[3 * b + 1] = v.g, o[3 * b + 2] = v.b;
+          }
+        },
+        true));
+  }
+  CanopyWriteInput w;
+  for (size_t m = 0; m < built.size(); ++m) w.models.push_back({built[m].record, &built[m].tiles, &built[m].bricks, &built[m].light, &pages[m]});
   w.instances = instances;
   w.metadata = "{\"tool\":\"tests/play\"}";
   writeCanopyFile(path, std::move(w));

@@ -64,11 +64,26 @@ std::string litForestFile() {
   return p;
 }
 
+// The lit forest with its lighting Haar-compressed (fp16, threshold 0.01): the finest level's light
+// comes from Haar pages in the same device pool, sampled with canopyHaarSampleAt.
+std::string haarForestFile() {
+  const std::string p = pt::tmpDir("cuda") + "/forest-haar.canopy";
+  std::vector<canopy::CanopyInstance> inst;
+  for (int i = 0; i < 24; ++i)
+    inst.push_back(pt::instanceAt(uint32_t(i % 2), float(i % 6) * 2.5f - 6.25f, 0, float(i / 6) * 2.5f - 3.75f, 1.0f, 0.7f * float(i)));
+  const float rgb[3] = {1.0f, 0.8f, 0.6f};
+  pt::writeHaarLitScene(p, {canopy::octreepack::testing::syntheticPlant(64, 0, "a", 6), canopy::octreepack::testing::syntheticPlant(48, 0, "b", 4)},
+                        {pt::rampLight(rgb, 1.0f, 64, 0.03f), pt::rampLight(rgb, -0.5f, 48, 0.03f)}, inst, 0.01f,
+                        canopy::haar::Precision::Fp16);
+  return p;
+}
+
 }  // namespace
 
 // The forest unlit, then lit (LB light on both models: the light pages go through the same device
 // pool and page table, and the kernel samples them with the same canopySampleLight / lbIndirect
-// code; the lit file also with the sun off, so that the indirect term alone is compared). One
+// code; the lit file also with the sun off, so that the indirect term alone is compared), then
+// Haar-lit (the finest level's light from Haar pages, canopyHaarSampleAt on the device). One
 // test case, so that bench/play/gpu.sh's count of passed cases stays valid.
 TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
   if (canopy::cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA device";
@@ -78,8 +93,9 @@ TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
     int litModels;
     const char* shadows;  // the sun transmittance map (default) or the per-sample shadow cones
   };
-  const std::string lit = litForestFile(), unlit = forestFile();
-  for (const Case& k : {Case{unlit, 1.0f, 0, "map"}, Case{unlit, 1.0f, 0, "cone"}, Case{lit, 1.0f, 2, "map"}, Case{lit, 0.0f, 2, "map"}}) {
+  const std::string lit = litForestFile(), unlit = forestFile(), haar = haarForestFile();
+  for (const Case& k : {Case{unlit, 1.0f, 0, "map"}, Case{unlit, 1.0f, 0, "cone"}, Case{lit, 1.0f, 2, "map"}, Case{lit, 0.0f, 2, "map"},
+                        Case{haar, 1.0f, 2, "map"}, Case{haar, 0.0f, 2, "map"}}) {
     pl::PlayOptions o;
     o.input = k.file;
     o.shadowMethod = k.shadows;

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -299,4 +300,109 @@ TEST(Light, SmallCacheStreamsLightPagesWithBrickPagesAndConverges) {
   for (size_t i = 3; i < want.size(); i += 4) peak = std::max(peak, double(want[i]));
   EXPECT_GT(peak, 0.2);  // the view shows the forest
   EXPECT_LT(rms(last, want), 1e-6) << r.dump();
+}
+
+// ---- Haar light (format 2.0: the finest level's light is the .chaar's bricks) ---------------------
+namespace {
+// The lit ball of litSphere() with its lighting Haar-compressed at threshold 0 (fp32: lossless).
+const std::string& haarSphere(float gradient = 0.0f) {
+  static std::map<float, std::string> files;
+  auto it = files.find(gradient);
+  if (it != files.end()) return it->second;
+  const std::string f = pt::tmpDir("light") + "/sphere-haar-" + std::to_string(gradient) + ".canopy";
+  pt::writeHaarLitScene(f, {pt::sphereModel(24, 10, 0.3f)}, {pt::rampLight(kRgb, gradient, 24)}, {pt::instanceAt(0, 0, 0, 0)}, 0.0f,
+                        canopy::haar::Precision::Fp32);
+  return files.emplace(gradient, f).first->second;
+}
+}  // namespace
+
+// Constant bases compressed losslessly: the Haar-lit ball renders as the float16-lit one (the
+// constants are exact in both), within float rounding (2e-5 relative), with the sun's three
+// bases and B_0 taken from the Haar items. The file is Haar-lit (float16 items above the finest
+// level only).
+TEST(Light, HaarLightRendersLikeTheSameLightInFloat16Items) {
+  const canopy::CanopyFile f = canopy::CanopyFile::open(haarSphere());
+  ASSERT_TRUE(f.model(0).flags & canopy::kCanopyModelHaarLight);
+  ASSERT_LT(f.model(0).lightCount, f.model(0).brickCount);
+  for (const char* sun : {"0,1,0", "0.3,0.8,-0.52"}) {
+    pl::PlayOptions o = view(litSphere(), 21, 21);
+    o.sun = sun;
+    o.sunIntensity = 0.0f;
+    const std::vector<float> items = render(o);
+    o.input = haarSphere();
+    nlohmann::json r;
+    const std::vector<float> haar = render(o, &r);
+    EXPECT_EQ(int(r["lit_models"]), 1);
+    double peak = 0;
+    for (size_t i = 0; i < items.size(); ++i) {
+      ASSERT_NEAR(haar[i], items[i], 2e-5f * items[i] + 1e-7f) << sun << " value " << i;
+      peak = std::max(peak, double(items[i]));
+    }
+    EXPECT_GT(peak, 0.1) << sun;
+  }
+}
+
+// Bases that vary along lattice x (+100% over the ball): the Haar items are sampled at the sample's
+// own lattice point. The float16 items (half resolution, box filtered, float16) give the same
+// image within their quantisation (a linear ramp survives the box filter): RMS below 1e-3 of the
+// peak (measured 2e-5 of it). A Haar lookup one lattice cell off along x would not: the control,
+// light shifted by one cell, differs by more than 3e-3 of the peak (measured 4.8e-3).
+TEST(Light, HaarLightIsSampledAtTheSamplesLatticePoint) {
+  pl::PlayOptions o = view("", 33, 33);
+  o.sun = "0.3,0.8,-0.52";
+  o.sunIntensity = 0.0f;
+  o.camera = "orbit:azimuth=30,elevation=20,turns=0";
+  const std::string items = pt::tmpDir("light") + "/sphere-ramp-items.canopy";
+  pt::writeLitScene(items, {pt::sphereModel(24, 10, 0.3f)}, {pt::rampLight(kRgb, 1.0f, 24)}, {pt::instanceAt(0, 0, 0, 0)});
+  const std::string shifted = pt::tmpDir("light") + "/sphere-ramp-shifted.canopy";
+  const auto ramp = pt::rampLight(kRgb, 1.0f, 24);
+  pt::writeHaarLitScene(shifted, {pt::sphereModel(24, 10, 0.3f)},
+                        {[ramp](int32_t i, int32_t j, int32_t k, float* out) { ramp(i + 1, j, k, out); }}, {pt::instanceAt(0, 0, 0, 0)},
+                        0.0f, canopy::haar::Precision::Fp32);
+  o.input = items;
+  const std::vector<float> ref = render(o);
+  o.input = haarSphere(1.0f);
+  const std::vector<float> haar = render(o);
+  o.input = shifted;
+  const std::vector<float> off = render(o);
+  double peak = 0;
+  for (float v : ref) peak = std::max(peak, double(v));
+  const double e = rms(haar, ref), eOff = rms(off, ref);
+  std::printf("Haar vs float16 items on a ramp: RMS %.3g (one cell off: %.3g), peak %.3g\n", e, eOff, peak);
+  EXPECT_GT(peak, 0.1);
+  EXPECT_LT(e, 1e-3 * peak);
+  EXPECT_GT(eOff, 3e-3 * peak);
+}
+
+// A flipped byte in a Haar page: reported once, never cached, and the samples that wanted it use
+// the float16 item of the level above (constant bases: the same values), so the damaged frame
+// equals the intact one within float rounding.
+TEST(Light, CorruptHaarPageIsReportedAndLitFromTheLevelAbove) {
+  const std::string good = haarSphere();
+  const std::string bad = pt::tmpDir("light") + "/sphere-haar-corrupt.canopy";
+  std::vector<unsigned char> bytes = canopy::readFile(good);
+  const canopy::CanopyFile f = canopy::CanopyFile::open(good);
+  const canopy::CanopyModel& M = f.model(0);
+  ASSERT_GE(M.haarPageCount, 1u);
+  const uint32_t page = M.firstHaarPage;
+  ASSERT_EQ(f.pageEntry(page).kind, uint32_t(canopy::CanopyPageKind::HaarLight));
+  bytes[size_t(f.header().pagesOffset) + size_t(page) * f.header().pageBytes + 700] ^= 0x40;
+  canopy::writeFileAtomic(bad, bytes.data(), bytes.size());
+  pl::PlayOptions o = view(good, 33, 33);
+  o.frames = 2;
+  o.camera = "orbit:azimuth=30,elevation=15,distance=3.5,turns=0.05";
+  o.sunIntensity = 0.0f;
+  nlohmann::json rg, rb;
+  const std::vector<float> intact = render(o, &rg);
+  o.input = bad;
+  const std::vector<float> damaged = render(o, &rb);
+  EXPECT_EQ(rg["corrupt_pages"], 0);
+  EXPECT_EQ(rb["corrupt_pages"], 1);
+  EXPECT_EQ(int(rb["pages_streamed"]) + 1, int(rg["pages_streamed"]));  // the page was wanted
+  double peak = 0;
+  for (size_t i = 0; i < intact.size(); ++i) {
+    ASSERT_NEAR(damaged[i], intact[i], 2e-5f * intact[i] + 1e-7f) << "value " << i;
+    peak = std::max(peak, double(intact[i]));
+  }
+  EXPECT_GT(peak, 0.1);
 }
