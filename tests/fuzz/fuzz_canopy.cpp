@@ -1,6 +1,6 @@
 // fuzz_canopy.cpp: libFuzzer harness for the .canopy reader. Any input must either be rejected
-// with a canopy::Error or be read in full (every page, a descent and a brick sample per model)
-// without a sanitizer report.
+// with a canopy::Error or be read in full (every page, a descent and a brick sample per model, its
+// float16 light item and its Haar light) without a sanitizer report.
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -33,7 +33,23 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         volatile float d = canopy::canopySampleBrick(canopy::canopyBrickInPage(page.data(), canopy::canopyBrickSlot(r.node.brick, bpp)),
                                                      r.local[0], r.local[1], r.local[2]).density;
         (void)d;
-        if (M.lightCount == 0) continue;
+        if (M.flags & canopy::kCanopyModelHaarLight) {  // the finest level's Haar light at the sample's lattice point
+          const canopy::CanopyHaarView hv = f.haarView(m);
+          const canopy::CanopyHaarLocation at = canopy::canopyHaarLocate(hv, float(M.latticeMin[0]) + 7.3f * u, float(M.latticeMin[1]) + 3.1f * u,
+                                                                         float(M.latticeMin[2]) + 5.7f * u);
+          if (at.page != canopy::kCanopyNone) {
+            std::vector<unsigned char> hp(f.header().pageBytes);
+            try {
+              f.readPage(at.page, hp.data());
+              const canopy::haar::Rgb v = canopy::canopyHaarSampleAt(canopy::canopyHaarItemInPage(hp.data(), at.item), hv.fp16,
+                                                                     uint32_t(k) % canopy::kCanopyLightBases, at.at);
+              volatile float l = v.r + v.g + v.b;
+              (void)l;
+            } catch (const canopy::Error&) {
+            }
+          }
+        }
+        if (r.node.brick >= M.lightCount) continue;  // float16 items: every brick, or those above the finest level
         const uint32_t lpp = f.header().lightItemsPerPage;
         try {
           f.readPage(canopy::canopyLightPage(M, r.node.brick, lpp), page.data());

@@ -1,0 +1,153 @@
+// bench_light_packing.cpp: what the packed file's lighting costs and how exact it is, per Haar
+// threshold (a benchmark, not a test: it prints a Markdown table for bench/RESULTS.md).
+//
+//   bench-light-packing WORKDIR PLANT.density.vdb PLANT.light.vdb [--thresholds 0,0.003,...]
+//                       [--precision fp16|fp32]
+//
+// For each threshold T: canopy-haar PLANT.light.vdb --threshold T -> .chaar, canopy-octreepack
+// packs it (format 2.0: the finest level's light is the .chaar's bricks, Haar pages) and, for
+// reference, the uncompressed light VDB (float16 items at half resolution on every level, the only
+// scheme of format 1.0). Reported per packed file: the bytes of its light pages, and the error of
+// the finest level's light against canopy-lbsolve's values (the light VDB) at every occupied
+// lattice cell, all 19 bases x RGB: RMS and max absolute, and both relative to the largest value.
+// Both sample through the format's CANOPY_HD functions (canopyHaarSampleAt / canopySampleLight),
+// as the player does. The tools are run from the folder of this executable.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "canopy/atomic_file.h"
+#include "canopy/cli.h"
+#include "formats/canopy_file.h"
+#include "tests/octreepack/packed_sampler.h"
+#include "tools/octreepack/inputs.h"
+
+namespace op = canopy::octreepack;
+
+namespace {
+
+struct Err {
+  double sumSq = 0, max = 0, peak = 0;
+  uint64_t n = 0;
+};
+
+// The finest level's light of the packed model 0 at every occupied cell vs the truth.
+Err lightError(const canopy::CanopyFile& f, const op::ModelSource& src, const op::LightFn& truth) {
+  op::testing::PackedSampler S(f);
+  const canopy::CanopyModel& M = f.model(0);
+  const bool haar = (M.flags & canopy::kCanopyModelHaarLight) != 0;
+  Err e;
+  float want[canopy::kCanopyLightChannels];
+  for (const op::SourceCell& c : src.cells) {
+    truth(c.ijk[0], c.ijk[1], c.ijk[2], want);
+    float u[3];
+    canopy::canopyLatticeToUnit(M.octreeOrigin, M.rootCells, float(c.ijk[0]), float(c.ijk[1]), float(c.ijk[2]), u);
+    const canopy::CanopyLookup r = f.descend(0, u[0], u[1], u[2], M.depth);
+    for (uint32_t b = 0; b < canopy::kCanopyLightBases; ++b) {
+      float got[3] = {0, 0, 0};
+      if (haar) {
+        const canopy::haar::Rgb v = S.sampleHaar(0, b, float(c.ijk[0]), float(c.ijk[1]), float(c.ijk[2]));
+        got[0] = v.r, got[1] = v.g, got[2] = v.b;
+      } else if (r.node.brick != canopy::kCanopyNone) {
+        const auto& page = S.pageData(canopy::canopyLightPage(M, r.node.brick, f.header().lightItemsPerPage));
+        canopy::canopySampleLight(canopy::canopyLightInPage(page.data(), r.node.brick % f.header().lightItemsPerPage), b, r.local[0],
+                                  r.local[1], r.local[2], got);
+      }
+      for (int ch = 0; ch < 3; ++ch) {
+        const double w = want[3 * b + size_t(ch)], d = double(got[ch]) - w;
+        e.sumSq += d * d;
+        e.max = std::max(e.max, std::fabs(d));
+        e.peak = std::max(e.peak, std::fabs(w));
+        ++e.n;
+      }
+    }
+  }
+  return e;
+}
+
+uint64_t lightBytes(const canopy::CanopyFile& f) {
+  uint64_t n = 0;
+  for (uint32_t m = 0; m < f.modelCount(); ++m) n += uint64_t(f.model(m).lightPageCount + f.model(m).haarPageCount) * f.header().pageBytes;
+  return n;
+}
+
+int run(const std::string& cmd) {
+  const int rc = std::system(cmd.c_str());
+  if (rc != 0) std::cerr << "bench-light-packing: failed (" << rc << "): " << cmd << "\n";
+  return rc;
+}
+
+std::string q(const std::string& s) { return "'" + s + "'"; }
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 4) {
+    std::cerr << "usage: bench-light-packing WORKDIR PLANT.density.vdb PLANT.light.vdb [--thresholds T,T,...] [--precision fp16|fp32]\n";
+    return 1;
+  }
+  canopy::setQuiet(true);
+  const std::string work = argv[1], density = argv[2], lightVdb = argv[3];
+  std::string thresholds = "0,0.003,0.01,0.03,0.1", precision = "fp16";
+  for (int i = 4; i + 1 < argc; i += 2) {
+    const std::string a = argv[i];
+    if (a == "--thresholds") thresholds = argv[i + 1];
+    else if (a == "--precision") precision = argv[i + 1];
+    else {
+      std::cerr << "bench-light-packing: unknown option " << a << "\n";
+      return 1;
+    }
+  }
+  std::string bin = argv[0];
+  bin = bin.find('/') == std::string::npos ? std::string(".") : bin.substr(0, bin.rfind('/'));
+  if (run("mkdir -p " + q(work)) != 0) return 2;
+  try {
+    const op::ModelSource src = op::readDensityVdb(density, "plant");
+    const op::LightVdb truth = op::readLightVdb(lightVdb, src);
+    struct Row {
+      std::string scheme;
+      uint64_t chaarBytes, fileBytes, lightBytes;
+      Err e;
+    };
+    std::vector<Row> rows;
+    auto packAndMeasure = [&](const std::string& scheme, const std::string& lightIn, uint64_t chaarBytes) {
+      const std::string out = work + "/plant." + std::to_string(rows.size()) + ".canopy";
+      if (run(q(bin + "/canopy-octreepack") + " -q " + q(density) + " " + q(lightIn) + " -o " + q(out)) != 0) std::exit(3);
+      const canopy::CanopyFile f = canopy::CanopyFile::open(out);
+      rows.push_back({scheme, chaarBytes, f.header().fileBytes, lightBytes(f), lightError(f, src, truth.fn)});
+    };
+    packAndMeasure("float16 items, half resolution (format 1.0 scheme, from the light VDB)", lightVdb, 0);
+    std::stringstream ts(thresholds);
+    for (std::string t; std::getline(ts, t, ',');) {
+      const std::string chaar = work + "/plant.T" + t + "." + precision + ".chaar";
+      if (run(q(bin + "/canopy-haar") + " -q " + q(lightVdb) + " --threshold " + t + " --precision " + precision + " -o " + q(chaar)) != 0)
+        return 3;
+      packAndMeasure("Haar pages, " + precision + ", threshold " + t, chaar, canopy::readFile(chaar).size());
+    }
+    const canopy::CanopyFile plain = [&] {
+      const std::string out = work + "/plant.density-only.canopy";
+      if (run(q(bin + "/canopy-octreepack") + " -q " + q(density) + " -o " + q(out)) != 0) std::exit(3);
+      return canopy::CanopyFile::open(out);
+    }();
+    std::printf("Light of %s (%zu occupied cells) packed with %s (density only: %.2f MB):\n\n", lightVdb.c_str(), src.cells.size(),
+                density.c_str(), double(plain.header().fileBytes) / 1e6);
+    std::printf("| finest-level light | .chaar MB | .canopy MB | light pages MB | RMS error | max error | RMS / peak | max / peak |\n");
+    std::printf("|---|---:|---:|---:|---:|---:|---:|---:|\n");
+    for (const Row& r : rows) {
+      const double rmsE = std::sqrt(r.e.sumSq / double(std::max<uint64_t>(r.e.n, 1)));
+      std::printf("| %s | %s | %.2f | %.2f | %.3g | %.3g | %.2e | %.2e |\n", r.scheme.c_str(),
+                  r.chaarBytes ? std::to_string(double(r.chaarBytes) / 1e6).substr(0, 5).c_str() : "-", double(r.fileBytes) / 1e6,
+                  double(r.lightBytes) / 1e6, rmsE, r.e.max, rmsE / r.e.peak, r.e.max / r.e.peak);
+    }
+    std::printf("\npeak value (largest |light| at an occupied cell): %.4g\n", rows.empty() ? 0.0 : rows[0].e.peak);
+  } catch (const canopy::Error& e) {
+    std::cerr << "bench-light-packing: " << e.what() << "\n";
+    return int(e.code());
+  }
+  return 0;
+}
