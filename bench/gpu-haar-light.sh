@@ -15,7 +15,8 @@
 #   1. CUDA tests: test_play_cuda (GPU frames vs CPU, the Haar-lit forest among them), test_octreepack's
 #      device sampling, test_core, test_haar_cuda, test_lbsolve_cuda (CANOPY_UNROLL moved to hd.h).
 #   2. bench-play 1920x1080, 1 GiB cache, shadow map: plant, forest, and the grove packed twice from
-#      the same lbsolve light: float16 items (the 1.0 scheme) and Haar pages (fp16, threshold 0.05).
+#      the same lbsolve light: float16 items (the 1.0 scheme) and Haar pages (fp16, threshold 0.05);
+#      each also with the Haar decoder fully unrolled (map-haarunroll; PLAY_VARIANTS overrides).
 #   3. bench-light-packing on oak_medium at 128^3 (voxelised and lit on the GPU here).
 set -u
 here=$(pwd)
@@ -52,7 +53,8 @@ for v in f16 h16; do
 done
 ls -l "$O"/grove-*.canopy
 step bench-play
-timeout 300 bench-play "$O/bench" --device cuda --size 1920x1080 --frames "${FRAMES:-120}" --cache-mb 1024 --shadows map \
+timeout 300 bench-play "$O/bench" --device cuda --size 1920x1080 --frames "${FRAMES:-120}" --cache-mb 1024 \
+  ${PLAY_VARIANTS:---shadows map --shadows map-haarunroll} \
   --extra grove-f16="$O/grove-f16.canopy" --extra grove-h16="$O/grove-h16.canopy" 2> "$O/bench_play.err" | tee "$O/bench_play.md" || status=1
 cp "$O/bench/grove-h16.png" "$O/play-grove-h16.png" 2>/dev/null
 rm -f "$O"/grove-*.canopy

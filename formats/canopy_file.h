@@ -563,14 +563,25 @@ CANOPY_HD CANOPY_FORCEINLINE const unsigned char* canopyHaarItemInPage(const voi
   return payload + reinterpret_cast<const uint32_t*>(payload)[item];
 }
 
+// A Haar item's coefficient entries in either precision (one instantiation of the sampler serves
+// both: the branch is uniform per model).
+struct CanopyHaarCoefReader {
+  const unsigned char* p;
+  uint32_t fp16;
+  CANOPY_HD CANOPY_FORCEINLINE haar::Rgb operator()(uint64_t i) const {
+    if (fp16) return haar::CoefReader16{reinterpret_cast<const uint16_t*>(p)}(i);
+    return haar::CoefReader32{reinterpret_cast<const float*>(p)}(i);
+  }
+};
+
 // Trilinear sample of base `base` of one Haar item at the footprint `at`: haar::sampleBrick on the
 // item's record and coefficients, so it equals haar::chaarSample of the source .chaar bit for bit.
+// kOuterUnroll: haar::sampleBrick's (same result either way).
+template <int kOuterUnroll = 4>
 CANOPY_HD inline haar::Rgb canopyHaarSampleAt(const unsigned char* item, uint32_t fp16, uint32_t base, const haar::BrickLookup& at) {
   const haar::BrickRecord rec = reinterpret_cast<const haar::BrickRecord*>(item)[base];
-  const unsigned char* coefs = item + kCanopyHaarRecordBytes;
-  if (fp16)
-    return haar::sampleBrick(rec, haar::CoefReader16{reinterpret_cast<const uint16_t*>(coefs)}, at.lx, at.ly, at.lz, at.fx, at.fy, at.fz);
-  return haar::sampleBrick(rec, haar::CoefReader32{reinterpret_cast<const float*>(coefs)}, at.lx, at.ly, at.lz, at.fx, at.fy, at.fz);
+  return haar::sampleBrick<CanopyHaarCoefReader, kOuterUnroll>(rec, CanopyHaarCoefReader{item + kCanopyHaarRecordBytes, fp16}, at.lx,
+                                                               at.ly, at.lz, at.fx, at.fy, at.fz);
 }
 
 // Checks the structure of a Haar page's payload (host): item offsets increasing, 4-aligned and inside

@@ -50,6 +50,14 @@
 #include "canopy/sun_lookup.h"
 #include "formats/canopy_file.h"
 
+// Out of line on the device (large per-sample code called from several places of a kernel: one
+// copy instead of one per call site); inline on the host.
+#if defined(__CUDA_ARCH__)
+#define CANOPY_PLAY_NOINLINE __noinline__
+#else
+#define CANOPY_PLAY_NOINLINE inline
+#endif
+
 namespace canopy::play {
 
 // ------------------------------------------------------------------------------------------------
@@ -165,6 +173,7 @@ struct ShadeParams {
   uint32_t shadowMapMaxVoxels;  // kShadowsMap: voxels grow until a grid has at most this many
   int descentCache;         // 1: reuse a ray's last descent per instance (DescentCache); 0: always descend
   int holdEmpty;            // 1: a primary ray keeps an instance's empty leaf segment to its end (EmptyHold)
+  int haarUnrolled;         // 1: the Haar light decoder fully unrolled on the device (timing; 0: rolled, the default)
 };
 
 // How a sample's sun transmittance Tshadow is found (ShadeParams::shadows).
@@ -293,25 +302,38 @@ CANOPY_HD inline void ambientOnly(const SceneView& s, float sceneFactor, float o
 }
 
 // The LB indirect light from a Haar item (format 2.0: the finest level of a Haar-lit model) at the
-// brick-local footprint `at`: the (up to) three sun bases of the instance's lookup and B_0, each
-// haar::sampleBrick of the item (bit for bit the .chaar decoder's sample), then lbIndirect().
-// item == nullptr: no light stored there (every base 0).
-CANOPY_HD inline void sampleHaarLbLight(const unsigned char* item, uint32_t fp16, const haar::BrickLookup& at, const sun::Weights& w,
-                                        float ambient, float sceneFactor, float out[3]) {
-  float bases[3][3];
-  float b0[3] = {0.0f, 0.0f, 0.0f};
-  for (int v = 0; v < 3; ++v) {
-    bases[v][0] = bases[v][1] = bases[v][2] = 0.0f;
-    if (item && w.weight[v] > 0.0f) {
-      const haar::Rgb c = canopyHaarSampleAt(item, fp16, uint32_t(w.base[v]), at);
-      bases[v][0] = c.r, bases[v][1] = c.g, bases[v][2] = c.b;
+// brick-local footprint `at`: (sum_v w_v B_v + ambient B_0 / 18) * sceneFactor, as lbIndirect()
+// computes it (the same terms in the same order), with each base haar::sampleBrick of the item
+// (bit for bit the .chaar decoder's sample). item == nullptr: no light stored there (every base 0).
+// On the device this is one out-of-line function with one copy of the sampler, its four bases in a
+// rolled loop: inlined per base, precision and call site, the Haar decoder made the lit pixel
+// kernel ten times larger (44.7 k PTX lines against 4.7 k) and the grove's frame 15x slower
+// (257.7 against 16.8 ms on an H200, bench/RESULTS.md).
+template <int kOuterUnroll>
+CANOPY_HD CANOPY_PLAY_NOINLINE void sampleHaarLbLightT(const unsigned char* item, uint32_t fp16, const haar::BrickLookup& at,
+                                                       const sun::Weights& w, float ambient, float sceneFactor, float out[3]) {
+  float acc[3] = {0.0f, 0.0f, 0.0f};
+  if (item) {
+    const uint32_t base[4] = {uint32_t(w.base[0]), uint32_t(w.base[1]), uint32_t(w.base[2]), 0u};
+    const float weight[4] = {w.weight[0], w.weight[1], w.weight[2], ambient * kAmbientB0Scale};
+#if defined(__CUDA_ARCH__)
+#pragma unroll 1
+#endif
+    for (int v = 0; v < 4; ++v) {
+      if (!(weight[v] != 0.0f)) continue;  // a zero weight adds +0 (lbIndirect would add 0 * B)
+      const haar::Rgb c = canopyHaarSampleAt<kOuterUnroll>(item, fp16, base[v], at);
+      acc[0] += weight[v] * c.r;
+      acc[1] += weight[v] * c.g;
+      acc[2] += weight[v] * c.b;
     }
   }
-  if (item) {
-    const haar::Rgb c = canopyHaarSampleAt(item, fp16, 0, at);
-    b0[0] = c.r, b0[1] = c.g, b0[2] = c.b;
-  }
-  lbIndirect(w, bases, b0, ambient, sceneFactor, out);
+  for (int c = 0; c < 3; ++c) out[c] = acc[c] * sceneFactor;
+}
+// unrolled (ShadeParams::haarUnrolled): the decoder's loops fully unrolled (timing comparison).
+CANOPY_HD inline void sampleHaarLbLight(const unsigned char* item, uint32_t fp16, const haar::BrickLookup& at, const sun::Weights& w,
+                                        float ambient, float sceneFactor, int unrolled, float out[3]) {
+  if (unrolled) sampleHaarLbLightT<4>(item, fp16, at, w, ambient, sceneFactor, out);
+  else sampleHaarLbLightT<1>(item, fp16, at, w, ambient, sceneFactor, out);
 }
 
 // The LB indirect light from a light item at node-local l in [0,1]^3: the (up to) three sun bases
@@ -529,7 +551,7 @@ CANOPY_HD inline void segmentIndirect(const SceneView& s, const InstanceView& in
     at.slot = 0;
     at.lx = int(g.haarLocal & 3u), at.ly = int((g.haarLocal >> 2) & 3u), at.lz = int((g.haarLocal >> 4) & 3u);
     at.fx = g.light[0], at.fy = g.light[1], at.fz = g.light[2];
-    sampleHaarLbLight(g.haarItem, (g.haarLocal >> 6) & 1u, at, inst.sunWeights, s.shade.ambient, factor, out);
+    sampleHaarLbLight(g.haarItem, (g.haarLocal >> 6) & 1u, at, inst.sunWeights, s.shade.ambient, factor, s.shade.haarUnrolled, out);
     return;
   }
   if (!kWithLight || !g.lightItem) {

@@ -254,6 +254,7 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   shade.shadowMapBias = o.shadowMapBias;
   shade.descentCache = o.descentCache ? 1 : 0;
   shade.holdEmpty = o.holdEmpty ? 1 : 0;
+  shade.haarUnrolled = o.haarUnrolled ? 1 : 0;
   shade.shadowMapMaxVoxels = o.shadowMapMaxVoxels;
   WorkCounters work{};
   if (o.countWork) backend->countWork(&work);

@@ -12,6 +12,8 @@
 // lattice cell, all 19 bases x RGB: RMS and max absolute, and both relative to the largest value.
 // Both sample through the format's CANOPY_HD functions (canopyHaarSampleAt / canopySampleLight),
 // as the player does. The tools are run from the folder of this executable.
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -103,8 +105,13 @@ int main(int argc, char** argv) {
       return 1;
     }
   }
-  std::string bin = argv[0];
-  bin = bin.find('/') == std::string::npos ? std::string(".") : bin.substr(0, bin.rfind('/'));
+  std::string bin = argv[0];  // the tools beside this executable (also when it was found on PATH)
+  {
+    char self[4096];
+    const ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
+    if (n > 0) bin.assign(self, size_t(n));
+    bin = bin.find('/') == std::string::npos ? std::string(".") : bin.substr(0, bin.rfind('/'));
+  }
   if (run("mkdir -p " + q(work)) != 0) return 2;
   try {
     const op::ModelSource src = op::readDensityVdb(density, "plant");
