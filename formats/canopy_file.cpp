@@ -289,7 +289,7 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
   if (const CanopySection* md = findSection(CanopySectionKind::Metadata))
     metadata_.assign(reinterpret_cast<const char*>(resident_.data() + md->offset), size_t(md->bytes));
   if (const CanopySection* hi = findSection(CanopySectionKind::HaarIndex)) {
-    if (h.major < 2) bad(P, "a 1.x file has a HaarIndex section");
+    if (h.major == 1 && h.minor < 1) bad(P, "a 1.0 file has a HaarIndex section");
     if (hi->itemBytes != sizeof(uint32_t)) bad(P, "section HaarIndex has the wrong item size");
     haarIndex_ = copyArray<uint32_t>(resident_, hi->offset, hi->itemCount);
   }
@@ -318,14 +318,12 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
     const uint64_t lpp = h.lightItemsPerPage;
     const bool lit = (M.flags & kCanopyModelHasLight) != 0;
     const bool haar = (M.flags & kCanopyModelHaarLight) != 0;
-    // With Haar light the float16 items cover the bricks above the finest level only (checked in
-    // the tree walk below); without, every brick or none.
-    const bool itemsOk = haar ? (lit && M.lightCount <= M.brickCount) : (lit ? M.lightCount == M.brickCount : M.lightCount == 0);
-    if (!itemsOk || M.lightPageCount != (uint64_t(M.lightCount) + lpp - 1) / lpp ||
+    if ((lit ? M.lightCount != M.brickCount : M.lightCount != 0) || M.lightPageCount != (uint64_t(M.lightCount) + lpp - 1) / lpp ||
         uint64_t(M.firstLightPage) + M.lightPageCount > h.pageCount)
       bad(P, name + " light items or pages out of range");
     if (haar) {
-      if (h.major < 2) bad(P, name + " has Haar light in a 1.x file");
+      if (h.major == 1 && h.minor < 1) bad(P, name + " has Haar light in a 1.0 file");
+      if (!lit) bad(P, name + " has Haar light but no light items");
       if (M.haarPrecision > 1) bad(P, name + " Haar coefficient precision " + u64s(M.haarPrecision) + " is unknown");
       uint64_t groups = 1;
       for (int a = 0; a < 3; ++a) {
@@ -360,8 +358,6 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
     std::vector<std::pair<uint32_t, uint32_t>> stack;  // (tile, level of its nodes)
     auto checkNode = [&](const CanopyNode& n, uint32_t level) {
       if (n.brick != kCanopyNone && n.brick >= M.brickCount) bad(P, name + ": brick id " + u64s(n.brick) + " out of range");
-      if (haar && level < M.depth && n.brick != kCanopyNone && n.brick >= M.lightCount)
-        bad(P, name + ": brick " + u64s(n.brick) + " above the finest level has no light item");
       if (!(n.density >= 0.0f) || n.density > 3.0e38f) bad(P, name + ": node density is negative or not finite");
       if (n.child == kCanopyNone) return;
       if (n.child >= M.tileCount) bad(P, name + ": child tile " + u64s(n.child) + " out of range");

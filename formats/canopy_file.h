@@ -1,4 +1,4 @@
-// canopy_file.h: the packed, streamable scene file (`.canopy`), version 2.0 (reads 1.0 too).
+// canopy_file.h: the packed, streamable scene file (`.canopy`), version 1.1 (reads 1.0 too).
 //
 // A .canopy file holds plant models (each a sparse GigaVoxels-style octree of bricks, thesis ch. 5),
 // instances of those models (model id + transform) and an optional coarse scene lighting lattice.
@@ -17,7 +17,7 @@
 //                       PageTable   CanopyPageEntry[pageCount]       32 B each
 //                       SceneLight  CanopySceneLight + float[dim]    (optional)
 //                       Metadata    UTF-8 JSON: tool version, inputs and their hashes (optional)
-//                       HaarIndex   uint32[]: Haar-lit models' group tables + brick locations (2.0)
+//                       HaarIndex   uint32[]: Haar-lit models' group tables + brick locations (1.1)
 //   pagesOffset       page 0, page 1, ...        pageBytes each (65536), pagesOffset % pageBytes == 0
 //   fileBytes         end of file (== pagesOffset + pageCount * pageBytes; nothing may follow)
 //
@@ -65,15 +65,15 @@
 // A model without lighting (density only) has no light pages; the player then shows direct and
 // ambient light.
 //
-// Haar light pages (kind HaarLight, 2.0; models flagged kCanopyModelHaarLight, packed from a
-// .chaar): the finest level's lighting is the .chaar's own compressed bricks (formats/chaar.h:
-// 3^3 cells + a forward border, 19 records of a 64-bit mask and a first-coefficient index, the
-// kept coefficients), re-paged unchanged, so a sample equals haar::chaarSample bit for bit and the
-// light keeps the .chaar's compression. Such a model has float16 light items only for its bricks
-// above the finest level (lightCount = bricks of levels 0..depth-1 = the first brick ids: they are
-// numbered coarse to fine); those remain the light MIP levels. The chaar bricks are grouped 4^3
-// per group; items are stored group by group (groups in x-fastest order, bricks in a group
-// x-fastest) and pages are filled greedily with whole items. Payload of a Haar page with n items:
+// Haar light pages (kind HaarLight, 1.1; models flagged kCanopyModelHaarLight, packed from a
+// .chaar): besides its light items (one per brick, as above), the model carries the .chaar's own
+// compressed bricks (formats/chaar.h: 3^3 cells + a forward border, 19 records of a 64-bit mask and
+// a first-coefficient index, the kept coefficients), re-paged unchanged, so a sample of them equals
+// haar::chaarSample bit for bit: the finest level's exact light at the .chaar's threshold, for a
+// player that asks for it (canopy-play --light exact; the items are the fast path). The chaar
+// bricks are grouped 4^3 per group; items are stored group by group (groups in x-fastest order,
+// bricks in a group x-fastest) and pages are filled greedily with whole items. Payload of a Haar
+// page with n items:
 //   uint32 offset[n + 1]   byte offset of item i from the payload start (offset[0] = 4 (n + 1),
 //                          increasing, multiples of 4; offset[n] = payloadBytes)
 //   item i                 BrickRecord rec[19] (12 B each: mask lo, mask hi, first | raw << 31;
@@ -90,9 +90,9 @@
 // truncation, trailing bytes, any CRC mismatch and any pointer out of range (canopy::Error).
 //
 // Versioning: major changes on any layout change (a reader refuses a newer major); minor adds
-// optional sections/page kinds that older readers may ignore. 2.0 added Haar light (a lit model's
-// lightCount may be smaller than brickCount, which a 1.0 reader would refuse); this reader also
-// reads 1.0 files (no Haar light).
+// optional sections/page kinds that older readers may ignore. 1.1 added Haar light (the HaarIndex
+// section, HaarLight pages, model fields in 1.0's reserved bytes); the writer writes 1.0 when no
+// model has Haar light, so such files are byte-identical to 1.0 ones.
 #pragma once
 #include <math.h>
 #include <string.h>
@@ -113,8 +113,8 @@ namespace canopy {
 // Constants
 // ------------------------------------------------------------------------------------------------
 constexpr char kCanopyMagic[8] = {'C', 'A', 'N', 'O', 'P', 'Y', 'P', 'K'};
-constexpr uint16_t kCanopyMajor = 2;  // 2.0: Haar light pages; a 2.x reader reads 1.0 files too
-constexpr uint16_t kCanopyMinor = 0;
+constexpr uint16_t kCanopyMajor = 1;
+constexpr uint16_t kCanopyMinor = 1;  // 1.1: Haar light pages (optional; a 1.0 reader skips them)
 constexpr uint32_t kCanopyPageBytes = 65536;   // page size written (readers accept powers of two >= 32 KiB)
 constexpr uint32_t kCanopySectionAlign = 64;   // every section starts on a 64-byte boundary
 constexpr uint32_t kCanopyBrickSize = 8;       // interior voxels per axis
@@ -166,7 +166,7 @@ enum class CanopySectionKind : uint32_t {
   PageTable = 4,   // CanopyPageEntry[pageCount]
   SceneLight = 5,  // CanopySceneLight then float values[dim.x * dim.y * dim.z] (optional)
   Metadata = 6,    // UTF-8 JSON (optional)
-  HaarIndex = 7,   // uint32[]: every Haar-lit model's group table and brick locations (2.0; optional)
+  HaarIndex = 7,   // uint32[]: every Haar-lit model's group table and brick locations (1.1; optional)
 };
 
 struct CanopySection {             // offset
@@ -192,8 +192,8 @@ struct CanopyNode {                // offset
 static_assert(sizeof(CanopyNode) == 16, "CanopyNode layout");
 
 enum CanopyModelFlags : uint32_t {
-  kCanopyModelHasLight = 1u,   // float16 light items: one per brick, or (with HaarLight) one per brick above the finest level
-  kCanopyModelHaarLight = 2u,  // the finest level's light is the .chaar's Haar bricks (Haar pages, HaarIndex)
+  kCanopyModelHasLight = 1u,   // float16 light items, one per brick
+  kCanopyModelHaarLight = 2u,  // also the .chaar's Haar bricks: the finest level's exact light (Haar pages, HaarIndex)
 };
 
 struct CanopyModel {               // offset
@@ -219,7 +219,7 @@ struct CanopyModel {               // offset
   CanopyNode root;                 // 248  level-0 node
   uint32_t levelBricks[16];        // 264  bricks per level
   uint32_t levelTiles[16];         // 328  child tiles per level (tiles whose nodes are at level d)
-  // Haar light of the finest level (flag kCanopyModelHaarLight, format 2.0; all zero otherwise):
+  // Haar light of the finest level (flag kCanopyModelHaarLight, format 1.1; all zero otherwise):
   // the .chaar's bricks re-paged, see "Haar light pages" above.
   uint32_t haarPrecision;          // 392  coefficients: 0 float32, 1 float16 (haar::Precision)
   int32_t haarBrickDims[3];        // 396  chaar bricks per axis: ceil((latticeMax - latticeMin + 1) / 3)
@@ -512,7 +512,7 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyLightPage(const CanopyModel& m, uint
   return m.firstLightPage + item / lightItemsPerPage;
 }
 
-// ---- Haar light (format 2.0, models flagged kCanopyModelHaarLight) -----------------------------
+// ---- Haar light (format 1.1, models flagged kCanopyModelHaarLight) -----------------------------
 constexpr uint32_t kCanopyHaarGroupEdge = 4;                              // chaar bricks per group edge
 constexpr uint32_t kCanopyHaarGroupBricks = 64;                           // 4^3 per group
 constexpr uint32_t kCanopyHaarItemBits = 12;                              // location = page << 12 | item
@@ -576,12 +576,9 @@ struct CanopyHaarCoefReader {
 
 // Trilinear sample of base `base` of one Haar item at the footprint `at`: haar::sampleBrick on the
 // item's record and coefficients, so it equals haar::chaarSample of the source .chaar bit for bit.
-// kOuterUnroll: haar::sampleBrick's (same result either way).
-template <int kOuterUnroll = 4>
 CANOPY_HD inline haar::Rgb canopyHaarSampleAt(const unsigned char* item, uint32_t fp16, uint32_t base, const haar::BrickLookup& at) {
   const haar::BrickRecord rec = reinterpret_cast<const haar::BrickRecord*>(item)[base];
-  return haar::sampleBrick<CanopyHaarCoefReader, kOuterUnroll>(rec, CanopyHaarCoefReader{item + kCanopyHaarRecordBytes, fp16}, at.lx,
-                                                               at.ly, at.lz, at.fx, at.fy, at.fz);
+  return haar::sampleBrick(rec, CanopyHaarCoefReader{item + kCanopyHaarRecordBytes, fp16}, at.lx, at.ly, at.lz, at.fx, at.fy, at.fz);
 }
 
 // Checks the structure of a Haar page's payload (host): item offsets increasing, 4-aligned and inside

@@ -44,12 +44,11 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
     m.firstBrickPage = page;
     m.brickPageCount = (m.brickCount + perPage - 1) / perPage;
     page += m.brickPageCount;
+    const bool lit = wm.light && !wm.light->empty();
     const bool haar = wm.haar != nullptr;
-    const bool lit = haar || (wm.light && !wm.light->empty());
-    const size_t items = wm.light ? wm.light->size() * 2 / kCanopyLightItemBytes : 0;
-    if (lit && ((haar ? m.lightCount > m.brickCount : m.lightCount != m.brickCount) ||
-                (wm.light ? wm.light->size() * 2 : 0) != size_t(m.lightCount) * kCanopyLightItemBytes || items != m.lightCount))
+    if (lit && (m.lightCount != m.brickCount || wm.light->size() * 2 != size_t(m.lightCount) * kCanopyLightItemBytes))
       throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has inconsistent light items");
+    if (haar && !lit) throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has Haar light but no light items");
     m.lightCount = lit ? m.lightCount : 0;
     m.firstLightPage = page;
     m.lightPageCount = (m.lightCount + lightPerPage - 1) / lightPerPage;
@@ -180,7 +179,7 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
   CanopyFileHeader h{};
   std::memcpy(h.magic, kCanopyMagic, 8);
   h.major = kCanopyMajor;
-  h.minor = kCanopyMinor;
+  h.minor = haarIndex.empty() ? 0 : kCanopyMinor;  // without Haar light a file is a 1.0 file, byte for byte
   h.headerBytes = sizeof(CanopyFileHeader);
   h.pageBytes = pageBytes;
   h.pageCount = uint32_t(L.pages.size());

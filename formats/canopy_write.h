@@ -18,7 +18,7 @@ namespace haar {
 struct ChaarData;
 }
 
-// A model's Haar light (format 2.0, canopy_file.h "Haar light pages"): a .chaar's bricks re-paged.
+// A model's Haar light (format 1.1, canopy_file.h "Haar light pages"): a .chaar's bricks re-paged.
 struct CanopyHaarPages {
   uint32_t precision = 0;                  // haar::Precision of the coefficients
   int32_t brickDims[3] = {0, 0, 0};
@@ -41,8 +41,7 @@ struct CanopyWriteModel {
   const std::vector<CanopyNode>* tiles = nullptr;      // 8 per tile
   const std::vector<unsigned char>* bricks = nullptr;  // record.brickCount * kCanopyBrickBytes
   const std::vector<uint16_t>* light = nullptr;        // null/empty (density only) or record.lightCount items
-  // With Haar light (the finest level's lighting): `light` holds the items of the bricks above the
-  // finest level only (record.lightCount of them, possibly none).
+  // Optional Haar light (format 1.1: the finest level's exact light), for a lit model only.
   const CanopyHaarPages* haar = nullptr;
 };
 

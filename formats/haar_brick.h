@@ -213,10 +213,7 @@ CANOPY_HD CANOPY_FORCEINLINE bool axisNeeds(int k, int l) {
 
 // Trilinear sample of one brick: (lx, ly, lz) in 0..2 is the lower texel of the 2^3 footprint
 // (brick-local), (fx, fy, fz) in [0, 1] the fractions. Reconstructs just the 8 texels.
-// kOuterUnroll: how far the device unrolls the loops over the coefficient indices (4: fully, the
-// fastest stand-alone decoder; 1: rolled, about a sixteenth of the code, for a sampler inside a
-// large kernel). The operations and their order, hence the result, do not depend on it.
-template <class Reader, int kOuterUnroll = 4>
+template <class Reader>
 CANOPY_HD inline Rgb sampleBrick(const BrickRecord& rec, const Reader& read, int lx, int ly, int lz,
                                  float fx, float fy, float fz) {
   const uint64_t mask = rec.mask();
@@ -233,22 +230,16 @@ CANOPY_HD inline Rgb sampleBrick(const BrickRecord& rec, const Reader& read, int
         for (int dx = 0; dx < 2; ++dx)
           v[dz][dy][dx] = brickCoef(mask, first, read, brickIndex(lx + dx, ly + dy, lz + dz));
   } else {
-#if defined(__CUDA_ARCH__)
-#pragma unroll kOuterUnroll
-#endif
+    CANOPY_UNROLL
     for (int kz = 0; kz < 4; ++kz) {
       if (!axisNeeds(kz, lz)) continue;
       Rgb w[2][2];  // [y][x]: x and y already unlifted, coefficient index kz along z
-#if defined(__CUDA_ARCH__)
-#pragma unroll kOuterUnroll
-#endif
+      CANOPY_UNROLL
       for (int ky = 0; ky < 4; ++ky) {
         if (!axisNeeds(ky, ly)) continue;
         Rgb u[2];  // [x]: x unlifted, coefficient indices (ky, kz)
         if ((mask >> brickIndex(0, ky, kz)) & 0xfu) {
-#if defined(__CUDA_ARCH__)
-#pragma unroll kOuterUnroll
-#endif
+          CANOPY_UNROLL
           for (int kx = 0; kx < 4; ++kx) {
             if (!axisNeeds(kx, lx)) continue;
             const Rgb c = brickCoef(mask, first, read, brickIndex(kx, ky, kz));

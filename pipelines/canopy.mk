@@ -34,10 +34,11 @@ DEVICE ?= auto
 VOXELIZE_FLAGS ?=
 LBSOLVE_FLAGS ?=
 # the compression dial: --max-error E (guaranteed max abs error) or --threshold T. The .chaar's
-# bricks are the packed file's finest-level light (docs/canopy-format.md), so this decides the
-# .canopy's light size and error too. Default: threshold 0.05, fp16 coefficients; measured on
-# oak_medium at 64^3 (bench/RESULTS.md, bench-light-packing): 7.4 MB packed, light RMS error 0.45%
-# and max 2.6% of the peak (float16 items, the only 1.0 scheme: 7.8 MB, 1.3% and 28%).
+# bricks go into the .canopy as the finest level's exact light (canopy-play --light exact,
+# docs/canopy-format.md), so this also decides that part of the packed file. Default: threshold
+# 0.05, fp16 coefficients; measured on oak_medium at 64^3 (bench/RESULTS.md, bench-light-packing):
+# 4.3 MB of Haar pages with an RMS error of 0.45% and a max of 2.6% of the peak (the float16 items,
+# 6.2 MB: 1.3% and 28%); the old default, --max-error 0.01 in fp32, was 17.8 MB per .chaar.
 HAAR_ERROR ?= --threshold 0.05
 HAAR_FLAGS ?= --precision fp16
 PACK_FLAGS ?=

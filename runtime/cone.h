@@ -173,7 +173,7 @@ struct ShadeParams {
   uint32_t shadowMapMaxVoxels;  // kShadowsMap: voxels grow until a grid has at most this many
   int descentCache;         // 1: reuse a ray's last descent per instance (DescentCache); 0: always descend
   int holdEmpty;            // 1: a primary ray keeps an instance's empty leaf segment to its end (EmptyHold)
-  int haarUnrolled;         // 1: the Haar light decoder fully unrolled on the device (timing; 0: rolled, the default)
+  int exactLight;           // 1 (--light exact): the finest level of Haar-lit models samples the Haar pages
 };
 
 // How a sample's sun transmittance Tshadow is found (ShadeParams::shadows).
@@ -301,17 +301,18 @@ CANOPY_HD inline void ambientOnly(const SceneView& s, float sceneFactor, float o
   lbIndirect(none, zero, b0, s.shade.ambient, sceneFactor, out);
 }
 
-// The LB indirect light from a Haar item (format 2.0: the finest level of a Haar-lit model) at the
-// brick-local footprint `at`: (sum_v w_v B_v + ambient B_0 / 18) * sceneFactor, as lbIndirect()
-// computes it (the same terms in the same order), with each base haar::sampleBrick of the item
-// (bit for bit the .chaar decoder's sample). item == nullptr: no light stored there (every base 0).
-// On the device this is one out-of-line function with one copy of the sampler, its four bases in a
-// rolled loop: inlined per base, precision and call site, the Haar decoder made the lit pixel
-// kernel ten times larger (44.7 k PTX lines against 4.7 k) and the grove's frame 15x slower
-// (257.7 against 16.8 ms on an H200, bench/RESULTS.md).
-template <int kOuterUnroll>
-CANOPY_HD CANOPY_PLAY_NOINLINE void sampleHaarLbLightT(const unsigned char* item, uint32_t fp16, const haar::BrickLookup& at,
-                                                       const sun::Weights& w, float ambient, float sceneFactor, float out[3]) {
+// The LB indirect light from a Haar item (--light exact at the finest level of a Haar-lit model) at
+// the brick-local footprint `at`: (sum_v w_v B_v + ambient B_0 / 18) * sceneFactor, as lbIndirect()
+// computes it (the same terms in the same order), each base haar::sampleBrick of the item (bit for
+// bit the .chaar decoder's sample). item == nullptr: no light stored there (every base 0).
+// On the device this is one out-of-line function, one copy of the sampler for both precisions, the
+// four bases in a rolled loop. Measured on the grove at 1080p on an H200 (bench/RESULTS.md): inlined
+// per base, precision and call site the decoder made the lit pixel kernel 10x larger (44.7 k PTX
+// lines against 4.7 k) and the frame 257.7 ms; out of line 195.0 ms; out of line with its
+// coefficient loops rolled too (a fifth of the code) 377.9 ms, so they stay unrolled. The float16
+// items (--light fast) take 16.6 ms.
+CANOPY_HD CANOPY_PLAY_NOINLINE void sampleHaarLbLight(const unsigned char* item, uint32_t fp16, const haar::BrickLookup& at,
+                                                      const sun::Weights& w, float ambient, float sceneFactor, float out[3]) {
   float acc[3] = {0.0f, 0.0f, 0.0f};
   if (item) {
     const uint32_t base[4] = {uint32_t(w.base[0]), uint32_t(w.base[1]), uint32_t(w.base[2]), 0u};
@@ -321,19 +322,13 @@ CANOPY_HD CANOPY_PLAY_NOINLINE void sampleHaarLbLightT(const unsigned char* item
 #endif
     for (int v = 0; v < 4; ++v) {
       if (!(weight[v] != 0.0f)) continue;  // a zero weight adds +0 (lbIndirect would add 0 * B)
-      const haar::Rgb c = canopyHaarSampleAt<kOuterUnroll>(item, fp16, base[v], at);
+      const haar::Rgb c = canopyHaarSampleAt(item, fp16, base[v], at);
       acc[0] += weight[v] * c.r;
       acc[1] += weight[v] * c.g;
       acc[2] += weight[v] * c.b;
     }
   }
   for (int c = 0; c < 3; ++c) out[c] = acc[c] * sceneFactor;
-}
-// unrolled (ShadeParams::haarUnrolled): the decoder's loops fully unrolled (timing comparison).
-CANOPY_HD inline void sampleHaarLbLight(const unsigned char* item, uint32_t fp16, const haar::BrickLookup& at, const sun::Weights& w,
-                                        float ambient, float sceneFactor, int unrolled, float out[3]) {
-  if (unrolled) sampleHaarLbLightT<4>(item, fp16, at, w, ambient, sceneFactor, out);
-  else sampleHaarLbLightT<1>(item, fp16, at, w, ambient, sceneFactor, out);
 }
 
 // The LB indirect light from a light item at node-local l in [0,1]^3: the (up to) three sun bases
@@ -505,9 +500,9 @@ CANOPY_HD CANOPY_FORCEINLINE bool descentCovers(const DescentCache& c, V3 u, uin
 CANOPY_HD inline void segmentLight(const SceneView& s, const ModelView& m, const Descent& d, V3 um, float tm, Segment& g) {
   g.haarLocal = kHaarNone;
   g.haarItem = nullptr;
-  if (m.haarLight && d.level == m.depth) {
-    // The finest level of a Haar-lit model: the chaar brick at the sample's lattice point, if its
-    // page is resident (else it is asked for and the float16 item of an ancestor serves).
+  if (s.shade.exactLight && m.haarLight && d.level == m.depth) {
+    // --light exact, the finest level of a Haar-lit model: the chaar brick at the sample's lattice
+    // point, if its page is resident (else it is asked for and the float16 items serve).
     const float rc = float(m.rootCells);
     const CanopyHaarLocation at =
         canopyHaarLocate(m.haar, um.x * rc - 0.5f + float(m.origin[0]), um.y * rc - 0.5f + float(m.origin[1]), um.z * rc - 0.5f + float(m.origin[2]));
@@ -551,7 +546,7 @@ CANOPY_HD inline void segmentIndirect(const SceneView& s, const InstanceView& in
     at.slot = 0;
     at.lx = int(g.haarLocal & 3u), at.ly = int((g.haarLocal >> 2) & 3u), at.lz = int((g.haarLocal >> 4) & 3u);
     at.fx = g.light[0], at.fy = g.light[1], at.fz = g.light[2];
-    sampleHaarLbLight(g.haarItem, (g.haarLocal >> 6) & 1u, at, inst.sunWeights, s.shade.ambient, factor, s.shade.haarUnrolled, out);
+    sampleHaarLbLight(g.haarItem, (g.haarLocal >> 6) & 1u, at, inst.sunWeights, s.shade.ambient, factor, out);
     return;
   }
   if (!kWithLight || !g.lightItem) {

@@ -38,6 +38,12 @@ int main(int argc, char** argv) {
   bool noDescentCache = false;
   app.add_flag("--no-descent-cache", noDescentCache, "Descend the octree from the root for every segment (same image; for timing)");
   app.add_option("--shadow-map-voxels", o.shadowMapMaxVoxels, "Shadow map size cap (the voxel grows to fit)")->capture_default_str();
+  std::string lightMode = "fast";
+  app.add_option("--light", lightMode,
+                 "fast: LB light from the float16 light items on every level; exact: at the finest level, from the .chaar's Haar "
+                 "bricks where the file has them (the .chaar decoder's values; about 10x the frame time, bench/RESULTS.md)")
+      ->check(CLI::IsMember({"fast", "exact"}))
+      ->capture_default_str();
   app.add_flag("--converge", o.converge, "Per frame, render passes until no loadable page is missing (reference quality)");
   bool coldStart = false;
   app.add_flag("--no-warm-start", coldStart, "Render the first frame in real-time mode too (node means until pages arrive)");
@@ -53,6 +59,7 @@ int main(int argc, char** argv) {
     o.shadows = !noShadows;
     o.descentCache = !noDescentCache;
     o.warmStart = !coldStart;
+    o.exactLight = lightMode == "exact";
     tool.report() = canopy::play::play(o, tool.device());
   });
 }

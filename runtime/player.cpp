@@ -254,7 +254,7 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   shade.shadowMapBias = o.shadowMapBias;
   shade.descentCache = o.descentCache ? 1 : 0;
   shade.holdEmpty = o.holdEmpty ? 1 : 0;
-  shade.haarUnrolled = o.haarUnrolled ? 1 : 0;
+  shade.exactLight = o.exactLight ? 1 : 0;
   shade.shadowMapMaxVoxels = o.shadowMapMaxVoxels;
   WorkCounters work{};
   if (o.countWork) backend->countWork(&work);
@@ -316,8 +316,10 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   r["cache_hit_rate"] = lookups ? double(st.pagesUsed) / double(lookups) : 1.0;
   r["cache_slots"] = slots;
   r["cache_mb"] = double(uint64_t(slots) * file.header().pageBytes) / (1024.0 * 1024.0);
-  r["scene_page_mb"] = double(scene.brickPageBytes + scene.lightPageBytes) / (1024.0 * 1024.0);
+  r["scene_page_mb"] = double(scene.brickPageBytes + scene.lightPageBytes + scene.haarPageBytes) / (1024.0 * 1024.0);
   r["light_page_mb"] = double(scene.lightPageBytes) / (1024.0 * 1024.0);
+  r["haar_page_mb"] = double(scene.haarPageBytes) / (1024.0 * 1024.0);
+  r["light"] = o.exactLight ? "exact" : "fast";
   r["lit_models"] = scene.litModels;
   r["pages_streamed"] = st.pagesLoaded;
   r["mb_streamed"] = double(st.bytesLoaded) / (1024.0 * 1024.0);

@@ -40,7 +40,7 @@ struct PlayOptions {
   uint32_t shadowMapMaxVoxels = 1u << 23;  // ...grown until the grid (and the map) has at most this many voxels
   bool descentCache = true;          // reuse a ray's last octree descent per instance (same image, fewer descents)
   bool holdEmpty = true;             // keep an instance's empty leaf segment over later steps (same image, cone.h EmptyHold)
-  bool haarUnrolled = false;         // Haar light decoder fully unrolled on the device (same image; timing comparison)
+  bool exactLight = false;           // --light exact: the finest level of Haar-lit models from their Haar pages (the .chaar's values)
   int pixelMinBlocks = 0;            // CUDA, map/no shadows: pixel kernel built for >= 6 or 8 blocks of 128 per SM (0: unconstrained)
   int warpTileWidth = 8;             // CUDA: a warp renders a warpTileWidth x (32 / warpTileWidth) tile
   bool countWork = false;            // CPU only: count cones, steps, samples, shadow work (report "work")

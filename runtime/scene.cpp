@@ -79,14 +79,10 @@ HostScene buildScene(const CanopyFile& f) {
     v.depth = M.depth;
     v.rootCells = M.rootCells;
     v.firstBrickPage = M.firstBrickPage;
-    // The reader has checked the light pages' range and that every brick above the finest level
-    // has a light item; a lit model has one per brick, or (Haar light) those and Haar pages.
-    v.haarLight = (M.flags & kCanopyModelHaarLight) ? 1u : 0u;
-    v.hasLight = (M.flags & kCanopyModelHasLight) && h.lightItemsPerPage > 0 &&
-                         (v.haarLight ? M.lightCount <= M.brickCount : (M.lightCount > 0 && M.lightCount == M.brickCount))
-                     ? 1u
-                     : 0u;
-    if (!v.hasLight) v.haarLight = 0;
+    // The reader has checked the light pages' range; a model flagged lit must have one item per
+    // brick, and may have Haar light too (the finest level's exact light).
+    v.hasLight = (M.flags & kCanopyModelHasLight) && M.lightCount > 0 && M.lightCount == M.brickCount && h.lightItemsPerPage > 0 ? 1u : 0u;
+    v.haarLight = v.hasLight && (M.flags & kCanopyModelHaarLight) ? 1u : 0u;
     v.lightCount = v.hasLight ? M.lightCount : 0;
     v.firstLightPage = M.firstLightPage;
     for (int a = 0; a < 3; ++a) v.origin[a] = M.octreeOrigin[a];
@@ -99,7 +95,8 @@ HostScene buildScene(const CanopyFile& f) {
     s.modelFirstTile.push_back(M.firstTile);
     s.modelFirstHaarIndex.push_back(M.firstHaarIndex);
     s.brickPageBytes += uint64_t(M.brickPageCount) * h.pageBytes;
-    if (v.hasLight) s.lightPageBytes += uint64_t(M.lightPageCount + M.haarPageCount) * h.pageBytes;
+    if (v.hasLight) s.lightPageBytes += uint64_t(M.lightPageCount) * h.pageBytes;
+    if (v.haarLight) s.haarPageBytes += uint64_t(M.haarPageCount) * h.pageBytes;
     M34 i2m;
     for (int k = 0; k < 12; ++k) i2m[size_t(k)] = M.indexToModel[k];
     latticeToModel[m] = i2m;

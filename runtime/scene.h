@@ -33,6 +33,7 @@ struct HostScene {
   uint32_t pageCount = 0, pageBytes = 0, bricksPerPage = 0, lightItemsPerPage = 0;
   uint64_t brickPageBytes = 0;            // bytes of all brick pages (streamed)
   uint64_t lightPageBytes = 0;            // bytes of the lit models' light pages (streamed, same cache)
+  uint64_t haarPageBytes = 0;             // bytes of the Haar-lit models' Haar pages (streamed with --light exact)
   uint32_t litModels = 0;                 // models sampled with LB light
 
   // Sets every instance's sun weights for the direction towards the sun (world).

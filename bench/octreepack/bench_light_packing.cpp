@@ -5,13 +5,13 @@
 //                       [--precision fp16|fp32]
 //
 // For each threshold T: canopy-haar PLANT.light.vdb --threshold T -> .chaar, canopy-octreepack
-// packs it (format 2.0: the finest level's light is the .chaar's bricks, Haar pages) and, for
-// reference, the uncompressed light VDB (float16 items at half resolution on every level, the only
-// scheme of format 1.0). Reported per packed file: the bytes of its light pages, and the error of
-// the finest level's light against canopy-lbsolve's values (the light VDB) at every occupied
-// lattice cell, all 19 bases x RGB: RMS and max absolute, and both relative to the largest value.
-// Both sample through the format's CANOPY_HD functions (canopyHaarSampleAt / canopySampleLight),
-// as the player does. The tools are run from the folder of this executable.
+// packs it (format 1.1: float16 light items of the decoded values on every level, and the .chaar's
+// bricks as Haar pages) and, for reference, the uncompressed light VDB (float16 items only).
+// Reported per packed file: the bytes of its float16 item pages and of its Haar pages, and the
+// error of the finest level's light against canopy-lbsolve's values (the light VDB) at every
+// occupied lattice cell, all 19 bases x RGB, as canopy-play samples it with --light fast (the
+// float16 items, canopySampleLight) and --light exact (the Haar pages, canopyHaarSampleAt): RMS and
+// max absolute, relative to the largest value. The tools are run from the folder of this executable.
 #include <unistd.h>
 
 #include <algorithm>
@@ -38,11 +38,11 @@ struct Err {
   uint64_t n = 0;
 };
 
-// The finest level's light of the packed model 0 at every occupied cell vs the truth.
-Err lightError(const canopy::CanopyFile& f, const op::ModelSource& src, const op::LightFn& truth) {
+// The finest level's light of the packed model 0 at every occupied cell vs the truth, from the
+// Haar pages (haar) or the float16 items.
+Err lightError(const canopy::CanopyFile& f, const op::ModelSource& src, const op::LightFn& truth, bool haar) {
   op::testing::PackedSampler S(f);
   const canopy::CanopyModel& M = f.model(0);
-  const bool haar = (M.flags & canopy::kCanopyModelHaarLight) != 0;
   Err e;
   float want[canopy::kCanopyLightChannels];
   for (const op::SourceCell& c : src.cells) {
@@ -72,11 +72,7 @@ Err lightError(const canopy::CanopyFile& f, const op::ModelSource& src, const op
   return e;
 }
 
-uint64_t lightBytes(const canopy::CanopyFile& f) {
-  uint64_t n = 0;
-  for (uint32_t m = 0; m < f.modelCount(); ++m) n += uint64_t(f.model(m).lightPageCount + f.model(m).haarPageCount) * f.header().pageBytes;
-  return n;
-}
+
 
 int run(const std::string& cmd) {
   const int rc = std::system(cmd.c_str());
@@ -118,23 +114,28 @@ int main(int argc, char** argv) {
     const op::LightVdb truth = op::readLightVdb(lightVdb, src);
     struct Row {
       std::string scheme;
-      uint64_t chaarBytes, fileBytes, lightBytes;
-      Err e;
+      uint64_t chaarBytes, fileBytes, itemBytes, haarBytes;
+      Err fast, exact;
+      bool hasHaar;
     };
     std::vector<Row> rows;
     auto packAndMeasure = [&](const std::string& scheme, const std::string& lightIn, uint64_t chaarBytes) {
       const std::string out = work + "/plant." + std::to_string(rows.size()) + ".canopy";
       if (run(q(bin + "/canopy-octreepack") + " -q " + q(density) + " " + q(lightIn) + " -o " + q(out)) != 0) std::exit(3);
       const canopy::CanopyFile f = canopy::CanopyFile::open(out);
-      rows.push_back({scheme, chaarBytes, f.header().fileBytes, lightBytes(f), lightError(f, src, truth.fn)});
+      const canopy::CanopyModel& M = f.model(0);
+      const bool hasHaar = (M.flags & canopy::kCanopyModelHaarLight) != 0;
+      rows.push_back({scheme, chaarBytes, f.header().fileBytes, uint64_t(M.lightPageCount) * f.header().pageBytes,
+                      uint64_t(M.haarPageCount) * f.header().pageBytes, lightError(f, src, truth.fn, false),
+                      hasHaar ? lightError(f, src, truth.fn, true) : Err{}, hasHaar});
     };
-    packAndMeasure("float16 items, half resolution (format 1.0 scheme, from the light VDB)", lightVdb, 0);
+    packAndMeasure("light VDB (float16 items only)", lightVdb, 0);
     std::stringstream ts(thresholds);
     for (std::string t; std::getline(ts, t, ',');) {
       const std::string chaar = work + "/plant.T" + t + "." + precision + ".chaar";
       if (run(q(bin + "/canopy-haar") + " -q " + q(lightVdb) + " --threshold " + t + " --precision " + precision + " -o " + q(chaar)) != 0)
         return 3;
-      packAndMeasure("Haar pages, " + precision + ", threshold " + t, chaar, canopy::readFile(chaar).size());
+      packAndMeasure(".chaar " + precision + ", threshold " + t, chaar, canopy::readFile(chaar).size());
     }
     const canopy::CanopyFile plain = [&] {
       const std::string out = work + "/plant.density-only.canopy";
@@ -143,15 +144,21 @@ int main(int argc, char** argv) {
     }();
     std::printf("Light of %s (%zu occupied cells) packed with %s (density only: %.2f MB):\n\n", lightVdb.c_str(), src.cells.size(),
                 density.c_str(), double(plain.header().fileBytes) / 1e6);
-    std::printf("| finest-level light | .chaar MB | .canopy MB | light pages MB | RMS error | max error | RMS / peak | max / peak |\n");
-    std::printf("|---|---:|---:|---:|---:|---:|---:|---:|\n");
+    std::printf("| lighting input | .chaar MB | .canopy MB | float16 item pages MB | Haar pages MB | fast (items): RMS / peak | max / peak | exact (Haar): RMS / peak | max / peak |\n");
+    std::printf("|---|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     for (const Row& r : rows) {
-      const double rmsE = std::sqrt(r.e.sumSq / double(std::max<uint64_t>(r.e.n, 1)));
-      std::printf("| %s | %s | %.2f | %.2f | %.3g | %.3g | %.2e | %.2e |\n", r.scheme.c_str(),
+      auto rel = [](const Err& e, bool rmsOf) {
+        const double v = rmsOf ? std::sqrt(e.sumSq / double(std::max<uint64_t>(e.n, 1))) : e.max;
+        char b[32];
+        std::snprintf(b, sizeof b, "%.2e", e.peak > 0 ? v / e.peak : 0.0);
+        return std::string(b);
+      };
+      std::printf("| %s | %s | %.2f | %.2f | %.2f | %s | %s | %s | %s |\n", r.scheme.c_str(),
                   r.chaarBytes ? std::to_string(double(r.chaarBytes) / 1e6).substr(0, 5).c_str() : "-", double(r.fileBytes) / 1e6,
-                  double(r.lightBytes) / 1e6, rmsE, r.e.max, rmsE / r.e.peak, r.e.max / r.e.peak);
+                  double(r.itemBytes) / 1e6, double(r.haarBytes) / 1e6, rel(r.fast, true).c_str(), rel(r.fast, false).c_str(),
+                  r.hasHaar ? rel(r.exact, true).c_str() : "-", r.hasHaar ? rel(r.exact, false).c_str() : "-");
     }
-    std::printf("\npeak value (largest |light| at an occupied cell): %.4g\n", rows.empty() ? 0.0 : rows[0].e.peak);
+    std::printf("\npeak value (largest |light| at an occupied cell): %.4g\n", rows.empty() ? 0.0 : rows[0].fast.peak);
   } catch (const canopy::Error& e) {
     std::cerr << "bench-light-packing: " << e.what() << "\n";
     return int(e.code());

@@ -27,8 +27,8 @@ namespace op = canopy::octreepack;
 
 namespace {
 
-// The current format's frozen file (2.0) and the previous one (1.0), which must still read.
-const std::string kFrozen = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v2.0.canopy";
+// The current format's frozen file (1.1) and the previous one (1.0), which must still read.
+const std::string kFrozen = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v1.1.canopy";
 const std::string kFrozenV1 = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v1.0.canopy";
 const std::string kFrozenChaar = std::string(CANOPY_SOURCE_DIR) + "/tests/haar/data/small_v1_0.chaar";
 
@@ -45,9 +45,9 @@ op::ModelSource haarModelSource(const haar::ChaarData& d) {
 }
 
 // The frozen files' content: a 20-cell synthetic plant (depth 2, density only), an 8-cell one with
-// analytic float16 lighting (depth 0) and three instances (1.0); 2.0 adds a fourth instance of a
-// third model lit by the frozen .chaar (Haar pages, depth 0: no float16 items).
-std::vector<unsigned char> smallFileBytes() {
+// analytic float16 lighting (depth 0) and three instances (1.0); 1.1 adds a fourth instance of a
+// third model lit by the frozen .chaar (float16 items of its decoded values and its Haar pages).
+std::vector<unsigned char> smallFileBytes(bool withHaar = true) {
   const op::ModelSource src = op::testing::syntheticPlant(20, 2, "frozen", 0);
   const op::BuiltModel m = op::buildOctree(src, "frozen");
   const op::BuiltModel lit = op::buildOctree(op::testing::syntheticPlant(8, 0, "lit", 0), "lit", op::testing::analyticLight);
@@ -61,12 +61,11 @@ std::vector<unsigned char> smallFileBytes() {
           const haar::Rgb v = haar::chaarSample(view, int(b), float(i), float(j), float(k));
           o[3 * b] = v.r, o[3 * b + 1] = v.g, o[3 * b + 2] = v.b;
         }
-      },
-      true);
+      });
   CanopyWriteInput in;
   in.models.push_back({m.record, &m.tiles, &m.bricks, nullptr});
   in.models.push_back({lit.record, &lit.tiles, &lit.bricks, &lit.light});
-  in.models.push_back({haarLit.record, &haarLit.tiles, &haarLit.bricks, &haarLit.light, &haarPages});
+  if (withHaar) in.models.push_back({haarLit.record, &haarLit.tiles, &haarLit.bricks, &haarLit.light, &haarPages});
   CanopyInstance a{}, b{};
   a.modelToWorld[0] = a.modelToWorld[5] = a.modelToWorld[10] = 1.0f;
   b = a;
@@ -76,8 +75,9 @@ std::vector<unsigned char> smallFileBytes() {
   CanopyInstance d = a;
   d.model = 2;
   d.modelToWorld[11] = -6.0f;
-  in.instances = {a, b, c, d};
-  in.metadata = R"({"tool":"test_canopy_file","note":"frozen .canopy 2.0"})";
+  in.instances = {a, b, c};
+  if (withHaar) in.instances.push_back(d);
+  in.metadata = withHaar ? R"({"tool":"test_canopy_file","note":"frozen .canopy 1.1"})" : R"({"tool":"test_canopy_file","note":"frozen .canopy 1.0"})";
   return writeCanopyBytes(std::move(in));
 }
 
@@ -159,16 +159,16 @@ TEST(CanopyFile, FrozenSmallFileStillReads) {
     writeFileAtomic(kFrozen, bytes.data(), bytes.size());
   }
   CanopyFile f = CanopyFile::open(kFrozen);
-  EXPECT_EQ(f.header().major, 2);
-  EXPECT_EQ(f.header().minor, 0);
+  EXPECT_EQ(f.header().major, 1);
+  EXPECT_EQ(f.header().minor, 1);
   ASSERT_EQ(f.modelCount(), 3u);
   ASSERT_EQ(f.instanceCount(), 4u);
   checkDensityAndFloat16Models(f);
-  EXPECT_NE(f.metadata().find("frozen .canopy 2.0"), std::string::npos);
-  // The Haar-lit model: its light at any point equals the .chaar decoder's sample, bit for bit.
+  EXPECT_NE(f.metadata().find("frozen .canopy 1.1"), std::string::npos);
+  // The Haar-lit model: its Haar light at any point equals the .chaar decoder's sample, bit for bit.
   const CanopyModel& H = f.model(2);
   ASSERT_TRUE(H.flags & kCanopyModelHaarLight);
-  ASSERT_EQ(H.lightCount, 0u);  // depth 0: no level above the finest, no float16 items
+  ASSERT_EQ(H.lightCount, H.brickCount);  // and float16 items as any lit model
   const haar::ChaarData chaar = haar::readChaar(kFrozenChaar);
   const haar::ChaarView view = chaar.view();
   EXPECT_EQ(H.haarItemCount, chaar.header.slotCount);
@@ -187,8 +187,9 @@ TEST(CanopyFile, FrozenSmallFileStillReads) {
   EXPECT_EQ(readFile(kFrozen), smallFileBytes()) << "the .canopy layout changed: bump the version";
 }
 
-// The 1.0 file (before Haar light) still reads, with the same content.
-TEST(CanopyFile, FrozenVersion1FileStillReads) {
+// The 1.0 file (before Haar light) still reads, with the same content, and a file without Haar
+// light is still written as exactly that 1.0 file.
+TEST(CanopyFile, FrozenVersion10FileStillReadsAndIsStillWritten) {
   CanopyFile f = CanopyFile::open(kFrozenV1);
   EXPECT_EQ(f.header().major, 1);
   EXPECT_EQ(f.header().minor, 0);
@@ -197,6 +198,30 @@ TEST(CanopyFile, FrozenVersion1FileStillReads) {
   EXPECT_TRUE(f.haarIndex().empty());
   checkDensityAndFloat16Models(f);
   EXPECT_NE(f.metadata().find("frozen .canopy 1.0"), std::string::npos);
+  EXPECT_EQ(readFile(kFrozenV1), smallFileBytes(false)) << "a file without Haar light must stay a 1.0 file";
+}
+
+// 1.1 keeps what a 1.0 reader requires, so that one reads a 1.1 file and skips the Haar light (a
+// 1.0 reader skips unknown sections, and the pages of unknown kinds of a newer minor): every lit
+// model has one light item per brick, and the Haar pages lie outside every model's brick and light
+// page ranges. (Checked once by hand with the 1.0 reader of commit 0b8a7c7: it opens
+// small-v1.1.canopy and reads every page.)
+TEST(CanopyFile, Version11KeepsWhatA10ReaderRequires) {
+  // What 1.0 checked of a model still holds for the Haar-lit one: one light item per brick.
+  CanopyFile f = CanopyFile::open(kFrozen);
+  for (uint32_t m = 0; m < f.modelCount(); ++m) {
+    const CanopyModel& M = f.model(m);
+    EXPECT_EQ(M.lightCount, (M.flags & kCanopyModelHasLight) ? M.brickCount : 0u);
+  }
+  // Every Haar page lies outside the 1.0 ranges (brick and light pages) of every model.
+  for (uint32_t i = 0; i < f.pageCount(); ++i) {
+    if (f.pageEntry(i).kind != uint32_t(CanopyPageKind::HaarLight)) continue;
+    for (uint32_t m = 0; m < f.modelCount(); ++m) {
+      const CanopyModel& M = f.model(m);
+      EXPECT_FALSE(i >= M.firstBrickPage && i < M.firstBrickPage + M.brickPageCount);
+      EXPECT_FALSE(i >= M.firstLightPage && i < M.firstLightPage + M.lightPageCount);
+    }
+  }
 }
 
 TEST(CanopyFile, EveryTruncatedPrefixIsRejected) {

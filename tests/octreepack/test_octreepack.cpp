@@ -722,10 +722,10 @@ TEST(OctreepackLight, LbsolveLightVdbPacksThroughTheCli) {
 #include "tests/haar/synthetic_light.h"
 
 // .chaar lighting packed through the CLI (a 20^3 smooth light field, fp16, threshold 0.01; the
-// lattice is the density's): the finest level's light is the .chaar's bricks re-paged, so its
-// samples equal the chaar decoder's bit for bit, at every lattice cell and at random points in
-// between; the levels above hold float16 items whose voxels are the box filter of the decoder's
-// values at the lattice cells (float16: relative 2^-11).
+// lattice is the density's): the .chaar's bricks re-paged as Haar light, whose samples equal the
+// chaar decoder's bit for bit, at every lattice cell and at random points in between; and float16
+// items on every level whose voxels are the box filter of the decoder's values at the lattice
+// cells (float16: relative 2^-11). --no-haar-light packs the items alone.
 TEST(OctreepackLight, ChaarLightingEqualsTheDecoder) {
   namespace ht = canopy::haar::testing;
   const int n = 20;
@@ -745,7 +745,7 @@ TEST(OctreepackLight, ChaarLightingEqualsTheDecoder) {
   const canopy::CanopyModel& M = f.model(0);
   ASSERT_TRUE(M.flags & canopy::kCanopyModelHaarLight);
   ASSERT_EQ(M.depth, 2u);
-  EXPECT_EQ(M.lightCount, M.levelBricks[0] + M.levelBricks[1]);  // float16 items above the finest level only
+  EXPECT_EQ(M.lightCount, M.brickCount);
   EXPECT_EQ(M.haarItemCount, chaar.header.slotCount);
   PackedSampler S(f);
   // Finest level: bit for bit.
@@ -766,14 +766,14 @@ TEST(OctreepackLight, ChaarLightingEqualsTheDecoder) {
     const canopy::haar::Rgb got = S.sampleHaar(0, base, p[0], p[1], p[2]);
     ASSERT_EQ(std::memcmp(&want, &got, sizeof want), 0) << "point " << p[0] << "," << p[1] << "," << p[2] << " base " << base;
   }
-  // Levels above: box filters of the decoder's cell values.
+  // Every level's float16 items: box filters of the decoder's cell values.
   auto decoded = [&](uint32_t base, int i, int j, int k, int ch) {
     if (i > src.latticeMax[0] || j > src.latticeMax[1] || k > src.latticeMax[2]) return 0.0f;
     const canopy::haar::Rgb v = canopy::haar::chaarSample(view, int(base), float(i), float(j), float(k));
     return ch == 0 ? v.r : (ch == 1 ? v.g : v.b);
   };
   size_t checked = 0;
-  for (uint32_t level = 0; level < M.depth; ++level) {
+  for (uint32_t level = 0; level <= M.depth; ++level) {
     const int c = 2 << (M.depth - level);  // cells per light voxel
     for (int z = 0; z * c < n; ++z)
       for (int y = 0; y * c < n; ++y)
@@ -801,6 +801,17 @@ TEST(OctreepackLight, ChaarLightingEqualsTheDecoder) {
         }
   }
   EXPECT_GT(checked, 8u);
+  // Without the Haar bricks: the same items, no Haar pages, a 1.0 file.
+  const std::string itemsOnly = dir + "/haarlit.items.canopy";
+  ASSERT_EQ(run("'" + dir + "/haarlit.density.vdb' '" + dir + "/haarlit.light.chaar' --no-haar-light -o '" + itemsOnly + "'"), 0);
+  CanopyFile items = CanopyFile::open(itemsOnly);
+  EXPECT_FALSE(items.model(0).flags & canopy::kCanopyModelHaarLight);
+  EXPECT_EQ(items.model(0).lightCount, M.lightCount);
+  EXPECT_EQ(items.header().minor, 0);
+  EXPECT_GT(M.haarPageCount, 0u);
+  EXPECT_EQ(f.header().fileBytes - items.header().fileBytes - uint64_t(M.haarPageCount) * f.header().pageBytes,
+            f.header().residentBytes - items.header().residentBytes)
+      << "the Haar pages and the HaarIndex (resident) are the difference";
 }
 
 #ifdef CANOPY_HAS_CUDA

@@ -103,9 +103,9 @@ inline haar::ChaarData chaarOf(const octreepack::ModelSource& src, const octreep
   return haar::assembleChaar(a);
 }
 
-// writeLitScene with each model's lighting Haar-compressed first (chaarOf): the finest level's
-// light is the .chaar's bricks (Haar pages), the levels above float16 items of its decoded values,
-// as canopy-octreepack packs PLANT.light.chaar.
+// writeLitScene with each model's lighting Haar-compressed first (chaarOf), as canopy-octreepack
+// packs PLANT.light.chaar: float16 light items of its decoded values on every level, and its bricks
+// as Haar pages (the finest level's exact light, canopy-play --light exact).
 inline void writeHaarLitScene(const std::string& path, const std::vector<octreepack::ModelSource>& sources,
                               const std::vector<octreepack::LightFn>& lights, const std::vector<CanopyInstance>& instances, float T,
                               haar::Precision precision) {
@@ -124,8 +124,7 @@ inline void writeHaarLitScene(const std::string& path, const std::vector<octreep
             const haar::Rgb v = inside ? haar::chaarSample(view, int(b), float(i), float(j), float(k)) : haar::Rgb{};
             o[3 * b] = v.r, o[3 * b + 1] = v.g, o[3 * b + 2] = v.b;
           }
-        },
-        true));
+        }));
   }
   CanopyWriteInput w;
   for (size_t m = 0; m < built.size(); ++m) w.models.push_back({built[m].record, &built[m].tiles, &built[m].bricks, &built[m].light, &pages[m]});

@@ -64,8 +64,8 @@ std::string litForestFile() {
   return p;
 }
 
-// The lit forest with its lighting Haar-compressed (fp16, threshold 0.01): the finest level's light
-// comes from Haar pages in the same device pool, sampled with canopyHaarSampleAt.
+// The lit forest with its lighting Haar-compressed (fp16, threshold 0.01): with --light exact the
+// finest level's light comes from Haar pages in the same device pool (canopyHaarSampleAt).
 std::string haarForestFile() {
   const std::string p = pt::tmpDir("cuda") + "/forest-haar.canopy";
   std::vector<canopy::CanopyInstance> inst;
@@ -83,7 +83,8 @@ std::string haarForestFile() {
 // The forest unlit, then lit (LB light on both models: the light pages go through the same device
 // pool and page table, and the kernel samples them with the same canopySampleLight / lbIndirect
 // code; the lit file also with the sun off, so that the indirect term alone is compared), then
-// Haar-lit (the finest level's light from Haar pages, canopyHaarSampleAt on the device). One
+// Haar-lit with --light exact (the finest level's light from Haar pages, canopyHaarSampleAt on the
+// device). One
 // test case, so that bench/play/gpu.sh's count of passed cases stays valid.
 TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
   if (canopy::cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA device";
@@ -92,10 +93,11 @@ TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
     float sunIntensity;
     int litModels;
     const char* shadows;  // the sun transmittance map (default) or the per-sample shadow cones
+    bool exact = false;   // --light exact (the Haar-lit file's Haar pages)
   };
   const std::string lit = litForestFile(), unlit = forestFile(), haar = haarForestFile();
   for (const Case& k : {Case{unlit, 1.0f, 0, "map"}, Case{unlit, 1.0f, 0, "cone"}, Case{lit, 1.0f, 2, "map"}, Case{lit, 0.0f, 2, "map"},
-                        Case{haar, 1.0f, 2, "map"}, Case{haar, 0.0f, 2, "map"}}) {
+                        Case{haar, 1.0f, 2, "map", true}, Case{haar, 0.0f, 2, "map", true}}) {
     pl::PlayOptions o;
     o.input = k.file;
     o.shadowMethod = k.shadows;
@@ -103,6 +105,7 @@ TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
     o.height = 64;
     o.converge = true;
     o.sunIntensity = k.sunIntensity;
+    o.exactLight = k.exact;
     if (k.litModels) o.sun = "0.3,0.8,-0.52";
     // the whole forest (coarse levels), and a close view among the trees (finest bricks,
     // overlapping crowns, long shadow cones)

@@ -302,7 +302,7 @@ TEST(Light, SmallCacheStreamsLightPagesWithBrickPagesAndConverges) {
   EXPECT_LT(rms(last, want), 1e-6) << r.dump();
 }
 
-// ---- Haar light (format 2.0: the finest level's light is the .chaar's bricks) ---------------------
+// ---- Haar light (format 1.1: the .chaar's bricks, the finest level's exact light) -----------------
 namespace {
 // The lit ball of litSphere() with its lighting Haar-compressed at threshold 0 (fp32: lossless).
 const std::string& haarSphere(float gradient = 0.0f) {
@@ -316,23 +316,24 @@ const std::string& haarSphere(float gradient = 0.0f) {
 }
 }  // namespace
 
-// Constant bases compressed losslessly: the Haar-lit ball renders as the float16-lit one (the
-// constants are exact in both), within float rounding (2e-5 relative), with the sun's three
-// bases and B_0 taken from the Haar items. The file is Haar-lit (float16 items above the finest
-// level only).
-TEST(Light, HaarLightRendersLikeTheSameLightInFloat16Items) {
+// Constant bases compressed losslessly: with --light exact the Haar-lit ball renders as the
+// float16-lit one (the constants are exact in both), within float rounding (2e-5 relative), with
+// the sun's three bases and B_0 taken from the Haar items.
+TEST(Light, ExactHaarLightRendersLikeTheSameLightInFloat16Items) {
   const canopy::CanopyFile f = canopy::CanopyFile::open(haarSphere());
   ASSERT_TRUE(f.model(0).flags & canopy::kCanopyModelHaarLight);
-  ASSERT_LT(f.model(0).lightCount, f.model(0).brickCount);
   for (const char* sun : {"0,1,0", "0.3,0.8,-0.52"}) {
     pl::PlayOptions o = view(litSphere(), 21, 21);
     o.sun = sun;
     o.sunIntensity = 0.0f;
     const std::vector<float> items = render(o);
     o.input = haarSphere();
+    o.exactLight = true;
     nlohmann::json r;
     const std::vector<float> haar = render(o, &r);
     EXPECT_EQ(int(r["lit_models"]), 1);
+    EXPECT_EQ(r["light"], "exact");
+    EXPECT_GT(double(r["haar_page_mb"]), 0.0);
     double peak = 0;
     for (size_t i = 0; i < items.size(); ++i) {
       ASSERT_NEAR(haar[i], items[i], 2e-5f * items[i] + 1e-7f) << sun << " value " << i;
@@ -346,8 +347,9 @@ TEST(Light, HaarLightRendersLikeTheSameLightInFloat16Items) {
 // own lattice point. The float16 items (half resolution, box filtered, float16) give the same
 // image within their quantisation (a linear ramp survives the box filter): RMS below 1e-3 of the
 // peak (measured 2e-5 of it). A Haar lookup one lattice cell off along x would not: the control,
-// light shifted by one cell, differs by more than 3e-3 of the peak (measured 4.8e-3).
-TEST(Light, HaarLightIsSampledAtTheSamplesLatticePoint) {
+// light shifted by one cell, differs by more than 3e-3 of the peak (measured 4.8e-3). The default
+// (--light fast) reads the float16 items of the same file and never asks for a Haar page.
+TEST(Light, ExactHaarLightIsSampledAtTheSamplesLatticePoint) {
   pl::PlayOptions o = view("", 33, 33);
   o.sun = "0.3,0.8,-0.52";
   o.sunIntensity = 0.0f;
@@ -360,8 +362,12 @@ TEST(Light, HaarLightIsSampledAtTheSamplesLatticePoint) {
                         {[ramp](int32_t i, int32_t j, int32_t k, float* out) { ramp(i + 1, j, k, out); }}, {pt::instanceAt(0, 0, 0, 0)},
                         0.0f, canopy::haar::Precision::Fp32);
   o.input = items;
-  const std::vector<float> ref = render(o);
+  nlohmann::json ri;
+  const std::vector<float> ref = render(o, &ri);
   o.input = haarSphere(1.0f);
+  nlohmann::json rf;
+  const std::vector<float> fast = render(o, &rf);  // --light fast: the items of the Haar-lit file
+  o.exactLight = true;
   const std::vector<float> haar = render(o);
   o.input = shifted;
   const std::vector<float> off = render(o);
@@ -372,12 +378,15 @@ TEST(Light, HaarLightIsSampledAtTheSamplesLatticePoint) {
   EXPECT_GT(peak, 0.1);
   EXPECT_LT(e, 1e-3 * peak);
   EXPECT_GT(eOff, 3e-3 * peak);
+  EXPECT_EQ(rf["light"], "fast");
+  EXPECT_EQ(int(rf["pages_streamed"]), int(ri["pages_streamed"]));  // no Haar page was wanted
+  for (size_t i = 0; i < fast.size(); ++i) ASSERT_NEAR(fast[i], ref[i], 2e-5f * std::fabs(ref[i]) + 1e-6f) << "value " << i;
 }
 
-// A flipped byte in a Haar page: reported once, never cached, and the samples that wanted it use
-// the float16 item of the level above (constant bases: the same values), so the damaged frame
-// equals the intact one within float rounding.
-TEST(Light, CorruptHaarPageIsReportedAndLitFromTheLevelAbove) {
+// A flipped byte in a Haar page: reported once, never cached, and the samples that wanted it use the
+// float16 items (constant bases: the same values), so the damaged frame equals the intact one
+// within float rounding.
+TEST(Light, CorruptHaarPageIsReportedAndLitFromTheFloat16Items) {
   const std::string good = haarSphere();
   const std::string bad = pt::tmpDir("light") + "/sphere-haar-corrupt.canopy";
   std::vector<unsigned char> bytes = canopy::readFile(good);
@@ -392,6 +401,7 @@ TEST(Light, CorruptHaarPageIsReportedAndLitFromTheLevelAbove) {
   o.frames = 2;
   o.camera = "orbit:azimuth=30,elevation=15,distance=3.5,turns=0.05";
   o.sunIntensity = 0.0f;
+  o.exactLight = true;
   nlohmann::json rg, rb;
   const std::vector<float> intact = render(o, &rg);
   o.input = bad;

@@ -27,6 +27,9 @@ int main(int argc, char** argv) {
   app.add_option("--scene-light", o.sceneLight, "Coarse scene lighting lattice (VDB, lbsolve --scene)");
   app.add_option("--scene-light-grid", o.sceneLightGrid, "Float grid name in --scene-light")->capture_default_str();
   app.add_flag("--ignore-light", o.ignoreLight, "Pack density only, even where a .chaar is given");
+  app.add_flag("--no-haar-light", o.noHaarLight,
+               "Pack a .chaar's lighting as float16 light items only, without its Haar bricks (the finest level's exact light: "
+               "canopy-play --light exact); a smaller file");
   app.fallthrough();  // (inherited by the subcommands) `info FILE --json` works too
   std::string infoPath, verifyPath;
   CLI::App* info = app.add_subcommand("info", "Print models, levels, node/brick/page counts and bytes per section");

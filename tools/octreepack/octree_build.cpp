@@ -316,7 +316,7 @@ uint32_t depthForCells(int64_t maxDim) {
   return depth;
 }
 
-BuiltModel buildOctree(const ModelSource& src, const std::string& what, const LightFn& light, bool haarFinest) {
+BuiltModel buildOctree(const ModelSource& src, const std::string& what, const LightFn& light) {
   checkSource(src, what);
   int64_t maxDim = 0;
   for (int a = 0; a < 3; ++a) maxDim = std::max<int64_t>(maxDim, int64_t(src.latticeMax[a]) - src.latticeMin[a] + 1);
@@ -425,10 +425,9 @@ BuiltModel buildOctree(const ModelSource& src, const std::string& what, const Li
   if (light) {
     std::vector<std::pair<uint32_t, uint64_t>> refs;
     refs.reserve(bricks.size());
-    for (const BrickRef& b : bricks)  // ids run coarse to fine: with Haar light, the finest level's come last
-      if (!haarFinest || b.level < depth) refs.emplace_back(b.level, b.key);
+    for (const BrickRef& b : bricks) refs.emplace_back(b.level, b.key);
     buildLight(src, what, light, levels, refs, out.light);
-    M.lightCount = uint32_t(refs.size());
+    M.lightCount = M.brickCount;
     M.flags |= kCanopyModelHasLight;
   }
   return out;

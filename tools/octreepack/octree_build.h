@@ -49,19 +49,17 @@ struct BuiltModel {
   CanopyModel record{};                         // firstTile/firstBrickPage etc. set by the writer
   std::vector<CanopyNode> tiles;                // 8 per tile, model-relative child indices
   std::vector<unsigned char> bricks;            // brickCount * kCanopyBrickBytes
-  std::vector<uint16_t> light;                  // empty, or record.lightCount light items (canopy_file.h)
-  std::shared_ptr<const CanopyHaarPages> haar;  // the finest level's Haar light (set by the caller), or null
+  std::vector<uint16_t> light;                  // empty, or brickCount light items (canopy_file.h)
+  std::shared_ptr<const CanopyHaarPages> haar;  // the .chaar's bricks as Haar light (set by the caller), or null
   std::string sourceLabel;
   uint64_t occupiedCells = 0;
 };
 
 // Validates the source (finite values, density >= 0, cells inside the lattice, no duplicates,
 // lattice not absurd) and builds its octree; with `light`, also one light item per brick (light
-// levels = Haar averages of the lighting, layout in canopy_file.h), or with `haarFinest` only per
-// brick above the finest level (whose light then comes from Haar pages: the first
-// record.lightCount brick ids). Throws canopy::Error(InvalidInput) naming `what` (also for
-// non-finite lighting).
-BuiltModel buildOctree(const ModelSource& src, const std::string& what, const LightFn& light = nullptr, bool haarFinest = false);
+// levels = Haar averages of the lighting, layout in canopy_file.h). Throws
+// canopy::Error(InvalidInput) naming `what` (also for non-finite lighting).
+BuiltModel buildOctree(const ModelSource& src, const std::string& what, const LightFn& light = nullptr);
 
 // Helpers shared with the tests: the finest level that covers `maxDim` cells per axis.
 uint32_t depthForCells(int64_t maxDim);

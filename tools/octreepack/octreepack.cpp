@@ -156,14 +156,15 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
     ModelSource src = readDensityVdb(m.density, m.name);
     nlohmann::json source = {{"name", m.name}, {"density", src.sourceLabel}};
     LightFn light;
-    std::shared_ptr<const CanopyHaarPages> haar;  // .chaar lighting: its bricks are the finest level's light
+    std::shared_ptr<const CanopyHaarPages> haar;  // .chaar lighting: its bricks, the finest level's exact light
     if (!m.light.empty() && !o.ignoreLight) {
       LightVdb lv = endsWith(m.light, ".chaar") ? readChaarLight(m.light, src) : readLightVdb(m.light, src);
       light = std::move(lv.fn);
       haar = std::move(lv.haar);
       source["light"] = lv.sourceLabel;
     }
-    built.push_back(buildOctree(src, m.density, light, haar != nullptr));
+    if (o.noHaarLight) haar.reset();
+    built.push_back(buildOctree(src, m.density, light));
     built.back().haar = std::move(haar);
     sources.push_back(source);
     progress.add();
@@ -274,7 +275,7 @@ std::string formatInfo(const nlohmann::json& j) {
       << " cells/axis), " << m["nodes"].get<uint64_t>() << " nodes, " << m["bricks"].get<uint64_t>() << " bricks in "
       << m["brick_pages"].get<uint64_t>() << " pages, " << m["instances"].get<uint64_t>() << " instances, light: "
       << (m["has_light"].get<bool>() ? "yes (" + std::to_string(m["light_pages"].get<uint64_t>()) + " pages of float16 items" +
-                                           (m["haar_light"].get<bool>() ? ", finest level: " + std::to_string(m["haar_items"].get<uint64_t>()) +
+                                           (m["haar_light"].get<bool>() ? "; the finest level's exact light: " + std::to_string(m["haar_items"].get<uint64_t>()) +
                                                                               " Haar bricks (" + m["haar_precision"].get<std::string>() + ") in " +
                                                                               std::to_string(m["haar_pages"].get<uint64_t>()) + " pages"
                                                                         : std::string()) +

@@ -23,6 +23,7 @@ struct OctreepackOptions {
   std::string sceneLight;            // coarse scene lighting lattice (VDB), optional
   std::string sceneLightGrid = "light";
   bool ignoreLight = false;          // pack density only even where a .chaar is named
+  bool noHaarLight = false;          // a .chaar's bricks are not packed (float16 light items only)
 };
 
 // Packs; returns the JSON report (models, levels, bytes, seconds). Throws canopy::Error.
