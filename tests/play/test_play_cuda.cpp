@@ -42,25 +42,32 @@ double fractionWithin(const std::vector<float>& a, const std::vector<float>& b, 
   return double(n) / double(a.size());
 }
 
-std::string forestFile() {
-  const std::string p = pt::tmpDir("cuda") + "/forest.canopy";
+// The forest: 24 instances of two synthetic plants (the models and placements of every file below).
+std::vector<canopy::octreepack::ModelSource> forestModels() {
+  return {canopy::octreepack::testing::syntheticPlant(64, 0, "a", 6), canopy::octreepack::testing::syntheticPlant(48, 0, "b", 4)};
+}
+std::vector<canopy::CanopyInstance> forestInstances() {
   std::vector<canopy::CanopyInstance> inst;
   for (int i = 0; i < 24; ++i)
     inst.push_back(pt::instanceAt(uint32_t(i % 2), float(i % 6) * 2.5f - 6.25f, 0, float(i / 6) * 2.5f - 3.75f, 1.0f, 0.7f * float(i)));
-  pt::writeScene(p, {canopy::octreepack::testing::syntheticPlant(64, 0, "a", 6), canopy::octreepack::testing::syntheticPlant(48, 0, "b", 4)},
-                 inst);
+  return inst;
+}
+// Spatially varying bases for the two models (tests/play/scenes.h rampLight).
+std::vector<canopy::octreepack::LightFn> forestLights() {
+  const float rgb[3] = {1.0f, 0.8f, 0.6f};
+  return {pt::rampLight(rgb, 1.0f, 64, 0.03f), pt::rampLight(rgb, -0.5f, 48, 0.03f)};
+}
+
+std::string forestFile() {
+  const std::string p = pt::tmpDir("cuda") + "/forest.canopy";
+  pt::writeScene(p, forestModels(), forestInstances());
   return p;
 }
 
-// The forest with LB light on both models (spatially varying bases, tests/play/scenes.h rampLight).
+// The forest with LB light on both models.
 std::string litForestFile() {
   const std::string p = pt::tmpDir("cuda") + "/forest-lit.canopy";
-  std::vector<canopy::CanopyInstance> inst;
-  for (int i = 0; i < 24; ++i)
-    inst.push_back(pt::instanceAt(uint32_t(i % 2), float(i % 6) * 2.5f - 6.25f, 0, float(i / 6) * 2.5f - 3.75f, 1.0f, 0.7f * float(i)));
-  const float rgb[3] = {1.0f, 0.8f, 0.6f};
-  pt::writeLitScene(p, {canopy::octreepack::testing::syntheticPlant(64, 0, "a", 6), canopy::octreepack::testing::syntheticPlant(48, 0, "b", 4)},
-                    {pt::rampLight(rgb, 1.0f, 64, 0.03f), pt::rampLight(rgb, -0.5f, 48, 0.03f)}, inst);
+  pt::writeLitScene(p, forestModels(), forestLights(), forestInstances());
   return p;
 }
 
@@ -68,13 +75,7 @@ std::string litForestFile() {
 // finest level's light comes from Haar pages in the same device pool (canopyHaarSampleAt).
 std::string haarForestFile() {
   const std::string p = pt::tmpDir("cuda") + "/forest-haar.canopy";
-  std::vector<canopy::CanopyInstance> inst;
-  for (int i = 0; i < 24; ++i)
-    inst.push_back(pt::instanceAt(uint32_t(i % 2), float(i % 6) * 2.5f - 6.25f, 0, float(i / 6) * 2.5f - 3.75f, 1.0f, 0.7f * float(i)));
-  const float rgb[3] = {1.0f, 0.8f, 0.6f};
-  pt::writeHaarLitScene(p, {canopy::octreepack::testing::syntheticPlant(64, 0, "a", 6), canopy::octreepack::testing::syntheticPlant(48, 0, "b", 4)},
-                        {pt::rampLight(rgb, 1.0f, 64, 0.03f), pt::rampLight(rgb, -0.5f, 48, 0.03f)}, inst, 0.01f,
-                        canopy::haar::Precision::Fp16);
+  pt::writeHaarLitScene(p, forestModels(), forestLights(), forestInstances(), 0.01f, canopy::haar::Precision::Fp16);
   return p;
 }
 

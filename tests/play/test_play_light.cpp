@@ -82,6 +82,40 @@ void expectedRatio(canopy::play::V3 toSun, float ambient, float ratio[3]) {
   for (int c = 0; c < 3; ++c) ratio[c] = (sum + ambient * pl::kAmbientB0Scale) * kRgb[c] / ambient;
 }
 
+// Flips a byte of page `page` of `good` (a copy), renders both files (2 frames, the sun's direct
+// term off) and checks that the bad page is reported once, never cached (one page fewer streamed,
+// so it was wanted), and that the frame equals the intact one within float rounding (2e-5
+// relative): the scenes have constant bases, so whatever serves instead holds the same light.
+void expectCorruptPageIsLitFromElsewhere(const std::string& good, uint32_t page, size_t byteInPage, bool exactLight) {
+  const std::string bad = pt::tmpDir("light") + "/corrupt-" + std::to_string(page) + ".canopy";
+  std::vector<unsigned char> bytes = canopy::readFile(good);
+  const canopy::CanopyFile f = canopy::CanopyFile::open(good);
+  bytes[size_t(f.header().pagesOffset) + size_t(page) * f.header().pageBytes + byteInPage] ^= 0x40;
+  canopy::writeFileAtomic(bad, bytes.data(), bytes.size());
+  pl::PlayOptions o = view(good, 33, 33);
+  o.frames = 2;
+  o.camera = "orbit:azimuth=30,elevation=15,distance=3.5,turns=0.05";
+  o.sunIntensity = 0.0f;
+  o.exactLight = exactLight;
+  nlohmann::json rg, rb;
+  const std::vector<float> intact = render(o, &rg);
+  o.input = bad;
+  const std::vector<float> damaged = render(o, &rb);
+  EXPECT_EQ(rg["corrupt_pages"], 0);
+  EXPECT_EQ(rb["corrupt_pages"], 1);
+  EXPECT_EQ(int(rb["pages_streamed"]) + 1, int(rg["pages_streamed"]));  // the page was wanted
+  double peak = 0;
+  for (size_t i = 0; i < intact.size(); ++i) {
+    if (i % 4 == 3) {
+      ASSERT_EQ(intact[i], damaged[i]);  // light never changes opacity
+      continue;
+    }
+    ASSERT_NEAR(damaged[i], intact[i], 2e-5f * intact[i] + 1e-7f) << "value " << i;
+    peak = std::max(peak, double(intact[i]));
+  }
+  EXPECT_GT(peak, 0.1);
+}
+
 }  // namespace
 
 // sampleLbLight on a hand-made light item whose base k, channel c holds (k + x_index) * (c + 1):
@@ -196,37 +230,12 @@ TEST(Light, MovingTheSunChangesTheLitImageSmoothly) {
 // same values, so the damaged frame equals the intact one within float rounding (2e-5 relative),
 // which the density-only fallback (ambient alone, 6x darker here) would not.
 TEST(Light, CorruptLightPageIsReportedAndLitFromACoarserLevel) {
-  const std::string good = litSphere();
-  const std::string bad = pt::tmpDir("light") + "/sphere-lit-corrupt.canopy";
-  std::vector<unsigned char> bytes = canopy::readFile(good);
-  const canopy::CanopyFile f = canopy::CanopyFile::open(good);
+  const canopy::CanopyFile f = canopy::CanopyFile::open(litSphere());
   const canopy::CanopyModel& M = f.model(0);
   ASSERT_GE(M.lightPageCount, 2u);
   const uint32_t page = M.firstLightPage + M.lightPageCount - 1;
   ASSERT_EQ(f.pageEntry(page).kind, uint32_t(canopy::CanopyPageKind::Light));
-  bytes[size_t(f.header().pagesOffset) + size_t(page) * f.header().pageBytes + 1000] ^= 0x40;
-  canopy::writeFileAtomic(bad, bytes.data(), bytes.size());
-  pl::PlayOptions o = view(good, 33, 33);
-  o.frames = 2;
-  o.camera = "orbit:azimuth=30,elevation=15,distance=3.5,turns=0.05";
-  o.sunIntensity = 0.0f;
-  nlohmann::json rg, rb;
-  const std::vector<float> intact = render(o, &rg);
-  o.input = bad;
-  const std::vector<float> damaged = render(o, &rb);
-  EXPECT_EQ(rg["corrupt_pages"], 0);
-  EXPECT_EQ(rb["corrupt_pages"], 1);
-  EXPECT_EQ(int(rb["pages_streamed"]) + 1, int(rg["pages_streamed"]));  // the page was wanted
-  double peak = 0;
-  for (size_t i = 0; i < intact.size(); ++i) {
-    if (i % 4 == 3) {
-      ASSERT_EQ(intact[i], damaged[i]);
-      continue;
-    }
-    ASSERT_NEAR(damaged[i], intact[i], 2e-5f * intact[i] + 1e-7f) << "value " << i;
-    peak = std::max(peak, double(intact[i]));
-  }
-  EXPECT_GT(peak, 0.1);
+  expectCorruptPageIsLitFromElsewhere(litSphere(), page, 1000, false);
 }
 
 // Rotating the instance 90 degrees about +y together with the sun and the camera leaves the image
@@ -387,32 +396,9 @@ TEST(Light, ExactHaarLightIsSampledAtTheSamplesLatticePoint) {
 // float16 items (constant bases: the same values), so the damaged frame equals the intact one
 // within float rounding.
 TEST(Light, CorruptHaarPageIsReportedAndLitFromTheFloat16Items) {
-  const std::string good = haarSphere();
-  const std::string bad = pt::tmpDir("light") + "/sphere-haar-corrupt.canopy";
-  std::vector<unsigned char> bytes = canopy::readFile(good);
-  const canopy::CanopyFile f = canopy::CanopyFile::open(good);
+  const canopy::CanopyFile f = canopy::CanopyFile::open(haarSphere());
   const canopy::CanopyModel& M = f.model(0);
   ASSERT_GE(M.haarPageCount, 1u);
-  const uint32_t page = M.firstHaarPage;
-  ASSERT_EQ(f.pageEntry(page).kind, uint32_t(canopy::CanopyPageKind::HaarLight));
-  bytes[size_t(f.header().pagesOffset) + size_t(page) * f.header().pageBytes + 700] ^= 0x40;
-  canopy::writeFileAtomic(bad, bytes.data(), bytes.size());
-  pl::PlayOptions o = view(good, 33, 33);
-  o.frames = 2;
-  o.camera = "orbit:azimuth=30,elevation=15,distance=3.5,turns=0.05";
-  o.sunIntensity = 0.0f;
-  o.exactLight = true;
-  nlohmann::json rg, rb;
-  const std::vector<float> intact = render(o, &rg);
-  o.input = bad;
-  const std::vector<float> damaged = render(o, &rb);
-  EXPECT_EQ(rg["corrupt_pages"], 0);
-  EXPECT_EQ(rb["corrupt_pages"], 1);
-  EXPECT_EQ(int(rb["pages_streamed"]) + 1, int(rg["pages_streamed"]));  // the page was wanted
-  double peak = 0;
-  for (size_t i = 0; i < intact.size(); ++i) {
-    ASSERT_NEAR(damaged[i], intact[i], 2e-5f * intact[i] + 1e-7f) << "value " << i;
-    peak = std::max(peak, double(intact[i]));
-  }
-  EXPECT_GT(peak, 0.1);
+  ASSERT_EQ(f.pageEntry(M.firstHaarPage).kind, uint32_t(canopy::CanopyPageKind::HaarLight));
+  expectCorruptPageIsLitFromElsewhere(haarSphere(), M.firstHaarPage, 700, true);
 }
