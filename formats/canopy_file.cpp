@@ -441,7 +441,9 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
     for (uint64_t i = 0; i < uint64_t(kCanopyHaarGroupBricks) * M.haarGroups; ++i) {
       if (loc[i] == kCanopyNone) continue;
       const uint32_t page = loc[i] >> kCanopyHaarItemBits, item = loc[i] & (kCanopyHaarMaxItemsPerPage - 1u);
-      if (page >= M.haarPageCount || item >= pages_[M.firstHaarPage + page].itemCount)
+      // (a page of the range may be of a kind a newer minor added: only a Haar page is sampled)
+      if (page >= M.haarPageCount || pages_[M.firstHaarPage + page].kind != uint32_t(CanopyPageKind::HaarLight) ||
+          item >= pages_[M.firstHaarPage + page].itemCount)
         bad(P, name + ": Haar brick location " + u64s(i) + " out of range");
       const uint32_t id = pages_[M.firstHaarPage + page].firstItem + item;
       if (seen[id]) bad(P, name + ": Haar item " + u64s(id) + " is referenced twice");

@@ -41,6 +41,9 @@
 //      own light page is asked for when it is missing. Only when no light page on the path is
 //      resident yet (a cold start) does the sample get the density-only indirect term
 //      (ambient x scene factor), and the coarsest brick's light page is asked for as well.
+//      With --light exact (ShadeParams::exactLight), a segment at the finest level of a model that
+//      has Haar light (format 1.1) samples the .chaar's brick at its lattice point instead
+//      (segmentLight, sampleHaarLbLight), its Haar page used or asked for through the same cache.
 #pragma once
 #include <math.h>
 #include <stdint.h>
@@ -135,10 +138,9 @@ struct ModelView {
   uint32_t depth;
   uint32_t rootCells;
   uint32_t firstBrickPage;
-  uint32_t hasLight;        // LB light present (kCanopyModelHasLight)
-  uint32_t lightCount;      // bricks 0 .. lightCount-1 have a float16 light item (all, or those above the finest level)
+  uint32_t hasLight;        // light items present (kCanopyModelHasLight, lightCount == brickCount)
   uint32_t firstLightPage;  // light item b is in page firstLightPage + b / lightItemsPerPage
-  uint32_t haarLight;       // the finest level's light is Haar bricks (kCanopyModelHaarLight): haar below
+  uint32_t haarLight;       // also Haar light (kCanopyModelHaarLight): the finest level's exact light, `haar` below
   int32_t origin[3];        // octreeOrigin: unit space -> lattice index space (for the Haar lookup)
   CanopyHaarView haar;
 };
@@ -310,7 +312,7 @@ CANOPY_HD inline void ambientOnly(const SceneView& s, float sceneFactor, float o
 // per base, precision and call site the decoder made the lit pixel kernel 10x larger (44.7 k PTX
 // lines against 4.7 k) and the frame 257.7 ms; out of line 195.0 ms; out of line with its
 // coefficient loops rolled too (a fifth of the code) 377.9 ms, so they stay unrolled. The float16
-// items (--light fast) take 16.6 ms.
+// items (--light fast) take 16.3 ms.
 CANOPY_HD CANOPY_PLAY_NOINLINE void sampleHaarLbLight(const unsigned char* item, uint32_t fp16, const haar::BrickLookup& at,
                                                       const sun::Weights& w, float ambient, float sceneFactor, float out[3]) {
   float acc[3] = {0.0f, 0.0f, 0.0f};
@@ -436,7 +438,7 @@ CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m,
   const uint32_t firstFallback = maxLevel > kFallbackLevels ? maxLevel - kFallbackLevels : 0;
   for (;;) {
     const bool last = !(d.level < maxLevel && d.node.child != kCanopyNone && d.node.child < m.tileCount);
-    if (wantLight && d.node.brick < m.lightCount) {
+    if (wantLight && d.node.brick != kCanopyNone) {
       const uint32_t lpage = m.firstLightPage + d.node.brick / s.lightItemsPerPage;
       const int32_t lslot = s.pageSlot[lpage];
       if (d.coarsestLightPage == kCanopyNone) d.coarsestLightPage = lpage;

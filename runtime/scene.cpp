@@ -83,7 +83,6 @@ HostScene buildScene(const CanopyFile& f) {
     // brick, and may have Haar light too (the finest level's exact light).
     v.hasLight = (M.flags & kCanopyModelHasLight) && M.lightCount > 0 && M.lightCount == M.brickCount && h.lightItemsPerPage > 0 ? 1u : 0u;
     v.haarLight = v.hasLight && (M.flags & kCanopyModelHaarLight) ? 1u : 0u;
-    v.lightCount = v.hasLight ? M.lightCount : 0;
     v.firstLightPage = M.firstLightPage;
     for (int a = 0; a < 3; ++a) v.origin[a] = M.octreeOrigin[a];
     if (v.haarLight) v.haar = f.haarView(m);
