@@ -59,6 +59,7 @@ timeout 300 bench-play "$O/bench" --device cuda --size 1920x1080 --frames "${FRA
   --extra grove-f16="$O/grove-f16.canopy" --extra grove-h16="$O/grove-h16.canopy" 2> "$O/bench_play.err" | tee "$O/bench_play.md" || status=1
 cp "$O/bench/grove-h16.png" "$O/play-grove-h16.png" 2>/dev/null
 rm -f "$O"/grove-*.canopy
+[[ ${SKIP_LIGHT_PACKING:-0} = 1 ]] && { date -u; exit $status; }  # SKIP_LIGHT_PACKING=1: stop after the frames
 step light-packing
 W=/tmp/lp; mkdir -p $W
 canopy-voxelize "$built/../shared/assets/plants/oak_medium.glb" -o $W/oak128.density.vdb --resolution 128 -q || status=1
