@@ -747,6 +747,12 @@ TEST(OctreepackLight, ChaarLightingEqualsTheDecoder) {
   ASSERT_EQ(M.depth, 2u);
   EXPECT_EQ(M.lightCount, M.brickCount);
   EXPECT_EQ(M.haarItemCount, chaar.header.slotCount);
+  const nlohmann::json info = op::canopyInfo(f);  // what `canopy-octreepack info --json` prints
+  EXPECT_EQ(info["format_version"], "1.1");
+  EXPECT_EQ(info["models"][0]["haar_light"], true);
+  EXPECT_EQ(info["models"][0]["haar_items"], chaar.header.slotCount);
+  EXPECT_EQ(info["models"][0]["haar_precision"], "fp16");
+  EXPECT_EQ(info["models"][0]["haar_pages"], M.haarPageCount);
   PackedSampler S(f);
   // Finest level: bit for bit.
   for (int k = -2; k < n - 2; ++k)

@@ -103,6 +103,26 @@ TEST(PlayCli, GpuDeviceWithoutAGpuExitsUnsupported) {
   EXPECT_FALSE(exists(out));
 }
 
+// --light exact on a Haar-lit file (format 1.1) through the executable: the report names the mode
+// and the Haar pages, and the frame is written; on a file without Haar light it is the fast path.
+TEST(PlayCli, LightExactReadsTheHaarPages) {
+  const std::string dir = pt::tmpDir("cli");
+  const std::string haar = dir + "/ball-haar.canopy", out = dir + "/exact.png";
+  const float rgb[3] = {1.0f, 0.5f, 0.25f};
+  pt::writeHaarLitScene(haar, {pt::sphereModel(24, 10, 0.4f)}, {pt::rampLight(rgb, 1.0f, 24)}, {pt::instanceAt(0, 0, 0, 0)}, 0.01f,
+                        canopy::haar::Precision::Fp16);
+  for (const char* mode : {"exact", "fast"}) {
+    std::remove(out.c_str());
+    const CliRun r = run("'" + haar + "' -o '" + out + "' --size 32x24 --device cpu --light " + mode + " --json -q");
+    ASSERT_EQ(r.code, 0) << r.err;
+    const nlohmann::json j = nlohmann::json::parse(r.out);
+    EXPECT_EQ(j["light"], mode);
+    EXPECT_GT(double(j["haar_page_mb"]), 0.0);
+    EXPECT_EQ(int(j["lit_models"]), 1);
+    EXPECT_TRUE(exists(out));
+  }
+}
+
 TEST(PlayCli, ErrorsHaveDocumentedExitCodesAndLeaveNoOutput) {
   const std::string dir = pt::tmpDir("cli/errors");
   const std::string out = dir + "/x.png";
@@ -133,6 +153,7 @@ TEST(PlayCli, ErrorsHaveDocumentedExitCodesAndLeaveNoOutput) {
       {"'" + sceneFile() + "' -o '" + out + "' --shadow-map-cells 0 --device cpu", 1, "--shadow-map-cells"},
       {"'" + sceneFile() + "' -o '" + out + "' --shadow-map-bias -1 --device cpu", 1, "--shadow-map-bias"},
       {"'" + sceneFile() + "' -o '" + out + "' --warp-tile 3 --device cpu", 1, "--warp-tile"},
+      {"'" + sceneFile() + "' -o '" + out + "' --light precise --device cpu", 1, "--light"},
   };
   for (const Case& c : cases) {
     std::remove(out.c_str());
