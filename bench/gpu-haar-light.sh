@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# gpu-haar-light.sh: the GPU checks and measurements of format 2.0's Haar light, in one device call.
+# gpu-haar-light.sh: the GPU checks and measurements of format 1.1's Haar light, in one device call.
 #
 # Here (from the repo root, after a Release build with -DCMAKE_CUDA_ARCHITECTURES=90):
 #   make -C pipelines scene RESOLUTION=64 DEVICE=cpu O=/tmp/grove     # the grove's lattices and light

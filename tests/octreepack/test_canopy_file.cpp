@@ -1,6 +1,6 @@
 // test_canopy_file.cpp: the .canopy reader never trusts its input (built with ASan/UBSan: the
 // reader, writer and builder sources are compiled into this test).
-//   - the frozen 2.0 file in data/ still reads (its Haar light equal to the .chaar decoder's bit for
+//   - the frozen 1.1 file in data/ still reads (its Haar light equal to the .chaar decoder's bit for
 //     bit), and the writer still produces it byte for byte (a layout change must be deliberate:
 //     bump the version and add a new frozen file); the frozen 1.0 file still reads;
 //   - every truncated prefix, flipped bytes (header, table, sections, padding, pages), trailing
@@ -32,7 +32,7 @@ const std::string kFrozen = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/
 const std::string kFrozenV1 = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v1.0.canopy";
 const std::string kFrozenChaar = std::string(CANOPY_SOURCE_DIR) + "/tests/haar/data/small_v1_0.chaar";
 
-// The Haar-lit model of the 2.0 file: every cell of the frozen .chaar's lattice occupied.
+// The Haar-lit model of the 1.1 file: every cell of the frozen .chaar's lattice occupied.
 op::ModelSource haarModelSource(const haar::ChaarData& d) {
   op::ModelSource s;
   s.name = "haarlit";
