@@ -348,9 +348,12 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
       }
       for (uint32_t b = 0; b < M.haarGroups; ++b)
         if (!used[b]) bad(P, name + " Haar block " + u64s(b) + " is not in the group table");
-    } else if (M.haarPrecision || M.haarGroups || M.haarItemCount || M.firstHaarIndex || M.haarIndexCount || M.firstHaarPage ||
-               M.haarPageCount) {
-      bad(P, name + " has Haar fields but no Haar light flag");
+    } else {
+      // Without the flag every Haar field is zero (1.0's reserved bytes).
+      static_assert(offsetof(CanopyModel, reserved) - offsetof(CanopyModel, haarPrecision) == 56, "the Haar fields of CanopyModel");
+      const unsigned char* f = reinterpret_cast<const unsigned char*>(&M) + offsetof(CanopyModel, haarPrecision);
+      for (size_t b = 0; b < offsetof(CanopyModel, reserved) - offsetof(CanopyModel, haarPrecision); ++b)
+        if (f[b] != 0) bad(P, name + " has Haar fields but no Haar light flag");
     }
     // Every tile must be reached exactly once from the root, at a level < depth: no cycles, no
     // shared or orphan tiles, every brick id in range.
@@ -485,16 +488,16 @@ std::string canopyCheckHaarPage(const void* pageImage, uint32_t pageBytes, bool 
       return "Haar item " + std::to_string(i) + ": bad offset";
   const uint64_t entryBytes = fp16 ? 6 : 12;
   for (size_t i = 0; i < size_t(n); ++i) {
-    const std::string what = "Haar item " + std::to_string(i) + ": ";
+    auto what = [i](const char* problem) { return "Haar item " + std::to_string(i) + ": " + problem; };
     haar::BrickRecord rec[kCanopyLightBases];
     std::memcpy(rec, payload + off[i], sizeof rec);
     uint64_t entries = 0;
     for (uint32_t b = 0; b < kCanopyLightBases; ++b) {
-      if (rec[b].first() != entries) return what + "records are not a running sum of their masks";
+      if (rec[b].first() != entries) return what("records are not a running sum of their masks");
       entries += uint64_t(haar::popcount64(rec[b].mask()));
     }
     const uint64_t need = (kCanopyHaarRecordBytes + entries * entryBytes + 3) / 4 * 4;
-    if (need != uint64_t(off[i + 1]) - off[i]) return what + "size does not match its coefficient count";
+    if (need != uint64_t(off[i + 1]) - off[i]) return what("size does not match its coefficient count");
     const unsigned char* c = payload + off[i] + kCanopyHaarRecordBytes;
     for (uint64_t k = 0; k < 3 * entries; ++k) {
       float v;
@@ -505,7 +508,7 @@ std::string canopyCheckHaarPage(const void* pageImage, uint32_t pageBytes, bool 
       } else {
         std::memcpy(&v, c + 4 * k, 4);
       }
-      if (!std::isfinite(v)) return what + "non-finite coefficient";
+      if (!std::isfinite(v)) return what("non-finite coefficient");
     }
   }
   return "";

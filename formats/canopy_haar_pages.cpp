@@ -8,12 +8,6 @@
 
 namespace canopy {
 
-uint64_t CanopyHaarPages::payloadBytes() const {
-  uint64_t n = 0;
-  for (const auto& p : payloads) n += p.size();
-  return n;
-}
-
 CanopyHaarPages canopyHaarPagesFromChaar(const haar::ChaarData& d, uint32_t pageBytes) {
   const haar::ChaarHeader& h = d.header;
   if (h.baseCount != kCanopyLightBases)

@@ -29,7 +29,6 @@ struct CanopyHaarPages {
   std::vector<uint32_t> index;             // the model's HaarIndex entries
   std::vector<std::vector<unsigned char>> payloads;  // one per page: offsets then items
   std::vector<uint32_t> itemCounts;        // items per page
-  uint64_t payloadBytes() const;
 };
 
 // Re-pages the 19 bases of a parsed .chaar (lattice = the model's, checked by the caller) into

@@ -52,16 +52,8 @@ std::vector<unsigned char> smallFileBytes(bool withHaar = true) {
   const op::BuiltModel m = op::buildOctree(src, "frozen");
   const op::BuiltModel lit = op::buildOctree(op::testing::syntheticPlant(8, 0, "lit", 0), "lit", op::testing::analyticLight);
   const haar::ChaarData chaar = haar::readChaar(kFrozenChaar);
-  const haar::ChaarView view = chaar.view();
   const CanopyHaarPages haarPages = canopyHaarPagesFromChaar(chaar);
-  const op::BuiltModel haarLit = op::buildOctree(
-      haarModelSource(chaar), "haarlit",
-      [&](int32_t i, int32_t j, int32_t k, float* o) {
-        for (uint32_t b = 0; b < kCanopyLightBases; ++b) {
-          const haar::Rgb v = haar::chaarSample(view, int(b), float(i), float(j), float(k));
-          o[3 * b] = v.r, o[3 * b + 1] = v.g, o[3 * b + 2] = v.b;
-        }
-      });
+  const op::BuiltModel haarLit = op::buildOctree(haarModelSource(chaar), "haarlit", op::chaarLightFn(chaar.view()));
   CanopyWriteInput in;
   in.models.push_back({m.record, &m.tiles, &m.bricks, nullptr});
   in.models.push_back({lit.record, &lit.tiles, &lit.bricks, &lit.light});
@@ -379,6 +371,16 @@ TEST(CanopyFile, CraftedHaarPagesAndLocationsAreRejectedEvenWithValidChecksums) 
       EXPECT_NE(std::string(e.what()).find(c.expect), std::string::npos) << e.what();
       EXPECT_EQ(std::string(e.what()).rfind("bad.canopy: page " + std::to_string(pageIndex), 0), 0u) << e.what();
     }
+  }
+  // A model without the Haar flag whose Haar fields are not zero (any of them), with valid CRCs.
+  const CanopySection* models = f.findSection(CanopySectionKind::Models);
+  ASSERT_NE(models, nullptr);
+  for (size_t field : {offsetof(CanopyModel, haarGroupDims), offsetof(CanopyModel, haarThreshold)}) {
+    std::vector<unsigned char> bad = good;
+    const uint32_t one = 0x3f800000u;  // 1 (as a count) or 1.0f
+    std::memcpy(bad.data() + models->offset + field, &one, 4);  // model 0: density only
+    reseal(bad);
+    EXPECT_NE(expectRejected(bad, false).find("Haar fields but no Haar light flag"), std::string::npos) << field;
   }
   // A brick location past its page's items, with valid CRCs, fails at open.
   const CanopySection* hi = f.findSection(CanopySectionKind::HaarIndex);

@@ -114,17 +114,8 @@ inline void writeHaarLitScene(const std::string& path, const std::vector<octreep
   built.reserve(sources.size());
   for (size_t m = 0; m < sources.size(); ++m) {
     const haar::ChaarData chaar = chaarOf(sources[m], lights[m], T, precision);
-    const haar::ChaarView view = chaar.view();
     pages[m] = canopyHaarPagesFromChaar(chaar);
-    built.push_back(octreepack::buildOctree(
-        sources[m], sources[m].name,
-        [&](int32_t i, int32_t j, int32_t k, float* o) {
-          const bool inside = i <= sources[m].latticeMax[0] && j <= sources[m].latticeMax[1] && k <= sources[m].latticeMax[2];
-          for (uint32_t b = 0; b < kCanopyLightBases; ++b) {
-            const haar::Rgb v = inside ? haar::chaarSample(view, int(b), float(i), float(j), float(k)) : haar::Rgb{};
-            o[3 * b] = v.r, o[3 * b + 1] = v.g, o[3 * b + 2] = v.b;
-          }
-        }));
+    built.push_back(octreepack::buildOctree(sources[m], sources[m].name, octreepack::chaarLightFn(chaar.view())));
   }
   CanopyWriteInput w;
   for (size_t m = 0; m < built.size(); ++m) w.models.push_back({built[m].record, &built[m].tiles, &built[m].bricks, &built[m].light, &pages[m]});

@@ -114,7 +114,7 @@ bool chaarSupported() {
 #endif
 }
 
-LightVdb readChaarLight(const std::string& path, const ModelSource& model) {
+LightVdb readChaarLight(const std::string& path, const ModelSource& model, bool withHaar) {
 #ifdef CANOPY_OCTREEPACK_HAS_CHAAR
   auto data = std::make_shared<haar::ChaarData>(haar::readChaar(path));
   const haar::ChaarHeader& h = data->header;
@@ -126,21 +126,12 @@ LightVdb readChaarLight(const std::string& path, const ModelSource& model) {
       throw invalidInput(path + ": its lattice differs from the density lattice of model '" + model.name + "'");
   LightVdb out;
   out.sourceLabel = vdbio::describeSource(path);
-  out.haar = std::make_shared<const CanopyHaarPages>(canopyHaarPagesFromChaar(*data));
-  const haar::ChaarView view = data->view();
-  out.fn = [data, view](int32_t i, int32_t j, int32_t k, float* o) {
-    const int32_t p[3] = {i, j, k};
-    bool inside = true;
-    for (int a = 0; a < 3; ++a) inside = inside && p[a] >= view.latticeMin[a] && p[a] <= view.latticeMax[a];
-    for (uint32_t b = 0; b < kCanopyLightBases; ++b) {
-      haar::Rgb v;
-      if (inside) v = haar::chaarSample(view, int(b), float(i), float(j), float(k));
-      o[3 * b] = v.r, o[3 * b + 1] = v.g, o[3 * b + 2] = v.b;
-    }
-  };
+  if (withHaar) out.haar = std::make_shared<const CanopyHaarPages>(canopyHaarPagesFromChaar(*data));
+  out.fn = [data, fn = chaarLightFn(data->view())](int32_t i, int32_t j, int32_t k, float* o) { fn(i, j, k, o); };  // keeps data alive
   return out;
 #else
   (void)model;
+  (void)withHaar;
   throw unsupported(path + ": packing .chaar lighting needs the chaar decoder, which this build does not have yet; "
                     "pass PLANT.light.vdb (canopy-lbsolve) instead, or --ignore-light to pack density only");
 #endif

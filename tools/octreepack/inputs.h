@@ -23,18 +23,17 @@ ModelSource readDensityVdb(const std::string& path, const std::string& name);
 struct LightVdb {
   LightFn fn;
   std::string sourceLabel;
-  // .chaar only: its bricks re-paged as the finest level's Haar light (fn then serves the coarser
-  // levels' float16 items).
+  // .chaar only (withHaar): its bricks re-paged as Haar light, the finest level's exact light.
   std::shared_ptr<const CanopyHaarPages> haar;
 };
 LightVdb readLightVdb(const std::string& path, const ModelSource& model);
 
-// Compressed lighting from canopy-haar (.chaar, 19 bases): its bricks as Haar pages, and fn samples
-// it through the chaar decoder at every lattice cell (0 outside the lattice) for the coarser light
-// levels. Its lattice must equal `model`'s. Throws
+// Compressed lighting from canopy-haar (.chaar, 19 bases): fn samples it through the chaar decoder
+// at every lattice cell (0 outside the lattice; chaarLightFn) for the float16 light items, and with
+// withHaar its bricks become Haar pages. Its lattice must equal `model`'s. Throws
 // Unsupported when this build has no chaar decoder (chaarSupported() == false).
 bool chaarSupported();
-LightVdb readChaarLight(const std::string& path, const ModelSource& model);
+LightVdb readChaarLight(const std::string& path, const ModelSource& model, bool withHaar = true);
 
 // Where a canopy-voxelize lattice came from, read from its metadata only (no voxels): the
 // density grid's canopy_source ("<mesh file> xxh64:<hash>") and the file's canopy_mesh_index

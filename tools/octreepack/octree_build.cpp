@@ -310,6 +310,19 @@ void buildLight(const ModelSource& src, const std::string& what, const LightFn& 
 
 }  // namespace
 
+LightFn chaarLightFn(const haar::ChaarView& view) {
+  return [view](int32_t i, int32_t j, int32_t k, float* o) {
+    const int32_t p[3] = {i, j, k};
+    bool inside = true;
+    for (int a = 0; a < 3; ++a) inside = inside && p[a] >= view.latticeMin[a] && p[a] <= view.latticeMax[a];
+    for (uint32_t b = 0; b < kCanopyLightBases; ++b) {
+      haar::Rgb v;
+      if (inside) v = haar::chaarSample(view, int(b), float(i), float(j), float(k));
+      o[3 * b] = v.r, o[3 * b + 1] = v.g, o[3 * b + 2] = v.b;
+    }
+  };
+}
+
 uint32_t depthForCells(int64_t maxDim) {
   uint32_t depth = 0;
   while ((int64_t(kCanopyBrickSize) << depth) < maxDim) ++depth;

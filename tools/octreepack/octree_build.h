@@ -14,13 +14,12 @@
 #pragma once
 #include <array>
 #include <functional>
-#include <memory>
 #include <cstdint>
 #include <string>
 #include <vector>
 
 #include "formats/canopy_file.h"
-#include "formats/canopy_write.h"
+#include "formats/haar_view.h"
 
 namespace canopy::octreepack {
 
@@ -45,12 +44,15 @@ struct ModelSource {
 // Called concurrently from several threads.
 using LightFn = std::function<void(int32_t i, int32_t j, int32_t k, float* out)>;
 
+// The lighting of a .chaar (19 bases) as a LightFn: the chaar decoder's value at each lattice cell,
+// 0 outside the lattice. `view` points into its ChaarData, which must outlive the function.
+LightFn chaarLightFn(const haar::ChaarView& view);
+
 struct BuiltModel {
   CanopyModel record{};                         // firstTile/firstBrickPage etc. set by the writer
   std::vector<CanopyNode> tiles;                // 8 per tile, model-relative child indices
   std::vector<unsigned char> bricks;            // brickCount * kCanopyBrickBytes
   std::vector<uint16_t> light;                  // empty, or brickCount light items (canopy_file.h)
-  std::shared_ptr<const CanopyHaarPages> haar;  // the .chaar's bricks as Haar light (set by the caller), or null
   std::string sourceLabel;
   uint64_t occupiedCells = 0;
 };

@@ -148,6 +148,7 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
   }
   std::vector<BuiltModel> built;
   built.reserve(scene.models.size());
+  std::vector<std::shared_ptr<const CanopyHaarPages>> haarPages;  // per model, or null
   nlohmann::json sources = nlohmann::json::array();
   Progress progress("octreepack models", int64_t(scene.models.size()));
   for (size_t i = 0; i < scene.models.size(); ++i) {
@@ -158,18 +159,18 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
     LightFn light;
     std::shared_ptr<const CanopyHaarPages> haar;  // .chaar lighting: its bricks, the finest level's exact light
     if (!m.light.empty() && !o.ignoreLight) {
-      LightVdb lv = endsWith(m.light, ".chaar") ? readChaarLight(m.light, src) : readLightVdb(m.light, src);
+      LightVdb lv = endsWith(m.light, ".chaar") ? readChaarLight(m.light, src, !o.noHaarLight) : readLightVdb(m.light, src);
       light = std::move(lv.fn);
       haar = std::move(lv.haar);
       source["light"] = lv.sourceLabel;
     }
-    if (o.noHaarLight) haar.reset();
     built.push_back(buildOctree(src, m.density, light));
-    built.back().haar = std::move(haar);
+    haarPages.push_back(std::move(haar));
     sources.push_back(source);
     progress.add();
   }
-  for (auto& b : built) w.models.push_back({b.record, &b.tiles, &b.bricks, &b.light, b.haar.get()});
+  for (size_t i = 0; i < built.size(); ++i)
+    w.models.push_back({built[i].record, &built[i].tiles, &built[i].bricks, &built[i].light, haarPages[i].get()});
   for (const SceneInstance& in : scene.instances) {
     CanopyInstance ci{};
     for (int k = 0; k < 12; ++k) ci.modelToWorld[k] = float(in.matrix[size_t(k)]);  // rows 0..2 of the 4x4
