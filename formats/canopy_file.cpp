@@ -321,6 +321,10 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
     if ((lit ? M.lightCount != M.brickCount : M.lightCount != 0) || M.lightPageCount != (uint64_t(M.lightCount) + lpp - 1) / lpp ||
         uint64_t(M.firstLightPage) + M.lightPageCount > h.pageCount)
       bad(P, name + " light items or pages out of range");
+    if (M.flags & kCanopyModelScatteredSun) {
+      if (h.major == 1 && h.minor < 1) bad(P, name + " has scattered-only sun bases in a 1.0 file");
+      if (!lit) bad(P, name + " has scattered-only sun bases but no light");
+    }
     if (haar) {
       if (h.major == 1 && h.minor < 1) bad(P, name + " has Haar light in a 1.0 file");
       if (!lit) bad(P, name + " has Haar light but no light items");

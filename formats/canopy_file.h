@@ -114,7 +114,7 @@ namespace canopy {
 // ------------------------------------------------------------------------------------------------
 constexpr char kCanopyMagic[8] = {'C', 'A', 'N', 'O', 'P', 'Y', 'P', 'K'};
 constexpr uint16_t kCanopyMajor = 1;
-constexpr uint16_t kCanopyMinor = 1;  // 1.1: Haar light pages (optional; a 1.0 reader skips them)
+constexpr uint16_t kCanopyMinor = 1;  // 1.1: Haar light pages (optional; a 1.0 reader skips them), kCanopyModelScatteredSun
 constexpr uint32_t kCanopyPageBytes = 65536;   // page size written (readers accept powers of two >= 32 KiB)
 constexpr uint32_t kCanopySectionAlign = 64;   // every section starts on a 64-byte boundary
 constexpr uint32_t kCanopyBrickSize = 8;       // interior voxels per axis
@@ -194,6 +194,10 @@ static_assert(sizeof(CanopyNode) == 16, "CanopyNode layout");
 enum CanopyModelFlags : uint32_t {
   kCanopyModelHasLight = 1u,   // float16 light items, one per brick
   kCanopyModelHaarLight = 2u,  // also the .chaar's Haar bricks: the finest level's exact light (Haar pages, HaarIndex)
+  // (1.1) The sun bases B01..B18 (items and Haar pages) hold only scattered light: canopy-lbsolve
+  // removed their direct beam, which the player adds as its shadowed direct sun. Without it (1.0
+  // files, or lbsolve --sun-bases total) the bases include the beam and the player counts it twice.
+  kCanopyModelScatteredSun = 4u,
 };
 
 struct CanopyModel {               // offset

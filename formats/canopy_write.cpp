@@ -33,6 +33,7 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
   std::vector<CanopyModel> models;
   std::vector<CanopyNode> tiles;
   std::vector<uint32_t> haarIndex;
+  bool scatteredSun = false;  // a model flagged kCanopyModelScatteredSun (1.1)
   uint32_t page = 0;
   for (CanopyWriteModel& wm : in.models) {
     CanopyModel m = wm.record;
@@ -53,7 +54,8 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
     m.firstLightPage = page;
     m.lightPageCount = (m.lightCount + lightPerPage - 1) / lightPerPage;
     page += m.lightPageCount;
-    m.flags = lit ? (m.flags | kCanopyModelHasLight) : (m.flags & ~uint32_t(kCanopyModelHasLight));
+    m.flags = lit ? (m.flags | kCanopyModelHasLight) : (m.flags & ~uint32_t(kCanopyModelHasLight | kCanopyModelScatteredSun));
+    scatteredSun = scatteredSun || (m.flags & kCanopyModelScatteredSun) != 0;
     m.flags &= ~uint32_t(kCanopyModelHaarLight);
     m.haarPrecision = m.haarGroups = m.haarItemCount = m.firstHaarIndex = m.haarIndexCount = m.firstHaarPage = m.haarPageCount = 0;
     m.haarThreshold = 0.0f;
@@ -179,7 +181,8 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
   CanopyFileHeader h{};
   std::memcpy(h.magic, kCanopyMagic, 8);
   h.major = kCanopyMajor;
-  h.minor = haarIndex.empty() ? 0 : kCanopyMinor;  // without Haar light a file is a 1.0 file, byte for byte
+  // Without a 1.1 feature (Haar light, scattered-only sun bases) a file is a 1.0 file, byte for byte.
+  h.minor = haarIndex.empty() && !scatteredSun ? 0 : kCanopyMinor;
   h.headerBytes = sizeof(CanopyFileHeader);
   h.pageBytes = pageBytes;
   h.pageCount = uint32_t(L.pages.size());

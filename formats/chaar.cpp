@@ -186,6 +186,12 @@ ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) 
     ck.require(e.coefCount <= uint64_t(BrickRecord::kMaxFirst) + 1, bn + " coefficient stream too long");
     for (int a = 0; a < 3; ++a)
       ck.require(e.direction[a] >= -1 && e.direction[a] <= 1, bn + " has a bad direction");
+    // Flags: none in 1.0; in 1.1 only kChaarBaseScattered, on a sun base (a newer minor may add more).
+    if (h.versionMinor == 0) ck.require(e.flags == 0, bn + " has flags in a 1.0 file");
+    if (h.versionMinor <= kChaarVersionMinor)
+      ck.require((e.flags & ~uint32_t(kChaarBaseScattered)) == 0, bn + " has unknown flags " + str(e.flags));
+    ck.require(!(e.flags & kChaarBaseScattered) || e.direction[0] != 0 || e.direction[1] != 0 || e.direction[2] != 0,
+               bn + " is the ambient base but flagged scattered-only");
     ck.require(std::isfinite(e.threshold) && std::isfinite(e.maxError) && std::isfinite(e.rmsError) &&
                    std::isfinite(e.valueMax),
                bn + " has non-finite statistics");
@@ -244,7 +250,10 @@ std::vector<uint8_t> serializeChaar(ChaarData& d) {
   ChaarHeader& h = d.header;
   std::memcpy(h.magic, kChaarMagic, sizeof kChaarMagic);
   h.versionMajor = kChaarVersionMajor;
-  h.versionMinor = kChaarVersionMinor;
+  // 1.1 only where a 1.1 field is used: files without base flags stay 1.0, byte for byte.
+  bool flagged = false;
+  for (const ChaarBaseEntry& e : d.bases) flagged = flagged || e.flags != 0;
+  h.versionMinor = flagged ? kChaarVersionMinor : 0;
   h.headerSize = sizeof(ChaarHeader);
   h.baseCount = uint32_t(d.bases.size());
   const bool fp16 = h.precision == uint32_t(Precision::Fp16);

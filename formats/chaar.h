@@ -18,6 +18,10 @@
 //   COEFS    the compacted coefficient streams of all bases, base after base: per entry three
 //            channels (R,G,B) as float32 (12 bytes) or binary16 (6 bytes)
 //   end of file = fileSize; nothing may follow.
+// Version 1.1 adds one thing: ChaarBaseEntry::flags bit 0 (kChaarBaseScattered), set for a sun base
+// that canopy-lbsolve stored without its direct beam (lbsolve's default since 2026-12; grid
+// metadata canopy_direct_beam = false). A writer writes 1.0 when no base has a flag, so files
+// without it are 1.0 byte for byte. A 1.0 reader reads 1.1 files (it ignores the flags).
 //
 // A reader (parseChaar) trusts nothing: it rejects bad magic, a newer major version, truncation,
 // trailing bytes, checksum mismatch, sections out of range or overlapping, inconsistent counts,
@@ -37,7 +41,7 @@ namespace canopy::haar {
 
 constexpr char kChaarMagic[8] = {'C', 'N', 'P', 'Y', 'H', 'A', 'A', 'R'};
 constexpr uint16_t kChaarVersionMajor = 1;
-constexpr uint16_t kChaarVersionMinor = 0;
+constexpr uint16_t kChaarVersionMinor = 1;
 constexpr int kChaarSectionCount = 5;
 enum ChaarSection : int { kSecMeta = 0, kSecBases = 1, kSecSlots = 2, kSecRecords = 3, kSecCoefs = 4 };
 constexpr int kMaxLatticeEdge = 1 << 15;  // per axis; a light lattice is 64..512 in practice
@@ -79,7 +83,7 @@ static_assert(offsetof(ChaarHeader, headerCrc32) == 380, "header layout");
 
 struct ChaarBaseEntry {    // 64 bytes
   int32_t direction[3];    //  0 lattice direction c_j of base B_j ((0,0,0) for B00)
-  uint32_t flags;          // 12 zero
+  uint32_t flags;          // 12 ChaarBaseFlags (1.1; zero in 1.0)
   uint64_t coefOffset;     // 16 first entry of this base in COEFS
   uint64_t coefCount;      // 24 entries of this base
   float threshold;         // 32 threshold this base was encoded with
@@ -91,6 +95,12 @@ struct ChaarBaseEntry {    // 64 bytes
   uint64_t reserved;       // 56 zero
 };
 static_assert(sizeof(ChaarBaseEntry) == 64, "ChaarBaseEntry is 64 bytes");
+
+enum ChaarBaseFlags : uint32_t {
+  // The base holds only light scattered at least once: canopy-lbsolve removed the sun base's
+  // unscattered beam (tools/lbsolve/beam.h), which the player adds as its shadowed direct sun.
+  kChaarBaseScattered = 1u,
+};
 
 // A .chaar in memory, typed and validated. view() gives the CPU sampler's POD view of it.
 struct ChaarData {

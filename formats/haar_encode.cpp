@@ -291,6 +291,7 @@ ChaarData assembleChaar(const ChaarAssembly& a) {
     ChaarBaseEntry& e = d.bases[k];
     std::memset(&e, 0, sizeof e);
     for (int i = 0; i < 3; ++i) e.direction[i] = a.directions[k][size_t(i)];
+    e.flags = k < a.flags.size() ? a.flags[k] : 0u;
     e.coefOffset = total;
     e.coefCount = c.coefCount;
     e.threshold = c.threshold;

@@ -114,6 +114,7 @@ struct ChaarAssembly {
   std::string meta = "{}";
   std::vector<BaseCode> codes;
   std::vector<std::array<int32_t, 3>> directions;
+  std::vector<uint32_t> flags;  // ChaarBaseFlags per base (empty: none)
   std::vector<double> valueMax;
 };
 ChaarData assembleChaar(const ChaarAssembly& a);

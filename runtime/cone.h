@@ -163,7 +163,8 @@ struct SceneLightView {     // coarse scene lattice (lbsolve --scene), factor on
 
 struct ShadeParams {
   V3 toSun;                 // unit vector towards the sun (world)
-  float sun[3];             // sun radiance (linear RGB)
+  float sun[3];             // sun radiance (linear RGB): scales the LB sun bases (lbIndirect)
+  float direct[3];          // the direct term's sun radiance: sun, or 0 (--no-direct-sun)
   float ambient;            // ambient factor (user): indirect = ambient * scene factor without LB data
   float sigma;              // extinction per lattice cell at density 1
   float stepFactor;         // brick step in voxels of the chosen level
@@ -285,11 +286,15 @@ constexpr float kAmbientB0Scale = 1.0f / 18.0f;
 
 // The LB indirect light of the dissertation §4.2-4.3 at one sample, given the values of the three
 // sun bases chosen by the polyhedron lookup (bases[v] = B_{w.base[v]} there, RGB) and of the
-// ambient base B_0: (sum_v w_v B_v + ambient B_0 / 18) * sceneFactor.
-CANOPY_HD inline void lbIndirect(const sun::Weights& w, const float bases[3][3], const float b0[3], float ambient,
-                                 float sceneFactor, float out[3]) {
+// ambient base B_0: ((sum_v w_v B_v) * sun + ambient B_0 / 18) * sceneFactor.
+// The bases are solved for a unit sun, so their sum is scaled by the sun radiance like the direct
+// term. canopy-lbsolve stores the sun bases without their direct beam (kCanopyModelScatteredSun):
+// this is then the light scattered at least once, and the shadowed direct sun is the caller's
+// `sun * Tshadow`. Bases that include the beam (older files) count it twice (docs/play.md).
+CANOPY_HD inline void lbIndirect(const sun::Weights& w, const float bases[3][3], const float b0[3], const float sun[3],
+                                 float ambient, float sceneFactor, float out[3]) {
   for (int c = 0; c < 3; ++c)
-    out[c] = (w.weight[0] * bases[0][c] + w.weight[1] * bases[1][c] + w.weight[2] * bases[2][c] +
+    out[c] = ((w.weight[0] * bases[0][c] + w.weight[1] * bases[1][c] + w.weight[2] * bases[2][c]) * sun[c] +
               ambient * kAmbientB0Scale * b0[c]) *
              sceneFactor;
 }
@@ -300,12 +305,12 @@ CANOPY_HD inline void ambientOnly(const SceneView& s, float sceneFactor, float o
   const float zero[3][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
   const float b0[3] = {1.0f / kAmbientB0Scale, 1.0f / kAmbientB0Scale, 1.0f / kAmbientB0Scale};
   const sun::Weights none;
-  lbIndirect(none, zero, b0, s.shade.ambient, sceneFactor, out);
+  lbIndirect(none, zero, b0, s.shade.sun, s.shade.ambient, sceneFactor, out);
 }
 
 // The LB indirect light from a Haar item (--light exact at the finest level of a Haar-lit model) at
-// the brick-local footprint `at`: (sum_v w_v B_v + ambient B_0 / 18) * sceneFactor, as lbIndirect()
-// computes it (the same terms in the same order), each base haar::sampleBrick of the item (bit for
+// the brick-local footprint `at`: ((sum_v w_v B_v) * sun + ambient B_0 / 18) * sceneFactor, as
+// lbIndirect() computes it (the same terms in the same order), each base haar::sampleBrick of the item (bit for
 // bit the .chaar decoder's sample). item == nullptr: no light stored there (every base 0).
 // On the device this is one out-of-line function, one copy of the sampler for both precisions, the
 // four bases in a rolled loop. Measured on the grove at 1080p on an H200 (bench/RESULTS.md): inlined
@@ -314,7 +319,8 @@ CANOPY_HD inline void ambientOnly(const SceneView& s, float sceneFactor, float o
 // coefficient loops rolled too (a fifth of the code) 377.9 ms, so they stay unrolled. The float16
 // items (--light fast) take 16.3 ms.
 CANOPY_HD CANOPY_PLAY_NOINLINE void sampleHaarLbLight(const unsigned char* item, uint32_t fp16, const haar::BrickLookup& at,
-                                                      const sun::Weights& w, float ambient, float sceneFactor, float out[3]) {
+                                                      const sun::Weights& w, const float sun[3], float ambient,
+                                                      float sceneFactor, float out[3]) {
   float acc[3] = {0.0f, 0.0f, 0.0f};
   if (item) {
     const uint32_t base[4] = {uint32_t(w.base[0]), uint32_t(w.base[1]), uint32_t(w.base[2]), 0u};
@@ -323,6 +329,8 @@ CANOPY_HD CANOPY_PLAY_NOINLINE void sampleHaarLbLight(const unsigned char* item,
 #pragma unroll 1
 #endif
     for (int v = 0; v < 4; ++v) {
+      if (v == 3)  // the three sun bases are summed: scale them by the sun radiance before B_0 joins
+        for (int c = 0; c < 3; ++c) acc[c] *= sun[c];
       if (!(weight[v] != 0.0f)) continue;  // a zero weight adds +0 (lbIndirect would add 0 * B)
       const haar::Rgb c = canopyHaarSampleAt(item, fp16, base[v], at);
       acc[0] += weight[v] * c.r;
@@ -336,8 +344,8 @@ CANOPY_HD CANOPY_PLAY_NOINLINE void sampleHaarLbLight(const unsigned char* item,
 // The LB indirect light from a light item at node-local l in [0,1]^3: the (up to) three sun bases
 // of the instance's lookup and B_0, each trilinear (canopySampleLight's interpolation, the corners
 // found once), then lbIndirect().
-CANOPY_HD inline void sampleLbLight(const uint16_t* item, const sun::Weights& w, float lx, float ly, float lz, float ambient,
-                                    float sceneFactor, float out[3]) {
+CANOPY_HD inline void sampleLbLight(const uint16_t* item, const sun::Weights& w, float lx, float ly, float lz,
+                                    const float sun[3], float ambient, float sceneFactor, float out[3]) {
   const CanopyLightCorners k = canopyLightCorners(lx, ly, lz);
   float bases[3][3];
   for (int v = 0; v < 3; ++v) {
@@ -346,7 +354,7 @@ CANOPY_HD inline void sampleLbLight(const uint16_t* item, const sun::Weights& w,
   }
   float b0[3];
   canopySampleLightAt(item, 0, k, b0);
-  lbIndirect(w, bases, b0, ambient, sceneFactor, out);
+  lbIndirect(w, bases, b0, sun, ambient, sceneFactor, out);
 }
 
 // ------------------------------------------------------------------------------------------------
@@ -548,14 +556,14 @@ CANOPY_HD inline void segmentIndirect(const SceneView& s, const InstanceView& in
     at.slot = 0;
     at.lx = int(g.haarLocal & 3u), at.ly = int((g.haarLocal >> 2) & 3u), at.lz = int((g.haarLocal >> 4) & 3u);
     at.fx = g.light[0], at.fy = g.light[1], at.fz = g.light[2];
-    sampleHaarLbLight(g.haarItem, (g.haarLocal >> 6) & 1u, at, inst.sunWeights, s.shade.ambient, factor, out);
+    sampleHaarLbLight(g.haarItem, (g.haarLocal >> 6) & 1u, at, inst.sunWeights, s.shade.sun, s.shade.ambient, factor, out);
     return;
   }
   if (!kWithLight || !g.lightItem) {
     ambientOnly(s, factor, out);
     return;
   }
-  sampleLbLight(g.lightItem, inst.sunWeights, g.light[0], g.light[1], g.light[2], s.shade.ambient, factor, out);
+  sampleLbLight(g.lightItem, inst.sunWeights, g.light[0], g.light[1], g.light[2], s.shade.sun, s.shade.ambient, factor, out);
 }
 
 // An instance's segment that stays what it is (k = 0, the same end) over later steps: the primary
@@ -1055,7 +1063,7 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
         if (w.hits[h].tin > t || seg[h].k <= 0.0f) continue;
         float ind[3];
         segmentIndirect<kWithLight>(s, s.instances[w.hits[h].instance], seg[h], o, d, ind);
-        for (int c = 0; c < 3; ++c) kc[c] += seg[h].k * seg[h].albedo[c] * (s.shade.sun[c] * sunT + ind[c]);
+        for (int c = 0; c < 3; ++c) kc[c] += seg[h].k * seg[h].albedo[c] * (s.shade.direct[c] * sunT + ind[c]);
       }
       const float scale = T * alpha / k;
       for (int c = 0; c < 3; ++c) r.rgb[c] += scale * kc[c];

@@ -30,6 +30,8 @@ int main(int argc, char** argv) {
   app.add_option("--shadow-aperture", o.shadowAperture, "Shadow cone aperture (radians)")->capture_default_str();
   bool noShadows = false;
   app.add_flag("--no-shadows", noShadows, "Direct sun unshadowed");
+  bool noDirect = false;
+  app.add_flag("--no-direct-sun", noDirect, "Leave the direct sun out: indirect light only (the LB bases and ambient), to inspect it");
   app.add_option("--shadows", o.shadowMethod, "map: per-frame sun transmittance map; cone: a shadow cone per shadow interval (slow reference)")
       ->capture_default_str();
   app.add_option("--shadow-map-cells", o.shadowMapCells, "Shadow extinction grid voxel in lattice cells of the finest instance")->capture_default_str();
@@ -57,6 +59,7 @@ int main(int argc, char** argv) {
     o.width = w;
     o.height = h;
     o.shadows = !noShadows;
+    o.directSun = !noDirect;
     o.descentCache = !noDescentCache;
     o.warmStart = !coldStart;
     o.exactLight = lightMode == "exact";

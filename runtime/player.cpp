@@ -244,6 +244,7 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
 
   ShadeParams shade{};
   shade.sun[0] = shade.sun[1] = shade.sun[2] = o.sunIntensity;
+  for (int c = 0; c < 3; ++c) shade.direct[c] = o.directSun ? shade.sun[c] : 0.0f;
   shade.ambient = o.ambient;
   shade.sigma = o.sigma;
   shade.stepFactor = o.stepFactor;
@@ -321,6 +322,10 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   r["haar_page_mb"] = double(scene.haarPageBytes) / (1024.0 * 1024.0);
   r["light"] = o.exactLight ? "exact" : "fast";
   r["lit_models"] = scene.litModels;
+  // The LB sun bases: scattered light only (kCanopyModelScatteredSun), or beam included (counted twice).
+  r["sun_bases"] = scene.litModels == 0 ? "none"
+                   : scene.totalSunModels == 0 ? "scattered"
+                   : scene.totalSunModels == scene.litModels ? "total" : "mixed";
   r["pages_streamed"] = st.pagesLoaded;
   r["mb_streamed"] = double(st.bytesLoaded) / (1024.0 * 1024.0);
   r["cold_start_mb"] = double(coldStartBytes) / (1024.0 * 1024.0);

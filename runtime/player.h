@@ -27,6 +27,7 @@ struct PlayOptions {
   float sigma = 4.0f;                // extinction per lattice cell at density 1
   float ambient = 0.35f;             // ambient (indirect) factor
   float sunIntensity = 1.0f;
+  bool directSun = true;             // false (--no-direct-sun): only the indirect (LB and ambient) light
   float stepFactor = 0.5f;           // brick step, in voxels of the chosen level
   float lodBias = 0.0f;
   float shadowAperture = 0.03f;      // shadow cone growth per unit length (soft shadows, coarser

@@ -90,6 +90,12 @@ HostScene buildScene(const CanopyFile& f) {
       logWarn(f.path() + ": model '" + std::string(M.name, strnlen(M.name, sizeof(M.name))) +
               "' is flagged lit but has no light item per brick; it is lit as density-only (direct sun + ambient)");
     s.litModels += v.hasLight;
+    if (v.hasLight && !(M.flags & kCanopyModelScatteredSun)) {
+      ++s.totalSunModels;
+      logWarn(f.path() + ": model '" + std::string(M.name, strnlen(M.name, sizeof(M.name))) +
+              "' has sun bases that include the direct beam (packed from canopy-lbsolve --sun-bases total, or from a light "
+              "file older than 2026-12): the direct sun is counted twice; re-run canopy-lbsolve and canopy-octreepack");
+    }
     s.models.push_back(v);
     s.modelFirstTile.push_back(M.firstTile);
     s.modelFirstHaarIndex.push_back(M.firstHaarIndex);

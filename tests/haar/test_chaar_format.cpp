@@ -194,6 +194,48 @@ TEST(ChaarFormat, ValidChecksumsButBadIndicesAreRejected) {
   EXPECT_NO_THROW(parseChaar(bytes.data(), bytes.size(), "ok"));
 }
 
+// Format 1.1: a sun base flagged kChaarBaseScattered (its direct beam removed by lbsolve). A flag
+// makes the writer write 1.1; without flags it writes 1.0 (the frozen file above stays byte-identical).
+// Flags in a 1.0 file, unknown flags and a flagged ambient base are rejected.
+TEST(ChaarFormat, ScatteredSunBaseFlagsAreVersion1_1) {
+  using namespace canopy::haar::testing;
+  const LatticeGeom g = makeGeom(7, 6, 5);
+  ChaarData plain = encodeLights(g, {smoothLight(g, 1), smoothLight(g, 2), randomLight(g, 3)}, 0.01f);
+  EXPECT_EQ(parseChaar(serializeChaar(plain).data(), serializeChaar(plain).size(), "plain").header.versionMinor, 0);
+  ChaarData flagged = plain;
+  const int32_t dirs[3][3] = {{0, 0, 0}, {1, 0, 0}, {-1, 0, 0}};  // B00 (ambient), then two sun bases
+  for (uint32_t b = 0; b < 3; ++b)
+    for (int a = 0; a < 3; ++a) flagged.bases[b].direction[a] = dirs[b][a];
+  flagged.bases[1].flags = kChaarBaseScattered;
+  flagged.bases[2].flags = kChaarBaseScattered;
+  std::vector<uint8_t> bytes = serializeChaar(flagged);
+  const ChaarData back = parseChaar(bytes.data(), bytes.size(), "flagged");
+  EXPECT_EQ(back.header.versionMinor, 1);
+  EXPECT_EQ(back.bases[0].flags, 0u);
+  EXPECT_EQ(back.bases[1].flags, uint32_t(kChaarBaseScattered));
+  EXPECT_EQ(back.bases[2].flags, uint32_t(kChaarBaseScattered));
+  ChaarData again = back;
+  EXPECT_EQ(serializeChaar(again), bytes);  // round trip, byte for byte
+
+  std::vector<uint8_t> asV10 = bytes;  // the same bases claiming to be 1.0
+  const uint16_t minor0 = 0;
+  std::memcpy(&asV10[10], &minor0, 2);
+  fixHeaderCrc(asV10);
+  expectRejected(asV10, "flags in 1.0", "has flags in a 1.0 file");
+  ChaarData unknown = flagged;
+  unknown.bases[1].flags = 2;
+  expectRejected(serializeChaar(unknown), "unknown flag", "unknown flags");
+  ChaarData ambient = flagged;
+  ambient.bases[0].flags = kChaarBaseScattered;
+  expectRejected(serializeChaar(ambient), "ambient flagged", "ambient base");
+  // A newer minor may define more flags: not rejected there.
+  std::vector<uint8_t> newer = serializeChaar(unknown);
+  const uint16_t minor2 = 2;
+  std::memcpy(&newer[10], &minor2, 2);
+  fixHeaderCrc(newer);
+  EXPECT_NO_THROW(parseChaar(newer.data(), newer.size(), "newer"));
+}
+
 TEST(ChaarFormat, WriterIsDeterministic) {
   using namespace canopy::haar::testing;
   const LatticeGeom g = makeGeom(9, 8, 7);

@@ -45,7 +45,9 @@ std::string slurp(const fs::path& p) {
 }
 
 // Writes an lbsolve-style file: Vec3 grids B00.., lattice metadata, canopy_direction, 1 cm voxels.
-void writeLightVdb(const std::string& path, const LatticeGeom& g, const std::vector<DenseLight>& lights) {
+// scattered: the sun bases (b > 0) are marked canopy_direct_beam = false, as canopy-lbsolve writes them.
+void writeLightVdb(const std::string& path, const LatticeGeom& g, const std::vector<DenseLight>& lights,
+                   bool scattered = false) {
   canopy::vdbio::initialize();
   canopy::vdbio::LatticeMeta m;
   m.min = openvdb::Coord(g.min[0], g.min[1], g.min[2]);
@@ -65,6 +67,7 @@ void writeLightVdb(const std::string& path, const LatticeGeom& g, const std::vec
     canopy::vdbio::stampGrid(*grid, m);
     const auto c = latticeDirection(b);
     grid->insertMeta("canopy_direction", openvdb::Vec3IMetadata(openvdb::Vec3i(c[0], c[1], c[2])));
+    if (scattered) grid->insertMeta("canopy_direct_beam", openvdb::BoolMetadata(b == 0));
     grids.push_back(grid);
   }
   canopy::vdbio::writeVdb(path, grids);
@@ -195,6 +198,29 @@ TEST(HaarTool, CliCommandsReportsAndDeterministicBytes) {
   // --max-error from the command line.
   ASSERT_EQ(run(smoothFile() + " -o " + b + " --max-error 0.02 --json", &out), 0) << lastStderr();
   EXPECT_LE(nlohmann::json::parse(out)["overall"]["max_error"].get<double>(), 0.02);
+}
+
+// lbsolve's scattered-only sun bases keep their mark through canopy-haar: the .chaar's base flags
+// (format 1.1), info's direct_beam, and decode's canopy_direct_beam metadata.
+TEST(HaarTool, ScatteredSunBasesKeepTheirMarkThroughEncodeAndDecode) {
+  const LatticeGeom g = makeGeom(14, 12, 10, -3, 0, 2);
+  const std::string in = (tempDir() / "scattered.light.vdb").string();
+  const std::string c = (tempDir() / "scattered.chaar").string(), dec = (tempDir() / "scattered.dec.vdb").string();
+  writeLightVdb(in, g, smoothSet(g), /*scattered=*/true);
+  ASSERT_EQ(run(in + " -o " + c + " --threshold 0.005 -q"), 0) << lastStderr();
+  std::string out;
+  ASSERT_EQ(run("info " + c + " --json", &out), 0) << lastStderr();
+  const nlohmann::json info = nlohmann::json::parse(out);
+  EXPECT_EQ(info["format_version"], "1.1");
+  for (uint32_t b = 0; b < 19; ++b) EXPECT_EQ(info["bases"][b]["direct_beam"], b == 0) << b;
+  ASSERT_EQ(run("decode " + c + " -o " + dec), 0) << lastStderr();
+  const canopy::vdbio::VdbFile f = canopy::vdbio::readVdb(dec);
+  for (uint32_t b = 0; b < 19; ++b)
+    EXPECT_EQ(f.require<openvdb::Vec3SGrid>(baseName(b))->metaValue<bool>("canopy_direct_beam"), b == 0) << b;
+  const LightFieldPtr lf = openLightField(dec);
+  EXPECT_TRUE(lightBaseHasBeam(*lf, 0));
+  EXPECT_FALSE(lightBaseHasBeam(*lf, 5));
+  EXPECT_TRUE(lightBaseHasBeam(*openLightField(smoothFile()), 5));  // no metadata: beam included
 }
 
 TEST(HaarTool, CliRejectsBadInputsWithDocumentedExitCodes) {

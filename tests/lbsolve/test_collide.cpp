@@ -9,6 +9,7 @@
 
 #include "canopy/lattice_dirs.h"
 #include "canopy/parallel.h"
+#include "beam.h"
 #include "collide.h"
 #include "fixtures.h"
 #include "shift_stream.h"
@@ -385,6 +386,82 @@ TEST(Solver, APlantCastsIndirectShadow) {
   EXPECT_LT(bottom, top);
   for (const auto& s : r)
     for (float v : s.values) ASSERT_GE(v, 0.f);
+}
+
+// The direct beam of a sun base (beam.h) is the solve restricted to Omega's diagonal: the same
+// values bit for bit, for axial and diagonal directions, before and after the beam has crossed the
+// lattice, with leaf, wood and empty nodes.
+TEST(DirectBeam, EqualsTheSolverWithOnlyOmegasDiagonal) {
+  const int nx = 19, ny = 22, nz = 17;  // not a cube: every axis's depth counts
+  std::vector<float> density(size_t(nx) * ny * nz, 0.f), wood(density.size(), 0.f);
+  for (size_t i = 0; i < density.size(); ++i) {
+    const float r = fixtures::hashUnit(i, 11);
+    density[i] = r < 0.4f ? 0.f : 2.5f * (r - 0.4f);  // up to 1.5: some nodes clamp at 0
+    wood[i] = fixtures::hashUnit(i, 12) < 0.2f ? 1.f : 0.f;
+  }
+  const DenseLattice L = fixtures::denseOf(nx, ny, nz, density, wood);
+  const LightParams p;
+  for (int c = 0; c < 3; ++c) {
+    const OmegaSet full = makeOmegaSet(p.sigmaA[c], p.sigmaS[c], p.g[c]);
+    OmegaSet diagonal = full;
+    for (int k = 0; k < 2; ++k)
+      for (int j = 0; j < kQ; ++j)
+        for (int i = 0; i < kQ; ++i)
+          if (i != j) diagonal.col[k][j][i] = 0.f;
+    for (int b : {1, 4, 6, 7, 12, 18}) {
+      for (int iterations : {3, 9, 40}) {
+        SolveSpec s;
+        s.omega = diagonal;
+        s.boundary[b] = 1.f;
+        s.maxIterations = iterations;
+        const SolveResult want = runSolves(L, {s}, Device())[0];
+        const std::vector<float> got = directBeam(L, full, b, iterations);
+        ASSERT_EQ(got.size(), want.values.size());
+        int64_t lit = 0;
+        for (size_t i = 0; i < got.size(); ++i) {
+          ASSERT_EQ(got[i], want.values[i]) << "base " << b << " channel " << c << " iterations " << iterations
+                                            << " node " << i;
+          lit += got[i] > 0.f;
+        }
+        EXPECT_GT(lit, int64_t(got.size() / 8)) << b;  // the beam reached some of the interior
+      }
+    }
+  }
+}
+
+// What remains of a sun base without its beam is the scattered light: none in empty space (the
+// beam passes whole), never negative beyond rounding, and present in and around a plant.
+TEST(DirectBeam, TheScatteredRemainderIsZeroInEmptySpaceAndNonNegative) {
+  const int n = 20;
+  const LightParams p;
+  const std::vector<float> zero(size_t(n) * n * n, 0.f);
+  const fixtures::Plant plant = fixtures::makePlant(n);
+  for (bool empty : {true, false}) {
+    const DenseLattice L = empty ? fixtures::denseOf(n, n, n, zero, zero)
+                                 : fixtures::denseOf(n, n, n, plant.density, plant.wood);
+    for (int b : {4, 9, 15}) {
+      SolveSpec s;
+      s.omega = makeOmegaSet(p.sigmaA[1], p.sigmaS[1], p.g[1]);
+      s.boundary[b] = 1.f;
+      s.maxIterations = 2 * n;
+      const SolveResult total = runSolves(L, {s}, Device())[0];
+      const std::vector<float> beam = directBeam(L, s.omega, b, total.iterations);
+      double scattered = 0, beamSum = 0;
+      for (size_t i = 0; i < beam.size(); ++i) {
+        const float d = total.values[i] - beam[i];
+        if (empty) {
+          ASSERT_EQ(d, 0.f) << i;
+        }
+        ASSERT_GE(d, -1e-6f) << "base " << b << " node " << i;
+        scattered += d;
+        beamSum += beam[i];
+      }
+      if (!empty) {
+        EXPECT_GT(scattered, 0.01 * beamSum) << b;  // the crown scatters a visible share
+        EXPECT_LT(scattered, beamSum) << b;
+      }
+    }
+  }
 }
 
 // The CPU solver updates runs of 8 same-kind nodes with updateLanes<8>; the GPU runs

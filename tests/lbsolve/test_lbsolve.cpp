@@ -15,6 +15,7 @@
 #include "fixtures.h"
 #include "formats/lattice_vdb.h"
 #include "lattice_io.h"
+#include "beam.h"
 #include "lbsolve.h"
 
 using namespace canopy;
@@ -96,7 +97,14 @@ TEST(Lbsolve, WritesNineteenBasesWithLatticeAndConvergenceMetadata) {
       s.maxIterations = 12;
       specs.push_back(s);
     }
-  const auto direct = lb::runSolves(dense, specs, Device());
+  auto direct = lb::runSolves(dense, specs, Device());
+  // The sun bases are stored without their direct beam (beam.h): B_j - U_j, clamped at 0.
+  for (size_t k = 3; k < specs.size(); ++k) {
+    const std::vector<float> beam = lb::directBeam(dense, specs[k].omega, int(k / 3), 12);
+    for (size_t i = 0; i < beam.size(); ++i) direct[k].values[i] = std::max(0.f, direct[k].values[i] - beam[i]);
+  }
+  EXPECT_EQ(rep.sunBases, "scattered");
+  EXPECT_EQ(f.meta->metaValue<std::string>("canopy_sun_terms"), "scattered");
   for (int b = 0; b < kQ; ++b) {
     auto g = f.require<openvdb::Vec3SGrid>(lattice::baseName(b));
     EXPECT_EQ(g->activeVoxelCount(), stored.size());
@@ -109,6 +117,7 @@ TEST(Lbsolve, WritesNineteenBasesWithLatticeAndConvergenceMetadata) {
     EXPECT_EQ(d->value(), openvdb::Vec3i(lattice::dir(b, 0), lattice::dir(b, 1), lattice::dir(b, 2)));
     EXPECT_EQ(g->metaValue<openvdb::Vec3i>("canopy_iterations"), openvdb::Vec3i(12));
     EXPECT_TRUE(g->getMetadata<openvdb::Vec3SMetadata>("canopy_sigma_a"));
+    EXPECT_EQ(g->metaValue<bool>("canopy_direct_beam"), b == 0) << b;
     auto acc = g->getConstAccessor();
     for (int64_t k : stored) {
       const openvdb::Vec3s v = acc.getValue(lb::nodeCoord(dense.dims, openvdb::Coord(0), k));
@@ -132,7 +141,11 @@ TEST(Lbsolve, WritesNineteenBasesWithLatticeAndConvergenceMetadata) {
 TEST(Lbsolve, SunSolutionIsTheWeightedSumOfItsBases) {
   const std::string dir = fixtures::scratch("sun");
   fixtures::writePlant(dir + "/p.vdb", fixtures::makePlant(12, 3));
-  lbsolve(quickOptions(dir + "/p.vdb", dir + "/bases.vdb", 20));
+  // The static sun solution holds all of the light, so it is the sum of the total bases (beam
+  // included: --sun-bases total), not of the default scattered-only ones.
+  LbsolveOptions total = quickOptions(dir + "/p.vdb", dir + "/bases.vdb", 20);
+  total.scatteredSunBases = false;
+  EXPECT_EQ(lbsolve(total).sunBases, "total");
   LbsolveOptions o = quickOptions(dir + "/p.vdb", dir + "/sun.vdb", 20);
   o.sun = std::array<float, 3>{0.3f, -1.0f, 0.45f};
   o.ambient = 0.25f;
@@ -145,6 +158,10 @@ TEST(Lbsolve, SunSolutionIsTheWeightedSumOfItsBases) {
   const auto bases = vdbio::readVdb(dir + "/bases.vdb");
   const auto sunFile = vdbio::readVdb(dir + "/sun.vdb");
   auto light = sunFile.require<openvdb::Vec3SGrid>("light");
+  EXPECT_TRUE(light->metaValue<bool>("canopy_direct_beam"));
+  EXPECT_EQ(bases.meta->metaValue<std::string>("canopy_sun_terms"), "total");
+  for (int b = 0; b < kQ; ++b)
+    EXPECT_TRUE(bases.require<openvdb::Vec3SGrid>(lattice::baseName(b))->metaValue<bool>("canopy_direct_beam")) << b;
   EXPECT_EQ(light->metaValue<openvdb::Vec3i>("canopy_sun_bases"), openvdb::Vec3i(w.base[0], w.base[1], w.base[2]));
   auto b0 = bases.require<openvdb::Vec3SGrid>("B00")->getConstAccessor();
   openvdb::Vec3SGrid::ConstAccessor bk[3] = {

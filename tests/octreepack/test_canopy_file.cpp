@@ -193,6 +193,29 @@ TEST(CanopyFile, FrozenVersion10FileStillReadsAndIsStillWritten) {
   EXPECT_EQ(readFile(kFrozenV1), smallFileBytes(false)) << "a file without Haar light must stay a 1.0 file";
 }
 
+// kCanopyModelScatteredSun (1.1): only on a lit model, and not in a 1.0 file (valid CRCs).
+TEST(CanopyFile, ScatteredSunFlagNeedsLightAndVersion11) {
+  for (const std::string& path : {kFrozen, kFrozenV1}) {
+    const std::vector<unsigned char> good = readFile(path);
+    CanopyFile f = CanopyFile::fromMemory(good.data(), good.size(), "ok.canopy");
+    const CanopySection* models = f.findSection(CanopySectionKind::Models);
+    ASSERT_NE(models, nullptr);
+    for (uint32_t m = 0; m < f.modelCount(); ++m) {
+      std::vector<unsigned char> bad = good;
+      const uint32_t flags = f.model(m).flags | kCanopyModelScatteredSun;
+      std::memcpy(bad.data() + models->offset + m * sizeof(CanopyModel) + offsetof(CanopyModel, flags), &flags, 4);
+      reseal(bad);
+      const bool lit = f.model(m).flags & kCanopyModelHasLight;
+      if (f.header().minor >= 1 && lit) {
+        EXPECT_NO_THROW(CanopyFile::fromMemory(bad.data(), bad.size(), "flagged.canopy")) << path << " model " << m;
+      } else {
+        EXPECT_NE(expectRejected(bad, false).find(f.header().minor == 0 ? "in a 1.0 file" : "but no light"), std::string::npos)
+            << path << " model " << m;
+      }
+    }
+  }
+}
+
 // 1.1 keeps what a 1.0 reader requires, so that one reads a 1.1 file and skips the Haar light (a
 // 1.0 reader skips unknown sections, and the pages of unknown kinds of a newer minor): every lit
 // model has one light item per brick, and the Haar pages lie outside every model's brick and light

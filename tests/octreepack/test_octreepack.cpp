@@ -6,6 +6,8 @@
 // so they come back within 0.5/255 of the source (plus 1e-6 for float rounding).
 #include <gtest/gtest.h>
 
+#include <filesystem>
+
 #include <sys/stat.h>
 
 #include <algorithm>
@@ -89,7 +91,9 @@ void writeSourceVdb(const std::string& path, const op::ModelSource& s, const std
 }
 
 // An lbsolve-style light VDB: 19 Vec3 grids B00..B18 holding analyticLight over an n^3 lattice.
-void writeLightVdb(const std::string& path, int n) {
+// scatteredSun: how many of the sun bases B01.. carry canopy_direct_beam = false (lbsolve's
+// default marks all 18; 0: no metadata, as light files from before it).
+void writeLightVdb(const std::string& path, int n, uint32_t scatteredSun = 0) {
   openvdb::GridPtrVec grids;
   float tmp[canopy::kCanopyLightChannels];
   for (uint32_t b = 0; b < canopy::kCanopyLightBases; ++b) {
@@ -104,6 +108,7 @@ void writeLightVdb(const std::string& path, int n) {
           op::testing::analyticLight(i, j, k, tmp);
           acc.setValue(openvdb::Coord(i, j, k), openvdb::Vec3s(tmp[3 * b], tmp[3 * b + 1], tmp[3 * b + 2]));
         }
+    if (scatteredSun > 0) g->insertMeta("canopy_direct_beam", openvdb::BoolMetadata(b == 0 || b > scatteredSun));
     grids.push_back(g);
   }
   canopy::vdbio::writeVdb(path, grids);
@@ -716,6 +721,34 @@ TEST(OctreepackLight, LbsolveLightVdbPacksThroughTheCli) {
         ++checked;
       }
   EXPECT_GT(checked, 50u);
+}
+
+// The mark of lbsolve's scattered-only sun bases (canopy_direct_beam = false on B01..B18) becomes
+// the model flag kCanopyModelScatteredSun (format 1.1), shown by info; without the mark the file
+// stays 1.0 and info says "total"; bases that disagree are refused with no output.
+TEST(OctreepackLight, ScatteredSunBasesAreFlagged) {
+  const std::string dir = tmpDir();
+  writeSourceVdb(dir + "/sunflag.density.vdb", syntheticPlant(16, 0, "sunflag", 0));
+  const std::string density = "'" + dir + "/sunflag.density.vdb' ";
+  for (uint32_t scattered : {18u, 0u}) {
+    const std::string light = dir + "/sunflag" + std::to_string(scattered) + ".light.vdb";
+    const std::string out = dir + "/sunflag" + std::to_string(scattered) + ".canopy";
+    writeLightVdb(light, 16, scattered);
+    ASSERT_EQ(run(density + "'" + light + "' -o '" + out + "'"), 0);
+    ASSERT_EQ(run("verify '" + out + "'"), 0);
+    CanopyFile f = CanopyFile::open(out);
+    EXPECT_EQ(bool(f.model(0).flags & canopy::kCanopyModelScatteredSun), scattered == 18);
+    EXPECT_EQ(f.header().minor, scattered == 18 ? 1 : 0);
+    const nlohmann::json info = op::canopyInfo(f);
+    EXPECT_EQ(info["models"][0]["sun_bases"], scattered == 18 ? "scattered" : "total");
+  }
+  writeLightVdb(dir + "/sunflag-mixed.light.vdb", 16, 7);
+  const std::string mixed = dir + "/sunflag-mixed.canopy";
+  EXPECT_EQ(run(density + "'" + dir + "/sunflag-mixed.light.vdb' -o '" + mixed + "'"), 3);
+  EXPECT_FALSE(std::filesystem::exists(mixed));
+  // Packed density-only, the flag does not survive (it describes light items).
+  EXPECT_EQ(run(density + "'" + dir + "/sunflag18.light.vdb' --ignore-light -o '" + dir + "/sunflag-dark.canopy'"), 0);
+  EXPECT_FALSE(CanopyFile::open(dir + "/sunflag-dark.canopy").model(0).flags & canopy::kCanopyModelScatteredSun);
 }
 
 #include "formats/chaar.h"

@@ -61,12 +61,17 @@ inline void writeScene(const std::string& path, const std::vector<octreepack::Mo
 
 // Builds every model with its lighting (lights[m] may be null: density only; the octreepack
 // builder makes the light items, canopy_file.h's "Light pages") and writes `path`.
+// scatteredSun: the lit models are flagged kCanopyModelScatteredSun, as canopy-octreepack flags
+// canopy-lbsolve's default output (sun bases without their direct beam); false: beam included.
 inline void writeLitScene(const std::string& path, const std::vector<octreepack::ModelSource>& sources,
-                          const std::vector<octreepack::LightFn>& lights, const std::vector<CanopyInstance>& instances) {
+                          const std::vector<octreepack::LightFn>& lights, const std::vector<CanopyInstance>& instances,
+                          bool scatteredSun = true) {
   std::vector<octreepack::BuiltModel> built;
   built.reserve(sources.size());
-  for (size_t m = 0; m < sources.size(); ++m)
+  for (size_t m = 0; m < sources.size(); ++m) {
     built.push_back(octreepack::buildOctree(sources[m], sources[m].name, m < lights.size() ? lights[m] : nullptr));
+    if (scatteredSun) built.back().record.flags |= kCanopyModelScatteredSun;  // the writer drops it on unlit models
+  }
   CanopyWriteInput w;
   for (auto& b : built) w.models.push_back({b.record, &b.tiles, &b.bricks, &b.light});
   w.instances = instances;
@@ -116,6 +121,7 @@ inline void writeHaarLitScene(const std::string& path, const std::vector<octreep
     const haar::ChaarData chaar = chaarOf(sources[m], lights[m], T, precision);
     pages[m] = canopyHaarPagesFromChaar(chaar);
     built.push_back(octreepack::buildOctree(sources[m], sources[m].name, octreepack::chaarLightFn(chaar.view())));
+    built.back().record.flags |= kCanopyModelScatteredSun;
   }
   CanopyWriteInput w;
   for (size_t m = 0; m < built.size(); ++m) w.models.push_back({built[m].record, &built[m].tiles, &built[m].bricks, &built[m].light, &pages[m]});

@@ -108,16 +108,19 @@ TEST(Cone, RayBoxAndNodeExit) {
   EXPECT_FLOAT_EQ(pl::nodeExit(pl::v3(0.3f, 0.6f, 0.1f), pl::v3(0, 0, 2), lo, 0.25f), (0.25f - 0.1f) / 2.0f);
 }
 
-// B_0 enters in open-sky units (divided by 18, see kAmbientB0Scale).
-TEST(Cone, LbIndirectIsTheWeightedBasesPlusAmbientTimesSceneFactor) {
+// B_0 enters in open-sky units (divided by 18, see kAmbientB0Scale); the sun bases, solved for a
+// unit sun, are scaled by the sun radiance per channel (the direct term's).
+TEST(Cone, LbIndirectIsTheWeightedBasesTimesSunPlusAmbientTimesSceneFactor) {
   canopy::sun::Weights w;
   ASSERT_TRUE(canopy::sun::lookupToSun(0.3f, 1.0f, 0.2f, w));
   const float bases[3][3] = {{1, 2, 3}, {4, 5, 6}, {7, 8, 9}};
   const float b0[3] = {0.5f, 0.25f, 1.0f};
+  const float sun[3] = {2.0f, 1.0f, 0.5f};
   float out[3];
-  pl::lbIndirect(w, bases, b0, 0.4f, 0.5f, out);
+  pl::lbIndirect(w, bases, b0, sun, 0.4f, 0.5f, out);
   for (int c = 0; c < 3; ++c) {
-    const float expect = (w.weight[0] * bases[0][c] + w.weight[1] * bases[1][c] + w.weight[2] * bases[2][c] + 0.4f * b0[c] / 18.0f) * 0.5f;
+    const float expect = ((w.weight[0] * bases[0][c] + w.weight[1] * bases[1][c] + w.weight[2] * bases[2][c]) * sun[c] +
+                          0.4f * b0[c] / 18.0f) * 0.5f;
     EXPECT_NEAR(out[c], expect, 1e-6f);
   }
 }
@@ -223,6 +226,7 @@ TEST(Render, ShadowMapIsBeerLambertThroughAUniformCube) {
   pl::ShadeParams shade{};
   shade.toSun = pl::v3(0, 1, 0);
   shade.sun[0] = shade.sun[1] = shade.sun[2] = 1.0f;
+  shade.direct[0] = shade.direct[1] = shade.direct[2] = 1.0f;
   shade.sigma = 0.5f;
   shade.stepFactor = 0.5f;
   shade.shadows = pl::kShadowsMap;

@@ -91,21 +91,21 @@ TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
   if (canopy::cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA device";
   struct Case {
     std::string file;
-    float sunIntensity;
+    bool direct;  // the direct sun term (off: the indirect light alone)
     int litModels;
     const char* shadows;  // the sun transmittance map (default) or the per-sample shadow cones
     bool exact = false;   // --light exact (the Haar-lit file's Haar pages)
   };
   const std::string lit = litForestFile(), unlit = forestFile(), haar = haarForestFile();
-  for (const Case& k : {Case{unlit, 1.0f, 0, "map"}, Case{unlit, 1.0f, 0, "cone"}, Case{lit, 1.0f, 2, "map"}, Case{lit, 0.0f, 2, "map"},
-                        Case{haar, 1.0f, 2, "map", true}, Case{haar, 0.0f, 2, "map", true}}) {
+  for (const Case& k : {Case{unlit, true, 0, "map"}, Case{unlit, true, 0, "cone"}, Case{lit, true, 2, "map"}, Case{lit, false, 2, "map"},
+                        Case{haar, true, 2, "map", true}, Case{haar, false, 2, "map", true}}) {
     pl::PlayOptions o;
     o.input = k.file;
     o.shadowMethod = k.shadows;
     o.width = 96;
     o.height = 64;
     o.converge = true;
-    o.sunIntensity = k.sunIntensity;
+    o.directSun = k.direct;
     o.exactLight = k.exact;
     if (k.litModels) o.sun = "0.3,0.8,-0.52";
     // the whole forest (coarse levels), and a close view among the trees (finest bricks,
@@ -117,10 +117,10 @@ TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
       const nlohmann::json rg = pl::play(o, cuda(), &gpu);
       EXPECT_EQ(int(rg["lit_models"]), k.litModels) << k.file;
       ASSERT_EQ(cpu.size(), gpu.size());
-      std::printf("%s %s shadows %s sun %.0f: RMS %.2e, within 1e-2: %.4f\n", k.file.c_str(), camera, k.shadows, k.sunIntensity,
+      std::printf("%s %s shadows %s direct %s: RMS %.2e, within 1e-2: %.4f\n", k.file.c_str(), camera, k.shadows, k.direct ? "on" : "off",
                   rms(cpu, gpu), fractionWithin(cpu, gpu, 1e-2f));
-      EXPECT_LT(rms(cpu, gpu), 2e-3) << k.file << " " << camera << " sun " << k.sunIntensity << " " << k.shadows;
-      EXPECT_GT(fractionWithin(cpu, gpu, 1e-2f), 0.99) << k.file << " " << camera << " sun " << k.sunIntensity << " " << k.shadows;
+      EXPECT_LT(rms(cpu, gpu), 2e-3) << k.file << " " << camera << " direct " << k.direct << " " << k.shadows;
+      EXPECT_GT(fractionWithin(cpu, gpu, 1e-2f), 0.99) << k.file << " " << camera << " direct " << k.direct << " " << k.shadows;
     }
   }
 }

@@ -73,13 +73,13 @@ const std::string& plainSphere() {
 }
 
 // The expected indirect light / (ambient * albedo-weighted density-only image) per channel for the
-// constant bases: (sum_v w_v (b_v + 1) + ambient * B_0 / 18) * kRgb[c] / ambient, B_0 = 1.
-void expectedRatio(canopy::play::V3 toSun, float ambient, float ratio[3]) {
+// constant bases: (sun * sum_v w_v (b_v + 1) + ambient * B_0 / 18) * kRgb[c] / ambient, B_0 = 1.
+void expectedRatio(canopy::play::V3 toSun, float sun, float ambient, float ratio[3]) {
   canopy::sun::Weights w;
   ASSERT_TRUE(canopy::sun::lookup(-toSun.x, -toSun.y, -toSun.z, w));
   float sum = 0.0f;
   for (int v = 0; v < 3; ++v) sum += w.weight[v] * float(w.base[v] + 1);
-  for (int c = 0; c < 3; ++c) ratio[c] = (sum + ambient * pl::kAmbientB0Scale) * kRgb[c] / ambient;
+  for (int c = 0; c < 3; ++c) ratio[c] = (sun * sum + ambient * pl::kAmbientB0Scale) * kRgb[c] / ambient;
 }
 
 // Flips a byte of page `page` of `good` (a copy), renders both files (2 frames, the sun's direct
@@ -95,7 +95,7 @@ void expectCorruptPageIsLitFromElsewhere(const std::string& good, uint32_t page,
   pl::PlayOptions o = view(good, 33, 33);
   o.frames = 2;
   o.camera = "orbit:azimuth=30,elevation=15,distance=3.5,turns=0.05";
-  o.sunIntensity = 0.0f;
+  o.directSun = false;
   o.exactLight = exactLight;
   nlohmann::json rg, rb;
   const std::vector<float> intact = render(o, &rg);
@@ -131,13 +131,15 @@ TEST(Light, SampleLbLightIsLbIndirectOfTheTrilinearBases) {
             canopy::canopyFloatToHalf(float(k + v % canopy::kCanopyLightVoxels) * float(c + 1) / 8.0f);
   canopy::sun::Weights w;
   ASSERT_TRUE(canopy::sun::lookup(0.2f, -1.0f, 0.45f, w));
+  const float sun[3] = {1.5f, 1.0f, 0.75f};
   for (float lx : {0.0f, 0.1f, 0.37f, 0.5f, 0.93f, 1.0f}) {
     float out[3];
-    pl::sampleLbLight(item.data(), w, lx, 0.3f, 0.6f, 0.35f, 0.5f, out);
+    pl::sampleLbLight(item.data(), w, lx, 0.3f, 0.6f, sun, 0.35f, 0.5f, out);
     const float t = lx * 4.0f + 0.5f;
     for (int c = 0; c < 3; ++c) {
-      float want = 0.35f * pl::kAmbientB0Scale * t;
+      float want = 0.0f;
       for (int v = 0; v < 3; ++v) want += w.weight[v] * (float(w.base[v]) + t);
+      want = want * sun[c] + 0.35f * pl::kAmbientB0Scale * t;
       want *= 0.5f * float(c + 1) / 8.0f;
       EXPECT_NEAR(out[c], want, 1e-5f) << "lx " << lx << " channel " << c;
     }
@@ -151,14 +153,18 @@ TEST(Light, SampleLbLightIsLbIndirectOfTheTrilinearBases) {
 // few ulps, so the tolerance is 2e-5 relative (+1e-7 absolute): float rounding only. Two suns:
 // straight overhead (light travelling -y: all the weight on B04) and a general direction (three
 // bases, weights from the shared lookup).
+// The sun bases scale with the sun radiance (solved for a unit sun), B_0 does not: two intensities.
 TEST(Light, IndirectIsTheLookupWeightedSunBasesPlusAmbientB0) {
-  for (const char* sun : {"0,1,0", "0.3,0.8,-0.52"}) {
+  const std::pair<const char*, float> cases[] = {{"0,1,0", 1.0f}, {"0,1,0", 2.5f}, {"0.3,0.8,-0.52", 1.0f}, {"0.3,0.8,-0.52", 2.5f}};
+  for (const auto& [sun, intensity] : cases) {
     pl::PlayOptions o = view(litSphere(), 21, 21);
     o.sun = sun;
-    o.sunIntensity = 0.0f;
+    o.sunIntensity = intensity;
+    o.directSun = false;
     nlohmann::json r;
     const std::vector<float> lit = render(o, &r);
     EXPECT_EQ(int(r["lit_models"]), 1);
+    EXPECT_EQ(r["sun_bases"], "scattered");
     EXPECT_GT(double(r["light_page_mb"]), 0.0);
     o.input = plainSphere();
     const std::vector<float> ref = render(o, &r);
@@ -166,9 +172,9 @@ TEST(Light, IndirectIsTheLookupWeightedSunBasesPlusAmbientB0) {
     float x, y, z;
     ASSERT_EQ(std::sscanf(sun, "%f,%f,%f", &x, &y, &z), 3);
     float ratio[3];
-    expectedRatio(canopy::play::normalize(canopy::play::v3(x, y, z)), o.ambient, ratio);
+    expectedRatio(canopy::play::normalize(canopy::play::v3(x, y, z)), intensity, o.ambient, ratio);
     if (std::string(sun) == "0,1,0") {
-      EXPECT_FLOAT_EQ(ratio[0], (5.0f + o.ambient * pl::kAmbientB0Scale) / o.ambient);  // B04 alone
+      EXPECT_FLOAT_EQ(ratio[0], (intensity * 5.0f + o.ambient * pl::kAmbientB0Scale) / o.ambient);  // B04 alone
     }
     double peak = 0;
     for (size_t i = 0; i < lit.size(); ++i) {
@@ -182,6 +188,21 @@ TEST(Light, IndirectIsTheLookupWeightedSunBasesPlusAmbientB0) {
     }
     EXPECT_GT(peak, 0.05) << sun;
   }
+}
+
+// A lit model packed without kCanopyModelScatteredSun (bases that include the direct beam: lbsolve
+// --sun-bases total, or older light files) is reported, since its direct sun is counted twice.
+TEST(Light, SunBasesWithTheirBeamAreReported) {
+  const std::string f = pt::tmpDir("light") + "/sphere-lit-total.canopy";
+  pt::writeLitScene(f, {pt::sphereModel(24, 10, 0.3f)}, {pt::rampLight(kRgb)}, {pt::instanceAt(0, 0, 0, 0)}, /*scatteredSun=*/false);
+  EXPECT_FALSE(canopy::CanopyFile::open(f).model(0).flags & canopy::kCanopyModelScatteredSun);
+  EXPECT_EQ(canopy::CanopyFile::open(f).header().minor, 0);  // no 1.1 feature used
+  EXPECT_EQ(canopy::CanopyFile::open(litSphere()).header().minor, 1);
+  nlohmann::json r;
+  render(view(f, 9, 9), &r);
+  EXPECT_EQ(r["sun_bases"], "total");
+  render(view(plainSphere(), 9, 9), &r);
+  EXPECT_EQ(r["sun_bases"], "none");
 }
 
 // The sun sweep of Render.MovingTheSunChangesTheImageSmoothly with LB light on (spatially varying
@@ -252,7 +273,7 @@ TEST(Light, InstanceRotationTakesTheSunIntoModelSpace) {
   pt::writeLitScene(a, {pt::sphereModel(24, 10, 0.3f)}, {light}, {pt::instanceAt(0, 0, 0, 0)});
   pt::writeLitScene(b, {pt::sphereModel(24, 10, 0.3f)}, {light}, {pt::instanceAt(0, 0, 0, 0, 1.0f, half)});
   pl::PlayOptions o = view(a, 33, 33);
-  o.sunIntensity = 0.0f;  // the indirect term alone (shadows rotate with the sun in any case)
+  o.directSun = false;  // the indirect term alone (shadows rotate with the sun in any case)
   o.camera = "orbit:azimuth=30,elevation=20,turns=0";
   o.sun = "orbit:azimuth=40,elevation=35";
   const std::vector<float> ref = render(o);
@@ -334,7 +355,7 @@ TEST(Light, ExactHaarLightRendersLikeTheSameLightInFloat16Items) {
   for (const char* sun : {"0,1,0", "0.3,0.8,-0.52"}) {
     pl::PlayOptions o = view(litSphere(), 21, 21);
     o.sun = sun;
-    o.sunIntensity = 0.0f;
+    o.directSun = false;
     const std::vector<float> items = render(o);
     o.input = haarSphere();
     o.exactLight = true;
@@ -361,7 +382,7 @@ TEST(Light, ExactHaarLightRendersLikeTheSameLightInFloat16Items) {
 TEST(Light, ExactHaarLightIsSampledAtTheSamplesLatticePoint) {
   pl::PlayOptions o = view("", 33, 33);
   o.sun = "0.3,0.8,-0.52";
-  o.sunIntensity = 0.0f;
+  o.directSun = false;
   o.camera = "orbit:azimuth=30,elevation=20,turns=0";
   const std::string items = pt::tmpDir("light") + "/sphere-ramp-items.canopy";
   pt::writeLitScene(items, {pt::sphereModel(24, 10, 0.3f)}, {pt::rampLight(kRgb, 1.0f, 24)}, {pt::instanceAt(0, 0, 0, 0)});

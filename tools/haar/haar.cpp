@@ -72,6 +72,11 @@ LightFieldPtr openLightField(const std::string& path) {
   return f;
 }
 
+bool lightBaseHasBeam(const LightField& f, uint32_t b) {
+  const auto m = f.grids.at(b)->getMetadata<openvdb::BoolMetadata>("canopy_direct_beam");
+  return !m || m->value();
+}
+
 DenseLight lightBase(const LightField& f, uint32_t b, std::array<int32_t, 3>& dir) {
   const auto& g = f.grids.at(b);
   const openvdb::Vec3i d = g->metaValue<openvdb::Vec3i>("canopy_direction");
@@ -207,6 +212,7 @@ nlohmann::json compressLight(const CompressOptions& o) {
     const float t = search ? lifted.searchThreshold(o.maxError, &n) : o.threshold;
     a.codes.push_back(lifted.encode(t));
     a.directions.push_back(dir);
+    a.flags.push_back(lightBaseHasBeam(*f, b) ? 0u : uint32_t(kChaarBaseScattered));
     a.valueMax.push_back(lifted.valueMax());
     active.push_back(light.activeVoxels);
     probes.push_back(n);
@@ -266,6 +272,7 @@ nlohmann::json decodeToVdb(const std::string& input, const std::string& output) 
     vdbio::stampGrid(*g, lm);
     const ChaarBaseEntry& e = d.bases[b];
     g->insertMeta("canopy_direction", openvdb::Vec3IMetadata(openvdb::Vec3i(e.direction[0], e.direction[1], e.direction[2])));
+    g->insertMeta("canopy_direct_beam", openvdb::BoolMetadata((e.flags & kChaarBaseScattered) == 0));
     g->insertMeta("canopy_haar_threshold", openvdb::FloatMetadata(e.threshold));
     g->insertMeta("canopy_haar_max_error", openvdb::FloatMetadata(e.maxError));
     activeTotal += g->activeVoxelCount();
@@ -314,11 +321,13 @@ nlohmann::json chaarInfo(const std::string& input) {
                             {"raw_bricks", e.rawBrickCount},
                             {"max_error", e.maxError},
                             {"rms_error", e.rmsError},
-                            {"value_max", e.valueMax}});
-    char line[200];
-    std::snprintf(line, sizeof line, "  %s dir (%2d,%2d,%2d) threshold %-10.4g %9llu coefs %7u bricks  max err %.4g  RMS %.4g",
+                            {"value_max", e.valueMax},
+                            {"direct_beam", (e.flags & kChaarBaseScattered) == 0}});
+    char line[220];
+    std::snprintf(line, sizeof line, "  %s dir (%2d,%2d,%2d) threshold %-10.4g %9llu coefs %7u bricks  max err %.4g  RMS %.4g%s",
                   baseName(b).c_str(), e.direction[0], e.direction[1], e.direction[2], e.threshold,
-                  (unsigned long long)e.coefCount, e.brickCount, e.maxError, e.rmsError);
+                  (unsigned long long)e.coefCount, e.brickCount, e.maxError, e.rmsError,
+                  (e.flags & kChaarBaseScattered) ? "  scattered only" : "");
     logInfo(line);
   }
   return rep;

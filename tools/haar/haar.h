@@ -50,5 +50,8 @@ const LatticeGeom& lightGeom(const LightField& f);
 uint32_t lightBaseCount(const LightField& f);
 // Dense copy of base b (3 floats per lattice cell, x fastest) and its direction metadata.
 DenseLight lightBase(const LightField& f, uint32_t b, std::array<int32_t, 3>& direction);
+// Whether base b includes its direct beam: the grid's canopy_direct_beam metadata (lbsolve; false
+// for scattered-only sun bases), true where it is absent (light files written before it existed).
+bool lightBaseHasBeam(const LightField& f, uint32_t b);
 
 }  // namespace canopy::haar

@@ -12,6 +12,7 @@
 #include "canopy/errors.h"
 #include "canopy/lattice_dirs.h"
 #include "canopy/sun_lookup.h"
+#include "beam.h"
 #include "lattice_io.h"
 #include "lbsolve_internal.h"
 
@@ -169,10 +170,22 @@ LbsolveReport solvePlant(const LbsolveOptions& o) {
       for (int c = 0; c < 3; ++c) addSpec(lattice::baseName(b), c, boundary);
     }
     auto results = runWithProgress(L.dense, specs, labels, o.device, report, parseCudaScheme(o.cudaScheme));
+    report.sunBases = o.scatteredSunBases ? "scattered" : "total";
+    if (o.scatteredSunBases) {
+      // B_j - U_j: the light of the sun bases that was scattered at least once (beam.h).
+      for (size_t k = 3; k < specs.size(); ++k) {
+        const std::vector<float> beam =
+            directBeam(L.dense, specs[k].omega, int(k / 3), results[k].iterations, specs[k].boundary[k / 3]);
+        std::vector<float>& v = results[k].values;
+        for (size_t i = 0; i < v.size(); ++i) v[i] = std::max(0.0f, v[i] - beam[i]);
+      }
+    }
     for (int b = 0; b < kQ; ++b) {
       auto g = makeLightGrid(lattice::baseName(b), L, results, size_t(3 * b));
       g->insertMeta("canopy_direction", openvdb::Vec3IMetadata(openvdb::Vec3i(
                                             lattice::dir(b, 0), lattice::dir(b, 1), lattice::dir(b, 2))));
+      // B00 (ambient) keeps the sky's unscattered light: the player has no other sky term.
+      g->insertMeta("canopy_direct_beam", openvdb::BoolMetadata(b == 0 || !o.scatteredSunBases));
       stampParams(*g, report.params);
       grids.push_back(g);
     }
@@ -191,10 +204,12 @@ LbsolveReport solvePlant(const LbsolveOptions& o) {
     g->insertMeta("canopy_sun_bases", openvdb::Vec3IMetadata(openvdb::Vec3i(w.base[0], w.base[1], w.base[2])));
     g->insertMeta("canopy_sun_weights", openvdb::Vec3SMetadata(openvdb::Vec3s(w.weight[0], w.weight[1], w.weight[2])));
     g->insertMeta("canopy_ambient", openvdb::FloatMetadata(o.ambient));
+    g->insertMeta("canopy_direct_beam", openvdb::BoolMetadata(true));  // a static bake: all of the light
     stampParams(*g, report.params);
     grids.push_back(g);
   }
   stampRun(fileMeta, report.mode, o, cap, report.params, report.solves);
+  if (!report.sunBases.empty()) fileMeta.insertMeta("canopy_sun_terms", openvdb::StringMetadata(report.sunBases));
   vdbio::writeVdb(o.output, grids, fileMeta);
   return report;
 }
@@ -214,7 +229,7 @@ nlohmann::json LbsolveReport::toJson() const {
   for (const auto& x : solves)
     s.push_back({{"grid", x.grid}, {"channel", kChannel[x.channel]}, {"iterations", x.iterations},
                  {"residual", x.residual}, {"seconds", x.seconds}});
-  return {{"mode", mode},
+  nlohmann::json j = {{"mode", mode},
           {"lattice", dims},
           {"stored_nodes", storedNodes},
           {"node_updates", nodeUpdates},
@@ -223,6 +238,8 @@ nlohmann::json LbsolveReport::toJson() const {
           {"params", params.toJson()},
           {"solves", s},
           {"seconds", seconds}};
+  if (!sunBases.empty()) j["sun_bases"] = sunBases;
+  return j;
 }
 
 // ---- info ------------------------------------------------------------------------------------

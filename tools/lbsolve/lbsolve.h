@@ -4,7 +4,9 @@
 // contract of formats/lattice_vdb.h), solves the lattice-Boltzmann lighting model of the
 // dissertation (§2.2, §4.1-4.3; collide.h holds the per-node update) and writes an OpenVDB file:
 //   bases mode (default): 19 Vec3SGrids B00..B18 (R, G, B = total site density per channel) for the
-//       boundary conditions f_i = delta_ij (B01..B18) and f_i = 1 (B00, ambient);
+//       boundary conditions f_i = delta_ij (B01..B18) and f_i = 1 (B00, ambient); the sun bases
+//       B01..B18 without their direct beam (beam.h; grid metadata canopy_direct_beam = false)
+//       unless scatteredSunBases is false;
 //   sun mode (--sun):     one Vec3SGrid `light`, the static solution for one sun direction, its
 //       boundary split over at most three directions by the 32-face lookup (sun_lookup.h), plus
 //       `ambient` on every direction;
@@ -42,6 +44,10 @@ struct LbsolveOptions {
   // CUDA scheme (solver.h, CudaScheme): "shift" (default), "shift-split" or "push"; all compute
   // the CPU reference's bits. Ignored on the CPU.
   std::string cudaScheme = "shift";
+  // Bases mode: store the sun bases B01..B18 without their unscattered beam (beam.h), the light
+  // scattered at least once, which the player adds to its own shadowed direct sun. false
+  // (--sun-bases total): the total site density, beam included (the dissertation's B_j).
+  bool scatteredSunBases = true;
 };
 
 struct LbsolveSolve {
@@ -54,6 +60,7 @@ struct LbsolveSolve {
 
 struct LbsolveReport {
   std::string mode;  // "bases", "sun" or "scene"
+  std::string sunBases;  // bases mode: "scattered" (direct beam removed) or "total"; else empty
   std::array<int, 3> dims{0, 0, 0};
   int64_t storedNodes = 0;
   int64_t nodeUpdates = 0;  // sum over solves of iterations x nodes

@@ -56,11 +56,20 @@ int main(int argc, char** argv) {
                  "CUDA streaming scheme: shift (index shift, work at occupied nodes only), shift-split, or push "
                  "(listing 5.2 over every node); all give the CPU's bits")
       ->capture_default_str();
+  std::string sunBases = "scattered";
+  app.add_option("--sun-bases", sunBases,
+                 "Sun bases B01..B18: scattered (the direct beam removed; the player adds its own shadowed direct sun) "
+                 "or total (beam included, the dissertation's B_j)")
+      ->check(CLI::IsMember({"scattered", "total"}))
+      ->capture_default_str();
   app.add_option("--scene", o.scene, "Scene instance list (docs/scene-json.md): solve the coarse scene-level lattice instead");
   app.add_option("--scene-resolution", o.sceneResolution, "Scene mode: coarse cells along the scene's longest axis")
       ->capture_default_str();
 
   return tool.run(argc, argv, [&] {
+    o.scatteredSunBases = sunBases == "scattered";
+    if (app.count("--sun-bases") && (!sun.empty() || !o.scene.empty()))
+      throw canopy::usageError("--sun-bases applies to the 19 bases, not to --sun or --scene");
     if (!sun.empty()) o.sun = std::array<float, 3>{sun[0], sun[1], sun[2]};
     if (woodThreshold >= 0) o.woodThreshold = woodThreshold;
     else if (app.count("--wood-threshold")) throw canopy::usageError("--wood-threshold must lie in [0, 1]");

@@ -25,6 +25,10 @@ struct LightVdb {
   std::string sourceLabel;
   // .chaar only (withHaar): its bricks re-paged as Haar light, the finest level's exact light.
   std::shared_ptr<const CanopyHaarPages> haar;
+  // The sun bases B01..B18 hold only scattered light (lbsolve's default: grid metadata
+  // canopy_direct_beam = false, or the .chaar's kChaarBaseScattered); packed as
+  // kCanopyModelScatteredSun. All 18 must agree (else InvalidInput).
+  bool scatteredSun = false;
 };
 LightVdb readLightVdb(const std::string& path, const ModelSource& model);
 

@@ -158,13 +158,20 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
     nlohmann::json source = {{"name", m.name}, {"density", src.sourceLabel}};
     LightFn light;
     std::shared_ptr<const CanopyHaarPages> haar;  // .chaar lighting: its bricks, the finest level's exact light
+    bool scatteredSun = false;
     if (!m.light.empty() && !o.ignoreLight) {
       LightVdb lv = endsWith(m.light, ".chaar") ? readChaarLight(m.light, src, !o.noHaarLight) : readLightVdb(m.light, src);
       light = std::move(lv.fn);
       haar = std::move(lv.haar);
+      scatteredSun = lv.scatteredSun;
       source["light"] = lv.sourceLabel;
+      source["sun_bases"] = scatteredSun ? "scattered" : "total";
+      if (!scatteredSun)
+        logWarn(m.light + ": its sun bases include the direct beam (canopy-lbsolve --sun-bases total, or a light file "
+                "from before 2026-12): canopy-play will count the direct sun twice; re-run canopy-lbsolve");
     }
     built.push_back(buildOctree(src, m.density, light));
+    if (scatteredSun) built.back().record.flags |= kCanopyModelScatteredSun;
     haarPages.push_back(std::move(haar));
     sources.push_back(source);
     progress.add();
@@ -247,6 +254,7 @@ nlohmann::json canopyInfo(const CanopyFile& f) {
                       {"light_items", M.lightCount},
                       {"has_light", (M.flags & kCanopyModelHasLight) != 0},
                       {"haar_light", (M.flags & kCanopyModelHaarLight) != 0},
+                      {"sun_bases", !(M.flags & kCanopyModelHasLight) ? "none" : (M.flags & kCanopyModelScatteredSun) ? "scattered" : "total"},
                       {"haar_pages", M.haarPageCount},
                       {"haar_items", M.haarItemCount},
                       {"haar_precision", M.haarPrecision ? "fp16" : "fp32"},
@@ -280,7 +288,7 @@ std::string formatInfo(const nlohmann::json& j) {
                                                                               " Haar bricks (" + m["haar_precision"].get<std::string>() + ") in " +
                                                                               std::to_string(m["haar_pages"].get<uint64_t>()) + " pages"
                                                                         : std::string()) +
-                                           ")"
+                                           "; sun bases " + m["sun_bases"].get<std::string>() + ")"
                                      : std::string("no"))
       << "\n";
     for (const auto& l : m["levels"])

@@ -1,0 +1,62 @@
+// beam.cpp: directBeam() (beam.h).
+#include "beam.h"
+
+#include <algorithm>
+
+#include "canopy/errors.h"
+#include "canopy/parallel.h"
+
+namespace canopy::lb {
+
+std::vector<float> directBeam(const DenseLattice& lattice, const OmegaSet& omega, int base, int iterations,
+                              float boundary) {
+  if (base < 1 || base >= kQ) throw runtimeError("internal: directBeam of base " + std::to_string(base));
+  const Dims d = lattice.dims;
+  const int n[3] = {d.nx, d.ny, d.nz};
+  const int c[3] = {lattice::dir(base, 0), lattice::dir(base, 1), lattice::dir(base, 2)};
+  // Omega_jj of leaf and wood nodes (col[kind][j][i] = Omega_ij).
+  const float diag[2] = {omega.col[0][base][base], omega.col[1][base][base]};
+  // The slices are taken across an axis the beam moves along, and walked downstream: every node's
+  // upstream neighbour r - c lies in the slice before.
+  const int a = c[2] != 0 ? 2 : c[1] != 0 ? 1 : 0;
+  const int u = a == 0 ? 1 : 0, v = a == 2 ? 1 : 2;  // the slice's two axes
+  std::vector<float> beam(size_t(d.count()), 0.0f);
+  const int64_t off = d.index(c[0], c[1], c[2]) - d.index(0, 0, 0);
+  for (int s = 0; s < n[a]; ++s) {
+    const int k = c[a] > 0 ? s : n[a] - 1 - s;
+    parallelFor(int64_t(n[u]) * n[v], [&](int64_t q) {
+      int r[3];
+      r[a] = k;
+      r[u] = int(q % n[u]);
+      r[v] = int(q / n[u]);
+      const int64_t idx = d.index(r[0], r[1], r[2]);
+      if (!d.interior(r[0], r[1], r[2])) {
+        beam[size_t(idx)] = boundary;  // the outer layer keeps its fixed value
+        return;
+      }
+      // Steps back to the boundary along -c: the iteration at which the beam first arrives here.
+      int depth = 1 << 30;
+      for (int b = 0; b < 3; ++b)
+        if (c[b] != 0) depth = std::min(depth, c[b] > 0 ? r[b] : n[b] - 1 - r[b]);
+      if (depth > iterations) return;  // still 0
+      // The upstream node's collision (collide.h, collideKind, with only f_j non-zero): the same
+      // operations, so the same bits as the solver's.
+      const float f = beam[size_t(idx - off)];
+      const float coded = lattice.coded[size_t(idx - off)];
+      const bool wood = coded < 0.0f;
+      const float rho = wood ? -coded : coded;
+      float out = f;
+      if (rho != 0.0f) {
+        const float acc = diag[wood ? 1 : 0] * f;
+        const float x = f + rho * acc;
+        out = x > 0.0f ? x : 0.0f;
+      }
+      beam[size_t(idx)] = out;
+    }, 256);
+  }
+  std::vector<float> values(lattice.stored.size());
+  for (size_t i = 0; i < values.size(); ++i) values[i] = beam[size_t(lattice.stored[i])];
+  return values;
+}
+
+}  // namespace canopy::lb
