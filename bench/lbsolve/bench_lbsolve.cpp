@@ -2,14 +2,14 @@
 // wall time of the 57 solves (19 bases x RGB) of one plant. Prints Markdown tables on stdout.
 //
 //   bench_lbsolve [--device cpu|cuda|cuda:N] [--sizes 128,256] [--solves-sizes 128]
-//                 [--iterations 64] [--schemes shift,shift-split,push,push-fused] [--fill plant|full|plant,full]
+//                 [--iterations 64] [--schemes shift,shift-split,push,push-fused,pull] [--fill plant|full|plant,full]
 //                 [--lattices a.density.vdb,b.density.vdb]
 //
 // Throughput: one solve run for I/4 and for I iterations (tolerance 0); the difference divided by
 // 3I/4 x nodes removes fixed costs (initialisation, gathering the result). "Node updates/s" counts
 // lattice nodes advanced by one iteration, whatever the scheme does at each node. Bytes per update:
-// - push: the nominal traffic of collide.h's push update: 19 floats read + 19 floats written +
-//   4 bytes of coded density = 156 B per node;
+// - push and pull: the nominal traffic of collide.h's push update: 19 floats read + 19 floats
+//   written + 4 bytes of coded density = 156 B per node (pull moves the same values, pull_stream.h);
 // - shift (shift_stream.h): per iteration, each occupied interior node reads and writes its 19
 //   values in place and reads its index and coded density (164 B); each boundary node reads its
 //   index and coded density (12 B) and writes one float per direction pointing into the interior;
@@ -65,9 +65,9 @@ std::vector<int> parseList(const std::string& s) {
 }
 
 CudaScheme parseScheme(const std::string& s) {
-  for (CudaScheme c : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::PushFused})
+  for (CudaScheme c : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::PushFused, CudaScheme::Pull})
     if (s == cudaSchemeName(c)) return c;
-  throw std::runtime_error("unknown scheme '" + s + "' (shift, shift-split, push, push-fused)");
+  throw std::runtime_error("unknown scheme '" + s + "' (shift, shift-split, push, push-fused, pull)");
 }
 
 int64_t occupiedNodes(const DenseLattice& L) {
@@ -78,7 +78,8 @@ int64_t occupiedNodes(const DenseLattice& L) {
 
 // Nominal device-memory bytes per lattice node and iteration (see the header comment).
 double bytesPerUpdate(const DenseLattice& L, const Device& dev, CudaScheme scheme) {
-  if (!dev.isCuda() || scheme == CudaScheme::Push || scheme == CudaScheme::PushFused) return (2 * kQ + 1) * 4.0;
+  if (!dev.isCuda() || scheme == CudaScheme::Push || scheme == CudaScheme::PushFused || scheme == CudaScheme::Pull)
+    return (2 * kQ + 1) * 4.0;
   const Dims d = L.dims;
   double bytes = 0;
   for (int z = 0; z < d.nz; ++z)
@@ -189,7 +190,7 @@ int main(int argc, char** argv) try {
     else {
       std::fprintf(stderr,
                    "usage: bench_lbsolve [--device D] [--sizes 128,256] [--solves-sizes 128] [--iterations 64]\n"
-                   "                     [--schemes shift,shift-split,push,push-fused] [--fill plant,full] [--lattices a.vdb,...]\n");
+                   "                     [--schemes shift,shift-split,push,push-fused,pull] [--fill plant,full] [--lattices a.vdb,...]\n");
       return 1;
     }
   }

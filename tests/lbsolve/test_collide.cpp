@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <vector>
 
 #include "canopy/lattice_dirs.h"
@@ -12,6 +13,7 @@
 #include "beam.h"
 #include "collide.h"
 #include "fixtures.h"
+#include "pull_stream.h"
 #include "shift_stream.h"
 #include "params.h"
 #include "solver.h"
@@ -490,6 +492,72 @@ TEST(Collide, EightLaneAndOneLaneUpdatesAreBitIdentical) {
   }
   for (int64_t i = 0; i < L.dims.count(); ++i)
     ASSERT_EQ(solver.values[size_t(i)], nodeTotal(a.data(), L.dims.count(), i)) << i;
+}
+
+// The CUDA "pull" scheme (pull_stream.h): aligned stores of each node's post-collision values in
+// tiles of 32 nodes, arrivals read from the neighbours. Run here with the same CANOPY_HD functions
+// the kernels call, on an odd-sized box (x padded from 37 to 64: two tiles per row) whose boundary
+// layer is occupied too (leaf and wood): after every iteration the arrivals it would read, and
+// their totals, are the push update's state bit for bit.
+TEST(PullStreaming, MatchesThePushUpdateBitForBitAtEveryIteration) {
+  const Dims d{37, 9, 11};
+  const int64_t n = d.count();
+  std::vector<float> coded(static_cast<size_t>(n));
+  for (int64_t i = 0; i < n; ++i) {
+    const float r = fixtures::hashUnit(uint64_t(i), 5);
+    const float rho = r < 0.5f ? 0.f : (r - 0.5f) * 2.f;
+    coded[size_t(i)] = fixtures::hashUnit(uint64_t(i), 6) < 0.2f ? -rho : rho;
+  }
+  const OmegaSet om = makeOmegaSet(0.109, 0.891, -0.3);
+  float boundary[kQ];
+  for (int m = 0; m < kQ; ++m) boundary[m] = 0.04f * float(m + 2);
+  std::vector<float> a(size_t(kQ) * n), b(a.size());
+  for (int z = 0; z < d.nz; ++z)
+    for (int y = 0; y < d.ny; ++y)
+      for (int x = 0; x < d.nx; ++x) {
+        initNode(d, boundary, a.data(), x, y, z);
+        initNode(d, boundary, b.data(), x, y, z);
+      }
+  const PullLayout L = pullLayout(d);
+  ASSERT_EQ(L.nxp, 64);
+  const float nan = std::numeric_limits<float>::quiet_NaN();  // padding and unwritten slots: never read
+  std::vector<float> in(size_t(pullStateFloats(L)), nan), out(in.size(), nan);
+  for (int z = 0; z < d.nz; ++z)
+    for (int y = 0; y < d.ny; ++y)
+      for (int x = 0; x < d.nx; ++x) {
+        if (d.interior(x, y, z)) {
+          for (int m = 0; m < kQ; ++m) in[size_t(pullSlot(L, m, x, y, z))] = out[size_t(pullSlot(L, m, x, y, z))] = 0.f;
+        } else {
+          pullBoundaryNode(om, L, boundary, coded[size_t(d.index(x, y, z))], in.data(), x, y, z);
+          pullBoundaryNode(om, L, boundary, coded[size_t(d.index(x, y, z))], out.data(), x, y, z);
+        }
+      }
+  for (int t = 0; t < 30; ++t) {
+    stepLattice(om, d, coded, a, b);
+    std::swap(a, b);
+    for (int z = 1; z < d.nz - 1; ++z)
+      for (int y = 1; y < d.ny - 1; ++y)
+        for (int x = 1; x < d.nx - 1; ++x) {
+          const float c = coded[size_t(d.index(x, y, z))];
+          if (c < 0.f) {
+            pullUpdateNode<kWoodKind>(om, L, c, in.data(), out.data(), x, y, z);
+          } else {
+            pullUpdateNode<kLeafKind>(om, L, c, in.data(), out.data(), x, y, z);
+          }
+        }
+    std::swap(in, out);  // in: the post values of iteration t; out: of t - 1 (the arrivals of t)
+    for (int z = 0; z < d.nz; ++z)
+      for (int y = 0; y < d.ny; ++y)
+        for (int x = 0; x < d.nx; ++x) {
+          const int64_t p = d.index(x, y, z);
+          ASSERT_EQ(pullArrivalTotal(L, out.data(), boundaryTotal(boundary), x, y, z), nodeTotal(a.data(), n, p))
+              << "iteration " << t + 1 << " node " << x << "," << y << "," << z;
+          if (!d.interior(x, y, z)) continue;
+          for (int m = 0; m < kQ; ++m)  // the 19 arrivals themselves
+            ASSERT_EQ(out[size_t(pullSlot(L, m, x - dir(m, 0), y - dir(m, 1), z - dir(m, 2)))], a[size_t(m * n + p)])
+                << "iteration " << t + 1 << " node " << p << " m " << m;
+        }
+  }
 }
 
 // The CUDA backend's default scheme (shift_stream.h): streaming by index shift, collision only at

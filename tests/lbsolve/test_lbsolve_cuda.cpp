@@ -1,6 +1,6 @@
 // CUDA backend vs the CPU reference (skips without a GPU). Issue 3: on a 64^3 plant lattice, all
 // 19 bases x RGB agree per node within 1e-5 relative. The exact CUDA schemes (shift, the default,
-// shift-split and push; solver.h) are checked, on the synthetic plant and on the real oak (oak_medium.glb
+// shift-split, push and pull; solver.h) are checked, and must give every value bit for bit, on the synthetic plant and on the real oak (oak_medium.glb
 // voxelised at 40^3 by canopy-voxelize; shift-split there and on the odd sizes). solve_cuda.cu is built without FMA contraction, so the
 // schemes execute the CPU's IEEE operations in the same order; agreement is expected to be exact
 // (the test prints how many values are bit-identical), and 1e-5 is the bound the issue sets.
@@ -72,6 +72,9 @@ void compare(const std::vector<SolveResult>& cpu, const std::vector<SolveResult>
   }
   std::printf("%s: %lld values, %lld bit-identical, worst %s difference %.3g\n", what.c_str(), (long long)total,
               (long long)exact, exactScheme ? "relative" : "scaled", worst);
+  if (exactScheme) {
+    EXPECT_EQ(exact, total) << what << ": an exact scheme must give the CPU's bits";
+  }
 }
 
 double seconds(std::chrono::steady_clock::time_point t0) {
@@ -97,11 +100,12 @@ TEST(LbsolveCuda, cuda_MatchesCpuPerNodeOn64CubedPlantForAll19BasesRGB) {
   // One GPU explicitly (the queue with a single worker), both exact schemes.
   compare(cpu, runSolves(L, specs, kGpu0, {}, CudaScheme::Shift), "64^3 plant, shift, GPU 0");
   compare(cpu, runSolves(L, specs, kGpu0, {}, CudaScheme::Push), "64^3 plant, push, GPU 0");
+  compare(cpu, runSolves(L, specs, kGpu0, {}, CudaScheme::Pull), "64^3 plant, pull, GPU 0");
 }
 
 TEST(LbsolveCuda, cuda_EmptyOddSizedAndOccupiedBoundaryLatticesMatchCpu) {
   if (cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA GPU";
-  for (CudaScheme scheme : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push}) {
+  for (CudaScheme scheme : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::Pull}) {
     const std::string name = cudaSchemeName(scheme);
     // Odd sizes exercise the partial thread block in x and the boundary tests in every direction.
     const std::vector<float> zero(size_t(131) * 5 * 7, 0.f);
@@ -124,6 +128,11 @@ TEST(LbsolveCuda, cuda_EmptyOddSizedAndOccupiedBoundaryLatticesMatchCpu) {
     const DenseLattice B = fixtures::denseOf(nx, ny, nz, density, wood);
     compare(runSolves(B, allSpecs(70, 1e-4f), kCpu), runSolves(B, allSpecs(70, 1e-4f), kGpu0, {}, scheme),
             "occupied boundary 45x23x31, " + name);
+    // A residual checked at every iteration, from the first on (the initial state's totals).
+    std::vector<SolveSpec> every = allSpecs(5, 1e-9f);
+    every.resize(6);
+    for (SolveSpec& e : every) e.checkEvery = 1;
+    compare(runSolves(B, every, kCpu), runSolves(B, every, kGpu0, {}, scheme), "checked every iteration, " + name);
   }
 }
 
@@ -146,7 +155,7 @@ TEST(LbsolveCuda, cuda_MatchesCpuOnTheRealOakLattice) {
   const int cap = 2 * std::max({L.dims.nx, L.dims.ny, L.dims.nz});
   const auto specs = allSpecs(cap, 1e-4f);
   const auto cpu = runSolves(L, specs, kCpu);
-  for (CudaScheme scheme : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push})
+  for (CudaScheme scheme : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::Pull})
     compare(cpu, runSolves(L, specs, kGpu0, {}, scheme), std::string("oak 40, ") + cudaSchemeName(scheme));
   // push-fused: fixed iterations (its residuals differ in the last bits, which could move a stop).
   const auto fixed = allSpecs(cap, 0.f);

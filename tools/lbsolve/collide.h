@@ -181,6 +181,14 @@ CANOPY_HD CANOPY_FORCEINLINE float nodeTotal(const float* state, int64_t n, int6
   return s;
 }
 
+// The total of a boundary node: nodeTotal of a node holding the boundary values (same bits).
+CANOPY_HD CANOPY_FORCEINLINE float boundaryTotal(const float boundary[kQ]) {
+  float t = 0.f;
+  CANOPY_UNROLL
+  for (int m = 0; m < kQ; ++m) t += boundary[m];
+  return t;
+}
+
 // ---- Building Omega (host) ----------------------------------------------------------------
 
 // The normalised Henyey-Greenstein phase pn_ij(g) (eq. 4.1-4.2) for output direction i and input

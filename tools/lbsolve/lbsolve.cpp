@@ -76,9 +76,9 @@ void stampRun(openvdb::MetaMap& m, const std::string& kind, const LbsolveOptions
 }
 
 CudaScheme parseCudaScheme(const std::string& name) {
-  for (CudaScheme c : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push})
+  for (CudaScheme c : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::Pull})
     if (name == cudaSchemeName(c)) return c;
-  throw usageError("--cuda-scheme must be shift, shift-split or push, not '" + name + "'");
+  throw usageError("--cuda-scheme must be shift, shift-split, push or pull, not '" + name + "'");
 }
 
 OmegaSet channelOmega(const LightParams& p, int c) {

@@ -41,7 +41,7 @@ struct LbsolveOptions {
   std::optional<double> woodThreshold;  // overrides the parameter file
   int sceneResolution = 32;  // scene mode: coarse nodes along the scene's longest axis (interior)
   Device device;           // cpu, one GPU, or all GPUs
-  // CUDA scheme (solver.h, CudaScheme): "shift" (default), "shift-split" or "push"; all compute
+  // CUDA scheme (solver.h, CudaScheme): "shift" (default), "shift-split", "push" or "pull"; all compute
   // the CPU reference's bits. Ignored on the CPU.
   std::string cudaScheme = "shift";
   // Bases mode: store the sun bases B01..B18 without their unscattered beam (beam.h), the light

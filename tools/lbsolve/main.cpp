@@ -53,8 +53,8 @@ int main(int argc, char** argv) {
   app.add_option("--check-every", o.checkEvery, "Residual check interval (iterations)")->capture_default_str();
   app.add_option("--wood-threshold", woodThreshold, "Wood fraction at or above which a node is wood (default 0.5 or the parameter file's)");
   app.add_option("--cuda-scheme", o.cudaScheme,
-                 "CUDA streaming scheme: shift (index shift, work at occupied nodes only), shift-split, or push "
-                 "(listing 5.2 over every node); all give the CPU's bits")
+                 "CUDA streaming scheme: shift (index shift, work at occupied nodes only), shift-split, push "
+                 "(listing 5.2 over every node) or pull (every node, aligned stores in tiles of 32 nodes); all give the CPU's bits")
       ->capture_default_str();
   std::string sunBases = "scattered";
   app.add_option("--sun-bases", sunBases,

@@ -137,12 +137,4 @@ CANOPY_HD CANOPY_FORCEINLINE float shiftNodeTotal(const float* state, int64_t n,
   return t;
 }
 
-// The total of a boundary node: nodeTotal of a node holding the boundary values (same bits).
-CANOPY_HD CANOPY_FORCEINLINE float boundaryTotal(const float boundary[kQ]) {
-  float t = 0.f;
-  CANOPY_UNROLL
-  for (int m = 0; m < kQ; ++m) t += boundary[m];
-  return t;
-}
-
 }  // namespace canopy::lb

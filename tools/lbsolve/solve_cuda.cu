@@ -8,6 +8,9 @@
 //   nodes, if any, in a second launch). A checked iteration also keeps the occupied nodes' totals
 //   before their collision; the residual is then one pass over the state. ShiftSplit: the same
 //   iteration as three launches of leaner kernels (measured slower: the parts no longer overlap).
+// - Pull: the push update reorganised (pull_stream.h): post-collision values stored aligned at each
+//   node in tiles of 32 nodes (19 directions contiguous per tile), arrivals read from the
+//   neighbours; ping-pong buffers, the same 156 bytes per node, the same bits.
 // - Push: the push update of listing 5.2 over every node: structure of arrays, state[m * n + idx],
 //   idx = (z*ny + y)*nx + x, one thread per node, x fastest within a block (a warp reads 32
 //   consecutive floats for every m; the pushed writes are shifted by at most one element in x),
@@ -26,6 +29,7 @@
 
 #include "canopy/errors.h"
 #include "canopy/parallel_cuda.cuh"
+#include "pull_stream.h"
 #include "shift_stream.h"
 #include "solver.h"
 
@@ -118,6 +122,79 @@ __global__ void pushGatherKernel(const float* __restrict__ cur, int64_t n, const
                                  int64_t k, float* __restrict__ values) {
   for (int64_t i = blockIdx.x * int64_t(blockDim.x) + threadIdx.x; i < k; i += int64_t(gridDim.x) * blockDim.x)
     values[i] = nodeTotal(cur, n, stored[i]);
+}
+
+// ---- Pull scheme (pull_stream.h) -------------------------------------------------------------
+
+// Interior leaf and empty nodes (wood nodes: pullWoodKernel); grid (ceil(nx / 128), ny, nz), so a
+// warp covers one tile of 32 nodes: every load of a direction reads 128 contiguous bytes (shifted by
+// at most one node, i.e. two tiles), every store writes 128 aligned bytes.
+__global__ void __launch_bounds__(kBlockX) pullLeafKernel(const OmegaSet omega, const PullLayout L,
+                                                          const float* __restrict__ coded,
+                                                          const float* __restrict__ in, float* __restrict__ out) {
+  const int x = int(blockIdx.x) * kBlockX + int(threadIdx.x);
+  const int y = int(blockIdx.y), z = int(blockIdx.z);
+  if (x >= L.d.nx - 1 || x < 1 || !L.d.interior(x, y, z)) return;  // boundary: its post values are fixed
+  const float c = coded[L.d.index(x, y, z)];
+  if (c < 0.f) return;  // a wood node: pullWoodKernel
+  pullUpdateNode<kLeafKind>(omega, L, c, in, out, x, y, z);
+}
+
+__global__ void __launch_bounds__(kBlockX) pullWoodKernel(const OmegaSet omega, const PullLayout L,
+                                                          const float* __restrict__ coded,
+                                                          const float* __restrict__ in, float* __restrict__ out,
+                                                          const int64_t* __restrict__ wood, int64_t count) {
+  const int64_t i = int64_t(blockIdx.x) * kBlockX + threadIdx.x;
+  if (i >= count) return;
+  int x, y, z;
+  coordsOf(L.d, wood[i], x, y, z);
+  pullUpdateNode<kWoodKind>(omega, L, coded[wood[i]], in, out, x, y, z);
+}
+
+// The boundary nodes' post values (constant over a solve) into both buffers.
+__global__ void pullBoundaryKernel(const OmegaSet omega, const Boundary b, const PullLayout L,
+                                   const float* __restrict__ coded, float* __restrict__ a, float* __restrict__ c) {
+  const int x = int(blockIdx.x) * kBlockX + int(threadIdx.x);
+  const int y = int(blockIdx.y), z = int(blockIdx.z);
+  if (x >= L.d.nx || L.d.interior(x, y, z)) return;
+  const float k = coded[L.d.index(x, y, z)];
+  pullBoundaryNode(omega, L, b.f, k, a, x, y, z);
+  pullBoundaryNode(omega, L, b.f, k, c, x, y, z);
+}
+
+// Every node's arrival total from `state` (the post values of the iteration before); zeroInterior:
+// the initial state (interior arrivals 0, before any post value exists).
+__global__ void pullTotalsKernel(const PullLayout L, const float* __restrict__ state, float fixedTotal, bool zeroInterior,
+                                 float* __restrict__ totals) {
+  const int x = int(blockIdx.x) * kBlockX + int(threadIdx.x);
+  const int y = int(blockIdx.y), z = int(blockIdx.z);
+  if (x >= L.d.nx) return;
+  totals[L.d.index(x, y, z)] =
+      zeroInterior && L.d.interior(x, y, z) ? 0.f : pullArrivalTotal(L, state, fixedTotal, x, y, z);
+}
+
+__global__ void __launch_bounds__(kReduceThreads) pullResidualKernel(const PullLayout L, const float* __restrict__ state,
+                                                                     float fixedTotal, const float* __restrict__ before,
+                                                                     unsigned* __restrict__ result) {
+  float dmax = 0.f, rmax = 0.f;
+  const int64_t n = L.d.count();
+  for (int64_t i = blockIdx.x * int64_t(blockDim.x) + threadIdx.x; i < n; i += int64_t(gridDim.x) * blockDim.x) {
+    int x, y, z;
+    coordsOf(L.d, i, x, y, z);
+    const float a = pullArrivalTotal(L, state, fixedTotal, x, y, z);
+    dmax = fmaxf(dmax, fabsf(a - before[i]));
+    rmax = fmaxf(rmax, a);
+  }
+  reduceMax2(dmax, rmax, result);
+}
+
+__global__ void pullGatherKernel(const PullLayout L, const float* __restrict__ state, float fixedTotal,
+                                 const int64_t* __restrict__ stored, int64_t k, float* __restrict__ values) {
+  for (int64_t i = blockIdx.x * int64_t(blockDim.x) + threadIdx.x; i < k; i += int64_t(gridDim.x) * blockDim.x) {
+    int x, y, z;
+    coordsOf(L.d, stored[i], x, y, z);
+    values[i] = pullArrivalTotal(L, state, fixedTotal, x, y, z);
+  }
 }
 
 // ---- Shift scheme ----------------------------------------------------------------------------
@@ -273,7 +350,8 @@ bool isShift(CudaScheme scheme) { return scheme == CudaScheme::Shift || scheme =
 
 class CudaSolver final : public Solver {
  public:
-  CudaSolver(const DenseLattice& l, int gpu, CudaScheme scheme) : lat_(l), gpu_(gpu), scheme_(scheme) {
+  CudaSolver(const DenseLattice& l, int gpu, CudaScheme scheme)
+      : lat_(l), gpu_(gpu), scheme_(scheme), pull_(pullLayout(l.dims)) {
     CANOPY_CUDA_CHECK(cudaSetDevice(gpu));
     size_t freeBytes = 0, totalBytes = 0;
     CANOPY_CUDA_CHECK(cudaMemGetInfo(&freeBytes, &totalBytes));
@@ -324,13 +402,20 @@ class CudaSolver final : public Solver {
                           wood_.data(), woodCoded_.data(), int64_t(wood.size()), blocksFor(int64_t(wood.size())),
                           edge_.data(), int64_t(edge.size()), blocksFor(int64_t(edge.size()))};
     } else {
-      bufA_.resize(size_t(kQ) * n);
-      bufB_.resize(size_t(kQ) * n);
+      const size_t floats = scheme == CudaScheme::Pull ? size_t(pullStateFloats(pull_)) : size_t(kQ) * n;
+      bufA_.resize(floats);
+      bufB_.resize(floats);
       cur_ = bufA_.data();
       prev_ = bufB_.data();
+      if (scheme == CudaScheme::Pull) totals_.resize(size_t(n));
+      // Wood nodes: every one for push (boundary nodes are sources there); pull updates interior ones only.
       std::vector<int64_t> wood;
-      for (int64_t p = 0; p < n; ++p)
-        if (l.coded[size_t(p)] < 0.f) wood.push_back(p);
+      for (int z = 0; z < d.nz; ++z)
+        for (int y = 0; y < d.ny; ++y)
+          for (int x = 0; x < d.nx; ++x) {
+            const int64_t p = d.index(x, y, z);
+            if (l.coded[size_t(p)] < 0.f && (scheme != CudaScheme::Pull || d.interior(x, y, z))) wood.push_back(p);
+          }
       uploadVector(wood_, wood);
     }
     CANOPY_CUDA_CHECK(cudaStreamCreate(&stream_));
@@ -352,13 +437,24 @@ class CudaSolver final : public Solver {
     if (isShift(scheme_)) {
       // Interior nodes start at 0; boundary slots are never read (shift_stream.h).
       CANOPY_CUDA_CHECK(cudaMemsetAsync(state_.data(), 0, state_.size() * sizeof(float), stream_));
+    } else if (scheme_ == CudaScheme::Pull) {
+      // Interior post values start at 0; the boundary's are written by the first step, which has
+      // Omega (pull_stream.h).
+      CANOPY_CUDA_CHECK(cudaMemsetAsync(bufA_.data(), 0, bufA_.size() * sizeof(float), stream_));
+      CANOPY_CUDA_CHECK(cudaMemsetAsync(bufB_.data(), 0, bufB_.size() * sizeof(float), stream_));
     } else {
       pushInitKernel<<<grid(), kBlockX, 0, stream_>>>(boundary_values_, lat_.dims, cur_, prev_);
       CANOPY_CUDA_CHECK(cudaGetLastError());
     }
   }
 
-  void beforeCheckedStep() override { keepTotals_ = isShift(scheme_); }
+  void beforeCheckedStep() override {
+    keepTotals_ = isShift(scheme_);
+    if (scheme_ == CudaScheme::Pull) {  // the totals of the current state, from the post values before it
+      pullTotalsKernel<<<grid(), kBlockX, 0, stream_>>>(pull_, prev_, fixedTotal_, t_ == 0, totals_.data());
+      CANOPY_CUDA_CHECK(cudaGetLastError());
+    }
+  }
 
   void step(const OmegaSet& omega) override {
     const Dims d = lat_.dims;
@@ -391,6 +487,20 @@ class CudaSolver final : public Solver {
             state_.data());
         CANOPY_CUDA_CHECK(cudaGetLastError());
       }
+    } else if (scheme_ == CudaScheme::Pull) {
+      if (t_ == 0) {
+        pullBoundaryKernel<<<grid(), kBlockX, 0, stream_>>>(omega, boundary_values_, pull_, coded_.data(), cur_, prev_);
+        CANOPY_CUDA_CHECK(cudaGetLastError());
+      }
+      pullLeafKernel<<<grid(), kBlockX, 0, stream_>>>(omega, pull_, coded_.data(), cur_, prev_);
+      CANOPY_CUDA_CHECK(cudaGetLastError());
+      const int64_t woodCount = int64_t(wood_.size());
+      if (woodCount > 0) {
+        pullWoodKernel<<<unsigned(blocksFor(woodCount)), kBlockX, 0, stream_>>>(omega, pull_, coded_.data(), cur_, prev_,
+                                                                                 wood_.data(), woodCount);
+        CANOPY_CUDA_CHECK(cudaGetLastError());
+      }
+      std::swap(cur_, prev_);
     } else {
       const bool fused = scheme_ == CudaScheme::PushFused;
       (fused ? pushLeafKernel<true> : pushLeafKernel<false>)<<<grid(), kBlockX, 0, stream_>>>(
@@ -414,6 +524,9 @@ class CudaSolver final : public Solver {
       shiftResidualKernel<<<kRowBlocks, kRowThreads, 0, stream_>>>(
           shiftOffsets(lat_.dims, t_), shiftOffsets(lat_.dims, t_ - 1), lat_.dims, fixedTotal_, state_.data(),
           coded_.data(), totals_.data(), result_.data());
+    } else if (scheme_ == CudaScheme::Pull) {
+      pullResidualKernel<<<kReduceBlocks, kReduceThreads, 0, stream_>>>(pull_, prev_, fixedTotal_, totals_.data(),
+                                                                       result_.data());
     } else {
       pushResidualKernel<<<kReduceBlocks, kReduceThreads, 0, stream_>>>(cur_, prev_, lat_.dims.count(),
                                                                        result_.data());
@@ -434,6 +547,9 @@ class CudaSolver final : public Solver {
       if (isShift(scheme_)) {
         shiftGatherKernel<<<kReduceBlocks, kReduceThreads, 0, stream_>>>(
             shiftOffsets(lat_.dims, t_), lat_.dims, fixedTotal_, state_.data(), stored_.data(), k, values_.data());
+      } else if (scheme_ == CudaScheme::Pull) {
+        pullGatherKernel<<<kReduceBlocks, kReduceThreads, 0, stream_>>>(pull_, prev_, fixedTotal_, stored_.data(), k,
+                                                                       values_.data());
       } else {
         pushGatherKernel<<<kReduceBlocks, kReduceThreads, 0, stream_>>>(cur_, lat_.dims.count(), stored_.data(), k,
                                                                        values_.data());
@@ -450,6 +566,7 @@ class CudaSolver final : public Solver {
   const DenseLattice& lat_;
   int gpu_;
   CudaScheme scheme_;
+  PullLayout pull_;  // pull: the tiled layout of bufA_/bufB_
   cudaStream_t stream_ = nullptr;
   Boundary boundary_values_{};
   float fixedTotal_ = 0.f;   // total of a boundary node
@@ -459,7 +576,7 @@ class CudaSolver final : public Solver {
   cuda::DeviceBuffer<float> coded_, values_;
   cuda::DeviceBuffer<int64_t> stored_, wood_;
   cuda::DeviceBuffer<unsigned> result_;
-  // Push: ping-pong state.
+  // Push and pull: ping-pong state (pull: post values in pull_'s layout; totals_ before a checked step).
   cuda::DeviceBuffer<float> bufA_, bufB_;
   float* cur_ = nullptr;   // the current state (one of bufA_/bufB_)
   float* prev_ = nullptr;  // the previous state; the next step writes here

@@ -18,6 +18,7 @@ const char* cudaSchemeName(CudaScheme scheme) {
     case CudaScheme::Push: return "push";
     case CudaScheme::ShiftSplit: return "shift-split";
     case CudaScheme::PushFused: return "push-fused";
+    case CudaScheme::Pull: return "pull";
   }
   return "?";
 }

@@ -65,10 +65,14 @@ class Solver {
 //   ShiftSplit: the same in three launches per iteration (leaf nodes, wood nodes, boundary nodes),
 //               each kernel holding only its own path (fewer registers).
 //   Push:       the push update of collide.h over every node, ping-pong buffers (listing 5.2).
+//   Pull:       the same update over every node, reorganised (pull_stream.h): each node's
+//               post-collision values stored aligned at the node, in tiles of 32 nodes with their 19
+//               directions contiguous; arrivals read from the neighbours. The dense scheme nearest
+//               the bandwidth roofline.
 //   PushFused:  Push with fused multiply-adds (fmaf) in the collision: a benchmark variant that
 //               measures what the unfused arithmetic costs; not bitwise equal to the CPU reference.
 // All but PushFused compute the CPU reference's bits (same IEEE operations in the same order).
-enum class CudaScheme { Shift, ShiftSplit, Push, PushFused };
+enum class CudaScheme { Shift, ShiftSplit, Push, PushFused, Pull };
 const char* cudaSchemeName(CudaScheme scheme);
 
 std::unique_ptr<Solver> makeCpuSolver(const DenseLattice& lattice);
@@ -77,7 +81,8 @@ std::unique_ptr<Solver> makeCudaSolver(const DenseLattice& lattice, int gpu,
                                        CudaScheme scheme = CudaScheme::Shift);
 
 // Bytes of device memory a CUDA solver needs for this lattice. Push: 2 x 19 floats + coded density
-// per node, the wood-node list, plus the stored-node index list and its values. Shift (both): 19
+// per node, the wood-node list, plus the stored-node index list and its values. Pull: the same with
+// x padded to a multiple of 32 and a total per node (residual). Shift (both): 19
 // floats + coded density + a kept total per node, the occupied and boundary node lists, and the
 // stored nodes.
 int64_t cudaSolverBytes(const DenseLattice& lattice, CudaScheme scheme = CudaScheme::Shift);
