@@ -20,7 +20,7 @@
 //   4. Opacity of a step of length dt (world) with extinction per lattice cell sigma * density:
 //      alpha = 1 - exp(-sigma * density * dt * cellsPerWorld) (the length correction of §2; the
 //      stored density is a fraction of a lattice cell, so opacity does not depend on the
-//      instance's scale). Front to back: C += T alpha c, T *= 1 - alpha; stop at T < kStopT.
+//      instance's scale). Front to back: C += T alpha c, T *= 1 - alpha; stop at T < stopT (--stop-opacity).
 //   5. Shading of a sample: albedo * (sun * Tshadow + indirect). Tshadow is a shadow cone towards
 //      the sun through every instance (the same lock-step march without shading, its footprint
 //      starting at the primary cone's and widening by shadowAperture per unit length), traced
@@ -127,7 +127,7 @@ CANOPY_HD inline void rayBox(V3 o, V3 d, V3 lo, V3 hi, float& t0, float& t1) {
 constexpr int kHitCapacity = 16;        // instances pending or active along one ray at once
 constexpr uint32_t kFallbackLevels = 3;  // a missing brick may use a resident ancestor this much coarser
 constexpr float kMaxConstantCells = 4.0f;  // a uniform non-empty node is shaded at least every 4 cells
-constexpr float kStopT = 1e-3f;          // early stop: opacity above 0.999
+constexpr float kStopT = 1e-3f;          // default early stop (ShadeParams::stopT): opacity above 0.999
 constexpr float kShadowStopT = 1e-2f;  // a shadow cone stops once 99% of the sun is blocked
 constexpr float kMinContribution = 1e-5f;  // samples below this (T * alpha) are not shaded
 
@@ -169,6 +169,7 @@ struct ShadeParams {
   float sigma;              // extinction per lattice cell at density 1
   float stepFactor;         // brick step in voxels of the chosen level
   float lodBias;            // added to the chosen level (negative = coarser)
+  float stopT;              // a cone stops when its transmittance falls below this (kStopT: opacity 0.999)
   float shadowAperture;     // shadow cone: footprint growth per unit length (radians)
   int shadows;              // kShadowsOff (Tshadow = 1), kShadowsMap or kShadowsCone
   float shadowMapCells;     // kShadowsMap: extinction grid voxel in lattice cells of the finest instance
@@ -1070,7 +1071,7 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
     }
     T *= 1.0f - alpha;
     t = next;
-    if (T < kStopT || t >= tMax) break;
+    if (T < s.shade.stopT || t >= tMax) break;
     while (!w.done && t >= w.tCellExit) walkAdvance(s, w, o, d, t);
   }
   r.transmittance = T;

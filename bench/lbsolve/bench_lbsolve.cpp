@@ -2,7 +2,7 @@
 // wall time of the 57 solves (19 bases x RGB) of one plant. Prints Markdown tables on stdout.
 //
 //   bench_lbsolve [--device cpu|cuda|cuda:N] [--sizes 128,256] [--solves-sizes 128]
-//                 [--iterations 64] [--schemes shift,shift-split,push,push-fused,pull] [--fill plant|full|plant,full]
+//                 [--iterations 64] [--schemes shift,shift-split,push,push-fused,pull,pull-fused] [--fill plant|full|plant,full]
 //                 [--lattices a.density.vdb,b.density.vdb]
 //
 // Throughput: one solve run for I/4 and for I iterations (tolerance 0); the difference divided by
@@ -65,9 +65,9 @@ std::vector<int> parseList(const std::string& s) {
 }
 
 CudaScheme parseScheme(const std::string& s) {
-  for (CudaScheme c : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::PushFused, CudaScheme::Pull})
+  for (CudaScheme c : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::PushFused, CudaScheme::Pull, CudaScheme::PullFused})
     if (s == cudaSchemeName(c)) return c;
-  throw std::runtime_error("unknown scheme '" + s + "' (shift, shift-split, push, push-fused, pull)");
+  throw std::runtime_error("unknown scheme '" + s + "' (shift, shift-split, push, push-fused, pull, pull-fused)");
 }
 
 int64_t occupiedNodes(const DenseLattice& L) {
@@ -78,7 +78,8 @@ int64_t occupiedNodes(const DenseLattice& L) {
 
 // Nominal device-memory bytes per lattice node and iteration (see the header comment).
 double bytesPerUpdate(const DenseLattice& L, const Device& dev, CudaScheme scheme) {
-  if (!dev.isCuda() || scheme == CudaScheme::Push || scheme == CudaScheme::PushFused || scheme == CudaScheme::Pull)
+  if (!dev.isCuda() || scheme == CudaScheme::Push || scheme == CudaScheme::PushFused || scheme == CudaScheme::Pull ||
+      scheme == CudaScheme::PullFused)
     return (2 * kQ + 1) * 4.0;
   const Dims d = L.dims;
   double bytes = 0;
@@ -190,7 +191,7 @@ int main(int argc, char** argv) try {
     else {
       std::fprintf(stderr,
                    "usage: bench_lbsolve [--device D] [--sizes 128,256] [--solves-sizes 128] [--iterations 64]\n"
-                   "                     [--schemes shift,shift-split,push,push-fused,pull] [--fill plant,full] [--lattices a.vdb,...]\n");
+                   "                     [--schemes shift,shift-split,push,push-fused,pull,pull-fused] [--fill plant,full] [--lattices a.vdb,...]\n");
       return 1;
     }
   }

@@ -12,7 +12,9 @@
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
+#include <cmath>
 #include <fstream>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -63,7 +65,7 @@ int main(int argc, char** argv) {
   app.add_option("--cache-mb", cacheMb, "Cache budget (MiB)")->capture_default_str();
   app.add_option("--instances", instances, "Forest instances")->capture_default_str();
   app.add_option("--extra", extra, "NAME=FILE.canopy: more packed scenes (orbit camera)");
-  app.add_option("--shadows", shadowMethods, "Shadow methods to run, each scene with each (map, cone, off; a -nocache suffix turns off the descent cache, -nohold the held empty segments, -occ6/-occ8 the CUDA pixel kernel for 6/8 blocks per SM (default: unconstrained), -rows puts a warp on 32 pixels of a row, -exact the finest level's light from Haar pages (--light exact))")->capture_default_str();
+  app.add_option("--shadows", shadowMethods, "Shadow methods to run, each scene with each (map, cone, off; a -nocache suffix turns off the descent cache, -nohold the held empty segments, -occ6/-occ8 the CUDA pixel kernel for 6/8 blocks per SM (default: unconstrained), -rows puts a warp on 32 pixels of a row, -exact the finest level's light from Haar pages (--light exact); quality dials: -stop99 stops cones at opacity 0.99 (--stop-opacity), -step1 marches bricks in steps of one voxel (--step 1), -lod1 one level coarser (--lod-bias -1); each scene's last frame is compared with the first method's (RMS)")->capture_default_str();
   app.add_flag("--count-work", countWork, "CPU only: count cones, steps, samples and shadow work per frame (results.json \"work\")");
   app.add_flag("--only-extra", skipSynthetic, "Play only the --extra scenes (the synthetic ones are still written)");
   return tool.run(argc, argv, [&] {
@@ -96,6 +98,7 @@ int main(int argc, char** argv) {
       scenes.push_back({e.substr(0, eq), e.substr(eq + 1), "orbit:elevation=20"});
     }
     nlohmann::json results = nlohmann::json::array();
+    std::map<std::string, std::vector<float>> firstFrames;  // per scene: the first method's last frame
     std::printf("| scene | shadows | device | size | frames | median ms | p95 ms | target 16.7 ms | first complete frame s | target 2 s | "
                 "hit rate | MB streamed | stream MB/s | cold start MB (MB/s) | disk read MB/s |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (const std::string& method : shadowMethods)
@@ -115,6 +118,9 @@ int main(int argc, char** argv) {
       if (method.find("occ8") != std::string::npos) o.pixelMinBlocks = 8;  // "map-occ8": kernel for 8 blocks/SM
       if (method.find("occ6") != std::string::npos) o.pixelMinBlocks = 6;  // "map-occ6": kernel for 6 blocks/SM
       if (method.find("rows") != std::string::npos) o.warpTileWidth = 32;  // "map-rows": a warp on 32 pixels of a row
+      if (method.find("stop99") != std::string::npos) o.stopOpacity = 0.99f;  // quality dials (image changes)
+      if (method.find("step1") != std::string::npos) o.stepFactor = 1.0f;
+      if (method.find("lod1") != std::string::npos) o.lodBias = -1.0f;
       const std::string shadowMethod = method.substr(0, method.find('-'));
       o.shadows = shadowMethod != "off";
       if (o.shadows) o.shadowMethod = shadowMethod;
@@ -123,12 +129,31 @@ int main(int argc, char** argv) {
       nlohmann::json r = pl::play(o, tool.device(), &last);
       pl::writePng(outDir + "/" + s.name + (method == "map" ? "" : "-" + method) + ".png", last, w, h, o.background);
       r["scene"] = s.name;
+      r["method"] = method;
+      // The last frame against the first method's of the same scene: RMS over RGBA, and that RMS
+      // relative to the mean RGB of the reference's covered pixels (alpha > 0.5).
+      if (!firstFrames.count(s.name)) {
+        firstFrames[s.name] = last;
+      } else if (firstFrames[s.name].size() == last.size()) {
+        const std::vector<float>& ref = firstFrames[s.name];
+        double se = 0, mean = 0;
+        size_t covered = 0;
+        for (size_t i = 0; i < last.size(); ++i) se += double(last[i] - ref[i]) * (last[i] - ref[i]);
+        for (size_t p = 0; p + 3 < ref.size(); p += 4)
+          if (ref[p + 3] > 0.5f) mean += double(ref[p]) + ref[p + 1] + ref[p + 2], covered += 3;
+        const double rms = std::sqrt(se / double(last.size())), meanRgb = covered ? mean / double(covered) : 0.0;
+        r["rms_vs_first_method"] = rms;
+        r["rms_vs_first_method_relative"] = meanRgb > 0 ? rms / meanRgb : 0.0;
+      }
       results.push_back(r);
       const double med = r["frame_ms_median"], fc = r["first_complete_frame_s"];
       std::printf("| %s | %s | %s | %dx%d | %d | %.2f | %.2f | %s | %.3f | %s | %.1f%% | %.1f | %.1f | %.1f (%.0f) | %.1f |\n", s.name.c_str(),
                   method.c_str(), std::string(r["device"]).c_str(), w, h, frames, med, double(r["frame_ms_p95"]), med <= 16.7 ? "met" : "missed", fc,
                   fc >= 0 && fc <= 2.0 ? "met" : "missed", 100.0 * double(r["cache_hit_rate"]), double(r["mb_streamed"]),
                   double(r["stream_mb_per_s"]), double(r["cold_start_mb"]), double(r["cold_start_mb_per_s"]), double(r["read_mb_per_s"]));
+      if (r.contains("rms_vs_first_method"))
+        std::printf("|   last frame vs %s's (%s, %s) | RMS %.4g (%.2f%% of the covered pixels' mean RGB) |\n", shadowMethods.front().c_str(),
+                    s.name.c_str(), method.c_str(), double(r["rms_vs_first_method"]), 100.0 * double(r["rms_vs_first_method_relative"]));
       if (r.contains("work")) {
         const auto& wk = r["work"];
         const double cones = double(wk["cones"]), shaded = std::max(double(wk["shaded_samples"]), 1.0);

@@ -232,6 +232,7 @@ TEST(Render, ShadowMapIsBeerLambertThroughAUniformCube) {
   shade.shadows = pl::kShadowsMap;
   shade.shadowMapCells = 4.0f;
   shade.shadowMapBias = 0.0f;
+  shade.stopT = pl::kStopT;
   shade.shadowMapMaxVoxels = 1u << 23;
   scene.setSun(shade.toSun);
   pl::CameraView cam{};

@@ -46,19 +46,34 @@ CANOPY_HD CANOPY_FORCEINLINE int64_t pullSlot(const PullLayout& L, int m, int x,
   return ((p / kPullTile) * kQ + m) * kPullTile + p % kPullTile;
 }
 
-// One step at interior node (x, y, z) whose coded density is `coded` (of kind Kind, or any):
-// read its arrivals from the neighbours' post values in `in`, collide, store the post values at
-// the node itself in `out`.
-template <int Kind = kAnyKind>
-CANOPY_HD CANOPY_FORCEINLINE void pullUpdateNode(const OmegaSet& om, const PullLayout& L, float coded,
-                                                 const float* in, float* out, int x, int y, int z) {
-  float f[kQ], post[kQ];
+// The arrivals f at interior node (x, y, z): the neighbours' post values in `in`.
+CANOPY_HD CANOPY_FORCEINLINE void pullLoad(const PullLayout& L, const float* in, int x, int y, int z, float f[kQ]) {
   CANOPY_UNROLL
   for (int m = 0; m < kQ; ++m)
     f[m] = in[pullSlot(L, m, x - lattice::dir(m, 0), y - lattice::dir(m, 1), z - lattice::dir(m, 2))];
-  collide<Kind>(om, coded, f, post);
+}
+
+// Collide the arrivals f of interior node (x, y, z), coded density `coded` (of kind Kind, or any),
+// and store its post values at the node itself in `out`. f is modified (collide.h).
+// Fused: fmaf in the collision (the benchmark-only pull-fused scheme; not the CPU's bits).
+template <int Kind = kAnyKind, bool Fused = false>
+CANOPY_HD CANOPY_FORCEINLINE void pullCollideStore(const OmegaSet& om, const PullLayout& L, float coded, float f[kQ],
+                                                   float* out, int x, int y, int z) {
+  float post[kQ];
+  collide<Kind, Fused>(om, coded, f, post);
   CANOPY_UNROLL
   for (int m = 0; m < kQ; ++m) out[pullSlot(L, m, x, y, z)] = post[m];
+}
+
+// One step at interior node (x, y, z): pullLoad, then pullCollideStore. (The CUDA leaf kernel
+// calls the two itself, reading the node's density between them, so that the density load does not
+// delay the 19 arrival loads.)
+template <int Kind = kAnyKind, bool Fused = false>
+CANOPY_HD CANOPY_FORCEINLINE void pullUpdateNode(const OmegaSet& om, const PullLayout& L, float coded,
+                                                 const float* in, float* out, int x, int y, int z) {
+  float f[kQ];
+  pullLoad(L, in, x, y, z, f);
+  pullCollideStore<Kind, Fused>(om, L, coded, f, out, x, y, z);
 }
 
 // Boundary node (x, y, z): its post values, the collision of the fixed boundary values (what the

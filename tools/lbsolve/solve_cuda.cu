@@ -22,7 +22,7 @@
 // addresses.
 // Built with --fmad=false (CMakeLists.txt): no multiply-add contraction, so each node computes the
 // same IEEE operations in the same order as the CPU reference and the results agree bit for bit
-// (tests/lbsolve/test_lbsolve_cuda.cpp). PushFused uses explicit fmaf (benchmark only).
+// (tests/lbsolve/test_lbsolve_cuda.cpp). PushFused and PullFused use explicit fmaf (benchmark only).
 #include <algorithm>
 #include <cstdio>
 #include <cstring>
@@ -129,17 +129,23 @@ __global__ void pushGatherKernel(const float* __restrict__ cur, int64_t n, const
 // Interior leaf and empty nodes (wood nodes: pullWoodKernel); grid (ceil(nx / 128), ny, nz), so a
 // warp covers one tile of 32 nodes: every load of a direction reads 128 contiguous bytes (shifted by
 // at most one node, i.e. two tiles), every store writes 128 aligned bytes.
+template <bool Fused>
 __global__ void __launch_bounds__(kBlockX) pullLeafKernel(const OmegaSet omega, const PullLayout L,
                                                           const float* __restrict__ coded,
                                                           const float* __restrict__ in, float* __restrict__ out) {
   const int x = int(blockIdx.x) * kBlockX + int(threadIdx.x);
   const int y = int(blockIdx.y), z = int(blockIdx.z);
-  if (x >= L.d.nx - 1 || x < 1 || !L.d.interior(x, y, z)) return;  // boundary: its post values are fixed
+  if (!L.d.interior(x, y, z)) return;  // boundary: its post values are fixed
+  // The 19 arrival loads first, the density after them: branching on the density before issuing
+  // them would put a second memory round trip in front of every node.
+  float f[kQ];
+  pullLoad(L, in, x, y, z, f);
   const float c = coded[L.d.index(x, y, z)];
   if (c < 0.f) return;  // a wood node: pullWoodKernel
-  pullUpdateNode<kLeafKind>(omega, L, c, in, out, x, y, z);
+  pullCollideStore<kLeafKind, Fused>(omega, L, c, f, out, x, y, z);
 }
 
+template <bool Fused>
 __global__ void __launch_bounds__(kBlockX) pullWoodKernel(const OmegaSet omega, const PullLayout L,
                                                           const float* __restrict__ coded,
                                                           const float* __restrict__ in, float* __restrict__ out,
@@ -148,7 +154,7 @@ __global__ void __launch_bounds__(kBlockX) pullWoodKernel(const OmegaSet omega, 
   if (i >= count) return;
   int x, y, z;
   coordsOf(L.d, wood[i], x, y, z);
-  pullUpdateNode<kWoodKind>(omega, L, coded[wood[i]], in, out, x, y, z);
+  pullUpdateNode<kWoodKind, Fused>(omega, L, coded[wood[i]], in, out, x, y, z);
 }
 
 // The boundary nodes' post values (constant over a solve) into both buffers.
@@ -347,6 +353,7 @@ void uploadVector(cuda::DeviceBuffer<T>& buffer, const std::vector<T>& v) {
 int64_t blocksFor(int64_t count) { return (count + kBlockX - 1) / kBlockX; }
 
 bool isShift(CudaScheme scheme) { return scheme == CudaScheme::Shift || scheme == CudaScheme::ShiftSplit; }
+bool isPull(CudaScheme scheme) { return scheme == CudaScheme::Pull || scheme == CudaScheme::PullFused; }
 
 class CudaSolver final : public Solver {
  public:
@@ -402,19 +409,19 @@ class CudaSolver final : public Solver {
                           wood_.data(), woodCoded_.data(), int64_t(wood.size()), blocksFor(int64_t(wood.size())),
                           edge_.data(), int64_t(edge.size()), blocksFor(int64_t(edge.size()))};
     } else {
-      const size_t floats = scheme == CudaScheme::Pull ? size_t(pullStateFloats(pull_)) : size_t(kQ) * n;
+      const size_t floats = isPull(scheme) ? size_t(pullStateFloats(pull_)) : size_t(kQ) * n;
       bufA_.resize(floats);
       bufB_.resize(floats);
       cur_ = bufA_.data();
       prev_ = bufB_.data();
-      if (scheme == CudaScheme::Pull) totals_.resize(size_t(n));
+      if (isPull(scheme)) totals_.resize(size_t(n));
       // Wood nodes: every one for push (boundary nodes are sources there); pull updates interior ones only.
       std::vector<int64_t> wood;
       for (int z = 0; z < d.nz; ++z)
         for (int y = 0; y < d.ny; ++y)
           for (int x = 0; x < d.nx; ++x) {
             const int64_t p = d.index(x, y, z);
-            if (l.coded[size_t(p)] < 0.f && (scheme != CudaScheme::Pull || d.interior(x, y, z))) wood.push_back(p);
+            if (l.coded[size_t(p)] < 0.f && (!isPull(scheme) || d.interior(x, y, z))) wood.push_back(p);
           }
       uploadVector(wood_, wood);
     }
@@ -437,7 +444,7 @@ class CudaSolver final : public Solver {
     if (isShift(scheme_)) {
       // Interior nodes start at 0; boundary slots are never read (shift_stream.h).
       CANOPY_CUDA_CHECK(cudaMemsetAsync(state_.data(), 0, state_.size() * sizeof(float), stream_));
-    } else if (scheme_ == CudaScheme::Pull) {
+    } else if (isPull(scheme_)) {
       // Interior post values start at 0; the boundary's are written by the first step, which has
       // Omega (pull_stream.h).
       CANOPY_CUDA_CHECK(cudaMemsetAsync(bufA_.data(), 0, bufA_.size() * sizeof(float), stream_));
@@ -450,7 +457,7 @@ class CudaSolver final : public Solver {
 
   void beforeCheckedStep() override {
     keepTotals_ = isShift(scheme_);
-    if (scheme_ == CudaScheme::Pull) {  // the totals of the current state, from the post values before it
+    if (isPull(scheme_)) {  // the totals of the current state, from the post values before it
       pullTotalsKernel<<<grid(), kBlockX, 0, stream_>>>(pull_, prev_, fixedTotal_, t_ == 0, totals_.data());
       CANOPY_CUDA_CHECK(cudaGetLastError());
     }
@@ -487,17 +494,19 @@ class CudaSolver final : public Solver {
             state_.data());
         CANOPY_CUDA_CHECK(cudaGetLastError());
       }
-    } else if (scheme_ == CudaScheme::Pull) {
+    } else if (isPull(scheme_)) {
       if (t_ == 0) {
         pullBoundaryKernel<<<grid(), kBlockX, 0, stream_>>>(omega, boundary_values_, pull_, coded_.data(), cur_, prev_);
         CANOPY_CUDA_CHECK(cudaGetLastError());
       }
-      pullLeafKernel<<<grid(), kBlockX, 0, stream_>>>(omega, pull_, coded_.data(), cur_, prev_);
+      const bool fused = scheme_ == CudaScheme::PullFused;
+      (fused ? pullLeafKernel<true> : pullLeafKernel<false>)<<<grid(), kBlockX, 0, stream_>>>(omega, pull_, coded_.data(),
+                                                                                           cur_, prev_);
       CANOPY_CUDA_CHECK(cudaGetLastError());
       const int64_t woodCount = int64_t(wood_.size());
       if (woodCount > 0) {
-        pullWoodKernel<<<unsigned(blocksFor(woodCount)), kBlockX, 0, stream_>>>(omega, pull_, coded_.data(), cur_, prev_,
-                                                                                 wood_.data(), woodCount);
+        (fused ? pullWoodKernel<true> : pullWoodKernel<false>)<<<unsigned(blocksFor(woodCount)), kBlockX, 0, stream_>>>(
+            omega, pull_, coded_.data(), cur_, prev_, wood_.data(), woodCount);
         CANOPY_CUDA_CHECK(cudaGetLastError());
       }
       std::swap(cur_, prev_);
@@ -524,7 +533,7 @@ class CudaSolver final : public Solver {
       shiftResidualKernel<<<kRowBlocks, kRowThreads, 0, stream_>>>(
           shiftOffsets(lat_.dims, t_), shiftOffsets(lat_.dims, t_ - 1), lat_.dims, fixedTotal_, state_.data(),
           coded_.data(), totals_.data(), result_.data());
-    } else if (scheme_ == CudaScheme::Pull) {
+    } else if (isPull(scheme_)) {
       pullResidualKernel<<<kReduceBlocks, kReduceThreads, 0, stream_>>>(pull_, prev_, fixedTotal_, totals_.data(),
                                                                        result_.data());
     } else {
@@ -547,7 +556,7 @@ class CudaSolver final : public Solver {
       if (isShift(scheme_)) {
         shiftGatherKernel<<<kReduceBlocks, kReduceThreads, 0, stream_>>>(
             shiftOffsets(lat_.dims, t_), lat_.dims, fixedTotal_, state_.data(), stored_.data(), k, values_.data());
-      } else if (scheme_ == CudaScheme::Pull) {
+      } else if (isPull(scheme_)) {
         pullGatherKernel<<<kReduceBlocks, kReduceThreads, 0, stream_>>>(pull_, prev_, fixedTotal_, stored_.data(), k,
                                                                        values_.data());
       } else {

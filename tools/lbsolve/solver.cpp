@@ -19,6 +19,7 @@ const char* cudaSchemeName(CudaScheme scheme) {
     case CudaScheme::ShiftSplit: return "shift-split";
     case CudaScheme::PushFused: return "push-fused";
     case CudaScheme::Pull: return "pull";
+    case CudaScheme::PullFused: return "pull-fused";
   }
   return "?";
 }
