@@ -24,6 +24,29 @@ using lattice::dir;
 
 namespace {
 
+// A coded density per node: half the nodes empty, a fifth of the others wood (-rho), the rest leaf.
+std::vector<float> randomCoded(int64_t n, uint64_t seed) {
+  std::vector<float> coded(static_cast<size_t>(n));
+  for (int64_t i = 0; i < n; ++i) {
+    const float r = fixtures::hashUnit(uint64_t(i), seed);
+    const float rho = r < 0.5f ? 0.f : (r - 0.5f) * 2.f;
+    coded[size_t(i)] = fixtures::hashUnit(uint64_t(i), seed + 1) < 0.2f ? -rho : rho;
+  }
+  return coded;
+}
+
+// The push update's two state buffers, each in the initial state of a solve (initNode).
+void initPush(const Dims& d, const float boundary[kQ], std::vector<float>& a, std::vector<float>& b) {
+  a.assign(size_t(kQ) * size_t(d.count()), 0.f);
+  b.assign(a.size(), 0.f);
+  for (int z = 0; z < d.nz; ++z)
+    for (int y = 0; y < d.ny; ++y)
+      for (int x = 0; x < d.nx; ++x) {
+        initNode(d, boundary, a.data(), x, y, z);
+        initNode(d, boundary, b.data(), x, y, z);
+      }
+}
+
 // One full step of the lattice with the shared per-node function (what both backends run).
 void stepLattice(const OmegaSet& om, const Dims& d, const std::vector<float>& coded,
                  const std::vector<float>& in, std::vector<float>& out) {
@@ -479,13 +502,8 @@ TEST(Collide, EightLaneAndOneLaneUpdatesAreBitIdentical) {
   s.maxIterations = 9;
   const SolveResult solver = runSolves(L, {s}, Device())[0];  // 8-lane path where possible
 
-  std::vector<float> a(size_t(kQ) * L.dims.count()), b(a.size());
-  for (int z = 0; z < n; ++z)
-    for (int y = 0; y < n; ++y)
-      for (int x = 0; x < n; ++x) {
-        initNode(L.dims, s.boundary, a.data(), x, y, z);
-        initNode(L.dims, s.boundary, b.data(), x, y, z);
-      }
+  std::vector<float> a, b;
+  initPush(L.dims, s.boundary, a, b);
   for (int t = 0; t < 9; ++t) {
     stepLattice(s.omega, L.dims, L.coded, a, b);  // updateNode only
     std::swap(a, b);
@@ -502,22 +520,12 @@ TEST(Collide, EightLaneAndOneLaneUpdatesAreBitIdentical) {
 TEST(PullStreaming, MatchesThePushUpdateBitForBitAtEveryIteration) {
   const Dims d{37, 9, 11};
   const int64_t n = d.count();
-  std::vector<float> coded(static_cast<size_t>(n));
-  for (int64_t i = 0; i < n; ++i) {
-    const float r = fixtures::hashUnit(uint64_t(i), 5);
-    const float rho = r < 0.5f ? 0.f : (r - 0.5f) * 2.f;
-    coded[size_t(i)] = fixtures::hashUnit(uint64_t(i), 6) < 0.2f ? -rho : rho;
-  }
+  const std::vector<float> coded = randomCoded(n, 5);
   const OmegaSet om = makeOmegaSet(0.109, 0.891, -0.3);
   float boundary[kQ];
   for (int m = 0; m < kQ; ++m) boundary[m] = 0.04f * float(m + 2);
-  std::vector<float> a(size_t(kQ) * n), b(a.size());
-  for (int z = 0; z < d.nz; ++z)
-    for (int y = 0; y < d.ny; ++y)
-      for (int x = 0; x < d.nx; ++x) {
-        initNode(d, boundary, a.data(), x, y, z);
-        initNode(d, boundary, b.data(), x, y, z);
-      }
+  std::vector<float> a, b;  // the push update's state (reference)
+  initPush(d, boundary, a, b);
   const PullLayout L = pullLayout(d);
   ASSERT_EQ(L.nxp, 64);
   const float nan = std::numeric_limits<float>::quiet_NaN();  // padding and unwritten slots: never read
@@ -568,23 +576,13 @@ TEST(PullStreaming, MatchesThePushUpdateBitForBitAtEveryIteration) {
 TEST(ShiftStreaming, MatchesThePushUpdateBitForBitAtEveryIteration) {
   const Dims d{13, 9, 11};
   const int64_t n = d.count();
-  std::vector<float> coded(static_cast<size_t>(n));
-  for (int64_t i = 0; i < n; ++i) {
-    const float r = fixtures::hashUnit(uint64_t(i), 3);
-    const float rho = r < 0.5f ? 0.f : (r - 0.5f) * 2.f;               // half the nodes empty
-    coded[size_t(i)] = fixtures::hashUnit(uint64_t(i), 4) < 0.2f ? -rho : rho;  // some wood
-  }
+  const std::vector<float> coded = randomCoded(n, 3);
   const OmegaSet om = makeOmegaSet(0.109, 0.891, 0.3);
   float boundary[kQ];
   for (int m = 0; m < kQ; ++m) boundary[m] = 0.05f * float(m + 1);
   // Reference: the push update over every node, ping-pong.
-  std::vector<float> a(size_t(kQ) * n), b(a.size());
-  for (int z = 0; z < d.nz; ++z)
-    for (int y = 0; y < d.ny; ++y)
-      for (int x = 0; x < d.nx; ++x) {
-        initNode(d, boundary, a.data(), x, y, z);
-        initNode(d, boundary, b.data(), x, y, z);
-      }
+  std::vector<float> a, b;
+  initPush(d, boundary, a, b);
   std::vector<float> state(a.size(), 0.f), kept(size_t(n), -1.f);
   int64_t collided = 0;
   const int iterations = 40;  // the z-directions' ring (step 117 of 1287 slots) wraps 3 times
