@@ -2,6 +2,7 @@
 # with the bundle at .gpu/canopy.tar.xz carried): unpacks the bundle, puts its binaries and
 # libraries first on the paths, links the absolute paths the tests were built with, and defines
 # $B (bundle), $BIN, $O (= $OUT, the logs), $status and the helpers step and gtest.
+set -o pipefail  # a failing step piped into tee fails the run
 here=$(pwd)
 B=/tmp/canopy-bundle
 mkdir -p "$B" && tar xJf .gpu/canopy.tar.xz -C "$B"

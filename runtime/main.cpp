@@ -27,8 +27,9 @@ int main(int argc, char** argv) {
   app.add_option("--sun-intensity", o.sunIntensity, "Sun radiance")->capture_default_str();
   app.add_option("--step", o.stepFactor, "Brick step in voxels of the chosen level")->capture_default_str();
   app.add_option("--lod-bias", o.lodBias, "Added to the footprint's level (negative = coarser)")->capture_default_str();
-  app.add_option("--stop-opacity", o.stopOpacity, "A cone stops at this opacity; at most 1 - this of a pixel's light is dropped")
-      ->capture_default_str()->check(CLI::Range(0.5, 1.0));
+  double stopOpacity = 1.0 - double(canopy::play::kStopT);
+  app.add_option("--stop-opacity", stopOpacity, "A cone stops at this opacity; at most 1 - this of a pixel's light is dropped")
+      ->default_str("0.999")->check(CLI::Range(0.5, 1.0));
   app.add_option("--shadow-aperture", o.shadowAperture, "Shadow cone aperture (radians)")->capture_default_str();
   bool noShadows = false;
   app.add_flag("--no-shadows", noShadows, "Direct sun unshadowed");
@@ -62,6 +63,7 @@ int main(int argc, char** argv) {
     o.height = h;
     o.shadows = !noShadows;
     o.directSun = !noDirect;
+    if (app.count("--stop-opacity")) o.stopTransmittance = float(1.0 - stopOpacity);  // else exactly kStopT
     o.descentCache = !noDescentCache;
     o.warmStart = !coldStart;
     o.exactLight = lightMode == "exact";

@@ -226,7 +226,7 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
     throw usageError("--sigma, --ambient, --sun-intensity and --shadow-aperture must be >= 0 and --step > 0.01");
   if (o.warpTileWidth < 1 || o.warpTileWidth > 32 || 32 % o.warpTileWidth != 0) throw usageError("--warp-tile must be 1, 2, 4, 8, 16 or 32");
   if (o.shadowMethod != "map" && o.shadowMethod != "cone") throw usageError("--shadows must be map or cone, got '" + o.shadowMethod + "'");
-  if (!(o.stopOpacity >= 0.5f && o.stopOpacity <= 1.0f)) throw usageError("--stop-opacity must be in [0.5, 1]");
+  if (!(o.stopTransmittance >= 0.0f && o.stopTransmittance <= 0.5f)) throw usageError("--stop-opacity must be in [0.5, 1]");
   if (!(o.shadowMapBias >= 0.0f && o.shadowMapBias <= 64.0f)) throw usageError("--shadow-map-bias must be in [0, 64]");
   if (!(o.shadowMapCells >= 0.25f && o.shadowMapCells <= 1024.0f) || o.shadowMapMaxVoxels < 27 || o.shadowMapMaxVoxels > (1u << 28))
     throw usageError("--shadow-map-cells must be in [0.25, 1024] and --shadow-map-voxels in [27, 2^28]");
@@ -250,9 +250,10 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   shade.sigma = o.sigma;
   shade.stepFactor = o.stepFactor;
   shade.lodBias = o.lodBias;
-  shade.stopT = 1.0f - o.stopOpacity;
+  shade.stopT = o.stopTransmittance;
   shade.shadowAperture = o.shadowAperture;
-  shade.shadows = !o.shadows ? kShadowsOff : (o.shadowMethod == "cone" ? kShadowsCone : kShadowsMap);
+  // Without the direct term no shadow is needed (--no-direct-sun: the indirect light alone).
+  shade.shadows = !o.shadows || !o.directSun ? kShadowsOff : (o.shadowMethod == "cone" ? kShadowsCone : kShadowsMap);
   shade.shadowMapCells = o.shadowMapCells;
   shade.shadowMapBias = o.shadowMapBias;
   shade.descentCache = o.descentCache ? 1 : 0;
@@ -340,7 +341,7 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   r["evictions"] = st.evictions;
   r["corrupt_pages"] = st.corruptPages;
   r["seconds"] = total;
-  r["shadows"] = !o.shadows ? "off" : o.shadowMethod;
+  r["shadows"] = shade.shadows == kShadowsOff ? "off" : o.shadowMethod;
   if (shade.shadows == kShadowsMap) {
     const ShadowMapView& m = backend->lastShadowMap();
     r["shadow_map"] = {{"dim", {m.dim[0], m.dim[1], m.dim[2]}}, {"voxel", m.voxel}};

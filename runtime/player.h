@@ -30,7 +30,7 @@ struct PlayOptions {
   bool directSun = true;             // false (--no-direct-sun): only the indirect (LB and ambient) light
   float stepFactor = 0.5f;           // brick step, in voxels of the chosen level
   float lodBias = 0.0f;
-  float stopOpacity = 1.0f - kStopT;  // a cone stops at this opacity (0.999); what is left behind is dropped
+  float stopTransmittance = kStopT;   // a cone stops below this transmittance (--stop-opacity 1 - this); the rest is dropped
   float shadowAperture = 0.03f;      // shadow cone growth per unit length (soft shadows, coarser
                                      // levels and longer steps far from the receiver)
   bool shadows = true;

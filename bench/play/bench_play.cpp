@@ -118,7 +118,7 @@ int main(int argc, char** argv) {
       if (method.find("occ8") != std::string::npos) o.pixelMinBlocks = 8;  // "map-occ8": kernel for 8 blocks/SM
       if (method.find("occ6") != std::string::npos) o.pixelMinBlocks = 6;  // "map-occ6": kernel for 6 blocks/SM
       if (method.find("rows") != std::string::npos) o.warpTileWidth = 32;  // "map-rows": a warp on 32 pixels of a row
-      if (method.find("stop99") != std::string::npos) o.stopOpacity = 0.99f;  // quality dials (image changes)
+      if (method.find("stop99") != std::string::npos) o.stopTransmittance = 0.01f;  // quality dials (image changes)
       if (method.find("step1") != std::string::npos) o.stepFactor = 1.0f;
       if (method.find("lod1") != std::string::npos) o.lodBias = -1.0f;
       const std::string shadowMethod = method.substr(0, method.find('-'));

@@ -45,9 +45,11 @@ std::string slurp(const fs::path& p) {
 }
 
 // Writes an lbsolve-style file: Vec3 grids B00.., lattice metadata, canopy_direction, 1 cm voxels.
-// scattered: the sun bases (b > 0) are marked canopy_direct_beam = false, as canopy-lbsolve writes them.
+// noBeam: bit b marks base b canopy_direct_beam = false (canopy-lbsolve marks the sun bases 1..18:
+// kSunBases); 0: no such metadata at all (light files from before it).
+constexpr uint32_t kSunBases = ((1u << 19) - 1) & ~1u;
 void writeLightVdb(const std::string& path, const LatticeGeom& g, const std::vector<DenseLight>& lights,
-                   bool scattered = false) {
+                   uint32_t noBeam = 0) {
   canopy::vdbio::initialize();
   canopy::vdbio::LatticeMeta m;
   m.min = openvdb::Coord(g.min[0], g.min[1], g.min[2]);
@@ -67,7 +69,7 @@ void writeLightVdb(const std::string& path, const LatticeGeom& g, const std::vec
     canopy::vdbio::stampGrid(*grid, m);
     const auto c = latticeDirection(b);
     grid->insertMeta("canopy_direction", openvdb::Vec3IMetadata(openvdb::Vec3i(c[0], c[1], c[2])));
-    if (scattered) grid->insertMeta("canopy_direct_beam", openvdb::BoolMetadata(b == 0));
+    if (noBeam) grid->insertMeta("canopy_direct_beam", openvdb::BoolMetadata(!(noBeam >> b & 1u)));
     grids.push_back(grid);
   }
   canopy::vdbio::writeVdb(path, grids);
@@ -206,7 +208,7 @@ TEST(HaarTool, ScatteredSunBasesKeepTheirMarkThroughEncodeAndDecode) {
   const LatticeGeom g = makeGeom(14, 12, 10, -3, 0, 2);
   const std::string in = (tempDir() / "scattered.light.vdb").string();
   const std::string c = (tempDir() / "scattered.chaar").string(), dec = (tempDir() / "scattered.dec.vdb").string();
-  writeLightVdb(in, g, smoothSet(g), /*scattered=*/true);
+  writeLightVdb(in, g, smoothSet(g), kSunBases);
   ASSERT_EQ(run(in + " -o " + c + " --threshold 0.005 -q"), 0) << lastStderr();
   std::string out;
   ASSERT_EQ(run("info " + c + " --json", &out), 0) << lastStderr();
@@ -221,6 +223,14 @@ TEST(HaarTool, ScatteredSunBasesKeepTheirMarkThroughEncodeAndDecode) {
   EXPECT_TRUE(lightBaseHasBeam(*lf, 0));
   EXPECT_FALSE(lightBaseHasBeam(*lf, 5));
   EXPECT_TRUE(lightBaseHasBeam(*openLightField(smoothFile()), 5));  // no metadata: beam included
+  // A marked ambient base, or sun bases that disagree, are refused (exit 3) with no output.
+  for (uint32_t bad : {kSunBases | 1u, kSunBases & ~(1u << 7)}) {
+    const std::string badIn = (tempDir() / "badmark.light.vdb").string(), badOut = (tempDir() / "badmark.chaar").string();
+    writeLightVdb(badIn, g, smoothSet(g), bad);
+    EXPECT_EQ(run(badIn + " -o " + badOut + " -q"), 3) << bad;
+    EXPECT_NE(lastStderr().find("canopy_direct_beam"), std::string::npos) << lastStderr();
+    EXPECT_FALSE(std::filesystem::exists(badOut));
+  }
 }
 
 TEST(HaarTool, CliRejectsBadInputsWithDocumentedExitCodes) {

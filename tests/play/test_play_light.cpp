@@ -348,13 +348,16 @@ const std::string& haarSphere(float gradient = 0.0f) {
 
 // Constant bases compressed losslessly: with --light exact the Haar-lit ball renders as the
 // float16-lit one (the constants are exact in both), within float rounding (2e-5 relative), with
-// the sun's three bases and B_0 taken from the Haar items.
+// the sun's three bases and B_0 taken from the Haar items; at a sun intensity of 2.5 too (both
+// paths scale the sun bases, not B_0, by it).
 TEST(Light, ExactHaarLightRendersLikeTheSameLightInFloat16Items) {
   const canopy::CanopyFile f = canopy::CanopyFile::open(haarSphere());
   ASSERT_TRUE(f.model(0).flags & canopy::kCanopyModelHaarLight);
-  for (const char* sun : {"0,1,0", "0.3,0.8,-0.52"}) {
+  const std::pair<const char*, float> cases[] = {{"0,1,0", 1.0f}, {"0.3,0.8,-0.52", 1.0f}, {"0.3,0.8,-0.52", 2.5f}};
+  for (const auto& [sun, intensity] : cases) {
     pl::PlayOptions o = view(litSphere(), 21, 21);
     o.sun = sun;
+    o.sunIntensity = intensity;
     o.directSun = false;
     const std::vector<float> items = render(o);
     o.input = haarSphere();

@@ -69,6 +69,17 @@ LightFieldPtr openLightField(const std::string& path) {
     if (!active.empty() && !lattice.isInside(active))
       throw invalidInput(path + ": grid " + g->getName() + " has active voxels outside the lattice");
   }
+  // The direct-beam mark (lbsolve): never on the ambient base, and the same on every sun base.
+  uint32_t without = 0;
+  for (uint32_t b = 0; b < f->grids.size(); ++b) {
+    const bool ambient = f->grids[b]->metaValue<openvdb::Vec3i>("canopy_direction") == openvdb::Vec3i(0, 0, 0);
+    if (!lightBaseHasBeam(*f, b) && ambient)
+      throw invalidInput(path + ": grid " + f->grids[b]->getName() + " is the ambient base but marked canopy_direct_beam = false");
+    without += lightBaseHasBeam(*f, b) ? 0 : 1;
+  }
+  if (without != 0 && without + 1 != f->grids.size())
+    throw invalidInput(path + ": " + std::to_string(without) + " of the sun bases are marked canopy_direct_beam = false and the "
+                       "others are not (mixed); re-run canopy-lbsolve");
   return f;
 }
 

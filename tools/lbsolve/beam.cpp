@@ -54,8 +54,42 @@ std::vector<float> directBeam(const DenseLattice& lattice, const OmegaSet& omega
       beam[size_t(idx)] = out;
     }, 256);
   }
+  // The total at the stored nodes: f_0 + f_j (nodeTotal adds f_0 first, then zeros up to f_j).
+  // f_0 is what the node absorbed of the beam at the iteration before the last (c_0 = 0 keeps it
+  // at the node), the collision's row 0 restricted to Omega_00 and Omega_0j.
+  const float row0[2][2] = {{omega.col[0][0][0], omega.col[0][base][0]}, {omega.col[1][0][0], omega.col[1][base][0]}};
   std::vector<float> values(lattice.stored.size());
-  for (size_t i = 0; i < values.size(); ++i) values[i] = beam[size_t(lattice.stored[i])];
+  parallelFor(int64_t(values.size()), [&](int64_t i) {
+    const int64_t idx = lattice.stored[size_t(i)];
+    const int64_t row = idx / d.nx;
+    const int r[3] = {int(idx - row * d.nx), int(row % d.ny), int(row / d.ny)};
+    const float fj = beam[size_t(idx)];
+    float f0 = 0.0f;
+    const float coded = lattice.coded[size_t(idx)];
+    if (d.interior(r[0], r[1], r[2]) && coded != 0.0f) {
+      int depth = 1 << 30;
+      for (int b = 0; b < 3; ++b)
+        if (c[b] != 0) depth = std::min(depth, c[b] > 0 ? r[b] : n[b] - 1 - r[b]);
+      const bool wood = coded < 0.0f;
+      const float rho = wood ? -coded : coded;
+      const float* w = row0[wood ? 1 : 0];
+      // Iterations depth .. iterations-1 collided the beam fj here; a leaf node zeroes f_0 first at
+      // each, so only the last one counts, a wood node carries f_0 over.
+      const int first = wood ? depth : std::max(depth, iterations - 1);
+      for (int t = first; t < iterations; ++t) {
+        const float prev = wood ? f0 : 0.0f;
+        float acc = 0.0f;
+        acc += w[0] * prev;
+        acc += w[1] * fj;
+        const float x = prev + rho * acc;
+        f0 = x > 0.0f ? x : 0.0f;
+      }
+    }
+    float total = 0.0f;
+    total += f0;
+    total += fj;
+    values[size_t(i)] = total;
+  });
   return values;
 }
 

@@ -2,12 +2,16 @@
 // the stored sun bases so that the player's own direct sun term does not count the beam twice
 // (docs/play.md, "Direct sun and the LB sun bases").
 //
-// Base B_j (j = 1..18) has boundary f_i = delta_ij. Of what arrives at a node, the beam U_j is the
-// part that was never scattered: f_j carried straight along c_j from the boundary, each node r on
-// the way keeping max(0, f + rho(r) * (Omega_jj * f)) of it (the collision of collide.h restricted
-// to its diagonal: what a node scatters back into direction j itself is counted as beam too, as it
-// keeps its direction). B_j - U_j >= 0 is then the light scattered at least once (every
-// off-diagonal entry of Omega is >= 0 and the update is monotone), up to rounding.
+// Base B_j (j = 1..18) has boundary f_i = delta_ij, and its stored value is the total site density
+// sum_m f_m, f_0 (the light absorbed at the node) included. Of that total, the beam U_j is the part
+// that was never scattered:
+//   - f_j carried straight along c_j from the boundary, each node r on the way keeping
+//     max(0, f + rho(r) * (Omega_jj * f)) of it (the collision of collide.h restricted to Omega_jj:
+//     what a node scatters back into direction j itself keeps its direction and counts as beam), and
+//   - f_0, what the node absorbs of that beam (Omega_0j = sigma_a; at wood nodes f_0 is kept and
+//     decays with Omega_00 = -1 as in the full update, at leaf nodes it is zeroed every iteration).
+// B_j - U_j >= 0 is then the light scattered at least once (every other entry of Omega that feeds
+// f_j or f_0 is >= 0 and the update is monotone), up to rounding.
 #pragma once
 #include <vector>
 
@@ -15,12 +19,13 @@
 
 namespace canopy::lb {
 
-// U_j at lattice.stored (the order of SolveResult::values) after `iterations` iterations of the
-// push update from the initial state of collide.h's initNode (interior 0, boundary f_j = boundary),
-// with the channel's Omega. A node d steps downstream of the boundary along c_j receives the beam
-// at iteration d, so after fewer iterations it holds 0. The values are bit for bit those of a
-// Solver run with Omega's off-diagonal entries set to 0 (the diagonal's products are the same IEEE
-// operations in the same order; tests/lbsolve/test_lbsolve.cpp checks it). O(nodes), all cores.
+// U_j (f_0 + f_j, nodeTotal's sum) at lattice.stored (the order of SolveResult::values) after
+// `iterations` iterations of the push update from the initial state of collide.h's initNode
+// (interior 0, boundary f_j = boundary), with the channel's Omega. A node d steps downstream of the
+// boundary along c_j receives the beam at iteration d, so after fewer iterations it holds 0. The
+// values are bit for bit those of a Solver run with every entry of Omega but Omega_jj, Omega_0j and
+// Omega_00 set to 0 (the same IEEE operations in the same order; tests/lbsolve/test_collide.cpp,
+// DirectBeam). O(nodes) on all cores, plus (iterations - depth) steps at each wood node.
 // Precondition: 1 <= base <= 18.
 std::vector<float> directBeam(const DenseLattice& lattice, const OmegaSet& omega, int base, int iterations,
                               float boundary = 1.0f);

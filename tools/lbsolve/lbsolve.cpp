@@ -173,12 +173,15 @@ LbsolveReport solvePlant(const LbsolveOptions& o) {
     report.sunBases = o.scatteredSunBases ? "scattered" : "total";
     if (o.scatteredSunBases) {
       // B_j - U_j: the light of the sun bases that was scattered at least once (beam.h).
+      Progress progress("lbsolve direct beams", int64_t(specs.size() - 3));
       for (size_t k = 3; k < specs.size(); ++k) {
         const std::vector<float> beam =
             directBeam(L.dense, specs[k].omega, int(k / 3), results[k].iterations, specs[k].boundary[k / 3]);
         std::vector<float>& v = results[k].values;
         for (size_t i = 0; i < v.size(); ++i) v[i] = std::max(0.0f, v[i] - beam[i]);
+        progress.add();
       }
+      progress.done();
     }
     for (int b = 0; b < kQ; ++b) {
       auto g = makeLightGrid(lattice::baseName(b), L, results, size_t(3 * b));

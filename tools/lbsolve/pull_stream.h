@@ -3,8 +3,8 @@
 // functions so that the CPU tests run the very same index arithmetic (tests/lbsolve/test_collide.cpp
 // compares it with the reference push update bit for bit, iteration by iteration).
 //
-// Why (bench/lbsolve/NOTES.md, "The access pattern"): the push update over every node reaches
-// 53-59 % of the copy bandwidth, and bench_lbsolve_streams shows that its memory traffic alone,
+// Why (bench/lbsolve/NOTES.md, third round): the push update over every node reaches 53-59 % of
+// the copy bandwidth on an H100 and 45-56 % on an H200, and bench_lbsolve_streams shows that its memory traffic alone,
 // without the collision, does the same (58 % at 128^3, 68 % at 256^3 on an H200): shifted stores in
 // structure-of-arrays layout are the limit. Pull (shifted loads, aligned stores) in an
 // array-of-structures-of-arrays layout (tiles of 32 nodes along x, the 19 directions of a tile

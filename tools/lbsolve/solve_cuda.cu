@@ -10,7 +10,7 @@
 //   iteration as three launches of leaner kernels (measured slower: the parts no longer overlap).
 // - Pull: the push update reorganised (pull_stream.h): post-collision values stored aligned at each
 //   node in tiles of 32 nodes (19 directions contiguous per tile), arrivals read from the
-//   neighbours; ping-pong buffers, the same 156 bytes per node, the same bits.
+//   neighbours; ping-pong buffers, the same 156 bytes moved per node update, the same bits.
 // - Push: the push update of listing 5.2 over every node: structure of arrays, state[m * n + idx],
 //   idx = (z*ny + y)*nx + x, one thread per node, x fastest within a block (a warp reads 32
 //   consecutive floats for every m; the pushed writes are shifted by at most one element in x),
@@ -457,7 +457,10 @@ class CudaSolver final : public Solver {
 
   void beforeCheckedStep() override {
     keepTotals_ = isShift(scheme_);
-    if (isPull(scheme_)) {  // the totals of the current state, from the post values before it
+    // Pull: the totals of the current state, from the post values before it. Before the first step
+    // (t_ == 0) they are the initial state's: 0 inside (the buffers hold zeros and the boundary's
+    // post values are not written yet, so the sums would be 0 too; the flag says it outright).
+    if (isPull(scheme_)) {
       pullTotalsKernel<<<grid(), kBlockX, 0, stream_>>>(pull_, prev_, fixedTotal_, t_ == 0, totals_.data());
       CANOPY_CUDA_CHECK(cudaGetLastError());
     }
