@@ -35,11 +35,14 @@ VOXELIZE_FLAGS ?=
 LBSOLVE_FLAGS ?=
 # the compression dial: --max-error E (guaranteed max abs error) or --threshold T. The .chaar's
 # bricks go into the .canopy as the finest level's exact light (canopy-play --light exact,
-# docs/canopy-format.md), so this also decides that part of the packed file. Default: threshold
-# 0.05, fp16 coefficients; measured on oak_medium at 64^3 (bench/RESULTS.md, bench-light-packing):
-# 4.3 MB of Haar pages with an RMS error of 0.45% and a max of 2.6% of the peak (the float16 items,
-# 6.2 MB: 1.3% and 28%); the old default, --max-error 0.01 in fp32, was 17.8 MB per .chaar.
-HAAR_ERROR ?= --threshold 0.05
+# docs/canopy-format.md), so this also decides that part of the packed file. The threshold is
+# absolute, and the sun bases (scattered light only, lbsolve's default) are ~14x smaller than the
+# ambient base, so it is chosen for them. Default: threshold 0.01, fp16 coefficients; measured on
+# oak_medium at 64^3 (bench/RESULTS.md, bench-light-packing): 5.4 MB of Haar pages, errors of the
+# sun bases 1.1% RMS and 6.5% max of their peak (all 19 bases: 0.08% and 0.5% of the overall peak);
+# at 0.05 (the default before) 1.5 MB but 4.2% and 29%. The float16 items (6.2 MB) are off by
+# 3.9% RMS and 40% max of the sun bases' peak whatever the threshold.
+HAAR_ERROR ?= --threshold 0.01
 HAAR_FLAGS ?= --precision fp16
 PACK_FLAGS ?=
 PLAY_FLAGS ?= --size 512x512
