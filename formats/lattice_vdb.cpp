@@ -160,4 +160,20 @@ VdbFile readVdb(const std::string& path) {
   return f;
 }
 
+bool gridHasDirectBeam(const openvdb::GridBase& grid) {
+  const auto m = grid.getMetadata<openvdb::BoolMetadata>(kDirectBeamMeta);
+  return !m || m->value();
+}
+
+bool sunBasesScattered(const std::string& path, const std::vector<bool>& beam) {
+  if (!beam.empty() && !beam[0])
+    throw invalidInput(path + ": the ambient base B00 is marked canopy_direct_beam = false (only sun bases can be)");
+  size_t without = 0;
+  for (size_t b = 1; b < beam.size(); ++b) without += beam[b] ? 0 : 1;
+  if (without != 0 && without + 1 != beam.size())
+    throw invalidInput(path + ": " + std::to_string(without) + " of the " + std::to_string(beam.size() - 1) +
+                       " sun bases have no direct beam and the others do (mixed canopy_direct_beam); re-run canopy-lbsolve");
+  return without != 0;
+}
+
 }  // namespace canopy::vdbio

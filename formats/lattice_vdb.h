@@ -9,6 +9,7 @@
 // give the same bytes. readVdb() turns every OpenVDB/Boost failure into a one-line canopy::Error.
 #pragma once
 #include <string>
+#include <vector>
 
 #include <openvdb/openvdb.h>
 
@@ -58,6 +59,16 @@ struct VdbFile {
 // Reads every grid of a .vdb file. Throws Io (missing/unreadable) or InvalidInput (not a VDB,
 // truncated, corrupt).
 VdbFile readVdb(const std::string& path);
+
+// canopy-lbsolve's mark on each light base grid: canopy_direct_beam = false where a sun base holds
+// only scattered light (its direct beam removed, docs/lbsolve.md). Absent (light files from before
+// the mark): the beam is included.
+constexpr const char* kDirectBeamMeta = "canopy_direct_beam";
+bool gridHasDirectBeam(const openvdb::GridBase& grid);
+// Whether a light field's sun bases hold scattered light only, from each base's mark (beam[b]:
+// base b includes its direct beam; b = 0 is the ambient base B00). Throws InvalidInput naming
+// `path` when the ambient base is marked or the sun bases disagree.
+bool sunBasesScattered(const std::string& path, const std::vector<bool>& beam);
 
 // Deterministic-UUID helper exposed for tests: rewrites the UUID field of an OpenVDB file image in
 // place from the hash of the other bytes. Returns false if the image is not a VDB header.

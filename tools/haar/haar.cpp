@@ -70,23 +70,13 @@ LightFieldPtr openLightField(const std::string& path) {
       throw invalidInput(path + ": grid " + g->getName() + " has active voxels outside the lattice");
   }
   // The direct-beam mark (lbsolve): never on the ambient base, and the same on every sun base.
-  uint32_t without = 0;
-  for (uint32_t b = 0; b < f->grids.size(); ++b) {
-    const bool ambient = f->grids[b]->metaValue<openvdb::Vec3i>("canopy_direction") == openvdb::Vec3i(0, 0, 0);
-    if (!lightBaseHasBeam(*f, b) && ambient)
-      throw invalidInput(path + ": grid " + f->grids[b]->getName() + " is the ambient base but marked canopy_direct_beam = false");
-    without += lightBaseHasBeam(*f, b) ? 0 : 1;
-  }
-  if (without != 0 && without + 1 != f->grids.size())
-    throw invalidInput(path + ": " + std::to_string(without) + " of the sun bases are marked canopy_direct_beam = false and the "
-                       "others are not (mixed); re-run canopy-lbsolve");
+  std::vector<bool> beam;
+  for (const auto& g : f->grids) beam.push_back(vdbio::gridHasDirectBeam(*g));
+  vdbio::sunBasesScattered(path, beam);
   return f;
 }
 
-bool lightBaseHasBeam(const LightField& f, uint32_t b) {
-  const auto m = f.grids.at(b)->getMetadata<openvdb::BoolMetadata>("canopy_direct_beam");
-  return !m || m->value();
-}
+bool lightBaseHasBeam(const LightField& f, uint32_t b) { return vdbio::gridHasDirectBeam(*f.grids.at(b)); }
 
 DenseLight lightBase(const LightField& f, uint32_t b, std::array<int32_t, 3>& dir) {
   const auto& g = f.grids.at(b);
@@ -283,7 +273,7 @@ nlohmann::json decodeToVdb(const std::string& input, const std::string& output) 
     vdbio::stampGrid(*g, lm);
     const ChaarBaseEntry& e = d.bases[b];
     g->insertMeta("canopy_direction", openvdb::Vec3IMetadata(openvdb::Vec3i(e.direction[0], e.direction[1], e.direction[2])));
-    g->insertMeta("canopy_direct_beam", openvdb::BoolMetadata((e.flags & kChaarBaseScattered) == 0));
+    g->insertMeta(vdbio::kDirectBeamMeta, openvdb::BoolMetadata((e.flags & kChaarBaseScattered) == 0));
     g->insertMeta("canopy_haar_threshold", openvdb::FloatMetadata(e.threshold));
     g->insertMeta("canopy_haar_max_error", openvdb::FloatMetadata(e.maxError));
     activeTotal += g->activeVoxelCount();

@@ -20,6 +20,14 @@ std::vector<float> directBeam(const DenseLattice& lattice, const OmegaSet& omega
   // upstream neighbour r - c lies in the slice before.
   const int a = c[2] != 0 ? 2 : c[1] != 0 ? 1 : 0;
   const int u = a == 0 ? 1 : 0, v = a == 2 ? 1 : 2;  // the slice's two axes
+  // Steps back to the boundary along -c from interior node r: the iteration at which the beam first
+  // arrives there.
+  auto depthOf = [&](const int r[3]) {
+    int depth = 1 << 30;
+    for (int b = 0; b < 3; ++b)
+      if (c[b] != 0) depth = std::min(depth, c[b] > 0 ? r[b] : n[b] - 1 - r[b]);
+    return depth;
+  };
   std::vector<float> beam(size_t(d.count()), 0.0f);
   const int64_t off = d.index(c[0], c[1], c[2]) - d.index(0, 0, 0);
   for (int s = 0; s < n[a]; ++s) {
@@ -34,11 +42,7 @@ std::vector<float> directBeam(const DenseLattice& lattice, const OmegaSet& omega
         beam[size_t(idx)] = boundary;  // the outer layer keeps its fixed value
         return;
       }
-      // Steps back to the boundary along -c: the iteration at which the beam first arrives here.
-      int depth = 1 << 30;
-      for (int b = 0; b < 3; ++b)
-        if (c[b] != 0) depth = std::min(depth, c[b] > 0 ? r[b] : n[b] - 1 - r[b]);
-      if (depth > iterations) return;  // still 0
+      if (depthOf(r) > iterations) return;  // still 0
       // The upstream node's collision (collide.h, collideKind, with only f_j non-zero): the same
       // operations, so the same bits as the solver's.
       const float f = beam[size_t(idx - off)];
@@ -67,9 +71,7 @@ std::vector<float> directBeam(const DenseLattice& lattice, const OmegaSet& omega
     float f0 = 0.0f;
     const float coded = lattice.coded[size_t(idx)];
     if (d.interior(r[0], r[1], r[2]) && coded != 0.0f) {
-      int depth = 1 << 30;
-      for (int b = 0; b < 3; ++b)
-        if (c[b] != 0) depth = std::min(depth, c[b] > 0 ? r[b] : n[b] - 1 - r[b]);
+      const int depth = depthOf(r);
       const bool wood = coded < 0.0f;
       const float rho = wood ? -coded : coded;
       const float* w = row0[wood ? 1 : 0];

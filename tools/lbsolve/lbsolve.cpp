@@ -188,7 +188,7 @@ LbsolveReport solvePlant(const LbsolveOptions& o) {
       g->insertMeta("canopy_direction", openvdb::Vec3IMetadata(openvdb::Vec3i(
                                             lattice::dir(b, 0), lattice::dir(b, 1), lattice::dir(b, 2))));
       // B00 (ambient) keeps the sky's unscattered light: the player has no other sky term.
-      g->insertMeta("canopy_direct_beam", openvdb::BoolMetadata(b == 0 || !o.scatteredSunBases));
+      g->insertMeta(vdbio::kDirectBeamMeta, openvdb::BoolMetadata(b == 0 || !o.scatteredSunBases));
       stampParams(*g, report.params);
       grids.push_back(g);
     }
@@ -207,7 +207,7 @@ LbsolveReport solvePlant(const LbsolveOptions& o) {
     g->insertMeta("canopy_sun_bases", openvdb::Vec3IMetadata(openvdb::Vec3i(w.base[0], w.base[1], w.base[2])));
     g->insertMeta("canopy_sun_weights", openvdb::Vec3SMetadata(openvdb::Vec3s(w.weight[0], w.weight[1], w.weight[2])));
     g->insertMeta("canopy_ambient", openvdb::FloatMetadata(o.ambient));
-    g->insertMeta("canopy_direct_beam", openvdb::BoolMetadata(true));  // a static bake: all of the light
+    g->insertMeta(vdbio::kDirectBeamMeta, openvdb::BoolMetadata(true));  // a static bake: all of the light
     stampParams(*g, report.params);
     grids.push_back(g);
   }

@@ -78,19 +78,6 @@ ModelSource readDensityVdb(const std::string& path, const std::string& name) {
   return src;
 }
 
-namespace {
-// Whether the 18 sun bases are scattered-only, from each one's flag (beam[b]: the base includes
-// its direct beam); they must agree.
-bool scatteredSunBases(const std::string& path, const bool beam[kCanopyLightBases]) {
-  int without = 0;
-  for (uint32_t b = 1; b < kCanopyLightBases; ++b) without += beam[b] ? 0 : 1;
-  if (without != 0 && without != int(kCanopyLightBases) - 1)
-    throw invalidInput(path + ": " + std::to_string(without) + " of the 18 sun bases have no direct beam and the others do "
-                       "(mixed canopy_direct_beam): re-run canopy-lbsolve");
-  return without != 0;
-}
-}  // namespace
-
 LightVdb readLightVdb(const std::string& path, const ModelSource& model) {
   vdbio::VdbFile file = vdbio::readVdb(path);
   std::vector<openvdb::Vec3SGrid::ConstPtr> grids;
@@ -107,12 +94,9 @@ LightVdb readLightVdb(const std::string& path, const ModelSource& model) {
   }
   LightVdb out;
   out.sourceLabel = vdbio::describeSource(path);
-  bool beam[kCanopyLightBases];
-  for (uint32_t b = 0; b < kCanopyLightBases; ++b) {
-    const auto m = grids[b]->getMetadata<openvdb::BoolMetadata>("canopy_direct_beam");
-    beam[b] = !m || m->value();  // absent: a light file from before the flag, beam included
-  }
-  out.scatteredSun = scatteredSunBases(path, beam);
+  std::vector<bool> beam;
+  for (const auto& g : grids) beam.push_back(vdbio::gridHasDirectBeam(*g));
+  out.scatteredSun = vdbio::sunBasesScattered(path, beam);
   // Tree::getValue on a const tree is thread-safe (no accessor cache): the builder calls this from
   // several threads.
   out.fn = [grids](int32_t i, int32_t j, int32_t k, float* o) {
@@ -145,9 +129,9 @@ LightVdb readChaarLight(const std::string& path, const ModelSource& model, bool 
       throw invalidInput(path + ": its lattice differs from the density lattice of model '" + model.name + "'");
   LightVdb out;
   out.sourceLabel = vdbio::describeSource(path);
-  bool beam[kCanopyLightBases];
-  for (uint32_t b = 0; b < kCanopyLightBases; ++b) beam[b] = (data->bases[b].flags & haar::kChaarBaseScattered) == 0;
-  out.scatteredSun = scatteredSunBases(path, beam);
+  std::vector<bool> beam;
+  for (const haar::ChaarBaseEntry& e : data->bases) beam.push_back((e.flags & haar::kChaarBaseScattered) == 0);
+  out.scatteredSun = vdbio::sunBasesScattered(path, beam);
   if (withHaar) out.haar = std::make_shared<const CanopyHaarPages>(canopyHaarPagesFromChaar(*data));
   out.fn = [data, fn = chaarLightFn(data->view())](int32_t i, int32_t j, int32_t k, float* o) { fn(i, j, k, o); };  // keeps data alive
   return out;
