@@ -154,14 +154,6 @@ struct CoefReader16 {
   }
 };
 
-// Coefficient c of a brick (zero when its mask bit is clear): the listing-5.5 popcount rule.
-template <class Reader>
-CANOPY_HD CANOPY_FORCEINLINE Rgb brickCoef(uint64_t mask, uint64_t first, const Reader& read, int c) {
-  if (!((mask >> c) & 1u)) return Rgb{};
-  const uint64_t below = mask & ((uint64_t(1) << c) - 1u);
-  return read(first + uint64_t(popcount64(below)));
-}
-
 // Expands a brick's kept coefficients into 64 values per channel and unlifts them (raw bricks are
 // copied). out[ch][c]. This is the reference decoder of one brick.
 template <class Reader>
@@ -190,29 +182,53 @@ CANOPY_HD CANOPY_FORCEINLINE float trilinear(const float v[2][2][2], float fx, f
   return lerpRn(lerpRn(c00, c10, fy), lerpRn(c01, c11, fy), fz);
 }
 
-// Folds coefficient/partial value c with axis index k into the reconstruction of position pos
-// (0..3) along that axis, in the operation order of unlift4: ((s +- D) +- d_{pos/2}).
-CANOPY_HD CANOPY_FORCEINLINE void foldAxis(float& acc, float c, int k, int pos) {
-  if (k == 0)
-    acc = c;
-  else if (k == 1)
-    acc = pos < 2 ? addRn(acc, c) : subRn(acc, c);
-  else if (k - 2 == (pos >> 1))
-    acc = (pos & 1) ? subRn(acc, c) : addRn(acc, c);
+// Reconstruction of position pos (0..3) along one axis from that axis's coefficients [s, D, d0, d1]
+// is ((s +- D) +- d_{pos/2}) (unlift4). axisSign(k, pos) is the sign with which coefficient k
+// enters it: +1, -1, or 0 where it does not enter, as a 2-bit code (0 none, 1 plus, 3 minus) of
+// one packed constant: k = 0: + + + +; k = 1: + + - -; k = 2: + - 0 0; k = 3: 0 0 + -.
+constexpr uint32_t kAxisSignTable = (1u << 0) | (1u << 2) | (1u << 4) | (1u << 6) |     // k = 0
+                                    (1u << 8) | (1u << 10) | (3u << 12) | (3u << 14) |  // k = 1
+                                    (1u << 16) | (3u << 18) |                           // k = 2
+                                    (1u << 28) | (3u << 30);                            // k = 3
+CANOPY_HD CANOPY_FORCEINLINE uint32_t axisSign(int k, int pos) { return (kAxisSignTable >> (2 * (4 * k + pos))) & 3u; }
+
+// acc +- c by sign code s (0: acc unchanged). Adding what the reference decoder adds, minus its
+// additions of exact zeros (x + 0 == x), so the result equals the reference's value.
+CANOPY_HD CANOPY_FORCEINLINE float foldSigned(float acc, float c, uint32_t s) {
+  const float t = (s & 2u) ? subRn(acc, c) : addRn(acc, c);
+  return s ? t : acc;
 }
-CANOPY_HD CANOPY_FORCEINLINE void foldAxis(Rgb& acc, const Rgb& c, int k, int pos) {
-  foldAxis(acc.r, c.r, k, pos);
-  foldAxis(acc.g, c.g, k, pos);
-  foldAxis(acc.b, c.b, k, pos);
+CANOPY_HD CANOPY_FORCEINLINE void foldSigned(Rgb& acc, const Rgb& c, uint32_t s) {
+  acc.r = foldSigned(acc.r, c.r, s);
+  acc.g = foldSigned(acc.g, c.g, s);
+  acc.b = foldSigned(acc.b, c.b, s);
 }
-// Axis coefficient indices that influence positions l and l+1: always 0 and 1, plus d0 (k=2)
-// for l <= 1 and d1 (k=3) for l >= 1.
-CANOPY_HD CANOPY_FORCEINLINE bool axisNeeds(int k, int l) {
-  return k < 2 || (k == 2 && l <= 1) || (k == 3 && l >= 1);
+
+// The axis coefficients that positions l and l+1 (l in 0..2) depend on, as a 4-bit set: s and D
+// always, d0 for l <= 1, d1 for l >= 1.
+CANOPY_HD CANOPY_FORCEINLINE uint32_t axisNeedBits(int l) { return l == 0 ? 0x7u : (l == 1 ? 0xfu : 0xbu); }
+// The 64-bit set of brick coefficients (c = x + 4y + 16z) that a footprint at (lx, ly, lz) depends
+// on: the product of the three axis sets.
+CANOPY_HD CANOPY_FORCEINLINE uint64_t footprintNeedMask(int lx, int ly, int lz) {
+  const uint32_t nx = axisNeedBits(lx), ny = axisNeedBits(ly), nz = axisNeedBits(lz);
+  // Spread a 4-bit set to one bit per nibble (4 bits apart) and per 16 bits; multiplying places
+  // the inner set at each selected position (no carries: the sets do not overlap).
+  const uint32_t spreadY = (ny & 1u) | ((ny & 2u) << 3) | ((ny & 4u) << 6) | ((ny & 8u) << 9);
+  const uint64_t spreadZ = uint64_t(nz & 1u) | (uint64_t(nz & 2u) << 15) | (uint64_t(nz & 4u) << 30) |
+                           (uint64_t(nz & 8u) << 45);
+  return spreadZ * uint64_t(spreadY * nx);
+}
+
+// Entries of the coefficient stream before coefficient c of a brick: popcount of the mask below c.
+CANOPY_HD CANOPY_FORCEINLINE uint32_t maskRank(uint64_t mask, int c) {
+  return uint32_t(popcount64(mask & ((uint64_t(1) << c) - 1u)));
 }
 
 // Trilinear sample of one brick: (lx, ly, lz) in 0..2 is the lower texel of the 2^3 footprint
-// (brick-local), (fx, fy, fz) in [0, 1] the fractions. Reconstructs just the 8 texels.
+// (brick-local), (fx, fy, fz) in [0, 1] the fractions. Reconstructs just the 8 texels from just
+// the kept coefficients they depend on (at most 27 of the 64; a row of 4 x-coefficients, or a
+// z-slab of 16, with none of them kept is skipped whole), in the reference decoder's order: each
+// row unlifted along x, the rows of a slab along y, the slabs along z.
 template <class Reader>
 CANOPY_HD inline Rgb sampleBrick(const BrickRecord& rec, const Reader& read, int lx, int ly, int lz,
                                  float fx, float fy, float fz) {
@@ -220,46 +236,60 @@ CANOPY_HD inline Rgb sampleBrick(const BrickRecord& rec, const Reader& read, int
   if (mask == 0) return Rgb{};
   const uint32_t first = rec.first();
   if (mask == 1u && !rec.raw()) return read(first);  // only the average: the fast path
-  Rgb v[2][2][2];  // [z][y][x]
+  Rgb v[2][2][2] = {};  // [z][y][x]
   if (rec.raw()) {
+    // Raw values: texel (x, y, z) is entry c of the brick when its mask bit is set, else zero.
     CANOPY_UNROLL
     for (int dz = 0; dz < 2; ++dz)
       CANOPY_UNROLL
-      for (int dy = 0; dy < 2; ++dy)
+      for (int dy = 0; dy < 2; ++dy) {
+        const int row = brickIndex(0, ly + dy, lz + dz);
+        const uint32_t rowBits = uint32_t(mask >> row) & 0xfu;
+        if (!(rowBits >> lx & 3u)) continue;
+        const uint32_t rowFirst = first + maskRank(mask, row);
         CANOPY_UNROLL
-        for (int dx = 0; dx < 2; ++dx)
-          v[dz][dy][dx] = brickCoef(mask, first, read, brickIndex(lx + dx, ly + dy, lz + dz));
+        for (int dx = 0; dx < 2; ++dx) {
+          const int x = lx + dx;
+          if (rowBits >> x & 1u) v[dz][dy][dx] = read(rowFirst + uint32_t(popcount64(rowBits & ((1u << x) - 1u))));
+        }
+      }
   } else {
+    const uint64_t need = mask & footprintNeedMask(lx, ly, lz);
     CANOPY_UNROLL
     for (int kz = 0; kz < 4; ++kz) {
-      if (!axisNeeds(kz, lz)) continue;
-      Rgb w[2][2];  // [y][x]: x and y already unlifted, coefficient index kz along z
+      const uint32_t slab = uint32_t(need >> (16 * kz)) & 0xffffu;
+      if (!slab) continue;
+      Rgb w[2][2] = {};  // [y][x]: x and y unlifted, coefficient index kz along z
       CANOPY_UNROLL
       for (int ky = 0; ky < 4; ++ky) {
-        if (!axisNeeds(ky, ly)) continue;
-        Rgb u[2];  // [x]: x unlifted, coefficient indices (ky, kz)
-        if ((mask >> brickIndex(0, ky, kz)) & 0xfu) {
-          CANOPY_UNROLL
-          for (int kx = 0; kx < 4; ++kx) {
-            if (!axisNeeds(kx, lx)) continue;
-            const Rgb c = brickCoef(mask, first, read, brickIndex(kx, ky, kz));
-            foldAxis(u[0], c, kx, lx);
-            foldAxis(u[1], c, kx, lx + 1);
-          }
-        } else {
-          u[0] = u[1] = Rgb{};  // a row of zeros: unlifts to zeros
+        const uint32_t nib = (slab >> (4 * ky)) & 0xfu;
+        if (!nib) continue;
+        const int row = brickIndex(0, ky, kz);
+        const uint32_t rowBits = uint32_t(mask >> row) & 0xfu;
+        const uint32_t rowFirst = first + maskRank(mask, row);
+        Rgb u[2] = {};  // [x]: x unlifted, coefficient indices (ky, kz)
+        CANOPY_UNROLL
+        for (int kx = 0; kx < 4; ++kx) {
+          if (!(nib >> kx & 1u)) continue;
+          const Rgb c = read(rowFirst + uint32_t(popcount64(rowBits & ((1u << kx) - 1u))));
+          foldSigned(u[0], c, axisSign(kx, lx));
+          foldSigned(u[1], c, axisSign(kx, lx + 1));
         }
         CANOPY_UNROLL
-        for (int dy = 0; dy < 2; ++dy)
+        for (int dy = 0; dy < 2; ++dy) {
+          const uint32_t s = axisSign(ky, ly + dy);
           CANOPY_UNROLL
-          for (int dx = 0; dx < 2; ++dx) foldAxis(w[dy][dx], u[dx], ky, ly + dy);
+          for (int dx = 0; dx < 2; ++dx) foldSigned(w[dy][dx], u[dx], s);
+        }
       }
       CANOPY_UNROLL
-      for (int dz = 0; dz < 2; ++dz)
+      for (int dz = 0; dz < 2; ++dz) {
+        const uint32_t s = axisSign(kz, lz + dz);
         CANOPY_UNROLL
         for (int dy = 0; dy < 2; ++dy)
           CANOPY_UNROLL
-          for (int dx = 0; dx < 2; ++dx) foldAxis(v[dz][dy][dx], w[dy][dx], kz, lz + dz);
+          for (int dx = 0; dx < 2; ++dx) foldSigned(v[dz][dy][dx], w[dy][dx], s);
+      }
     }
   }
   float ch[2][2][2];

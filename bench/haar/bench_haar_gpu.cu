@@ -8,6 +8,8 @@
 // checksum so nothing is optimised away; timings by cudaEvent, best of `reps`.
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
+#include <algorithm>
 #include <random>
 #include <string>
 #include <vector>
@@ -15,16 +17,67 @@
 #include "canopy/parallel_cuda.cuh"
 #include "formats/haar_cuda.h"
 #include "formats/haar_view.h"
+#include "old_sampler.cuh"
 
 using namespace canopy::haar;
 
 namespace {
 
-__global__ void compressedKernel(ChaarView v, int base, const float4* pts, size_t n, float* sum) {
+// The samplers compared: the shipped chaarSample; the previous sampler (old_sampler.cuh) on the
+// same data; the shipped sampler over a padded device copy of the coefficients (one 16-byte fp32
+// or 8-byte fp16 load per coefficient instead of three scalar loads).
+enum class Sampler { Shipped, Old, Padded };
+
+struct PaddedReader32 {
+  const float4* p;
+  __device__ __forceinline__ Rgb operator()(uint64_t i) const {
+    const float4 c = p[i];
+    return Rgb{c.x, c.y, c.z};
+  }
+};
+struct PaddedReader16 {
+  const uint2* p;
+  __device__ __forceinline__ Rgb operator()(uint64_t i) const {
+    const uint2 c = p[i];
+    return Rgb{canopy::halfToFloat(uint16_t(c.x & 0xffffu)), canopy::halfToFloat(uint16_t(c.x >> 16)),
+               canopy::halfToFloat(uint16_t(c.y & 0xffffu))};
+  }
+};
+
+template <Sampler S>
+__device__ __forceinline__ Rgb sampleWith(const ChaarView& v, int base, const void* padded, float x, float y, float z) {
+  if constexpr (S == Sampler::Shipped) {
+    return chaarSample(v, base, x, y, z);
+  } else {
+    const BrickLookup at = locate(v, x, y, z);
+    if (at.slot == kEmptySlot) return Rgb{};
+    const BrickRecord rec = v.records[uint64_t(base) * v.slotCount + at.slot];
+    const uint64_t off = v.baseCoefOffset[base];
+    const bool fp16 = v.precision == Precision::Fp16;
+    if constexpr (S == Sampler::Old) {
+      if (fp16) return old::sampleBrick(rec, CoefReader16{static_cast<const uint16_t*>(v.coefs) + 3 * off}, at.lx, at.ly, at.lz, at.fx, at.fy, at.fz);
+      return old::sampleBrick(rec, CoefReader32{static_cast<const float*>(v.coefs) + 3 * off}, at.lx, at.ly, at.lz, at.fx, at.fy, at.fz);
+    } else {
+      if (fp16) return sampleBrick(rec, PaddedReader16{static_cast<const uint2*>(padded) + off}, at.lx, at.ly, at.lz, at.fx, at.fy, at.fz);
+      return sampleBrick(rec, PaddedReader32{static_cast<const float4*>(padded) + off}, at.lx, at.ly, at.lz, at.fx, at.fy, at.fz);
+    }
+  }
+}
+
+// out == nullptr: timing (the sum keeps the sample live); else the first nOut samples are stored.
+template <Sampler S>
+__global__ void compressedKernel(ChaarView v, int base, const void* padded, const float4* pts, size_t n, float* sum,
+                                 float* out) {
   const size_t i = blockIdx.x * size_t(blockDim.x) + threadIdx.x;
   if (i >= n) return;
   const float4 p = pts[i];
-  const Rgb c = chaarSample(v, base, p.x, p.y, p.z);
+  const Rgb c = sampleWith<S>(v, base, padded, p.x, p.y, p.z);
+  if (out) {
+    out[3 * i] = c.r;
+    out[3 * i + 1] = c.g;
+    out[3 * i + 2] = c.b;
+    return;
+  }
   const float s = c.r + c.g + c.b;
   if (s == -1.0f) atomicAdd(sum, s);  // never true for light; keeps the sample live
 }
@@ -111,6 +164,20 @@ int main(int argc, char** argv) {
                 prop.name, argv[1], dim[0], dim[1], dim[2], d.baseCount(),
                 d.precision() == Precision::Fp16 ? "fp16" : "fp32", n, reps);
 
+    // The padded copy of the coefficient streams (Sampler::Padded).
+    const uint64_t coefCount = h.coefCount;
+    canopy::cuda::DeviceBuffer<uint8_t> padded(size_t(coefCount) * (d.precision() == Precision::Fp16 ? 8 : 16) + 16);
+    {
+      std::vector<uint8_t> host(padded.size(), 0);
+      for (uint64_t i = 0; i < coefCount; ++i) {
+        if (d.precision() == Precision::Fp16)
+          std::memcpy(host.data() + 8 * i, d.coefs16.data() + 3 * i, 6);
+        else
+          std::memcpy(host.data() + 16 * i, d.coefs32.data() + 3 * i, 12);
+      }
+      padded.upload(host.data(), host.size());
+    }
+
     // Point sets: (0) inside stored bricks, (1) uniform over the lattice box.
     std::vector<uint64_t> stored;
     for (uint64_t b = 0; b < d.brickCount(); ++b)
@@ -133,14 +200,44 @@ int main(int argc, char** argv) {
         ptsHost[set][i] = make_float4(p[0], p[1], p[2], 0.0f);
       }
     }
+    // What a sample reads, over set 0 and base 0/all: the kept coefficients its footprint depends on.
+    {
+      double need = 0, kept = 0, haarSamples = 0, raw = 0, fast = 0, none = 0;
+      const ChaarView hv = d.view();
+      const size_t m = std::min<size_t>(n, size_t(1) << 20);
+      for (uint32_t b = 0; b < d.baseCount(); ++b)
+        for (size_t i = 0; i < m; ++i) {
+          const BrickLookup at = locate(hv, ptsHost[0][i].x, ptsHost[0][i].y, ptsHost[0][i].z);
+          const BrickRecord rec = at.slot == kEmptySlot ? BrickRecord{} : hv.records[uint64_t(b) * hv.slotCount + at.slot];
+          const uint64_t mask = rec.mask();
+          if (mask == 0) ++none;
+          else if (rec.raw()) ++raw;
+          else if (mask == 1) ++fast;
+          else {
+            ++haarSamples;
+            kept += popcount64(mask);
+            need += popcount64(mask & footprintNeedMask(at.lx, at.ly, at.lz));
+          }
+        }
+      const double all = double(m) * d.baseCount();
+      std::printf("samples in stored bricks, all bases: %.1f%% no light, %.1f%% raw bricks, %.1f%% average-only, "
+                  "%.1f%% Haar bricks with on average %.2f kept coefficients of which the footprint needs %.2f\n\n",
+                  100 * none / all, 100 * raw / all, 100 * fast / all, 100 * haarSamples / all,
+                  kept / std::max(1.0, haarSamples), need / std::max(1.0, haarSamples));
+    }
+
     canopy::cuda::DeviceBuffer<float4> pts(n);
     canopy::cuda::DeviceBuffer<float> sum(1);
-    const unsigned grid = unsigned((n + 127) / 128);
-    std::printf("| points | base | compressed Gsamples/s | texture Gsamples/s | array Gsamples/s | compressed / texture |\n");
-    std::printf("|---|---|---|---|---|---|\n");
+    const size_t nCheck = std::min<size_t>(n, size_t(1) << 20), nCpu = std::min<size_t>(n, 65536);
+    canopy::cuda::DeviceBuffer<float> outDev(3 * nCheck);
+    std::vector<float> outShipped(3 * nCheck), outOther(3 * nCheck);
+    size_t mismatchOld = 0, mismatchPadded = 0, mismatchCpu = 0;
+    const unsigned grid = unsigned((n + 127) / 128), gridCheck = unsigned((nCheck + 127) / 128);
+    std::printf("| points | base | compressed Gsamples/s | previous sampler | padded coefficients | texture Gsamples/s | array Gsamples/s | compressed / texture |\n");
+    std::printf("|---|---|---|---|---|---|---|---|\n");
     for (int set = 0; set < 2; ++set) {
       pts.upload(ptsHost[set].data(), n);
-      double totC = 0, totT = 0, totA = 0;
+      double totC = 0, totO = 0, totP = 0, totT = 0, totA = 0;
       for (uint32_t b = 0; b < d.baseCount(); ++b) {
         std::vector<float> dense;
         decodeBaseDense(d, b, dense);
@@ -170,25 +267,50 @@ int main(int argc, char** argv) {
         denseDev.upload(dense.data(), dense.size());
 
         const ChaarView v = dev.view();
-        const float msC = bestMs(reps, [&] { compressedKernel<<<grid, 128>>>(v, int(b), pts.data(), n, sum.data()); });
+        const void* pad = padded.data();
+        // Correctness: the variants agree with the shipped sampler, and it with the CPU bit for bit.
+        compressedKernel<Sampler::Shipped><<<gridCheck, 128>>>(v, int(b), pad, pts.data(), nCheck, sum.data(), outDev.data());
+        outDev.download(outShipped.data(), outShipped.size());
+        compressedKernel<Sampler::Old><<<gridCheck, 128>>>(v, int(b), pad, pts.data(), nCheck, sum.data(), outDev.data());
+        outDev.download(outOther.data(), outOther.size());
+        for (size_t i = 0; i < outShipped.size(); ++i) mismatchOld += outShipped[i] != outOther[i];
+        compressedKernel<Sampler::Padded><<<gridCheck, 128>>>(v, int(b), pad, pts.data(), nCheck, sum.data(), outDev.data());
+        outDev.download(outOther.data(), outOther.size());
+        for (size_t i = 0; i < outShipped.size(); ++i) mismatchPadded += outShipped[i] != outOther[i];
+        const ChaarView hv = d.view();
+        for (size_t i = 0; i < nCpu; ++i) {
+          const Rgb c = chaarSample(hv, int(b), ptsHost[set][i].x, ptsHost[set][i].y, ptsHost[set][i].z);
+          mismatchCpu += std::memcmp(&c.r, &outShipped[3 * i], 4) != 0 || std::memcmp(&c.g, &outShipped[3 * i + 1], 4) != 0 ||
+                         std::memcmp(&c.b, &outShipped[3 * i + 2], 4) != 0;
+        }
+        const float msC = bestMs(reps, [&] { compressedKernel<Sampler::Shipped><<<grid, 128>>>(v, int(b), pad, pts.data(), n, sum.data(), nullptr); });
+        const float msO = bestMs(reps, [&] { compressedKernel<Sampler::Old><<<grid, 128>>>(v, int(b), pad, pts.data(), n, sum.data(), nullptr); });
+        const float msP = bestMs(reps, [&] { compressedKernel<Sampler::Padded><<<grid, 128>>>(v, int(b), pad, pts.data(), n, sum.data(), nullptr); });
         const float msT = bestMs(reps, [&] { textureKernel<<<grid, 128>>>(tex, mn, pts.data(), n, sum.data()); });
         const float msA = bestMs(reps, [&] { arrayKernel<<<grid, 128>>>(denseDev.data(), mn, mx, pts.data(), n, sum.data()); });
         totC += msC;
+        totO += msO;
+        totP += msP;
         totT += msT;
         totA += msA;
         if (b % 6 == 0 || b + 1 == d.baseCount())
-          std::printf("| %s | %s | %.2f | %.2f | %.2f | %.2fx |\n", set == 0 ? "stored bricks" : "lattice box",
-                      baseName(b).c_str(), n / (msC * 1e6), n / (msT * 1e6), n / (msA * 1e6), msT / msC);
+          std::printf("| %s | %s | %.2f | %.2f | %.2f | %.2f | %.2f | %.2fx |\n", set == 0 ? "stored bricks" : "lattice box",
+                      baseName(b).c_str(), n / (msC * 1e6), n / (msO * 1e6), n / (msP * 1e6), n / (msT * 1e6),
+                      n / (msA * 1e6), msT / msC);
         cudaDestroyTextureObject(tex);
         cudaFreeArray(arr);
       }
-      std::printf("| %s | **all %u** | **%.2f** | **%.2f** | **%.2f** | **%.2fx** (target >= 0.5x) |\n",
-                  set == 0 ? "stored bricks" : "lattice box", d.baseCount(), n * d.baseCount() / (totC * 1e6),
-                  n * d.baseCount() / (totT * 1e6), n * d.baseCount() / (totA * 1e6), totT / totC);
+      const double nb = double(n) * d.baseCount();
+      std::printf("| %s | **all %u** | **%.2f** | %.2f | %.2f | **%.2f** | **%.2f** | **%.2fx** (target >= 0.5x) |\n",
+                  set == 0 ? "stored bricks" : "lattice box", d.baseCount(), nb / (totC * 1e6), nb / (totO * 1e6),
+                  nb / (totP * 1e6), nb / (totT * 1e6), nb / (totA * 1e6), totT / totC);
     }
+    std::printf("\nchecks: previous sampler != shipped in %zu values, padded != shipped in %zu, GPU != CPU (bits) in %zu "
+                "samples (of %zu / %zu / %zu per base and point set)\n",
+                mismatchOld, mismatchPadded, mismatchCpu, 3 * nCheck, 3 * nCheck, nCpu);
     std::printf("\ncompressed on device: %.2f MiB; dense float4 texture per base: %.2f MiB\n",
                 double(dev.deviceBytes()) / (1 << 20), double(dim[0]) * dim[1] * dim[2] * 16 / (1 << 20));
-    return 0;
+    return mismatchOld || mismatchPadded || mismatchCpu ? 3 : 0;
   } catch (const canopy::Error& e) {
     std::fprintf(stderr, "bench_haar_gpu: error: %s\n", e.what());
     return int(e.code());

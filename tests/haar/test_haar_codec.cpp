@@ -96,15 +96,45 @@ TEST(HaarMath, LiftUnliftBrickRoundTripsDyadicValuesExactly) {
   for (int c = 0; c < 64; ++c) EXPECT_EQ(f[c], v[c]) << c;
 }
 
+// The sampler's needed-coefficient set and signs against their definitions: coefficient k along an
+// axis enters position pos as unlift4 says (s always +; D + below 2, - from 2; d_i only positions
+// 2i (+) and 2i+1 (-)); a footprint at l depends on the k that enter l or l+1.
+TEST(HaarMath, FootprintNeedMaskAndAxisSignsMatchUnlift) {
+  for (int k = 0; k < 4; ++k)
+    for (int pos = 0; pos < 4; ++pos) {
+      int want = 0;
+      if (k == 0) want = 1;
+      else if (k == 1) want = pos < 2 ? 1 : -1;
+      else if (k - 2 == pos / 2) want = pos % 2 ? -1 : 1;
+      const uint32_t s = axisSign(k, pos);
+      EXPECT_EQ(s == 0 ? 0 : (s == 3 ? -1 : (s == 1 ? 1 : 99)), want) << k << " " << pos;
+    }
+  for (int lz = 0; lz < 3; ++lz)
+    for (int ly = 0; ly < 3; ++ly)
+      for (int lx = 0; lx < 3; ++lx) {
+        uint64_t want = 0;
+        for (int z = 0; z < 4; ++z)
+          for (int y = 0; y < 4; ++y)
+            for (int x = 0; x < 4; ++x) {
+              const bool n = (axisSign(x, lx) || axisSign(x, lx + 1)) && (axisSign(y, ly) || axisSign(y, ly + 1)) &&
+                             (axisSign(z, lz) || axisSign(z, lz + 1));
+              if (n) want |= uint64_t(1) << brickIndex(x, y, z);
+            }
+        EXPECT_EQ(footprintNeedMask(lx, ly, lz), want) << lx << ly << lz;
+      }
+}
+
 // The point sampler reconstructs only 8 texels but must equal trilinear interpolation of the fully
 // decoded brick bit for bit (raw and Haar bricks, any mask, both precisions).
 TEST(HaarMath, SampleBrickEqualsDecodeThenTrilinearBitForBit) {
   std::mt19937 rng(11);
   std::uniform_real_distribution<float> u(-2.0f, 2.0f);
-  for (int trial = 0; trial < 400; ++trial) {
+  for (int trial = 0; trial < 1200; ++trial) {
     const bool raw = trial % 4 == 3;
     uint64_t mask = (uint64_t(rng()) << 32) | rng();
     if (trial % 5 == 0) mask &= (uint64_t(rng()) << 32) | rng();  // sparser
+    if (trial % 3 == 1)  // a few coefficients: whole rows and z-slabs empty (the sampler skips them)
+      for (int k = 0; k < 3; ++k) mask &= (uint64_t(rng()) << 32) | rng();
     if (trial % 7 == 0) mask = 1;                                    // fast path
     BrickRecord rec;
     rec.set(mask, 5, raw);  // first = 5: not at the stream start
