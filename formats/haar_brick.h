@@ -9,10 +9,11 @@
 //   [ s, D, d0, d1 ] with a_i = (v_2i + v_2i+1)/2, d_i = (v_2i - v_2i+1)/2, s = (a0+a1)/2, D = (a0-a1)/2,
 // applied along z, then y, then x (the lift, done in double by the encoder). The inverse (unlift,
 // float, x then y then z) computes every output as ((s +- D) +- d_{i/2}) in exactly that order.
-// The point sampler below reconstructs only the 2^3 texels it needs but with the same float
-// operations in the same order, so a sample equals trilinear interpolation of the fully decoded
-// brick bit for bit, and the CPU and CUDA decoders agree bit for bit (products use explicitly
-// rounded multiplies/adds on the device so nvcc cannot contract them into FMAs).
+// The CPU and CUDA decoders agree bit for bit (products use explicitly rounded multiplies/adds on
+// the device so nvcc cannot contract them into FMAs). The point sampler below (sampleBrick) does not
+// decode: it sums the kept coefficients its footprint depends on, each times the trilinear weight
+// of its basis function; CPU and CUDA samples agree bit for bit too, and equal decode-then-trilinear
+// up to float rounding.
 //
 // A brick record (12 bytes, the dissertation's layout) stores the 64-bit mask of kept coefficients
 // and the index of its first one in the base's compacted coefficient stream (coefficient j of the
@@ -182,53 +183,76 @@ CANOPY_HD CANOPY_FORCEINLINE float trilinear(const float v[2][2][2], float fx, f
   return lerpRn(lerpRn(c00, c10, fy), lerpRn(c01, c11, fy), fz);
 }
 
-// Reconstruction of position pos (0..3) along one axis from that axis's coefficients [s, D, d0, d1]
-// is ((s +- D) +- d_{pos/2}) (unlift4). axisSign(k, pos) is the sign with which coefficient k
-// enters it: +1, -1, or 0 where it does not enter, as a 2-bit code (0 none, 1 plus, 3 minus) of
-// one packed constant: k = 0: + + + +; k = 1: + + - -; k = 2: + - 0 0; k = 3: 0 0 + -.
-constexpr uint32_t kAxisSignTable = (1u << 0) | (1u << 2) | (1u << 4) | (1u << 6) |     // k = 0
-                                    (1u << 8) | (1u << 10) | (3u << 12) | (3u << 14) |  // k = 1
-                                    (1u << 16) | (3u << 18) |                           // k = 2
-                                    (1u << 28) | (3u << 30);                            // k = 3
-CANOPY_HD CANOPY_FORCEINLINE uint32_t axisSign(int k, int pos) { return (kAxisSignTable >> (2 * (4 * k + pos))) & 3u; }
+// ---- trilinear sampling inside one brick, as one weighted sum ---------------------------------
+//
+// A trilinear sample is linear in the brick's coefficients: sample = sum over coefficients k of
+// c_k * Wx(kx) * Wy(ky) * Wz(kz), where W(k) along an axis is the trilinear interpolation of that
+// axis's Haar basis function k. Position pos (0..3) is reconstructed as ((s +- D) +- d_{pos/2})
+// (unlift4), so with the footprint's lower texel at l and fraction f (weights 1-f at l, f at l+1):
+//   l = 0: W = [1,  1,     1-2f,  0   ]
+//   l = 1: W = [1,  1-2f,  f-1,   f   ]
+//   l = 2: W = [1, -1,     0,     1-2f]
+// and for a raw brick (values, no transform) W(k) = 1-f at k = l, f at k = l+1, else 0. Only the
+// kept coefficients whose W is non-zero on all three axes are read (footprintNeedMask): at most 27
+// of a Haar brick's 64, 8 of a raw brick's, in one loop over their bits. Branch-free per
+// coefficient, so the 32 samples of a warp in 32 different bricks do not diverge (as a per-row or
+// per-slab structure does).
+//
+// The sum is in coefficient order with explicitly rounded operations: CPU and CUDA give the same
+// bits. It is not the same rounding as decoding the brick (decodeBrick) and interpolating its 8
+// texels: the two agree to a few float ulps of the sum of |c_k W_k| (tests bound it).
 
-// acc +- c by sign code s (0: acc unchanged). Adding what the reference decoder adds, minus its
-// additions of exact zeros (x + 0 == x), so the result equals the reference's value.
-CANOPY_HD CANOPY_FORCEINLINE float foldSigned(float acc, float c, uint32_t s) {
-  const float t = (s & 2u) ? subRn(acc, c) : addRn(acc, c);
-  return s ? t : acc;
+CANOPY_HD CANOPY_FORCEINLINE void haarAxisWeights(int l, float f, float w[4]) {
+  const float e = subRn(1.0f, addRn(f, f));  // 1 - 2f (2f is exact)
+  w[0] = 1.0f;
+  w[1] = l == 0 ? 1.0f : (l == 1 ? e : -1.0f);
+  w[2] = l == 0 ? e : (l == 1 ? subRn(f, 1.0f) : 0.0f);
+  w[3] = l == 0 ? 0.0f : (l == 1 ? f : e);
 }
-CANOPY_HD CANOPY_FORCEINLINE void foldSigned(Rgb& acc, const Rgb& c, uint32_t s) {
-  acc.r = foldSigned(acc.r, c.r, s);
-  acc.g = foldSigned(acc.g, c.g, s);
-  acc.b = foldSigned(acc.b, c.b, s);
+CANOPY_HD CANOPY_FORCEINLINE void rawAxisWeights(int l, float f, float w[4]) {
+  const float g = subRn(1.0f, f);
+  w[0] = l == 0 ? g : 0.0f;
+  w[1] = l == 1 ? g : (l == 0 ? f : 0.0f);
+  w[2] = l == 2 ? g : (l == 1 ? f : 0.0f);
+  w[3] = l == 2 ? f : 0.0f;
+}
+// w[k] for a k known only at run time, by selects (an indexed register array would go to memory).
+CANOPY_HD CANOPY_FORCEINLINE float pickWeight(const float w[4], uint32_t k) {
+  const float lo = (k & 1u) ? w[1] : w[0], hi = (k & 1u) ? w[3] : w[2];
+  return (k & 2u) ? hi : lo;
 }
 
-// The axis coefficients that positions l and l+1 (l in 0..2) depend on, as a 4-bit set: s and D
-// always, d0 for l <= 1, d1 for l >= 1.
-CANOPY_HD CANOPY_FORCEINLINE uint32_t axisNeedBits(int l) { return l == 0 ? 0x7u : (l == 1 ? 0xfu : 0xbu); }
-// The 64-bit set of brick coefficients (c = x + 4y + 16z) that a footprint at (lx, ly, lz) depends
-// on: the product of the three axis sets.
-CANOPY_HD CANOPY_FORCEINLINE uint64_t footprintNeedMask(int lx, int ly, int lz) {
-  const uint32_t nx = axisNeedBits(lx), ny = axisNeedBits(ly), nz = axisNeedBits(lz);
-  // Spread a 4-bit set to one bit per nibble (4 bits apart) and per 16 bits; multiplying places
-  // the inner set at each selected position (no carries: the sets do not overlap).
+// The 64-bit set of coefficients c = x + 4y + 16z with x in nx, y in ny and z in nz (4-bit sets).
+CANOPY_HD CANOPY_FORCEINLINE uint64_t coefficientBox(uint32_t nx, uint32_t ny, uint32_t nz) {
+  // Spread ny to one bit per nibble and nz to one bit per 16 bits; multiplying places the inner
+  // set at each selected position (no carries: the copies do not overlap).
   const uint32_t spreadY = (ny & 1u) | ((ny & 2u) << 3) | ((ny & 4u) << 6) | ((ny & 8u) << 9);
   const uint64_t spreadZ = uint64_t(nz & 1u) | (uint64_t(nz & 2u) << 15) | (uint64_t(nz & 4u) << 30) |
                            (uint64_t(nz & 8u) << 45);
   return spreadZ * uint64_t(spreadY * nx);
+}
+// The axis coefficients whose W is non-zero for a footprint at l (0..2): s and D always, d0 for
+// l <= 1, d1 for l >= 1.
+CANOPY_HD CANOPY_FORCEINLINE uint32_t axisNeedBits(int l) { return l == 0 ? 0x7u : (l == 1 ? 0xfu : 0xbu); }
+// The coefficients a Haar brick's footprint at (lx, ly, lz) depends on (at most 27 of 64).
+CANOPY_HD CANOPY_FORCEINLINE uint64_t footprintNeedMask(int lx, int ly, int lz) {
+  return coefficientBox(axisNeedBits(lx), axisNeedBits(ly), axisNeedBits(lz));
 }
 
 // Entries of the coefficient stream before coefficient c of a brick: popcount of the mask below c.
 CANOPY_HD CANOPY_FORCEINLINE uint32_t maskRank(uint64_t mask, int c) {
   return uint32_t(popcount64(mask & ((uint64_t(1) << c) - 1u)));
 }
+CANOPY_HD CANOPY_FORCEINLINE int lowestBit(uint64_t v) {  // v != 0
+#if defined(__CUDA_ARCH__)
+  return __ffsll(static_cast<long long>(v)) - 1;
+#else
+  return __builtin_ctzll(v);
+#endif
+}
 
 // Trilinear sample of one brick: (lx, ly, lz) in 0..2 is the lower texel of the 2^3 footprint
-// (brick-local), (fx, fy, fz) in [0, 1] the fractions. Reconstructs just the 8 texels from just
-// the kept coefficients they depend on (at most 27 of the 64; a row of 4 x-coefficients, or a
-// z-slab of 16, with none of them kept is skipped whole), in the reference decoder's order: each
-// row unlifted along x, the rows of a slab along y, the slabs along z.
+// (brick-local), (fx, fy, fz) in [0, 1] the fractions.
 template <class Reader>
 CANOPY_HD inline Rgb sampleBrick(const BrickRecord& rec, const Reader& read, int lx, int ly, int lz,
                                  float fx, float fy, float fz) {
@@ -236,73 +260,30 @@ CANOPY_HD inline Rgb sampleBrick(const BrickRecord& rec, const Reader& read, int
   if (mask == 0) return Rgb{};
   const uint32_t first = rec.first();
   if (mask == 1u && !rec.raw()) return read(first);  // only the average: the fast path
-  Rgb v[2][2][2] = {};  // [z][y][x]
+  float wx[4], wy[4], wz[4];
+  uint64_t need;
   if (rec.raw()) {
-    // Raw values: texel (x, y, z) is entry c of the brick when its mask bit is set, else zero.
-    CANOPY_UNROLL
-    for (int dz = 0; dz < 2; ++dz)
-      CANOPY_UNROLL
-      for (int dy = 0; dy < 2; ++dy) {
-        const int row = brickIndex(0, ly + dy, lz + dz);
-        const uint32_t rowBits = uint32_t(mask >> row) & 0xfu;
-        if (!(rowBits >> lx & 3u)) continue;
-        const uint32_t rowFirst = first + maskRank(mask, row);
-        CANOPY_UNROLL
-        for (int dx = 0; dx < 2; ++dx) {
-          const int x = lx + dx;
-          if (rowBits >> x & 1u) v[dz][dy][dx] = read(rowFirst + uint32_t(popcount64(rowBits & ((1u << x) - 1u))));
-        }
-      }
+    rawAxisWeights(lx, fx, wx);
+    rawAxisWeights(ly, fy, wy);
+    rawAxisWeights(lz, fz, wz);
+    need = mask & coefficientBox(3u << lx, 3u << ly, 3u << lz);
   } else {
-    const uint64_t need = mask & footprintNeedMask(lx, ly, lz);
-    CANOPY_UNROLL
-    for (int kz = 0; kz < 4; ++kz) {
-      const uint32_t slab = uint32_t(need >> (16 * kz)) & 0xffffu;
-      if (!slab) continue;
-      Rgb w[2][2] = {};  // [y][x]: x and y unlifted, coefficient index kz along z
-      CANOPY_UNROLL
-      for (int ky = 0; ky < 4; ++ky) {
-        const uint32_t nib = (slab >> (4 * ky)) & 0xfu;
-        if (!nib) continue;
-        const int row = brickIndex(0, ky, kz);
-        const uint32_t rowBits = uint32_t(mask >> row) & 0xfu;
-        const uint32_t rowFirst = first + maskRank(mask, row);
-        Rgb u[2] = {};  // [x]: x unlifted, coefficient indices (ky, kz)
-        CANOPY_UNROLL
-        for (int kx = 0; kx < 4; ++kx) {
-          if (!(nib >> kx & 1u)) continue;
-          const Rgb c = read(rowFirst + uint32_t(popcount64(rowBits & ((1u << kx) - 1u))));
-          foldSigned(u[0], c, axisSign(kx, lx));
-          foldSigned(u[1], c, axisSign(kx, lx + 1));
-        }
-        CANOPY_UNROLL
-        for (int dy = 0; dy < 2; ++dy) {
-          const uint32_t s = axisSign(ky, ly + dy);
-          CANOPY_UNROLL
-          for (int dx = 0; dx < 2; ++dx) foldSigned(w[dy][dx], u[dx], s);
-        }
-      }
-      CANOPY_UNROLL
-      for (int dz = 0; dz < 2; ++dz) {
-        const uint32_t s = axisSign(kz, lz + dz);
-        CANOPY_UNROLL
-        for (int dy = 0; dy < 2; ++dy)
-          CANOPY_UNROLL
-          for (int dx = 0; dx < 2; ++dx) foldSigned(v[dz][dy][dx], w[dy][dx], s);
-      }
-    }
+    haarAxisWeights(lx, fx, wx);
+    haarAxisWeights(ly, fy, wy);
+    haarAxisWeights(lz, fz, wz);
+    need = mask & footprintNeedMask(lx, ly, lz);
   }
-  float ch[2][2][2];
   Rgb out;
-  CANOPY_UNROLL
-  for (int i = 0; i < 8; ++i) (&ch[0][0][0])[i] = (&v[0][0][0])[i].r;
-  out.r = trilinear(ch, fx, fy, fz);
-  CANOPY_UNROLL
-  for (int i = 0; i < 8; ++i) (&ch[0][0][0])[i] = (&v[0][0][0])[i].g;
-  out.g = trilinear(ch, fx, fy, fz);
-  CANOPY_UNROLL
-  for (int i = 0; i < 8; ++i) (&ch[0][0][0])[i] = (&v[0][0][0])[i].b;
-  out.b = trilinear(ch, fx, fy, fz);
+  while (need) {
+    const int c = lowestBit(need);
+    need &= need - 1u;
+    const Rgb v = read(first + maskRank(mask, c));
+    const uint32_t k = uint32_t(c);
+    const float w = mulRn(mulRn(pickWeight(wx, k & 3u), pickWeight(wy, (k >> 2) & 3u)), pickWeight(wz, k >> 4));
+    out.r = addRn(out.r, mulRn(v.r, w));
+    out.g = addRn(out.g, mulRn(v.g, w));
+    out.b = addRn(out.b, mulRn(v.b, w));
+  }
   return out;
 }
 

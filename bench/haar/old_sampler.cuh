@@ -1,4 +1,4 @@
-// old_sampler.cuh: the point sampler before the sparse one (every candidate
+// old_sampler.cuh: the point sampler before the weighted sum (8 texels reconstructed as the decoder does, every candidate
 // coefficient tested in a fully unrolled 4x4x4 loop), kept only so that bench_haar_gpu can measure
 // the new sampler against it in one run. Not used by any tool.
 #pragma once
