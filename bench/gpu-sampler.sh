@@ -7,10 +7,11 @@
 #   (OAK64.light.vdb: canopy-voxelize oak_medium.glb --resolution 64 | canopy-lbsolve, the defaults)
 #   cp PREVIOUS_BUILD/bin/bench-play /tmp/hs/bench-play-old       # the same benchmark before the change
 #   ../shared/scripts/bundle-libs .gpu/canopy.tar.xz build/bin/{bench_haar_gpu,test_haar_cuda,test_play_cuda,\
-#      test_octreepack,bench-play} /tmp/hs/bench-play-old -- /tmp/hs/b32.chaar /tmp/hs/b16.chaar \
+#      test_octreepack,test_core,bench-play} /tmp/hs/bench-play-old -- /tmp/hs/b32.chaar /tmp/hs/b16.chaar \
 #      OAK64.light.vdb GROVE.canopy
 # There:  bash bench/gpu-sampler.sh       (.gpu carried; logs and tables under $OUT)
 #   1. CUDA tests: test_haar_cuda on the oak's real light (decode and sampling, GPU == CPU bit for bit),
+#      test_core (halfToFloat and halfValue on the device for every half),
 #      test_play_cuda, test_octreepack's device sampling.
 #   2. bench_haar_gpu on both .chaar files: the shipped sampler, the previous one, the shipped one
 #      over padded coefficients, a float4 texture and a plain array (with the equality checks).
@@ -22,6 +23,7 @@ step tests
 CANOPY_HAAR_LIGHT_VDB=$S/oak64.light.vdb gtest test_haar_cuda "$BIN/test_haar_cuda"
 gtest test_play_cuda "$BIN/test_play_cuda"
 gtest test_octreepack_cuda "$BIN/test_octreepack" --gtest_filter='*cuda*'
+gtest test_core_cuda "$BIN/test_core" --gtest_filter="*cuda*"
 step bench_haar_gpu
 for p in 32 16; do
   timeout 200 bench_haar_gpu "$S/b$p.chaar" > "$O/bench_haar_gpu_fp$p.md" 2>&1 || status=1

@@ -14,5 +14,5 @@ struct Saxpy {
 
 // Runs Saxpy over n elements on the GPU (saxpy_cuda.cu); only in CUDA builds.
 void saxpyCuda(float a, const std::vector<float>& x, std::vector<float>& y);
-// canopy::halfToFloat of all 65536 halves on the GPU, as float bits.
-std::vector<uint32_t> halfToFloatAllCuda();
+// canopy::halfToFloat (value: canopy::halfValue) of all 65536 halves on the GPU, as float bits.
+std::vector<uint32_t> halfToFloatAllCuda(bool value = false);

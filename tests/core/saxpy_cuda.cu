@@ -5,14 +5,18 @@
 namespace {
 struct HalfToFloatAll {
   uint32_t* bits;
-  __device__ void operator()(int64_t i) const { bits[i] = __float_as_uint(canopy::halfToFloat(uint16_t(i))); }
+  bool value;  // canopy::halfValue instead of canopy::halfToFloat
+  __device__ void operator()(int64_t i) const {
+    const uint16_t h = uint16_t(i);
+    bits[i] = __float_as_uint(value ? canopy::halfValue(h) : canopy::halfToFloat(h));
+  }
 };
 }  // namespace
 
-std::vector<uint32_t> halfToFloatAllCuda() {
+std::vector<uint32_t> halfToFloatAllCuda(bool value) {
   std::vector<uint32_t> out(65536);
   canopy::cuda::DeviceBuffer<uint32_t> d(out.size());
-  canopy::cuda::parallelFor(int64_t(out.size()), HalfToFloatAll{d.data()});
+  canopy::cuda::parallelFor(int64_t(out.size()), HalfToFloatAll{d.data(), value});
   CANOPY_CUDA_CHECK(cudaDeviceSynchronize());
   d.download(out.data(), out.size());
   return out;

@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <cmath>
 #include <cstring>
 
 #include "canopy/device.h"
@@ -56,6 +57,18 @@ TEST(Dispatch, cuda_HalfToFloatMatchesCpuForEveryHalf) {
     uint32_t cpu;
     std::memcpy(&cpu, &f, sizeof cpu);
     ASSERT_EQ(gpu[h], cpu) << "half 0x" << std::hex << h;
+  }
+  // halfValue: the bare hardware conversion; the same bits but for NaN's payload.
+  const std::vector<uint32_t> value = halfToFloatAllCuda(true);
+  for (uint32_t h = 0; h < 65536; ++h) {
+    const float f = canopy::halfToFloat(uint16_t(h));
+    uint32_t cpu;
+    std::memcpy(&cpu, &f, sizeof cpu);
+    if (std::isnan(f))
+      ASSERT_EQ(value[h] & 0x7f800000u, 0x7f800000u) << "half 0x" << std::hex << h;
+    else
+      ASSERT_EQ(value[h], cpu) << "half 0x" << std::hex << h;
+    ASSERT_EQ(std::isnan(f), (value[h] & 0x7fffffffu) > 0x7f800000u) << "half 0x" << std::hex << h;
   }
 #endif
 }
