@@ -1,6 +1,6 @@
 // test_canopy_file.cpp: the .canopy reader never trusts its input (built with ASan/UBSan: the
 // reader, writer and builder sources are compiled into this test).
-//   - the frozen 1.1 file in data/ still reads (its Haar light equal to the .chaar decoder's bit for
+//   - the frozen 1.1 file in data/ still reads (its Haar light equal to the .chaar sampler's bit for
 //     bit), and the writer still produces it byte for byte (a layout change must be deliberate:
 //     bump the version and add a new frozen file); the frozen 1.0 file still reads;
 //   - every truncated prefix, flipped bytes (header, table, sections, padding, pages), trailing
@@ -157,7 +157,7 @@ TEST(CanopyFile, FrozenSmallFileStillReads) {
   ASSERT_EQ(f.instanceCount(), 4u);
   checkDensityAndFloat16Models(f);
   EXPECT_NE(f.metadata().find("frozen .canopy 1.1"), std::string::npos);
-  // The Haar-lit model: its Haar light at any point equals the .chaar decoder's sample, bit for bit.
+  // The Haar-lit model: its Haar light at any point equals the .chaar sampler's value, bit for bit.
   const CanopyModel& H = f.model(2);
   ASSERT_TRUE(H.flags & kCanopyModelHaarLight);
   ASSERT_EQ(H.lightCount, H.brickCount);  // and float16 items as any lit model

@@ -756,8 +756,8 @@ TEST(OctreepackLight, ScatteredSunBasesAreFlagged) {
 
 // .chaar lighting packed through the CLI (a 20^3 smooth light field, fp16, threshold 0.01; the
 // lattice is the density's): the .chaar's bricks re-paged as Haar light, whose samples equal the
-// chaar decoder's bit for bit, at every lattice cell and at random points in between; and float16
-// items on every level whose voxels are the box filter of the decoder's values at the lattice
+// chaar sampler's bit for bit, at every lattice cell and at random points in between; and float16
+// items on every level whose voxels are the box filter of the sampler's values at the lattice
 // cells (float16: relative 2^-11). --no-haar-light packs the items alone.
 TEST(OctreepackLight, ChaarLightingEqualsTheDecoder) {
   namespace ht = canopy::haar::testing;
@@ -805,7 +805,7 @@ TEST(OctreepackLight, ChaarLightingEqualsTheDecoder) {
     const canopy::haar::Rgb got = S.sampleHaar(0, base, p[0], p[1], p[2]);
     ASSERT_EQ(std::memcmp(&want, &got, sizeof want), 0) << "point " << p[0] << "," << p[1] << "," << p[2] << " base " << base;
   }
-  // Every level's float16 items: box filters of the decoder's cell values.
+  // Every level's float16 items: box filters of the sampler's cell values.
   auto decoded = [&](uint32_t base, int i, int j, int k, int ch) {
     if (i > src.latticeMax[0] || j > src.latticeMax[1] || k > src.latticeMax[2]) return 0.0f;
     const canopy::haar::Rgb v = canopy::haar::chaarSample(view, int(base), float(i), float(j), float(k));
