@@ -312,13 +312,15 @@ CANOPY_HD inline void ambientOnly(const SceneView& s, float sceneFactor, float o
 // The LB indirect light from a Haar item (--light exact at the finest level of a Haar-lit model) at
 // the brick-local footprint `at`: ((sum_v w_v B_v) * sun + ambient B_0 / 18) * sceneFactor, as
 // lbIndirect() computes it (the same terms in the same order), each base haar::sampleBrick of the item (bit for
-// bit the .chaar decoder's sample). item == nullptr: no light stored there (every base 0).
+// bit the .chaar's own chaarSample). item == nullptr: no light stored there (every base 0).
 // On the device this is one out-of-line function, one copy of the sampler for both precisions, the
 // four bases in a rolled loop. Measured on the grove at 1080p on an H200 (bench/RESULTS.md): inlined
 // per base, precision and call site the decoder made the lit pixel kernel 10x larger (44.7 k PTX
 // lines against 4.7 k) and the frame 257.7 ms; out of line 195.0 ms; out of line with its
-// coefficient loops rolled too (a fifth of the code) 377.9 ms, so they stay unrolled. The float16
-// items (--light fast) take 16.3 ms.
+// coefficient loops rolled too (a fifth of the code) 377.9 ms (all with the sampler that rebuilt the
+// footprint's 8 texels as the decoder does). With the weighted-sum sampler (one loop over the
+// footprint's kept coefficients, haar_brick.h) the grove takes 17.3 ms, the float16 items
+// (--light fast) 16.4 ms (2026-12-01).
 // The sun radiance comes by value: a pointer into the kernel's parameters, passed to this
 // out-of-line function, made the whole lit kernel 10 % slower on the grove (measured: 18.0 against
 // 16.3 ms per 1080p frame on an H200), although --light fast never calls it.
