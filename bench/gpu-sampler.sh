@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# gpu-sampler.sh: the GPU checks and measurements of the sparse Haar point sampler, in one device call.
+# gpu-sampler.sh: the GPU checks and measurements of the weighted-sum Haar point sampler, in one device call.
 #
 # Here (from the repo root, after a Release build with -DCMAKE_CUDA_ARCHITECTURES=90):
 #   build/bin/bench_haar OAK64.light.vdb --write-chaar /tmp/hs/b32.chaar            # fp32, 1% volume RMS
@@ -13,8 +13,8 @@
 #   1. CUDA tests: test_haar_cuda on the oak's real light (decode and sampling, GPU == CPU bit for bit),
 #      test_core (halfToFloat and halfValue on the device for every half),
 #      test_play_cuda, test_octreepack's device sampling.
-#   2. bench_haar_gpu on both .chaar files: the shipped sampler, the previous one, the shipped one
-#      over padded coefficients, a float4 texture and a plain array (with the equality checks).
+#   2. bench_haar_gpu on both .chaar files: the shipped sampler, the previous one, the shipped sum in
+#      one 64-bit loop, a float4 texture and a plain array (with the equality checks).
 #   3. bench-play on the grove, --light fast and exact, previous and new build alternately.
 set -u
 source "$(dirname "$0")/gpu-common.sh"

@@ -192,7 +192,7 @@ int main(int argc, char** argv) {
         ptsHost[set][i] = make_float4(p[0], p[1], p[2], 0.0f);
       }
     }
-    // What a sample reads, over set 0 and base 0/all: the kept coefficients its footprint depends on.
+    // What a sample reads (point set 0, all bases): the kept coefficients its footprint depends on.
     {
       double need = 0, kept = 0, haarSamples = 0, raw = 0, fast = 0, none = 0;
       const ChaarView hv = d.view();
