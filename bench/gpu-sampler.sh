@@ -13,8 +13,9 @@
 #   1. CUDA tests: test_haar_cuda on the oak's real light (decode and sampling, GPU == CPU bit for bit),
 #      test_core (halfToFloat and halfValue on the device for every half),
 #      test_play_cuda, test_octreepack's device sampling.
-#   2. bench_haar_gpu on both .chaar files: the shipped sampler, the previous one, the shipped sum in
-#      one 64-bit loop, a float4 texture and a plain array (with the equality checks).
+#   2. bench_haar_gpu on both .chaar files: the sampler, a float4 texture and a plain array (GPU
+#      samples checked against the CPU's). At 9e53285 it also timed the previous sampler and the
+#      one-64-bit-loop form (bench/RESULTS.md); those copies were removed after.
 #   3. bench-play on the grove, --light fast and exact, previous and new build alternately.
 set -u
 source "$(dirname "$0")/gpu-common.sh"

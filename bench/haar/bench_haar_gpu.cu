@@ -1,14 +1,12 @@
 // bench_haar_gpu: random trilinear lookups per second from compressed bricks (chaarSample, the
 // device function a player kernel calls) vs the same decoded data uncompressed, as
 //   (a) a 3D texture (cudaArray float4, hardware trilinear filtering), and
-//   (b) a plain float3 array in global memory with the same software trilinear;
-// and, on the same points, the previous sampler and a candidate form of the shipped one (below).
+//   (b) a plain float3 array in global memory with the same software trilinear.
 //   bench_haar_gpu IN.chaar [samples=16777216] [reps=10]
 // Points are uniform over the stored bricks' cells (where a renderer samples: light exists there)
 // and, second table, uniform over the whole lattice box. Each kernel's result is reduced to a
-// checksum so nothing is optimised away; timings by cudaEvent, best of `reps`. Checks (exit 3 when
-// one fails): GPU samples == CPU samples bit for bit; the candidate == shipped; the previous
-// (decode-exact) sampler within 1e-5 of the largest sample.
+// checksum so nothing is optimised away; timings by cudaEvent, best of `reps`. Check (exit 3 when it
+// fails): the GPU samples equal the CPU's bit for bit.
 #include <cstdio>
 #include <cstdlib>
 #include <cmath>
@@ -21,63 +19,17 @@
 #include "canopy/parallel_cuda.cuh"
 #include "formats/haar_cuda.h"
 #include "formats/haar_view.h"
-#include "old_sampler.cuh"  // the previous sampler, for comparison
 
 using namespace canopy::haar;
 
 namespace {
 
-// The samplers compared: the shipped chaarSample (one weighted sum over the footprint's kept
-// coefficients, in coefficient order, the mask's 32-bit halves in two loops); the previous sampler
-// (old_sampler.cuh: reconstructs the 8 texels exactly as the decoder, every candidate coefficient
-// tested in an unrolled 4x4x4 loop) on the same data; and a candidate that adds the same terms in
-// the same order (so the same bits) in one loop over the 64-bit set (Loop64, the first form of the
-// weighted sum).
-enum class Sampler { Shipped, Old, Loop64 };
-
-template <class Reader>
-__device__ __forceinline__ Rgb sampleLoop64(const BrickRecord& rec, const Reader& read, const BrickLookup& at) {
-  const uint64_t mask = rec.mask();
-  if (mask == 0) return Rgb{};
-  const uint32_t first = rec.first();
-  if (mask == 1u && !rec.raw()) return read(first);
-  const FootprintWeights fw = footprintWeights(rec, at.lx, at.ly, at.lz, at.fx, at.fy, at.fz);
-  Rgb out;
-  for (uint64_t need = fw.need; need; need &= need - 1u) {
-    const int c = __ffsll(static_cast<long long>(need)) - 1;
-    accumulate(out, read(first + uint32_t(popcount64(mask & ((uint64_t(1) << c) - 1u)))), fw(uint32_t(c)));
-  }
-  return out;
-}
-
-template <Sampler S>
-__device__ __forceinline__ Rgb sampleWith(const ChaarView& v, int base, float x, float y, float z) {
-  if constexpr (S == Sampler::Shipped) {
-    return chaarSample(v, base, x, y, z);
-  } else {
-    const BrickLookup at = locate(v, x, y, z);
-    if (at.slot == kEmptySlot) return Rgb{};
-    const BrickRecord rec = v.records[uint64_t(base) * v.slotCount + at.slot];
-    const uint64_t off = v.baseCoefOffset[base];
-    const CoefReader16 r16{static_cast<const uint16_t*>(v.coefs) + 3 * off};
-    const CoefReader32 r32{static_cast<const float*>(v.coefs) + 3 * off};
-    if constexpr (S == Sampler::Old) {
-      if (v.precision == Precision::Fp16) return old::sampleBrick(rec, r16, at.lx, at.ly, at.lz, at.fx, at.fy, at.fz);
-      return old::sampleBrick(rec, r32, at.lx, at.ly, at.lz, at.fx, at.fy, at.fz);
-    } else {
-      if (v.precision == Precision::Fp16) return sampleLoop64(rec, r16, at);
-      return sampleLoop64(rec, r32, at);
-    }
-  }
-}
-
-// out == nullptr: timing (the sum keeps the sample live); else the first nOut samples are stored.
-template <Sampler S>
+// out == nullptr: timing (the sum keeps the sample live); else each sample is stored in out (rgb).
 __global__ void compressedKernel(ChaarView v, int base, const float4* pts, size_t n, float* sum, float* out) {
   const size_t i = blockIdx.x * size_t(blockDim.x) + threadIdx.x;
   if (i >= n) return;
   const float4 p = pts[i];
-  const Rgb c = sampleWith<S>(v, base, p.x, p.y, p.z);
+  const Rgb c = chaarSample(v, base, p.x, p.y, p.z);
   if (out) {
     out[3 * i] = c.r;
     out[3 * i + 1] = c.g;
@@ -220,30 +172,16 @@ int main(int argc, char** argv) {
 
     canopy::cuda::DeviceBuffer<float4> pts(n);
     canopy::cuda::DeviceBuffer<float> sum(1);
-    const size_t nCheck = std::min<size_t>(n, size_t(1) << 20), nCpu = std::min<size_t>(n, 65536);
-    canopy::cuda::DeviceBuffer<float> outDev(3 * nCheck);
-    std::vector<float> outShipped(3 * nCheck), outOther(3 * nCheck);
-    // Candidates: same bits as the shipped sampler required (counted), timed alongside.
-    constexpr int kCand = 1;
-    const Sampler cands[kCand] = {Sampler::Loop64};
-    const char* candNames[kCand] = {"one 64-bit loop"};
-    size_t mismatchCand = 0, mismatchCpu = 0;
-    double oldMaxAbs = 0, peak = 0;  // the previous sampler (decode-exact) vs the shipped one
-    const unsigned grid = unsigned((n + 127) / 128), gridCheck = unsigned((nCheck + 127) / 128);
-    auto launch = [&](Sampler S, const ChaarView& v, int b, size_t count, float* out) {
-      const unsigned g = out ? gridCheck : grid;
-      switch (S) {
-        case Sampler::Shipped: compressedKernel<Sampler::Shipped><<<g, 128>>>(v, b, pts.data(), count, sum.data(), out); break;
-        case Sampler::Old: compressedKernel<Sampler::Old><<<g, 128>>>(v, b, pts.data(), count, sum.data(), out); break;
-        case Sampler::Loop64: compressedKernel<Sampler::Loop64><<<g, 128>>>(v, b, pts.data(), count, sum.data(), out); break;
-      }
-    };
-    std::printf("| points | base | compressed Gsamples/s | previous sampler | %s | texture Gsamples/s | array Gsamples/s | compressed / texture |\n",
-                candNames[0]);
-    std::printf("|---|---|---|---|---|---|---|---|\n");
+    const size_t nCpu = std::min<size_t>(n, 65536);  // samples checked against the CPU
+    canopy::cuda::DeviceBuffer<float> outDev(3 * nCpu);
+    std::vector<float> outGpu(3 * nCpu);
+    size_t mismatchCpu = 0;
+    const unsigned grid = unsigned((n + 127) / 128), gridCheck = unsigned((nCpu + 127) / 128);
+    std::printf("| points | base | compressed Gsamples/s | texture Gsamples/s | array Gsamples/s | compressed / texture |\n");
+    std::printf("|---|---|---|---|---|---|\n");
     for (int set = 0; set < 2; ++set) {
       pts.upload(ptsHost[set].data(), n);
-      double totC = 0, totO = 0, totT = 0, totA = 0, totK[kCand] = {};
+      double totC = 0, totT = 0, totA = 0;
       for (uint32_t b = 0; b < d.baseCount(); ++b) {
         std::vector<float> dense;
         decodeBaseDense(d, b, dense);
@@ -273,59 +211,37 @@ int main(int argc, char** argv) {
         denseDev.upload(dense.data(), dense.size());
 
         const ChaarView v = dev.view();
-        // Correctness: the candidates give the shipped sampler's values, the shipped sampler the
-        // CPU's bits, and the previous sampler the same values up to float rounding.
-        launch(Sampler::Shipped, v, int(b), nCheck, outDev.data());
-        outDev.download(outShipped.data(), outShipped.size());
-        for (int k = 0; k < kCand; ++k) {
-          launch(cands[k], v, int(b), nCheck, outDev.data());
-          outDev.download(outOther.data(), outOther.size());
-          for (size_t i = 0; i < outShipped.size(); ++i) mismatchCand += outShipped[i] != outOther[i];
-        }
-        launch(Sampler::Old, v, int(b), nCheck, outDev.data());
-        outDev.download(outOther.data(), outOther.size());
-        for (size_t i = 0; i < outShipped.size(); ++i) {
-          peak = std::max(peak, std::fabs(double(outShipped[i])));
-          oldMaxAbs = std::max(oldMaxAbs, std::fabs(double(outShipped[i]) - outOther[i]));
-        }
+        // Correctness: the GPU's samples are the CPU's, bit for bit.
+        compressedKernel<<<gridCheck, 128>>>(v, int(b), pts.data(), nCpu, sum.data(), outDev.data());
+        outDev.download(outGpu.data(), outGpu.size());
         const ChaarView hv = d.view();
         for (size_t i = 0; i < nCpu; ++i) {
           const Rgb c = chaarSample(hv, int(b), ptsHost[set][i].x, ptsHost[set][i].y, ptsHost[set][i].z);
-          mismatchCpu += std::memcmp(&c.r, &outShipped[3 * i], 4) != 0 || std::memcmp(&c.g, &outShipped[3 * i + 1], 4) != 0 ||
-                         std::memcmp(&c.b, &outShipped[3 * i + 2], 4) != 0;
+          mismatchCpu += std::memcmp(&c.r, &outGpu[3 * i], 4) != 0 || std::memcmp(&c.g, &outGpu[3 * i + 1], 4) != 0 ||
+                         std::memcmp(&c.b, &outGpu[3 * i + 2], 4) != 0;
         }
-        const float msC = bestMs(reps, [&] { launch(Sampler::Shipped, v, int(b), n, nullptr); });
-        const float msO = bestMs(reps, [&] { launch(Sampler::Old, v, int(b), n, nullptr); });
-        float msK[kCand] = {};
-        for (int k = 0; k < kCand; ++k)
-          msK[k] = bestMs(reps, [&] { launch(cands[k], v, int(b), n, nullptr); });
+        const float msC = bestMs(reps, [&] { compressedKernel<<<grid, 128>>>(v, int(b), pts.data(), n, sum.data(), nullptr); });
         const float msT = bestMs(reps, [&] { textureKernel<<<grid, 128>>>(tex, mn, pts.data(), n, sum.data()); });
         const float msA = bestMs(reps, [&] { arrayKernel<<<grid, 128>>>(denseDev.data(), mn, mx, pts.data(), n, sum.data()); });
         totC += msC;
-        totO += msO;
-        for (int k = 0; k < kCand; ++k) totK[k] += msK[k];
         totT += msT;
         totA += msA;
         auto rate = [&](double ms) { return ms > 0 ? n / (ms * 1e6) : 0.0; };
         if (b % 6 == 0 || b + 1 == d.baseCount())
-          std::printf("| %s | %s | %.2f | %.2f | %.2f | %.2f | %.2f | %.2fx |\n", set == 0 ? "stored bricks" : "lattice box",
-                      baseName(b).c_str(), rate(msC), rate(msO), rate(msK[0]), rate(msT), rate(msA), msT / msC);
+          std::printf("| %s | %s | %.2f | %.2f | %.2f | %.2fx |\n", set == 0 ? "stored bricks" : "lattice box",
+                      baseName(b).c_str(), rate(msC), rate(msT), rate(msA), msT / msC);
         cudaDestroyTextureObject(tex);
         cudaFreeArray(arr);
       }
       const double nb = double(n) * d.baseCount();
       auto rate = [&](double ms) { return ms > 0 ? nb / (ms * 1e6) : 0.0; };
-      std::printf("| %s | **all %u** | **%.2f** | %.2f | %.2f | **%.2f** | **%.2f** | **%.2fx** (target >= 0.5x) |\n",
-                  set == 0 ? "stored bricks" : "lattice box", d.baseCount(), rate(totC), rate(totO), rate(totK[0]),
-                  rate(totT), rate(totA), totT / totC);
+      std::printf("| %s | **all %u** | **%.2f** | **%.2f** | **%.2f** | **%.2fx** (target >= 0.5x) |\n",
+                  set == 0 ? "stored bricks" : "lattice box", d.baseCount(), rate(totC), rate(totT), rate(totA), totT / totC);
     }
-    std::printf("\nchecks: candidates != shipped in %zu values (of %zu per candidate, base and point set), GPU != CPU (bits) "
-                "in %zu samples (of %zu per base and point set); previous (decode-exact) sampler vs shipped: largest "
-                "difference %.3g, largest sample %.3g\n",
-                mismatchCand, 3 * nCheck, mismatchCpu, nCpu, oldMaxAbs, peak);
+    std::printf("\ncheck: GPU != CPU (bits) in %zu samples (of %zu per base and point set)\n", mismatchCpu, nCpu);
     std::printf("\ncompressed on device: %.2f MiB; dense float4 texture per base: %.2f MiB\n",
                 double(dev.deviceBytes()) / (1 << 20), double(dim[0]) * dim[1] * dim[2] * 16 / (1 << 20));
-    return mismatchCand || mismatchCpu || !(oldMaxAbs <= 1e-5 * peak) ? 3 : 0;
+    return mismatchCpu ? 3 : 0;
   } catch (const canopy::Error& e) {
     std::fprintf(stderr, "bench_haar_gpu: error: %s\n", e.what());
     return int(e.code());

@@ -168,15 +168,14 @@ __global__ void pullBoundaryKernel(const OmegaSet omega, const Boundary b, const
   pullBoundaryNode(omega, L, b.f, k, c, x, y, z);
 }
 
-// Every node's arrival total from `state` (the post values of the iteration before); zeroInterior:
-// the initial state (interior arrivals 0, before any post value exists).
-__global__ void pullTotalsKernel(const PullLayout L, const float* __restrict__ state, float fixedTotal, bool zeroInterior,
+// Every node's arrival total from `state` (the post values of the iteration before). Before the
+// first step both buffers hold zeros (reset), so every interior total is 0, the initial state's.
+__global__ void pullTotalsKernel(const PullLayout L, const float* __restrict__ state, float fixedTotal,
                                  float* __restrict__ totals) {
   const int x = int(blockIdx.x) * kBlockX + int(threadIdx.x);
   const int y = int(blockIdx.y), z = int(blockIdx.z);
   if (x >= L.d.nx) return;
-  totals[L.d.index(x, y, z)] =
-      zeroInterior && L.d.interior(x, y, z) ? 0.f : pullArrivalTotal(L, state, fixedTotal, x, y, z);
+  totals[L.d.index(x, y, z)] = pullArrivalTotal(L, state, fixedTotal, x, y, z);
 }
 
 __global__ void __launch_bounds__(kReduceThreads) pullResidualKernel(const PullLayout L, const float* __restrict__ state,
@@ -457,11 +456,10 @@ class CudaSolver final : public Solver {
 
   void beforeCheckedStep() override {
     keepTotals_ = isShift(scheme_);
-    // Pull: the totals of the current state, from the post values before it. Before the first step
-    // (t_ == 0) they are the initial state's: 0 inside (the buffers hold zeros and the boundary's
-    // post values are not written yet, so the sums would be 0 too; the flag says it outright).
+    // Pull: the totals of the current state, from the post values before it (before the first step:
+    // zeros, the boundary's post values not written yet, so 0 inside, the initial state's).
     if (isPull(scheme_)) {
-      pullTotalsKernel<<<grid(), kBlockX, 0, stream_>>>(pull_, prev_, fixedTotal_, t_ == 0, totals_.data());
+      pullTotalsKernel<<<grid(), kBlockX, 0, stream_>>>(pull_, prev_, fixedTotal_, totals_.data());
       CANOPY_CUDA_CHECK(cudaGetLastError());
     }
   }
