@@ -65,16 +65,47 @@ ChaarView ChaarData::view() const {
   v.precision = precision();
   v.slots = slots.data();
   v.records = records.data();
-  v.coefs = precision() == Precision::Fp16 ? static_cast<const void*>(coefs16.data())
-                                           : static_cast<const void*>(coefs32.data());
-  for (uint32_t b = 0; b < header.baseCount && b < uint32_t(kMaxBases); ++b)
+  v.quantRecords = quantRecords.data();
+  v.coefs = precision() == Precision::Quant  ? static_cast<const void*>(quantWords.data())
+            : precision() == Precision::Fp16 ? static_cast<const void*>(coefs16.data())
+                                             : static_cast<const void*>(coefs32.data());
+  for (uint32_t b = 0; b < header.baseCount && b < uint32_t(kMaxBases); ++b) {
     v.baseCoefOffset[b] = bases[b].coefOffset;
+    if (precision() == Precision::Quant) quantSteps(bases[b].quantStep, v.quantStep[b]);
+  }
   return v;
 }
 
 uint64_t ChaarData::baseBytes(uint32_t base) const {
+  if (precision() == Precision::Quant)
+    return uint64_t(header.slotCount) * sizeof(QuantRecord) + (uint64_t(bases[base].quantWords) + 1) * 8;
   const uint64_t entryBytes = precision() == Precision::Fp16 ? 6 : 12;
   return uint64_t(header.slotCount) * sizeof(BrickRecord) + bases[base].coefCount * entryBytes;
+}
+
+// Validates base b's quantised records against its stream and fills d.records with their masks
+// (first = the running entry index), which the shared checks below then verify.
+void checkQuantRecords(ChaarData& d, uint32_t b, const Checker& ck) {
+  const ChaarHeader& h = d.header;
+  const ChaarBaseEntry& e = d.bases[b];
+  const std::string bn = "base " + baseName(b);
+  uint64_t bit = 0, entries = 0;
+  for (uint32_t s = 0; s < h.slotCount; ++s) {
+    const QuantRecord& q = d.quantRecords[uint64_t(b) * h.slotCount + s];
+    const std::string at = bn + " slot " + str(s);
+    const uint64_t m = q.mask();
+    ck.require((q.widths >> 24) == 0, at + " has reserved width bits set");
+    ck.require((m & 1u) || q.groupBits(0) == 0, at + " has average widths without an average");
+    ck.require((m & ~uint64_t(1)) || q.groupBits(1) == 0, at + " has detail widths without details");
+    ck.require(q.bitOffset == bit, at + " bit offset out of order or out of range");
+    bit += q.bits();
+    ck.require(bit <= 64 * uint64_t(e.quantWords), at + " fields run past the base's stream");
+    d.records[uint64_t(b) * h.slotCount + s].set(m, uint32_t(entries), false);
+    entries += uint64_t(popcount64(m));
+  }
+  ck.require((bit + 63) / 64 == e.quantWords, bn + " stream is longer than its records' fields");
+  if (bit % 64)
+    ck.require((d.quantWords[e.coefOffset + bit / 64] >> (bit % 64)) == 0, bn + " has nonzero bits after its last field");
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -92,7 +123,7 @@ ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) 
   ck.require(major <= kChaarVersionMajor,
              ".chaar version " + str(major) + "." + str(minor) + " is newer than this reader (" +
                  str(kChaarVersionMajor) + "." + str(kChaarVersionMinor) + "); update Canopy");
-  ck.require(major == kChaarVersionMajor, "unsupported .chaar major version " + str(major));
+  ck.require(major >= 1, "unsupported .chaar major version " + str(major));
   ck.require(headerSize >= sizeof(ChaarHeader) && headerSize <= 4096 && headerSize % kAlign == 0,
              "bad header size " + str(headerSize));
   ck.require(size >= headerSize,
@@ -107,7 +138,12 @@ ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) 
 
   // Header fields.
   ck.require(h.baseCount >= 1 && h.baseCount <= uint32_t(kMaxBases), "bad base count " + str(h.baseCount));
-  ck.require(h.precision <= 1, "unknown coefficient precision " + str(h.precision));
+  ck.require(h.precision <= 2, "unknown coefficient precision " + str(h.precision));
+  const bool quant = h.precision == uint32_t(Precision::Quant);
+  ck.require(quant == (h.versionMajor == 2), quant ? "quantised coefficients in a 1.x file"
+                                                   : "float coefficients in a 2.x file");
+  // The newest minor of the file's major that this reader knows.
+  const uint16_t knownMinor = h.versionMajor == 1 ? kChaarVersionMinor : 0;
   for (int a = 0; a < 3; ++a) {
     const int64_t dim = int64_t(h.latticeMax[a]) - h.latticeMin[a] + 1;
     ck.require(dim >= 1 && dim <= kMaxLatticeEdge, "bad lattice bounds on axis " + str(a));
@@ -129,7 +165,7 @@ ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) 
   const uint64_t entryBytes = h.precision == 1 ? 6 : 12;
   const uint64_t expected[kChaarSectionCount] = {
       0, uint64_t(h.baseCount) * sizeof(ChaarBaseEntry), brickCount * 4,
-      uint64_t(h.baseCount) * h.slotCount * sizeof(BrickRecord), 0};
+      uint64_t(h.baseCount) * h.slotCount * (quant ? sizeof(QuantRecord) : sizeof(BrickRecord)), 0};
   ck.require(h.coefCount <= uint64_t(h.baseCount) * h.slotCount * kBrickValues,
              "coefficient count larger than the bricks can hold");
 
@@ -144,7 +180,8 @@ ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) 
     if (s == kSecMeta)
       ck.require(e.size <= kMaxMetaBytes, sec + " is too large");
     else if (s == kSecCoefs)
-      ck.require(e.size == h.coefCount * entryBytes, sec + " has the wrong size");
+      ck.require(quant ? e.size % 8 == 0 && e.size >= 8 * uint64_t(h.baseCount) : e.size == h.coefCount * entryBytes,
+                 sec + " has the wrong size");
     else
       ck.require(e.size == expected[s], sec + " has the wrong size");
     for (uint64_t i = cursor; i < e.offset; ++i)
@@ -154,7 +191,7 @@ ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) 
     cursor = e.offset + e.size;
   }
   // A newer minor version may append sections after COEFS; in ours the file ends there.
-  if (h.versionMinor <= kChaarVersionMinor)
+  if (h.versionMinor <= knownMinor)
     ck.require(cursor == h.fileSize, str(h.fileSize - cursor) + " unaccounted bytes after the last section");
 
   // Copy sections into typed arrays.
@@ -165,8 +202,17 @@ ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) 
   d.slots.resize(brickCount);
   std::memcpy(d.slots.data(), sectionPtr(kSecSlots), h.sections[kSecSlots].size);
   d.records.resize(uint64_t(h.baseCount) * h.slotCount);
-  std::memcpy(static_cast<void*>(d.records.data()), sectionPtr(kSecRecords), h.sections[kSecRecords].size);
-  if (h.precision == 1) {
+  if (quant) {
+    d.quantRecords.resize(d.records.size());
+    std::memcpy(static_cast<void*>(d.quantRecords.data()), sectionPtr(kSecRecords), h.sections[kSecRecords].size);
+    d.quantWords.resize(h.sections[kSecCoefs].size / 8);
+    std::memcpy(d.quantWords.data(), sectionPtr(kSecCoefs), h.sections[kSecCoefs].size);
+  } else {
+    std::memcpy(static_cast<void*>(d.records.data()), sectionPtr(kSecRecords), h.sections[kSecRecords].size);
+  }
+  if (quant) {
+    // Checked with the records below.
+  } else if (h.precision == 1) {
     d.coefs16.resize(3 * h.coefCount);
     std::memcpy(d.coefs16.data(), sectionPtr(kSecCoefs), h.sections[kSecCoefs].size);
     for (uint16_t v : d.coefs16) ck.require(isFiniteHalf(v), "non-finite coefficient");
@@ -177,18 +223,28 @@ ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) 
   }
 
   // Bases: streams consecutive and covering COEFS exactly.
-  uint64_t coefCursor = 0;
+  uint64_t coefCursor = 0, wordCursor = 0;
   for (uint32_t b = 0; b < h.baseCount; ++b) {
     const ChaarBaseEntry& e = d.bases[b];
     const std::string bn = "base " + baseName(b);
-    ck.require(e.coefOffset == coefCursor && e.coefCount <= h.coefCount - coefCursor,
-               bn + " coefficient stream out of range");
+    ck.require(e.coefCount <= h.coefCount - coefCursor, bn + " coefficient count out of range");
+    if (quant) {
+      ck.require(e.coefOffset == wordCursor && e.quantWords < d.quantWords.size() - wordCursor,
+                 bn + " coefficient stream out of range");
+      // Steps: finite, positive, and small enough that 2^14 steps of sqrt(2)^3 T stay finite.
+      ck.require(std::isfinite(e.quantStep) && e.quantStep > 0 && e.quantStep < 1e30f, bn + " has a bad quantisation step");
+      ck.require(d.quantWords[e.coefOffset + e.quantWords] == 0, bn + " stream's end word is not zero (corrupted)");
+      wordCursor += uint64_t(e.quantWords) + 1;
+    } else {
+      ck.require(e.coefOffset == coefCursor, bn + " coefficient stream out of range");
+      ck.require(e.quantStep == 0 && e.quantWords == 0, bn + " has quantisation fields in a float file");
+    }
     ck.require(e.coefCount <= uint64_t(BrickRecord::kMaxFirst) + 1, bn + " coefficient stream too long");
     for (int a = 0; a < 3; ++a)
       ck.require(e.direction[a] >= -1 && e.direction[a] <= 1, bn + " has a bad direction");
     // Flags: none in 1.0; in 1.1 only kChaarBaseScattered, on a sun base (a newer minor may add more).
-    if (h.versionMinor == 0) ck.require(e.flags == 0, bn + " has flags in a 1.0 file");
-    if (h.versionMinor <= kChaarVersionMinor)
+    if (h.versionMajor == 1 && h.versionMinor == 0) ck.require(e.flags == 0, bn + " has flags in a 1.0 file");
+    if (h.versionMinor <= knownMinor)
       ck.require((e.flags & ~uint32_t(kChaarBaseScattered)) == 0, bn + " has unknown flags " + str(e.flags));
     ck.require(!(e.flags & kChaarBaseScattered) || e.direction[0] != 0 || e.direction[1] != 0 || e.direction[2] != 0,
                bn + " is the ambient base but flagged scattered-only");
@@ -198,6 +254,7 @@ ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) 
     coefCursor += e.coefCount;
   }
   ck.require(coefCursor == h.coefCount, "base streams do not cover the coefficient section");
+  ck.require(!quant || wordCursor == d.quantWords.size(), "base streams do not cover the coefficient section");
 
   // Slots: a bijection between stored bricks and slots.
   std::vector<uint8_t> seen(h.slotCount, 0);
@@ -215,6 +272,7 @@ ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) 
   for (uint32_t b = 0; b < h.baseCount; ++b) {
     uint64_t next = 0;
     uint32_t nonEmpty = 0, raw = 0;
+    if (quant) checkQuantRecords(d, b, ck);
     for (uint32_t s = 0; s < h.slotCount; ++s) {
       const BrickRecord& r = d.records[uint64_t(b) * h.slotCount + s];
       ck.require(!r.raw() || r.mask() != 0,
@@ -249,27 +307,37 @@ ChaarData readChaar(const std::string& path) {
 std::vector<uint8_t> serializeChaar(ChaarData& d) {
   ChaarHeader& h = d.header;
   std::memcpy(h.magic, kChaarMagic, sizeof kChaarMagic);
-  h.versionMajor = kChaarVersionMajor;
-  // 1.1 only where a 1.1 field is used: files without base flags stay 1.0, byte for byte.
+  const bool quant = h.precision == uint32_t(Precision::Quant);
+  // 2.0 only for quantised coefficients; 1.1 only where a 1.1 field is used: files without base
+  // flags stay 1.0, byte for byte.
   bool flagged = false;
   for (const ChaarBaseEntry& e : d.bases) flagged = flagged || e.flags != 0;
-  h.versionMinor = flagged ? kChaarVersionMinor : 0;
+  h.versionMajor = quant ? 2 : 1;
+  h.versionMinor = quant ? 0 : (flagged ? kChaarVersionMinor : 0);
   h.headerSize = sizeof(ChaarHeader);
   h.baseCount = uint32_t(d.bases.size());
   const bool fp16 = h.precision == uint32_t(Precision::Fp16);
-  const uint64_t coefEntries = fp16 ? d.coefs16.size() / 3 : d.coefs32.size() / 3;
+  uint64_t coefEntries = fp16 ? d.coefs16.size() / 3 : d.coefs32.size() / 3;
+  if (quant) {
+    coefEntries = 0;
+    for (const ChaarBaseEntry& e : d.bases) coefEntries += e.coefCount;
+  }
   h.coefCount = coefEntries;
-  if (d.slots.size() != d.brickCount() || d.records.size() != uint64_t(h.baseCount) * h.slotCount)
+  if (d.slots.size() != d.brickCount() || d.records.size() != uint64_t(h.baseCount) * h.slotCount ||
+      (quant && d.quantRecords.size() != d.records.size()))
     throw runtimeError("serializeChaar: inconsistent brick tables");
   std::memset(h.reserved, 0, sizeof h.reserved);
 
   const void* src[kChaarSectionCount] = {d.meta.data(), d.bases.data(), d.slots.data(),
-                                         d.records.data(),
-                                         fp16 ? static_cast<const void*>(d.coefs16.data())
-                                              : static_cast<const void*>(d.coefs32.data())};
+                                         quant ? static_cast<const void*>(d.quantRecords.data())
+                                               : static_cast<const void*>(d.records.data()),
+                                         quant  ? static_cast<const void*>(d.quantWords.data())
+                                         : fp16 ? static_cast<const void*>(d.coefs16.data())
+                                                : static_cast<const void*>(d.coefs32.data())};
   const uint64_t sizes[kChaarSectionCount] = {
       d.meta.size(), d.bases.size() * sizeof(ChaarBaseEntry), d.slots.size() * 4,
-      d.records.size() * sizeof(BrickRecord), coefEntries * (fp16 ? 6 : 12)};
+      quant ? d.quantRecords.size() * sizeof(QuantRecord) : d.records.size() * sizeof(BrickRecord),
+      quant ? d.quantWords.size() * 8 : coefEntries * (fp16 ? 6 : 12)};
   uint64_t cursor = sizeof(ChaarHeader);
   for (int s = 0; s < kChaarSectionCount; ++s) {
     cursor = alignUp(cursor);
@@ -302,19 +370,12 @@ void decodeBaseDense(const ChaarData& d, uint32_t base, std::vector<float>& out)
   for (int a = 0; a < 3; ++a) dim[a] = int64_t(h.latticeMax[a]) - h.latticeMin[a] + 1;
   out.assign(size_t(3 * dim[0] * dim[1] * dim[2]), 0.0f);
   const ChaarView v = d.view();
-  const uint64_t off = v.baseCoefOffset[base];
   float vals[3][kBrickValues];
   for (int64_t bz = 0; bz < h.brickDims[2]; ++bz)
     for (int64_t by = 0; by < h.brickDims[1]; ++by)
       for (int64_t bx = 0; bx < h.brickDims[0]; ++bx) {
         const uint32_t slot = d.slots[size_t((bz * h.brickDims[1] + by) * h.brickDims[0] + bx)];
-        if (slot == kEmptySlot) continue;
-        const BrickRecord& rec = d.records[uint64_t(base) * h.slotCount + slot];
-        if (rec.mask() == 0) continue;
-        if (h.precision == uint32_t(Precision::Fp16))
-          decodeBrick(rec, CoefReader16{d.coefs16.data() + 3 * off}, vals);
-        else
-          decodeBrick(rec, CoefReader32{d.coefs32.data() + 3 * off}, vals);
+        if (slot == kEmptySlot || !decodeSlot(v, int(base), slot, vals)) continue;
         // The brick owns its 3^3 core; the border belongs to the next brick.
         for (int z = 0; z < kBrickCore; ++z)
           for (int y = 0; y < kBrickCore; ++y)

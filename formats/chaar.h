@@ -23,6 +23,15 @@
 // metadata canopy_direct_beam = false). A writer writes 1.0 when no base has a flag, so files
 // without it are 1.0 byte for byte. A 1.0 reader reads 1.1 files (it ignores the flags).
 //
+// Version 2.0 is Precision::Quant (quantised integer coefficients, formats/haar_brick.h): the same
+// header, META, BASES (quantStep, quantWords filled) and SLOTS; RECORDS holds QuantRecord[baseCount
+// * slotCount] (16 bytes: u32 mask lo, u32 mask hi, u32 bit offset, u32 widths), base-major, each
+// base's bit offsets the running sum of its records' bits in slot order; COEFS holds each base's
+// stream (quantWords little-endian u64, bits past the last field zero) followed by one zero word,
+// base after base (coefOffset = the base's first word); header coefCount = kept coefficients. A
+// writer writes 2.0 only for Quant, so fp32/fp16 files stay 1.x byte for byte; 1.x readers
+// reject 2.0 files (a newer major), a 2.0 reader reads every 1.x file.
+//
 // A reader (parseChaar) trusts nothing: it rejects bad magic, a newer major version, truncation,
 // trailing bytes, checksum mismatch, sections out of range or overlapping, inconsistent counts,
 // out-of-range slots/indices and non-finite values, each with canopy::Error(InvalidInput) naming
@@ -40,8 +49,8 @@
 namespace canopy::haar {
 
 constexpr char kChaarMagic[8] = {'C', 'N', 'P', 'Y', 'H', 'A', 'A', 'R'};
-constexpr uint16_t kChaarVersionMajor = 1;
-constexpr uint16_t kChaarVersionMinor = 1;
+constexpr uint16_t kChaarVersionMajor = 2;  // the newest major this reader reads (2: Quant)
+constexpr uint16_t kChaarVersionMinor = 1;  // the newest 1.x minor (2.x: 0)
 constexpr int kChaarSectionCount = 5;
 enum ChaarSection : int { kSecMeta = 0, kSecBases = 1, kSecSlots = 2, kSecRecords = 3, kSecCoefs = 4 };
 constexpr int kMaxLatticeEdge = 1 << 15;  // per axis; a light lattice is 64..512 in practice
@@ -92,7 +101,8 @@ struct ChaarBaseEntry {    // 64 bytes
   float valueMax;          // 44 largest input value (any channel): the PSNR peak
   uint32_t brickCount;     // 48 bricks with light in this base (mask != 0)
   uint32_t rawBrickCount;  // 52 of those, stored raw (no transform)
-  uint64_t reserved;       // 56 zero
+  float quantStep;         // 56 (2.0, Quant) the base's step T (haar_brick.h quantSteps); zero otherwise
+  uint32_t quantWords;     // 60 (2.0, Quant) 64-bit words of the base's stream, without its zero end word
 };
 static_assert(sizeof(ChaarBaseEntry) == 64, "ChaarBaseEntry is 64 bytes");
 
@@ -111,6 +121,11 @@ struct ChaarData {
   std::vector<BrickRecord> records;
   std::vector<float> coefs32;           // 3 * coefCount floats when precision == fp32
   std::vector<uint16_t> coefs16;        // 3 * coefCount halves when precision == fp16
+  // Quant (2.0): the on-disk records and the bit streams (each base's words, then one zero word).
+  // `records` then holds their masks with `first` = the running entry index (raw never set), so
+  // code that only counts coefficients or looks at masks serves every precision.
+  std::vector<QuantRecord> quantRecords;
+  std::vector<uint64_t> quantWords;
 
   Precision precision() const { return Precision(header.precision); }
   uint32_t baseCount() const { return header.baseCount; }
@@ -137,6 +152,9 @@ void writeChaar(const std::string& path, ChaarData& data);
 // Rebuilds the two decoded views used by tools and tests: every lattice cell's value as decoded
 // from the brick that owns it. out: 3 floats per cell, x fastest over the lattice box.
 void decodeBaseDense(const ChaarData& data, uint32_t base, std::vector<float>& out);
+
+// Bytes of one brick record of a base.
+inline uint64_t recordBytes(Precision p) { return p == Precision::Quant ? sizeof(QuantRecord) : sizeof(BrickRecord); }
 
 // "B07" for base 7.
 std::string baseName(uint32_t base);

@@ -36,7 +36,7 @@ constexpr int kBrickValues = 64;  // 4^3
 constexpr uint32_t kEmptySlot = 0xffffffffu;  // slot table entry of a brick with no light
 constexpr int kMaxBases = 32;
 
-enum class Precision : uint32_t { Fp32 = 0, Fp16 = 1 };
+enum class Precision : uint32_t { Fp32 = 0, Fp16 = 1, Quant = 2 };
 
 struct Rgb {
   float r = 0, g = 0, b = 0;
@@ -155,21 +155,27 @@ struct CoefReader16 {
   }
 };
 
-// Expands a brick's kept coefficients into 64 values per channel and unlifts them (raw bricks are
-// copied). out[ch][c]. This is the reference decoder of one brick.
-template <class Reader>
-CANOPY_HD inline void decodeBrick(const BrickRecord& rec, const Reader& read, float out[3][kBrickValues]) {
-  const uint64_t mask = rec.mask();
-  uint64_t k = rec.first();
+// Expands a brick's kept coefficients (by rank, as sampleMasked reads them) into 64 values per
+// channel and unlifts them (raw bricks are copied), then applies coef.finish per value. out[ch][c].
+// This is the reference decoder of one brick.
+template <class Coefs>
+CANOPY_HD inline void decodeMasked(uint64_t mask, bool raw, const Coefs& coef, float out[3][kBrickValues]) {
+  uint32_t j = 0;
   for (int c = 0; c < kBrickValues; ++c) {
     Rgb v{};
-    if ((mask >> c) & 1u) v = read(k++);
+    if ((mask >> c) & 1u) v = coef(j++, uint32_t(c));
     out[0][c] = v.r;
     out[1][c] = v.g;
     out[2][c] = v.b;
   }
-  if (rec.raw()) return;
-  for (int ch = 0; ch < 3; ++ch) unliftBrick(out[ch]);
+  if (!raw)
+    for (int ch = 0; ch < 3; ++ch) unliftBrick(out[ch]);
+  for (int c = 0; c < kBrickValues; ++c) {
+    const Rgb v = coef.finish(Rgb{out[0][c], out[1][c], out[2][c]});
+    out[0][c] = v.r;
+    out[1][c] = v.g;
+    out[2][c] = v.b;
+  }
 }
 
 // ---- trilinear sampling inside one brick ----------------------------------------------------
@@ -263,19 +269,19 @@ struct FootprintWeights {
     return mulRn(mulRn(pickWeight(wx, c & 3u), pickWeight(wy, (c >> 2) & 3u)), pickWeight(wz, c >> 4));
   }
 };
-CANOPY_HD CANOPY_FORCEINLINE FootprintWeights footprintWeights(const BrickRecord& rec, int lx, int ly, int lz, float fx,
+CANOPY_HD CANOPY_FORCEINLINE FootprintWeights footprintWeights(uint64_t mask, bool raw, int lx, int ly, int lz, float fx,
                                                              float fy, float fz) {
   FootprintWeights fw;
-  if (rec.raw()) {
+  if (raw) {
     rawAxisWeights(lx, fx, fw.wx);
     rawAxisWeights(ly, fy, fw.wy);
     rawAxisWeights(lz, fz, fw.wz);
-    fw.need = rec.mask() & coefficientBox(3u << lx, 3u << ly, 3u << lz);
+    fw.need = mask & coefficientBox(3u << lx, 3u << ly, 3u << lz);
   } else {
     haarAxisWeights(lx, fx, fw.wx);
     haarAxisWeights(ly, fy, fw.wy);
     haarAxisWeights(lz, fz, fw.wz);
-    fw.need = rec.mask() & footprintNeedMask(lx, ly, lz);
+    fw.need = mask & footprintNeedMask(lx, ly, lz);
   }
   return fw;
 }
@@ -285,29 +291,152 @@ CANOPY_HD CANOPY_FORCEINLINE void accumulate(Rgb& out, const Rgb& v, float w) {
   out.b = addRn(out.b, mulRn(v.b, w));
 }
 
-// Trilinear sample of one brick: (lx, ly, lz) in 0..2 is the lower texel of the 2^3 footprint
-// (brick-local), (fx, fy, fz) in [0, 1] the fractions. The terms are summed in coefficient order.
-template <class Reader>
-CANOPY_HD inline Rgb sampleBrick(const BrickRecord& rec, const Reader& read, int lx, int ly, int lz,
-                                 float fx, float fy, float fz) {
-  const uint64_t mask = rec.mask();
+// Trilinear sample of a brick given its mask and its kept coefficients by rank: coef(j, c) returns
+// the j-th kept coefficient (in mask order), which is coefficient c of the brick; coef.finish()
+// maps the sum to RGB (identity for float streams, the colour transform for quantised ones).
+// (lx, ly, lz) in 0..2 is the lower texel of the 2^3 footprint (brick-local), (fx, fy, fz) in
+// [0, 1] the fractions. The terms are summed in coefficient order.
+template <class Coefs>
+CANOPY_HD inline Rgb sampleMasked(uint64_t mask, bool raw, const Coefs& coef, int lx, int ly, int lz, float fx,
+                                  float fy, float fz) {
   if (mask == 0) return Rgb{};
-  const uint32_t first = rec.first();
-  if (mask == 1u && !rec.raw()) return read(first);  // only the average: the fast path
-  const FootprintWeights fw = footprintWeights(rec, lx, ly, lz, fx, fy, fz);
+  if (mask == 1u && !raw) return coef.finish(coef(0u, 0u));  // only the average: the fast path
+  const FootprintWeights fw = footprintWeights(mask, raw, lx, ly, lz, fx, fy, fz);
+  const uint32_t maskLo = uint32_t(mask), maskHi = uint32_t(mask >> 32);
   Rgb out;
   // The mask's two 32-bit halves in two loops: 32-bit bit scans and popcounts (measured on an H200:
   // 20.4 against 16.5 G samples/s for one loop over the 64-bit set).
   for (uint32_t need = uint32_t(fw.need); need; need &= need - 1u) {
     const uint32_t c = lowestBit32(need);
-    accumulate(out, read(first + popcount32(rec.maskLo & ((1u << c) - 1u))), fw(c));
+    accumulate(out, coef(popcount32(maskLo & ((1u << c) - 1u)), c), fw(c));
   }
-  const uint32_t firstHi = first + popcount32(rec.maskLo);
+  const uint32_t rankHi = popcount32(maskLo);
   for (uint32_t need = uint32_t(fw.need >> 32); need; need &= need - 1u) {
     const uint32_t c = lowestBit32(need);
-    accumulate(out, read(firstHi + popcount32(rec.maskHi & ((1u << c) - 1u))), fw(c + 32u));
+    accumulate(out, coef(rankHi + popcount32(maskHi & ((1u << c) - 1u)), c + 32u), fw(c + 32u));
   }
-  return out;
+  return coef.finish(out);
+}
+
+// The kept coefficients of a float brick record: entries first, first + 1, ... of a stream.
+template <class Reader>
+struct RankedEntries {
+  const Reader& read;
+  uint32_t first;
+  CANOPY_HD CANOPY_FORCEINLINE Rgb operator()(uint32_t j, uint32_t) const { return read(uint64_t(first) + j); }
+  CANOPY_HD CANOPY_FORCEINLINE Rgb finish(const Rgb& v) const { return v; }
+};
+
+// Trilinear sample of one float brick (fp32 or fp16 stream).
+template <class Reader>
+CANOPY_HD inline Rgb sampleBrick(const BrickRecord& rec, const Reader& read, int lx, int ly, int lz,
+                                 float fx, float fy, float fz) {
+  return sampleMasked(rec.mask(), rec.raw(), RankedEntries<Reader>{read, rec.first()}, lx, ly, lz, fx, fy, fz);
+}
+
+// The reference decoder of one float brick.
+template <class Reader>
+CANOPY_HD inline void decodeBrick(const BrickRecord& rec, const Reader& read, float out[3][kBrickValues]) {
+  decodeMasked(rec.mask(), rec.raw(), RankedEntries<Reader>{read, rec.first()}, out);
+}
+
+// ---- quantised coefficients (Precision::Quant, .chaar 2.0) ------------------------------------
+//
+// A quantised base stores integers: channel values are first taken to (Y, R-Y, B-Y) with Y = G
+// (the light's channels are strongly correlated, so the two differences are small), lifted as
+// above, and coefficient c of a brick is stored as q = round(v / step) per channel, where step =
+// the base's step T times sqrt(2) per axis along which c is a fine detail (d0 or d1: those basis
+// functions cover half the texels, so their error weighs half as much). |v| < kQuantDeadZone *
+// step stores 0; a coefficient whose three q are 0 is dropped from the mask. Decoding multiplies
+// back (q * step, rounded float), unlifts, and maps (Y, R-Y, B-Y) back to RGB.
+//
+// Bits: each base's stream is an array of little-endian 64-bit words. A brick's fields start at
+// its record's bitOffset: the average's three channels (if mask bit 0 is set), then each kept
+// detail's three channels in mask order; a field is a two's-complement integer of its width, the
+// widths (0..15 bits, 0 = all zero) are per brick, one per channel for the average and one per
+// channel for the details (QuantRecord::widths). Reading a field set takes a 64-bit window at its
+// bit position (two aligned word loads; each base stream ends with one zero word for the second).
+
+constexpr float kQuantDeadZone = 0.7f;     // |v| / step below this stores 0
+constexpr int kQuantMaxWidth = 15;         // bits per field
+constexpr int32_t kQuantMaxLevel = 16383;  // |q| <= 2^14 - 1 (15-bit fields, one level of margin)
+
+// One brick of one quantised base: 16 bytes on disk and in memory.
+struct QuantRecord {
+  uint32_t maskLo = 0, maskHi = 0;  // kept coefficients (bit c = coefficient c)
+  uint32_t bitOffset = 0;           // first bit of the brick's fields in the base's stream
+  uint32_t widths = 0;              // nibbles: 0-2 the average's Y, R-Y, B-Y widths, 3-5 the details'; 6-7 zero
+  CANOPY_HD uint64_t mask() const { return uint64_t(maskLo) | (uint64_t(maskHi) << 32); }
+  CANOPY_HD uint32_t width(int group, int ch) const { return (widths >> (4 * (3 * group + ch))) & 0xfu; }
+  CANOPY_HD uint32_t groupBits(int group) const { return width(group, 0) + width(group, 1) + width(group, 2); }
+  // Bits of all the brick's fields.
+  CANOPY_HD uint64_t bits() const {
+    const uint64_t m = mask();
+    const uint32_t has0 = uint32_t(m & 1u);
+    return uint64_t(has0) * groupBits(0) + uint64_t(popcount64(m) - int(has0)) * groupBits(1);
+  }
+};
+static_assert(sizeof(QuantRecord) == 16, "QuantRecord is 16 bytes on disk and on the device");
+
+// The number of axes along which coefficient c (x + 4y + 16z) is a fine detail (axis index 2 or 3).
+CANOPY_HD CANOPY_FORCEINLINE uint32_t fineDetailAxes(uint32_t c) {
+  return ((c >> 1) & 1u) + ((c >> 3) & 1u) + ((c >> 5) & 1u);
+}
+
+// The four steps of a base with step T: T * sqrt(2)^n for n = 0..3 fine-detail axes, each rounded
+// to float once (readers compute them on the host, so CPU and GPU use the same bits).
+inline void quantSteps(float T, float step[4]) {
+  const double r = 1.4142135623730951;
+  double s = double(T);
+  for (int n = 0; n < 4; ++n, s *= r) step[n] = float(s);
+}
+
+// Bits pos .. pos+63 of a word stream (the stream has a word after the last field's).
+CANOPY_HD CANOPY_FORCEINLINE uint64_t bitWindow(const uint64_t* words, uint64_t pos) {
+  const uint64_t i = pos >> 6;
+  const uint32_t sh = uint32_t(pos & 63u);
+  const uint64_t lo = words[i], hi = words[i + 1];
+  return sh ? (lo >> sh) | (hi << (64u - sh)) : lo;
+}
+// The signed field of width w (0..15) at bit `at` of a window.
+CANOPY_HD CANOPY_FORCEINLINE int32_t signedField(uint64_t window, uint32_t at, uint32_t w) {
+  const uint32_t v = uint32_t(window >> at) & ((1u << w) - 1u);
+  const uint32_t s = 32u - (w ? w : 1u);
+  return w ? int32_t(v << s) >> s : 0;
+}
+
+// The kept coefficients of a quantised brick record (the rank accessor of sampleMasked).
+struct QuantBrick {
+  const uint64_t* words;  // the base's stream
+  const float* step;      // the base's four steps
+  uint64_t pos0;          // record.bitOffset
+  uint32_t widths;
+  uint32_t has0, avgBits, detailBits;
+  CANOPY_HD CANOPY_FORCEINLINE QuantBrick(const QuantRecord& r, const uint64_t* w, const float* st)
+      : words(w), step(st), pos0(r.bitOffset), widths(r.widths), has0(r.maskLo & 1u), avgBits(r.groupBits(0)),
+        detailBits(r.groupBits(1)) {}
+  CANOPY_HD CANOPY_FORCEINLINE Rgb operator()(uint32_t j, uint32_t c) const {
+    const bool avg = c == 0;
+    const uint64_t pos = avg ? pos0 : pos0 + has0 * avgBits + uint64_t(j - has0) * detailBits;
+    const uint32_t w = avg ? widths : widths >> 12;
+    const uint32_t w0 = w & 0xfu, w1 = (w >> 4) & 0xfu, w2 = (w >> 8) & 0xfu;
+    const uint64_t win = bitWindow(words, pos);
+    const uint32_t n = fineDetailAxes(c);
+    const float st = n < 2 ? (n == 0 ? step[0] : step[1]) : (n == 2 ? step[2] : step[3]);
+    return Rgb{mulRn(float(signedField(win, 0, w0)), st), mulRn(float(signedField(win, w0, w1)), st),
+               mulRn(float(signedField(win, w0 + w1, w2)), st)};
+  }
+  // (Y, R-Y, B-Y) -> RGB.
+  CANOPY_HD CANOPY_FORCEINLINE Rgb finish(const Rgb& v) const { return Rgb{addRn(v.r, v.g), v.r, addRn(v.r, v.b)}; }
+};
+
+CANOPY_HD inline Rgb sampleQuantBrick(const QuantRecord& rec, const uint64_t* words, const float* step, int lx, int ly,
+                                      int lz, float fx, float fy, float fz) {
+  return sampleMasked(rec.mask(), false, QuantBrick(rec, words, step), lx, ly, lz, fx, fy, fz);
+}
+CANOPY_HD inline void decodeQuantBrick(const QuantRecord& rec, const uint64_t* words, const float* step,
+                                       float out[3][kBrickValues]) {
+  decodeMasked(rec.mask(), false, QuantBrick(rec, words, step), out);
 }
 
 }  // namespace canopy::haar

@@ -35,7 +35,10 @@ ChaarDevice::ChaarDevice(const ChaarData& d) {
   try {
     slots_ = uploadArray(d.slots.data(), d.slots.size(), bytes_);
     records_ = uploadArray(d.records.data(), d.records.size(), bytes_);
-    if (d.precision() == Precision::Fp16)
+    if (d.precision() == Precision::Quant) {
+      quantRecords_ = uploadArray(d.quantRecords.data(), d.quantRecords.size(), bytes_);
+      coefs_ = uploadArray(d.quantWords.data(), d.quantWords.size(), bytes_);
+    } else if (d.precision() == Precision::Fp16)
       coefs_ = uploadArray(d.coefs16.data(), d.coefs16.size(), bytes_);
     else
       coefs_ = uploadArray(d.coefs32.data(), d.coefs32.size(), bytes_);
@@ -43,16 +46,19 @@ ChaarDevice::ChaarDevice(const ChaarData& d) {
     cudaFree(slots_);
     cudaFree(records_);
     cudaFree(coefs_);
+    cudaFree(quantRecords_);
     throw;
   }
   view_.slots = slots_;
   view_.records = records_;
+  view_.quantRecords = quantRecords_;
   view_.coefs = coefs_;
 }
 
 ChaarDevice::~ChaarDevice() {
   cudaFree(slots_);
   cudaFree(records_);
+  cudaFree(quantRecords_);
   cudaFree(coefs_);
 }
 
@@ -88,14 +94,8 @@ void ChaarDevice::decodeDense(uint32_t base, std::vector<float>& out) const {
   cuda::parallelFor(bricks, [=] __device__(int64_t b) {
     const uint32_t slot = v.slots[b];
     if (slot == kEmptySlot) return;
-    const BrickRecord rec = v.records[uint64_t(base) * v.slotCount + slot];
-    if (rec.mask() == 0) return;
     float vals[3][kBrickValues];
-    const uint64_t off = v.baseCoefOffset[base];
-    if (v.precision == Precision::Fp16)
-      decodeBrick(rec, CoefReader16{static_cast<const uint16_t*>(v.coefs) + 3 * off}, vals);
-    else
-      decodeBrick(rec, CoefReader32{static_cast<const float*>(v.coefs) + 3 * off}, vals);
+    if (!decodeSlot(v, int(base), slot, vals)) return;
     const int64_t bx = b % v.brickDims[0], by = b / v.brickDims[0] % v.brickDims[1],
                   bz = b / (int64_t(v.brickDims[0]) * v.brickDims[1]);
     for (int z = 0; z < kBrickCore; ++z)

@@ -38,6 +38,7 @@ class ChaarDevice {
   ChaarView view_;
   uint32_t* slots_ = nullptr;
   BrickRecord* records_ = nullptr;
+  QuantRecord* quantRecords_ = nullptr;
   void* coefs_ = nullptr;
   size_t bytes_ = 0;
 };

@@ -34,6 +34,27 @@ LatticeGeom LatticeGeom::fromBounds(const int32_t mn[3], const int32_t mx[3], co
 
 namespace {
 float quantize(float v, Precision p) { return p == Precision::Fp16 ? halfToFloat(floatToHalf(v)) : v; }
+
+// Words a quantised brick's fields can take (64 coefficients x 3 fields x 15 bits), plus the one a
+// 64-bit window reads past them.
+constexpr int kQuantBrickWords = (kBrickValues * 3 * kQuantMaxWidth + 63) / 64 + 1;
+
+// Two's-complement bits that hold q (0 for q = 0).
+uint32_t fieldWidth(int32_t q) {
+  if (q == 0) return 0;
+  uint32_t w = 1;
+  while (q < -(int32_t(1) << (w - 1)) || q > (int32_t(1) << (w - 1)) - 1) ++w;
+  return w;
+}
+
+// ORs the low n (<= 64) bits of v into the stream at bit pos (the words there are zero).
+void putBits(uint64_t* words, uint64_t pos, uint64_t v, uint32_t n) {
+  if (n == 0) return;
+  if (n < 64) v &= (uint64_t(1) << n) - 1u;
+  const uint32_t sh = uint32_t(pos & 63u);
+  words[pos >> 6] |= v << sh;
+  if (sh && sh + n > 64) words[(pos >> 6) + 1] |= v >> (64u - sh);
+}
 }  // namespace
 
 LiftedBase::LiftedBase(const LatticeGeom& geom, const DenseLight& light, Precision precision,
@@ -81,11 +102,27 @@ LiftedBase::LiftedBase(const LatticeGeom& geom, const DenseLight& light, Precisi
     gather(brickIds_[size_t(k)], v, inside);
     for (int ch = 0; ch < 3; ++ch) {
       double d[kBrickValues];
-      for (int c = 0; c < kBrickValues; ++c) d[c] = v[ch][c];
+      for (int c = 0; c < kBrickValues; ++c) {
+        if (precision_ != Precision::Quant)
+          d[c] = v[ch][c];
+        else  // (Y, R-Y, B-Y) with Y = G, exact in double
+          d[c] = ch == 0 ? double(v[1][c]) : double(v[ch == 1 ? 0 : 2][c]) - double(v[1][c]);
+      }
       liftBrick(d);
       for (int c = 0; c < kBrickValues; ++c) lifted_[size_t(k) * 192 + ch * 64 + c] = float(d[c]);
     }
   }, 64);
+  if (precision_ == Precision::Quant) {
+    // The largest |coefficient| / sqrt(2)^(fine axes), over kQuantMaxLevel - 1 (one level of margin
+    // for the rounding of the steps): the smallest step at which every level fits 15 bits.
+    double worst = 0;
+    for (size_t k = 0; k < brickIds_.size(); ++k)
+      for (int ch = 0; ch < 3; ++ch)
+        for (int c = 0; c < kBrickValues; ++c)
+          worst = std::max(worst, std::fabs(double(lifted_[k * 192 + size_t(ch) * 64 + size_t(c)])) /
+                                      std::pow(1.4142135623730951, int(fineDetailAxes(uint32_t(c)))));
+    minQuantStep_ = float(worst / double(kQuantMaxLevel - 1));
+  }
 }
 
 void LiftedBase::gather(int64_t brick, float out[3][kBrickValues], uint8_t* coreInside) const {
@@ -170,7 +207,151 @@ LiftedBase::Result LiftedBase::encodeBrick(size_t k, float threshold, float* coe
   return best;
 }
 
+LiftedBase::Result LiftedBase::encodeQuantBrick(size_t k, const float step[4], QuantRecord& rec, uint64_t* words) const {
+  float orig[3][kBrickValues];
+  uint8_t inside[kBrickValues];
+  gather(brickIds_[k], orig, inside);
+  const float* L = &lifted_[k * 192];
+  int32_t q[kBrickValues][3];
+  uint64_t mask = 0;
+  for (int c = 0; c < kBrickValues; ++c) {
+    const double st = double(step[fineDetailAxes(uint32_t(c))]);
+    for (int ch = 0; ch < 3; ++ch) {
+      const double v = double(L[ch * 64 + c]) / st;
+      int64_t qi = std::fabs(v) < double(kQuantDeadZone) ? 0 : std::llround(v);
+      qi = std::max<int64_t>(-kQuantMaxLevel, std::min<int64_t>(kQuantMaxLevel, qi));  // encode() checked the step
+      q[c][ch] = int32_t(qi);
+      if (qi) mask |= uint64_t(1) << c;
+    }
+  }
+  uint32_t w[2][3] = {};
+  for (int c = 0; c < kBrickValues; ++c)
+    if ((mask >> c) & 1u)
+      for (int ch = 0; ch < 3; ++ch) w[c != 0][ch] = std::max(w[c != 0][ch], fieldWidth(q[c][ch]));
+  rec = QuantRecord{};
+  rec.maskLo = uint32_t(mask);
+  rec.maskHi = uint32_t(mask >> 32);
+  for (int g = 0; g < 2; ++g)
+    for (int ch = 0; ch < 3; ++ch) rec.widths |= w[g][ch] << (4 * (3 * g + ch));
+  uint64_t pos = 0;
+  for (int c = 0; c < kBrickValues; ++c)
+    if ((mask >> c) & 1u)
+      for (int ch = 0; ch < 3; ++ch) {
+        putBits(words, pos, uint64_t(uint32_t(q[c][ch])), w[c != 0][ch]);
+        pos += w[c != 0][ch];
+      }
+  // Measured with the readers' decoder.
+  float dec[3][kBrickValues];
+  decodeQuantBrick(rec, words, step, dec);
+  Result r{mask, false, 0.0, 0.0};
+  for (int ch = 0; ch < 3; ++ch)
+    for (int c = 0; c < kBrickValues; ++c) {
+      const double e = std::fabs(double(dec[ch][c]) - double(orig[ch][c]));
+      r.err = std::max(r.err, e);
+      if (inside[c]) r.sumSq += e * e;
+    }
+  return r;
+}
+
+BaseCode LiftedBase::encodeQuant(float T) const {
+  if (!(T > 0) || !std::isfinite(T) || T >= 1e30f)
+    throw unsupported(name_ + ": quantised coefficients need a threshold (their step) > 0, not " + std::to_string(T));
+  if (T < minQuantStep_)
+    throw unsupported(name_ + ": threshold " + std::to_string(T) + " is below " + std::to_string(minQuantStep_) +
+                      ", where a quantised coefficient would need more than 15 bits; raise it or use --precision "
+                      "fp16 or fp32");
+  float step[4];
+  quantSteps(T, step);
+  const size_t n = brickIds_.size();
+  std::vector<Result> res(n);
+  std::vector<QuantRecord> recs(n);
+  std::vector<uint64_t> scratch(n * kQuantBrickWords, 0);
+  parallelFor(int64_t(n), [&](int64_t k) {
+    res[size_t(k)] = encodeQuantBrick(size_t(k), step, recs[size_t(k)], &scratch[size_t(k) * kQuantBrickWords]);
+  }, 16);
+  BaseCode code;
+  code.threshold = T;
+  code.bricks.assign(geom_.bricks, BrickRecord{});
+  code.quant.assign(geom_.bricks, QuantRecord{});
+  for (size_t k = 0; k < n; ++k) {
+    code.quant[size_t(brickIds_[k])] = recs[k];
+    code.brickCount += res[k].mask != 0;
+    code.maxError = std::max(code.maxError, res[k].err);
+    code.sumSqError += res[k].sumSq;
+  }
+  // Running entry indices and bit offsets in brick order (the slot order); each brick's fields
+  // appended to the stream.
+  uint64_t next = 0, bit = 0, total = 0;
+  for (const QuantRecord& r : code.quant) total += r.bits();
+  if (total > 0xffffffffull)
+    throw unsupported(name_ + ": more than 2^32 bits in one base's quantised stream; raise the threshold");
+  code.words.assign(size_t((total + 63) / 64) + 1, 0);  // + 1: putBits may touch the word after
+  size_t k = 0;
+  for (uint64_t b = 0; b < geom_.bricks; ++b) {
+    QuantRecord& r = code.quant[b];
+    code.bricks[b].set(r.mask(), uint32_t(next), false);
+    r.bitOffset = uint32_t(bit);
+    const uint64_t bits = r.bits();
+    if (bits) {
+      while (brickIds_[k] != int64_t(b)) ++k;
+      const uint64_t* from = &scratch[k * kQuantBrickWords];
+      for (uint64_t i = 0; 64 * i < bits; ++i) putBits(code.words.data(), bit + 64 * i, from[i], uint32_t(std::min<uint64_t>(64, bits - 64 * i)));
+    }
+    bit += bits;
+    next += uint64_t(popcount64(r.mask()));
+  }
+  code.words.resize(size_t((total + 63) / 64));
+  code.coefCount = next;
+  return code;
+}
+
+float LiftedBase::searchQuantStep(float maxError, int* probes) const {
+  const size_t n = brickIds_.size();
+  int tries = 0;
+  auto errorAt = [&](float T) {
+    ++tries;
+    float step[4];
+    quantSteps(T, step);
+    std::vector<double> err(n);
+    parallelFor(int64_t(n), [&](int64_t k) {
+      QuantRecord rec;
+      uint64_t words[kQuantBrickWords] = {};
+      err[size_t(k)] = encodeQuantBrick(size_t(k), step, rec, words).err;
+    }, 16);
+    double m = 0;
+    for (double e : err) m = std::max(m, e);
+    return m;
+  };
+  if (minQuantStep_ == 0) {  // no light at all: any step is exact
+    if (probes) *probes = 0;
+    return 1.0f;
+  }
+  float lo = minQuantStep_, hi = float(4 * valueMax_ + double(minQuantStep_));
+  const double e0 = errorAt(lo);
+  if (e0 > double(maxError)) {
+    if (probes) *probes = tries;
+    throw unsupported(name_ + ": --max-error " + std::to_string(maxError) + " cannot be met with quantised "
+                      "coefficients: the finest step gives " + std::to_string(e0) + "; use --precision fp16 or fp32");
+  }
+  if (errorAt(hi) <= double(maxError)) {
+    lo = hi;
+  } else {
+    // Bisection in log space; lo is always a measured feasible step.
+    for (int it = 0; it < 40; ++it) {
+      const float mid = float(std::sqrt(double(lo) * double(hi)));
+      if (mid <= lo || mid >= hi) break;
+      if (errorAt(mid) <= double(maxError))
+        lo = mid;
+      else
+        hi = mid;
+    }
+  }
+  if (probes) *probes = tries;
+  return lo;
+}
+
 BaseCode LiftedBase::encode(float threshold) const {
+  if (precision_ == Precision::Quant) return encodeQuant(threshold);
   const size_t n = brickIds_.size();
   std::vector<Result> res(n);
   std::vector<float> scratch(n * 192);
@@ -206,6 +387,7 @@ BaseCode LiftedBase::encode(float threshold) const {
 }
 
 float LiftedBase::searchThreshold(float maxError, int* probes) const {
+  if (precision_ == Precision::Quant) return searchQuantStep(maxError, probes);
   const size_t n = brickIds_.size();
   int tries = 0;
   auto feasible = [&](float t) {
@@ -281,13 +463,18 @@ ChaarData assembleChaar(const ChaarAssembly& a) {
     if (any) d.slots[b] = slots++;
   }
   h.slotCount = slots;
+  const bool quant = a.precision == Precision::Quant;
   d.records.resize(uint64_t(nb) * slots);
+  if (quant) d.quantRecords.resize(d.records.size());
   d.bases.resize(nb);
   uint64_t total = 0;
   for (uint32_t k = 0; k < nb; ++k) {
     const BaseCode& c = a.codes[k];
     for (uint64_t b = 0; b < g.bricks; ++b)
-      if (d.slots[b] != kEmptySlot) d.records[uint64_t(k) * slots + d.slots[b]] = c.bricks[b];
+      if (d.slots[b] != kEmptySlot) {
+        d.records[uint64_t(k) * slots + d.slots[b]] = c.bricks[b];
+        if (quant) d.quantRecords[uint64_t(k) * slots + d.slots[b]] = c.quant[b];
+      }
     ChaarBaseEntry& e = d.bases[k];
     std::memset(&e, 0, sizeof e);
     for (int i = 0; i < 3; ++i) e.direction[i] = a.directions[k][size_t(i)];
@@ -300,9 +487,18 @@ ChaarData assembleChaar(const ChaarAssembly& a) {
     e.valueMax = float(a.valueMax[k]);
     e.brickCount = c.brickCount;
     e.rawBrickCount = c.rawBrickCount;
+    if (quant) {
+      e.coefOffset = d.quantWords.size();
+      e.quantStep = c.threshold;
+      e.quantWords = uint32_t(c.words.size());
+      d.quantWords.insert(d.quantWords.end(), c.words.begin(), c.words.end());
+      d.quantWords.push_back(0);  // the end word a 64-bit window may read
+    }
     total += c.coefCount;
   }
-  if (a.precision == Precision::Fp16) {
+  if (quant) {
+    // The streams are in quantWords.
+  } else if (a.precision == Precision::Fp16) {
     d.coefs16.reserve(3 * total);
     for (const auto& c : a.codes)
       for (float v : c.coefs) d.coefs16.push_back(floatToHalf(v));
@@ -356,15 +552,15 @@ std::vector<BaseReport> baseReports(const ChaarData& d, const ChaarAssembly& a,
   return out;
 }
 
-uint64_t chaarFileSize(uint32_t baseCount, uint64_t bricks, uint32_t slots, uint64_t coefCount,
+uint64_t chaarFileSize(uint32_t baseCount, uint64_t bricks, uint32_t slots, uint64_t coefBytes,
                        Precision precision, size_t metaBytes) {
   auto up = [](uint64_t v) { return (v + 15) / 16 * 16; };
   uint64_t s = sizeof(ChaarHeader);
   s = up(s) + metaBytes;
   s = up(s) + uint64_t(baseCount) * sizeof(ChaarBaseEntry);
   s = up(s) + bricks * 4;
-  s = up(s) + uint64_t(baseCount) * slots * sizeof(BrickRecord);
-  s = up(s) + coefCount * (precision == Precision::Fp16 ? 6 : 12);
+  s = up(s) + uint64_t(baseCount) * slots * recordBytes(precision);
+  s = up(s) + coefBytes;
   return s;
 }
 

@@ -51,6 +51,14 @@ struct BaseCode {
   uint64_t coefCount = 0;
   uint32_t brickCount = 0, rawBrickCount = 0;
   double maxError = 0, sumSqError = 0;  // sumSqError over lattice cells and channels
+  // Quant: per brick of the lattice its record (running bit offsets; `bricks` then holds the same
+  // masks), the base's bit stream (without the end word) and its step (= threshold).
+  std::vector<QuantRecord> quant;
+  std::vector<uint64_t> words;
+  // Bytes of this base's COEFS share (Quant: its words and the end word).
+  uint64_t coefBytes(Precision p) const {
+    return p == Precision::Quant ? (words.size() + 1) * 8 : coefCount * (p == Precision::Fp16 ? 6 : 12);
+  }
 };
 
 class LiftedBase {
@@ -59,7 +67,10 @@ class LiftedBase {
   // `name` ("file.vdb grid B03") prefixes errors.
   LiftedBase(const LatticeGeom& geom, const DenseLight& light, Precision precision, std::string name);
 
+  // Quant: `threshold` is the step T (haar_brick.h); it must be at least minQuantStep().
   BaseCode encode(float threshold) const;
+  // Quant: the smallest step at which every coefficient fits kQuantMaxLevel (0 for an all-zero base).
+  float minQuantStep() const { return minQuantStep_; }
   // Largest probed threshold with maxError <= maxError. Throws unsupported if even threshold 0
   // cannot meet it (fp16 rounding). `probes` receives the number of encodes tried.
   float searchThreshold(float maxError, int* probes = nullptr) const;
@@ -76,6 +87,11 @@ class LiftedBase {
     double sumSq;
   };
   Result encodeBrick(size_t k, float threshold, float* coefOut) const;
+  // Quant: quantises brick k with the four steps; fills the record's mask and widths and writes
+  // its fields from bit 0 of `words` (which must hold kQuantBrickWords zeroed words).
+  Result encodeQuantBrick(size_t k, const float step[4], QuantRecord& rec, uint64_t* words) const;
+  BaseCode encodeQuant(float step) const;
+  float searchQuantStep(float maxError, int* probes) const;
   void gather(int64_t brick, float out[3][kBrickValues], uint8_t* coreInside) const;
 
   const LatticeGeom& geom_;
@@ -85,7 +101,8 @@ class LiftedBase {
   double valueMax_ = 0;
   std::vector<uint8_t> nonEmpty_;
   std::vector<int64_t> brickIds_;  // non-empty bricks in brick order
-  std::vector<float> lifted_;      // 3*64 per non-empty brick: [ch][c]
+  std::vector<float> lifted_;      // 3*64 per non-empty brick: [ch][c] (Quant: of Y, R-Y, B-Y)
+  float minQuantStep_ = 0;
 };
 
 struct BaseReport {
@@ -125,8 +142,9 @@ std::vector<BaseReport> baseReports(const ChaarData& d, const ChaarAssembly& a,
                                     const std::vector<uint64_t>& activeVoxels, uint64_t fileBytes,
                                     OverallReport& overall);
 
-// Exact file size the assembly would serialize to, without building it (for sweeps).
-uint64_t chaarFileSize(uint32_t baseCount, uint64_t bricks, uint32_t slots, uint64_t coefCount,
+// Exact file size the assembly would serialize to, without building it (for sweeps): coefBytes =
+// the sum of the bases' BaseCode::coefBytes.
+uint64_t chaarFileSize(uint32_t baseCount, uint64_t bricks, uint32_t slots, uint64_t coefBytes,
                        Precision precision, size_t metaBytes);
 
 double psnrOf(double peak, double rms);

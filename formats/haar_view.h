@@ -24,9 +24,11 @@ struct ChaarView {
   uint32_t baseCount = 0;
   Precision precision = Precision::Fp32;
   const uint32_t* slots = nullptr;        // [brickDims x*y*z], x fastest: slot or kEmptySlot
-  const BrickRecord* records = nullptr;   // [base * slotCount + slot]
-  const void* coefs = nullptr;            // all bases' streams: float[3n] or uint16_t[3n]
-  uint64_t baseCoefOffset[kMaxBases] = {};  // first entry of each base's stream in coefs
+  const BrickRecord* records = nullptr;   // [base * slotCount + slot] (fp32, fp16)
+  const void* coefs = nullptr;            // all bases' streams: float[3n], uint16_t[3n] or (Quant) uint64_t words
+  uint64_t baseCoefOffset[kMaxBases] = {};  // first entry (Quant: first word) of each base's stream in coefs
+  const QuantRecord* quantRecords = nullptr;  // [base * slotCount + slot] (Quant)
+  float quantStep[kMaxBases][4] = {};          // each base's four steps (quantSteps; Quant)
 };
 
 CANOPY_HD CANOPY_FORCEINLINE float clampf(float v, float lo, float hi) {
@@ -82,14 +84,38 @@ CANOPY_HD inline BrickLookup locate(const ChaarView& v, float x, float y, float 
 CANOPY_HD inline Rgb chaarSample(const ChaarView& v, int base, float x, float y, float z) {
   const BrickLookup at = locate(v, x, y, z);
   if (at.slot == kEmptySlot) return Rgb{};
-  const BrickRecord rec = v.records[uint64_t(base) * v.slotCount + at.slot];
   const uint64_t off = v.baseCoefOffset[base];
+  if (v.precision == Precision::Quant)
+    return sampleQuantBrick(v.quantRecords[uint64_t(base) * v.slotCount + at.slot],
+                            static_cast<const uint64_t*>(v.coefs) + off, v.quantStep[base], at.lx, at.ly, at.lz, at.fx,
+                            at.fy, at.fz);
+  const BrickRecord rec = v.records[uint64_t(base) * v.slotCount + at.slot];
   if (v.precision == Precision::Fp16) {
     const CoefReader16 read{static_cast<const uint16_t*>(v.coefs) + 3 * off};
     return sampleBrick(rec, read, at.lx, at.ly, at.lz, at.fx, at.fy, at.fz);
   }
   const CoefReader32 read{static_cast<const float*>(v.coefs) + 3 * off};
   return sampleBrick(rec, read, at.lx, at.ly, at.lz, at.fx, at.fy, at.fz);
+}
+
+// Decodes the brick in `slot` of base `base` into out[ch][c] (decodeBrick / decodeQuantBrick).
+// Returns false, leaving out untouched, where the base has no light in that brick.
+CANOPY_HD inline bool decodeSlot(const ChaarView& v, int base, uint32_t slot, float out[3][kBrickValues]) {
+  const uint64_t off = v.baseCoefOffset[base];
+  const uint64_t r = uint64_t(base) * v.slotCount + slot;
+  if (v.precision == Precision::Quant) {
+    const QuantRecord q = v.quantRecords[r];
+    if (q.mask() == 0) return false;
+    decodeQuantBrick(q, static_cast<const uint64_t*>(v.coefs) + off, v.quantStep[base], out);
+    return true;
+  }
+  const BrickRecord rec = v.records[r];
+  if (rec.mask() == 0) return false;
+  if (v.precision == Precision::Fp16)
+    decodeBrick(rec, CoefReader16{static_cast<const uint16_t*>(v.coefs) + 3 * off}, out);
+  else
+    decodeBrick(rec, CoefReader32{static_cast<const float*>(v.coefs) + 3 * off}, out);
+  return true;
 }
 
 }  // namespace canopy::haar

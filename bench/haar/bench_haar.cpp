@@ -2,7 +2,7 @@
 // the data's maximum, against (a) dense fp32, (b) the dissertation's 5.6x (456 MB -> 81 MB) and
 // (c) ZFP 1.0 fixed-accuracy mode at the same max error on the same grids.
 //
-//   bench_haar IN.light.vdb [--precision fp32|fp16] [--write-chaar OUT.chaar]
+//   bench_haar IN.light.vdb [--precision fp32|fp16|quant] [--write-chaar OUT.chaar]
 //   bench_haar --synthetic N [...]      (19 smooth bases on an N^3 lattice, tests/haar/synthetic_light.h)
 //
 // Per base: bisection on the threshold for the largest one whose volume RMS error is <= 1% of the
@@ -82,7 +82,7 @@ int main(int argc, char** argv) {
     else if (a == "--write-chaar" && i + 1 < argc) writeChaar = argv[++i];
     else if (a[0] != '-') input = a;
     else {
-      std::fprintf(stderr, "usage: bench_haar (IN.light.vdb | --synthetic N) [--precision fp32|fp16] [--write-chaar OUT]\n");
+      std::fprintf(stderr, "usage: bench_haar (IN.light.vdb | --synthetic N) [--precision fp32|fp16|quant] [--write-chaar OUT]\n");
       return 1;
     }
   }
@@ -119,12 +119,15 @@ int main(int argc, char** argv) {
       const LiftedBase lb(g, light, precision, source + " " + baseName(b));
       const double target = 0.01 * lb.valueMax();
       // Bisection in log space on T for the largest T with RMS <= 1% of the max.
-      double lo = 0, hi = lb.valueMax();
-      BaseCode best = lb.encode(0.0f);
+      // (Quant: the threshold is the step, > 0 and at least the step where every level fits.)
+      const bool quant = precision == Precision::Quant;
+      const double floor = quant ? std::max(double(lb.minQuantStep()), 1e-30) : 0.0;
+      double lo = floor, hi = std::max(lb.valueMax(), floor);
+      BaseCode best = lb.encode(float(floor));
       if (rmsOf(lb.encode(float(hi)), g) <= target) {
         best = lb.encode(float(hi));
       } else {
-        lo = hi * 1e-7;
+        lo = std::max(hi * 1e-7, floor);
         for (int it = 0; it < 30; ++it) {
           const double mid = std::sqrt(lo * hi);
           BaseCode c = lb.encode(float(mid));

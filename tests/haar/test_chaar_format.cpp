@@ -121,7 +121,12 @@ TEST(ChaarFrozen, TrailingBytesAndVersionsAreRejected) {
   const uint16_t major2 = 2;
   std::memcpy(&v2[8], &major2, 2);
   fixHeaderCrc(v2);
-  expectRejected(v2, "major 2", "newer than this reader");
+  expectRejected(v2, "major 2", "float coefficients in a 2.x file");
+  std::vector<uint8_t> v3 = bytes;
+  const uint16_t major3 = 3;
+  std::memcpy(&v3[8], &major3, 2);
+  fixHeaderCrc(v3);
+  expectRejected(v3, "major 3", "newer than this reader");
   std::vector<uint8_t> v0 = bytes;
   const uint16_t major0 = 0;
   std::memcpy(&v0[8], &major0, 2);

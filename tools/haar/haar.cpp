@@ -20,9 +20,12 @@ namespace canopy::haar {
 Precision parsePrecision(const std::string& s) {
   if (s == "fp32") return Precision::Fp32;
   if (s == "fp16") return Precision::Fp16;
-  throw usageError("--precision must be fp32 or fp16, not '" + s + "'");
+  if (s == "quant") return Precision::Quant;
+  throw usageError("--precision must be fp32, fp16 or quant, not '" + s + "'");
 }
-const char* precisionName(Precision p) { return p == Precision::Fp16 ? "fp16" : "fp32"; }
+const char* precisionName(Precision p) {
+  return p == Precision::Quant ? "quant" : (p == Precision::Fp16 ? "fp16" : "fp32");
+}
 
 // ---- reading the light field -----------------------------------------------------------------
 struct LightField {
@@ -182,6 +185,8 @@ nlohmann::json compressLight(const CompressOptions& o) {
   if (!(o.threshold >= 0) || !std::isfinite(o.threshold))
     throw usageError("--threshold must be a finite number >= 0");
   if (o.maxError >= 0 && !std::isfinite(o.maxError)) throw usageError("--max-error must be finite");
+  if (o.precision == Precision::Quant && o.maxError < 0 && !(o.threshold > 0))
+    throw usageError("--precision quant needs --threshold T > 0 (the quantisation step) or --max-error E");
   AtomicOutput out(o.output);  // fail early on an unwritable destination
   LightFieldPtr f = openLightField(o.input);
   const LatticeGeom& g = f->geom;
@@ -354,15 +359,17 @@ nlohmann::json sweepThresholds(const SweepOptions& o) {
   if (o.thresholds.empty()) throw usageError("--thresholds needs at least one value");
   for (float t : o.thresholds)
     if (!(t >= 0) || !std::isfinite(t)) throw usageError("--thresholds must be finite numbers >= 0");
+  if (o.precision == Precision::Quant)
+    for (float t : o.thresholds)
+      if (!(t > 0)) throw usageError("--precision quant: every threshold (the quantisation step) must be > 0");
   AtomicOutput csvOut(o.prefix + ".csv"), jsonOut(o.prefix + ".json");
   LightFieldPtr f = openLightField(o.input);
   const LatticeGeom& g = f->geom;
   const size_t nt = o.thresholds.size(), nb = f->grids.size();
   // stats[t][b]
   struct Cell {
-    uint64_t coefs;
+    uint64_t coefBytes;
     double maxErr, sumSq, rms, peak;
-    uint64_t records;
   };
   std::vector<std::vector<Cell>> stats(nt, std::vector<Cell>(nb));
   std::vector<uint8_t> anyLight(g.bricks, 0);
@@ -378,15 +385,14 @@ nlohmann::json sweepThresholds(const SweepOptions& o) {
     peaks[b] = lifted.valueMax();
     for (size_t t = 0; t < nt; ++t) {
       const BaseCode c = lifted.encode(o.thresholds[t]);
-      stats[t][b] = Cell{c.coefCount, c.maxError, c.sumSqError,
-                         std::sqrt(c.sumSqError / (3.0 * double(g.cells))), lifted.valueMax(), 0};
+      stats[t][b] = Cell{c.coefBytes(o.precision), c.maxError, c.sumSqError,
+                         std::sqrt(c.sumSqError / (3.0 * double(g.cells))), lifted.valueMax()};
     }
     progress.add();
   }
   progress.done();
   uint32_t slots = 0;
   for (uint8_t v : anyLight) slots += v;
-  const uint64_t entryBytes = o.precision == Precision::Fp16 ? 6 : 12;
   const uint64_t dense = g.cells * 12;
 
   std::ostringstream csv;
@@ -411,11 +417,11 @@ nlohmann::json sweepThresholds(const SweepOptions& o) {
   }
   bool zeroRms = false;
   for (size_t t = 0; t < nt; ++t) {
-    uint64_t totalCoefs = 0, sparse = 0;
+    uint64_t totalCoefBytes = 0, sparse = 0;
     double maxErr = 0, sumSq = 0, peak = 0;
     for (uint32_t b = 0; b < nb; ++b) {
       const Cell& c = stats[t][b];
-      const uint64_t bytes = uint64_t(slots) * sizeof(BrickRecord) + c.coefs * entryBytes;
+      const uint64_t bytes = uint64_t(slots) * recordBytes(o.precision) + c.coefBytes;
       const double psnr = psnrOf(c.peak, c.rms);
       char line[256];
       std::snprintf(line, sizeof line, "%.9g,%s,%llu,%.6g,%.6g,%.9g,%.9g,%s\n", o.thresholds[t],
@@ -426,7 +432,7 @@ nlohmann::json sweepThresholds(const SweepOptions& o) {
       rows.push_back({{"threshold", o.thresholds[t]}, {"base", baseName(b)}, {"bytes", bytes},
                       {"ratio_dense", double(dense) / bytes}, {"ratio_sparse", double(active[b] * 12) / bytes},
                       {"max_error", c.maxErr}, {"rms_error", c.rms}, {"psnr_db", numberOrNull(psnr)}});
-      totalCoefs += c.coefs;
+      totalCoefBytes += c.coefBytes;
       sparse += active[b] * 12;
       maxErr = std::max(maxErr, c.maxErr);
       sumSq += c.sumSq;
@@ -439,7 +445,7 @@ nlohmann::json sweepThresholds(const SweepOptions& o) {
     // The META text compressLight would write for this threshold: the size is exact.
     const std::string meta =
         metaJson(o.input, {{"precision", precisionName(o.precision)}, {"threshold", o.thresholds[t]}});
-    const uint64_t file = chaarFileSize(uint32_t(nb), g.bricks, slots, totalCoefs, o.precision, meta.size());
+    const uint64_t file = chaarFileSize(uint32_t(nb), g.bricks, slots, totalCoefBytes, o.precision, meta.size());
     const double rms = std::sqrt(sumSq / (3.0 * double(g.cells) * nb));
     const double psnr = psnrOf(peak, rms);
     char line[256];

@@ -1,5 +1,5 @@
 // canopy-haar: Haar-wavelet brick compression of LB light fields (see docs/haar.md).
-//   canopy-haar IN.light.vdb -o OUT.chaar [--threshold T | --max-error E] [--precision fp32|fp16]
+//   canopy-haar IN.light.vdb -o OUT.chaar [--threshold T | --max-error E] [--precision fp32|fp16|quant]
 //   canopy-haar decode IN.chaar -o OUT.vdb
 //   canopy-haar info IN.chaar
 //   canopy-haar verify IN.chaar
@@ -44,12 +44,16 @@ int main(int argc, char** argv) {
   app.add_option("input", co.input, "lbsolve output (.light.vdb)");
   app.add_option("-o,--output", co.output, "output .chaar file");
   auto* thr = app.add_option("--threshold", co.threshold,
-                             "drop detail coefficients whose R, G and B magnitudes are all <= T (default 0: lossless)");
+                             "drop detail coefficients whose R, G and B magnitudes are all <= T (default 0: lossless); "
+                             "with --precision quant, T is the quantisation step (> 0)");
   auto* me = app.add_option("--max-error", co.maxError,
                             "instead of --threshold: per base, the largest threshold whose max absolute error "
                             "(measured, every texel) is <= E");
   thr->excludes(me);
-  app.add_option("--precision", precision, "coefficient precision: fp32 or fp16")->capture_default_str();
+  app.add_option("--precision", precision,
+                 "coefficients: fp32, fp16, or quant (integers in steps of T, sqrt(2) T per fine-detail axis, on "
+                 "G, R-G, B-G; the smallest files, .chaar 2.0; needs T > 0 or --max-error)")
+      ->capture_default_str();
 
   std::string decIn, decOut;
   CLI::App* dec = app.add_subcommand("decode", "Decode a .chaar back to an OpenVDB file (B00..B18)");
@@ -70,7 +74,7 @@ int main(int argc, char** argv) {
   sw->add_option("input", so.input, "lbsolve output (.light.vdb)")->required();
   sw->add_option("--thresholds", sweepList, "comma-separated thresholds")->capture_default_str();
   sw->add_option("-o,--output", so.prefix, "output prefix")->required();
-  sw->add_option("--precision", sweepPrecision, "coefficient precision: fp32 or fp16")->capture_default_str();
+  sw->add_option("--precision", sweepPrecision, "coefficients: fp32, fp16 or quant (as for compression)")->capture_default_str();
 
   return tool.run(argc, argv, [&] {
     if (*dec) {
