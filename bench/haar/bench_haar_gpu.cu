@@ -120,7 +120,7 @@ int main(int argc, char** argv) {
     CANOPY_CUDA_CHECK(cudaGetDeviceProperties(&prop, 0));
     std::printf("## canopy-haar GPU sampling: %s, %s, lattice %dx%dx%d, %u bases, %s, %zu samples, best of %d\n\n",
                 prop.name, argv[1], dim[0], dim[1], dim[2], d.baseCount(),
-                d.precision() == Precision::Fp16 ? "fp16" : "fp32", n, reps);
+                d.precision() == Precision::Quant ? "quant" : (d.precision() == Precision::Fp16 ? "fp16" : "fp32"), n, reps);
 
     // Point sets: (0) inside stored bricks, (1) uniform over the lattice box.
     std::vector<uint64_t> stored;

@@ -22,10 +22,16 @@ namespace {
 constexpr uint64_t FROZEN_DENSE_HASH = 0x4e4bcc7bfce5a027ULL;
 constexpr float FROZEN_SAMPLE_R = 0x1.e8ccp-2f, FROZEN_SAMPLE_G = 0x1.0f99p-1f, FROZEN_SAMPLE_B = 0x1.976ap-2f;
 
-const std::string kFrozen = std::string(CANOPY_SOURCE_DIR) + "/tests/haar/data/small_v1_0.chaar";
+// The same, printed once when the quantised 2.0 file was written (B03 at the same point =
+// 0.499171525, 0.550343096, 0.41458571).
+constexpr uint64_t FROZEN2_DENSE_HASH = 0x6dac22a9050ef3baULL;
+constexpr float FROZEN2_SAMPLE_R = 0x1.ff26d2p-2f, FROZEN2_SAMPLE_G = 0x1.19c692p-1f, FROZEN2_SAMPLE_B = 0x1.a88928p-2f;
 
-std::vector<uint8_t> frozenBytes() {
-  const auto b = canopy::readFile(kFrozen);
+const std::string kFrozen = std::string(CANOPY_SOURCE_DIR) + "/tests/haar/data/small_v1_0.chaar";
+const std::string kFrozen2 = std::string(CANOPY_SOURCE_DIR) + "/tests/haar/data/small_v2_0.chaar";
+
+std::vector<uint8_t> frozenBytes(const std::string& path = kFrozen) {
+  const auto b = canopy::readFile(path);
   return std::vector<uint8_t>(b.begin(), b.end());
 }
 
@@ -92,21 +98,46 @@ TEST(ChaarFrozen, DecodesToKnownValues) {
   EXPECT_EQ(serializeChaar(copy), bytes);
 }
 
+// Frozen by `canopy-haar small.light.vdb -o small_v2_0.chaar --threshold 0.004 --precision quant`
+// (the same input; tests/haar/data/README.md): must never change while the format is 2.x.
+TEST(ChaarFrozen, QuantisedV2DecodesToKnownValues) {
+  const std::vector<uint8_t> bytes = frozenBytes(kFrozen2);
+  const ChaarData d = parseChaar(bytes.data(), bytes.size(), kFrozen2);
+  EXPECT_EQ(d.header.versionMajor, 2);
+  EXPECT_EQ(d.header.versionMinor, 0);
+  EXPECT_EQ(d.baseCount(), 19u);
+  EXPECT_EQ(d.precision(), Precision::Quant);
+  EXPECT_FLOAT_EQ(d.header.threshold, 0.004f);
+  EXPECT_FLOAT_EQ(d.bases[5].quantStep, 0.004f);
+  const ChaarView v = d.view();
+  const Rgb s = chaarSample(v, 3, 0.25f, 2.5f, 1.75f);
+  EXPECT_EQ(denseHash(d), FROZEN2_DENSE_HASH);
+  EXPECT_EQ(s.r, FROZEN2_SAMPLE_R);
+  EXPECT_EQ(s.g, FROZEN2_SAMPLE_G);
+  EXPECT_EQ(s.b, FROZEN2_SAMPLE_B);
+  ChaarData copy = d;
+  EXPECT_EQ(serializeChaar(copy), bytes);
+}
+
 TEST(ChaarFrozen, EveryTruncatedPrefixIsRejected) {
-  const std::vector<uint8_t> bytes = frozenBytes();
-  for (size_t n = 0; n < bytes.size(); ++n) {
-    std::vector<uint8_t> t(bytes.begin(), bytes.begin() + long(n));
-    expectRejected(t, "prefix " + std::to_string(n));
+  for (const std::string& path : {kFrozen, kFrozen2}) {
+    const std::vector<uint8_t> bytes = frozenBytes(path);
+    for (size_t n = 0; n < bytes.size(); ++n) {
+      std::vector<uint8_t> t(bytes.begin(), bytes.begin() + long(n));
+      expectRejected(t, path + " prefix " + std::to_string(n));
+    }
   }
 }
 
 TEST(ChaarFrozen, EveryFlippedByteIsRejected) {
-  std::vector<uint8_t> bytes = frozenBytes();
-  for (size_t i = 0; i < bytes.size(); ++i) {
-    for (uint8_t flip : {uint8_t(0x01), uint8_t(0x80)}) {
-      bytes[i] ^= flip;
-      expectRejected(bytes, "flip at " + std::to_string(i));
-      bytes[i] ^= flip;
+  for (const std::string& path : {kFrozen, kFrozen2}) {
+    std::vector<uint8_t> bytes = frozenBytes(path);
+    for (size_t i = 0; i < bytes.size(); ++i) {
+      for (uint8_t flip : {uint8_t(0x01), uint8_t(0x80)}) {
+        bytes[i] ^= flip;
+        expectRejected(bytes, path + " flip at " + std::to_string(i));
+        bytes[i] ^= flip;
+      }
     }
   }
 }
@@ -239,6 +270,66 @@ TEST(ChaarFormat, ScatteredSunBaseFlagsAreVersion1_1) {
   std::memcpy(&newer[10], &minor2, 2);
   fixHeaderCrc(newer);
   EXPECT_NO_THROW(parseChaar(newer.data(), newer.size(), "newer"));
+}
+
+// Quantised (2.0) files whose checksums are right but whose records, streams or steps are not.
+TEST(ChaarFormat, QuantisedFilesWithBadFieldsAreRejected) {
+  using namespace canopy::haar::testing;
+  const LatticeGeom g = makeGeom(7, 6, 5);
+  const ChaarData good = encodeLights(g, {smoothLight(g, 1), randomLight(g, 2)}, 0.01f, -1.0f, Precision::Quant);
+  {
+    ChaarData copy = good;
+    const std::vector<uint8_t> bytes = serializeChaar(copy);
+    const ChaarData back = parseChaar(bytes.data(), bytes.size(), "good");
+    EXPECT_EQ(back.header.versionMajor, 2);
+    EXPECT_EQ(back.quantWords, good.quantWords);
+    ChaarData again = back;
+    EXPECT_EQ(serializeChaar(again), bytes);
+  }
+  auto rejects = [&](const char* what, const std::string& needle, auto edit) {
+    ChaarData d = good;
+    edit(d);
+    expectRejected(serializeChaar(d), what, needle);
+  };
+  // The first slot of base 0 with an average and details, and the base's used bits.
+  const uint32_t slots = good.header.slotCount;
+  uint32_t full = slots;
+  uint64_t used = 0;
+  for (uint32_t s = 0; s < slots; ++s) {
+    const QuantRecord& q = good.quantRecords[s];
+    if (full == slots && (q.maskLo & 1u) && (q.mask() >> 1)) full = s;
+    used += q.bits();
+  }
+  ASSERT_LT(full, slots);
+  rejects("reserved width bits", "reserved width bits", [&](ChaarData& d) { d.quantRecords[full].widths |= 1u << 28; });
+  rejects("bit offset", "bit offset", [&](ChaarData& d) { d.quantRecords[slots - 1].bitOffset += 1; });
+  rejects("wider field", "base B00", [&](ChaarData& d) { d.quantRecords[slots - 1].widths += 1u << 12; });
+  rejects("average widths, no average", "average widths without an average",
+          [&](ChaarData& d) { d.quantRecords[full].maskLo &= ~1u; });
+  rejects("detail widths, no details", "detail widths without details", [&](ChaarData& d) {
+    d.quantRecords[full].maskLo &= 1u;
+    d.quantRecords[full].maskHi = 0;
+  });
+  ASSERT_NE(used % 64, 0u) << "the tail test needs unused bits in base 0's last word";
+  rejects("tail bits", "nonzero bits after its last field",
+          [&](ChaarData& d) { d.quantWords[d.bases[0].quantWords - 1] |= uint64_t(1) << 63; });
+  rejects("end word", "end word", [&](ChaarData& d) { d.quantWords[d.bases[0].quantWords] = 1; });
+  rejects("short stream", "base B00", [&](ChaarData& d) {
+    d.bases[0].quantWords -= 1;
+  });
+  rejects("zero step", "quantisation step", [&](ChaarData& d) { d.bases[1].quantStep = 0; });
+  rejects("nan step", "quantisation step", [&](ChaarData& d) { d.bases[1].quantStep = NAN; });
+  rejects("huge step", "quantisation step", [&](ChaarData& d) { d.bases[1].quantStep = 1e31f; });
+  // Quantised coefficients claiming 1.x, and float files carrying quantisation fields.
+  ChaarData q = good;
+  std::vector<uint8_t> asV1 = serializeChaar(q);
+  const uint16_t major1 = 1;
+  std::memcpy(&asV1[8], &major1, 2);
+  fixHeaderCrc(asV1);
+  expectRejected(asV1, "quant as 1.x", "quantised coefficients in a 1.x file");
+  ChaarData f = encodeLights(g, {smoothLight(g, 1)}, 0.01f);
+  f.bases[0].quantStep = 0.5f;
+  expectRejected(serializeChaar(f), "float with a step", "quantisation fields in a float file");
 }
 
 TEST(ChaarFormat, WriterIsDeterministic) {

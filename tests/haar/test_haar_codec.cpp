@@ -262,7 +262,7 @@ TEST(HaarEncode, ThresholdZeroIsExactInFp32AndWithinRoundingInFp16) {
 TEST(HaarEncode, MaxErrorIsNeverExceeded) {
   const LatticeGeom g = makeGeom(17, 14, 12);
   for (int kind = 0; kind < 2; ++kind)
-    for (Precision p : {Precision::Fp32, Precision::Fp16})
+    for (Precision p : {Precision::Fp32, Precision::Fp16, Precision::Quant})
       for (float E : {0.002f, 0.01f, 0.05f, 0.2f}) {
         const DenseLight light = kind ? randomLight(g, 99, 2.0f) : smoothLight(g, 9, 3.0f);
         LiftedBase lb(g, light, p, "t");
@@ -270,9 +270,10 @@ TEST(HaarEncode, MaxErrorIsNeverExceeded) {
         try {
           T = lb.searchThreshold(E);
         } catch (const canopy::Error& e) {
-          // Only allowed where fp16 rounding alone exceeds E (checked below to be so).
-          ASSERT_EQ(p, Precision::Fp16) << e.what();
-          EXPECT_GT(lb.encode(0.0f).maxError, E);
+          // Only allowed where fp16 rounding, or the finest quantisation step, alone exceeds E
+          // (checked below to be so).
+          ASSERT_NE(p, Precision::Fp32) << e.what();
+          EXPECT_GT(lb.encode(p == Precision::Quant ? lb.minQuantStep() : 0.0f).maxError, E);
           EXPECT_EQ(e.code(), canopy::ExitCode::Unsupported);
           continue;
         }
@@ -305,7 +306,8 @@ TEST(HaarEncode, ThresholdTradesSizeForError) {
   EXPECT_EQ(loose.coefCount, loose.brickCount);
 }
 
-// Seams: samples on brick faces, edges and corners (and just inside either side).
+// Seams: samples on brick faces, edges and corners (and just inside either side), float and
+// quantised coefficients.
 TEST(HaarSample, BrickSeamsFacesEdgesCorners) {
   const LatticeGeom g = makeGeom(16, 13, 11, 3, -5, 0);
   const DenseLight light = smoothLight(g, 11);
@@ -313,8 +315,10 @@ TEST(HaarSample, BrickSeamsFacesEdgesCorners) {
   std::vector<float> seams;
   for (int k = 0; k <= 5; ++k) seams.push_back(float(3 * k));  // brick boundaries (lattice-relative)
   const float offs[] = {0.0f, 1e-3f, -1e-3f, 0.5f};
-  for (float T : {0.0f, 0.004f, 0.03f}) {
-    const ChaarData d = encodeLights(g, {light}, T);
+  for (const auto& [T, p] : {std::pair{0.0f, Precision::Fp32}, std::pair{0.004f, Precision::Fp32},
+                             std::pair{0.03f, Precision::Fp32}, std::pair{0.002f, Precision::Quant},
+                             std::pair{0.02f, Precision::Quant}}) {
+    const ChaarData d = encodeLights(g, {light}, T, -1.0f, p);
     const ChaarView v = d.view();
     decodeBaseDense(d, 0, dense);
     const double E = d.bases[0].maxError;
@@ -426,4 +430,115 @@ TEST(HaarEncode, EmptyLightStoresNoBricks) {
   std::vector<float> dense;
   decodeBaseDense(back, 0, dense);
   EXPECT_EQ(dense, dark.rgb);
+}
+
+// The quantised stream's fields: random widths (0..15) at every bit position read back exactly
+// (bitWindow + signedField against a bit-by-bit writer).
+TEST(HaarQuant, FieldsReadBackAtEveryBitPosition) {
+  std::mt19937 rng(5);
+  std::vector<uint64_t> words(64, 0);
+  struct Field {
+    uint64_t pos;
+    uint32_t w;
+    int32_t v;
+  };
+  std::vector<Field> fields;
+  uint64_t pos = 0;
+  while (pos + 15 < 62 * 64) {
+    const uint32_t w = rng() % 16;
+    const int32_t lo = w ? -(1 << (w - 1)) : 0, hi = w ? (1 << (w - 1)) - 1 : 0;
+    const int32_t v = lo + int32_t(rng() % uint32_t(hi - lo + 1));
+    for (uint32_t b = 0; b < w; ++b)
+      if ((uint32_t(v) >> b) & 1u) words[(pos + b) / 64] |= uint64_t(1) << ((pos + b) % 64);
+    fields.push_back({pos, w, v});
+    pos += w;
+  }
+  EXPECT_GT(fields.size(), 400u);
+  for (const Field& f : fields) ASSERT_EQ(signedField(bitWindow(words.data(), f.pos), 0, f.w), f.v) << f.pos;
+  // Three consecutive fields from one window (as QuantBrick reads a coefficient).
+  for (size_t i = 0; i + 2 < fields.size(); ++i) {
+    const uint64_t win = bitWindow(words.data(), fields[i].pos);
+    ASSERT_EQ(signedField(win, fields[i].w, fields[i + 1].w), fields[i + 1].v);
+    ASSERT_EQ(signedField(win, fields[i].w + fields[i + 1].w, fields[i + 2].w), fields[i + 2].v);
+  }
+  EXPECT_EQ(fineDetailAxes(brickIndex(0, 1, 0)), 0u);
+  EXPECT_EQ(fineDetailAxes(brickIndex(2, 1, 3)), 2u);
+  EXPECT_EQ(fineDetailAxes(brickIndex(3, 3, 2)), 3u);
+}
+
+// The quantised sampler equals decoding the point's brick (decodeSlot) and interpolating its 8
+// texels, up to float rounding, at random points of random and smooth light (each base's own
+// steps; the colour transform inside both).
+TEST(HaarQuant, SampleEqualsDecodeThenTrilinearWithinRounding) {
+  const LatticeGeom g = makeGeom(14, 12, 10, -3, 1, 2);
+  const std::vector<DenseLight> lights = {smoothLight(g, 2), randomLight(g, 7), smoothLight(g, 12, 4.0f)};
+  int compared = 0;
+  for (float T : {0.001f, 0.01f, 0.1f}) {
+    const ChaarData d = encodeLights(g, lights, T, -1.0f, Precision::Quant);
+    const ChaarView v = d.view();
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<float> ux(g.min[0] - 1.0f, g.max[0] + 1.0f), uy(g.min[1] - 1.0f, g.max[1] + 1.0f),
+        uz(g.min[2] - 1.0f, g.max[2] + 1.0f);
+    for (uint32_t b = 0; b < lights.size(); ++b) {
+      // Y and the differences are at most twice the peak: twice the float bound.
+      const double tol = 2 * sampleRounding(lights[b]);
+      for (int i = 0; i < 4000; ++i) {
+        const float x = ux(rng), y = uy(rng), z = uz(rng);
+        const Rgb c = chaarSample(v, int(b), x, y, z);
+        const BrickLookup at = locate(v, x, y, z);
+        float vals[3][kBrickValues] = {};
+        if (at.slot != kEmptySlot) decodeSlot(v, int(b), at.slot, vals);
+        float want[3];
+        for (int ch = 0; ch < 3; ++ch) {
+          float t[2][2][2];
+          for (int dz = 0; dz < 2; ++dz)
+            for (int dy = 0; dy < 2; ++dy)
+              for (int dx = 0; dx < 2; ++dx) t[dz][dy][dx] = vals[ch][brickIndex(at.lx + dx, at.ly + dy, at.lz + dz)];
+          want[ch] = trilinear(t, at.fx, at.fy, at.fz);
+        }
+        ASSERT_NEAR(c.r, want[0], tol) << "T " << T << " base " << b;
+        ASSERT_NEAR(c.g, want[1], tol) << "T " << T << " base " << b;
+        ASSERT_NEAR(c.b, want[2], tol) << "T " << T << " base " << b;
+        compared += want[1] != 0.0f;
+      }
+    }
+  }
+  EXPECT_GT(compared, 15000);  // of 36000: most points have light
+}
+
+// The step is the error dial: a larger step stores fewer bits and errs more; the encoder's
+// reported error is the decoded file's; steps of 0 or below the 15-bit floor are refused.
+TEST(HaarQuant, StepTradesSizeForErrorAndIsRefusedWhereLevelsOverflow) {
+  const LatticeGeom g = makeGeom(20, 18, 16);
+  const DenseLight light = smoothLight(g, 3, 2.0f);
+  LiftedBase lb(g, light, Precision::Quant, "file.vdb grid B03");
+  uint64_t lastBytes = ~uint64_t(0);
+  double lastRms = 0;
+  for (float T : {0.0005f, 0.005f, 0.05f, 0.5f}) {
+    const BaseCode c = lb.encode(T);
+    EXPECT_LT(c.coefBytes(Precision::Quant), lastBytes) << T;
+    EXPECT_GE(c.sumSqError, lastRms) << T;
+    lastBytes = c.coefBytes(Precision::Quant);
+    lastRms = c.sumSqError;
+    ChaarAssembly a;
+    a.geom = g;
+    a.precision = Precision::Quant;
+    a.codes.push_back(c);
+    a.directions.push_back({0, 0, 0});
+    a.valueMax.push_back(lb.valueMax());
+    const ChaarData d = assembleChaar(a);
+    std::vector<float> dense;
+    decodeBaseDense(d, 0, dense);
+    EXPECT_LE(maxAbsDiff(dense, light.rgb), c.maxError) << T;
+  }
+  for (float bad : {0.0f, -1.0f, lb.minQuantStep() * 0.5f}) {
+    try {
+      lb.encode(bad);
+      ADD_FAILURE() << "step " << bad << " accepted";
+    } catch (const canopy::Error& e) {
+      EXPECT_EQ(e.code(), canopy::ExitCode::Unsupported);
+      EXPECT_EQ(std::string(e.what()).rfind("file.vdb grid B03: ", 0), 0u) << e.what();
+    }
+  }
+  EXPECT_NO_THROW(lb.encode(lb.minQuantStep()));
 }

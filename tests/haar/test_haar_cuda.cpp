@@ -1,4 +1,4 @@
-// The CUDA decoder against the CPU decoder: bit for bit (fp32 and fp16 coefficients), 19 bases,
+// The CUDA decoder against the CPU decoder: bit for bit (fp32, fp16 and quantised coefficients), 19 bases,
 // random points everywhere (inside, on brick seams, outside the lattice) and every lattice cell.
 // Skips without a GPU. Set CANOPY_HAAR_LIGHT_VDB=path/to/plant.light.vdb to use a real lbsolve
 // output instead of the synthetic field (the lead runs this on the GPU host: bench/haar/gpu.sh).
@@ -32,7 +32,8 @@ ChaarData lightFile(Precision p, float threshold) {
       std::array<int32_t, 3> dir;
       const DenseLight light = lightBase(*f, b, dir);
       LiftedBase lb(g, light, p, path);
-      a.codes.push_back(lb.encode(threshold));
+      // (Quant: the threshold is the step; at least the smallest step the base's levels fit.)
+      a.codes.push_back(lb.encode(p == Precision::Quant ? std::max(threshold, lb.minQuantStep()) : threshold));
       a.directions.push_back(dir);
       a.valueMax.push_back(lb.valueMax());
     }
@@ -84,4 +85,10 @@ TEST(HaarCuda, cuda_DecodeEqualsCpuBitForBitFp32) {
 TEST(HaarCuda, cuda_DecodeEqualsCpuBitForBitFp16) {
   if (canopy::cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA device";
   compareAll(lightFile(Precision::Fp16, 0.003f));
+}
+
+TEST(HaarCuda, cuda_DecodeEqualsCpuBitForBitQuant) {
+  if (canopy::cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA device";
+  compareAll(lightFile(Precision::Quant, 0.003f));
+  compareAll(lightFile(Precision::Quant, 0.03f));
 }

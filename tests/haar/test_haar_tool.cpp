@@ -103,11 +103,14 @@ std::string lastStderr() { return slurp(tempDir() / "stderr.txt"); }
 }  // namespace
 
 TEST(HaarTool, CompressDecodeRoundTripMatchesReportedErrors) {
+  for (Precision p : {Precision::Fp32, Precision::Quant}) {
+  SCOPED_TRACE(precisionName(p));
   const std::string out = (tempDir() / "a.chaar").string(), dec = (tempDir() / "a.decoded.vdb").string();
   CompressOptions o;
   o.input = smoothFile();
   o.output = out;
   o.threshold = 0.01f;
+  o.precision = p;
   const nlohmann::json rep = compressLight(o);
   ASSERT_EQ(rep["bases"].size(), 19u);
   decodeToVdb(out, dec);
@@ -138,16 +141,18 @@ TEST(HaarTool, CompressDecodeRoundTripMatchesReportedErrors) {
   EXPECT_NEAR(d.header.indexToModel[0], 0.01, 1e-12);
   EXPECT_NEAR(d.header.indexToModel[12], -0.5, 1e-12);
   EXPECT_EQ(d.header.latticeMin[0], -3);
+  EXPECT_EQ(d.precision(), p);
+  }
 }
 
-TEST(HaarTool, MaxErrorHoldsOnRandomAndSmoothFieldsInBothPrecisions) {
+TEST(HaarTool, MaxErrorHoldsOnRandomAndSmoothFieldsInEveryPrecision) {
   const LatticeGeom g = makeGeom(11, 10, 9);
   std::vector<DenseLight> rnd;
   for (uint32_t b = 0; b < 19; ++b) rnd.push_back(randomLight(g, 100 + b, 0.5f + 0.1f * float(b)));
   const std::string rndFile = (tempDir() / "random.light.vdb").string();
   writeLightVdb(rndFile, g, rnd);
   for (const std::string& in : {smoothFile(), rndFile})
-    for (Precision p : {Precision::Fp32, Precision::Fp16}) {
+    for (Precision p : {Precision::Fp32, Precision::Fp16, Precision::Quant}) {
       CompressOptions o;
       o.input = in;
       o.output = (tempDir() / "me.chaar").string();
@@ -247,6 +252,11 @@ TEST(HaarTool, CliRejectsBadInputsWithDocumentedExitCodes) {
   EXPECT_EQ(run(smoothFile()), 1);  // no -o
   EXPECT_EQ(run(smoothFile() + " -o /nonexistent-dir/x.chaar"), 2);
   EXPECT_EQ(run(smoothFile() + " -o " + out + " --max-error 0 --precision fp16"), 5);  // unattainable
+  EXPECT_EQ(run(smoothFile() + " -o " + out + " --max-error 0 --precision quant"), 5);
+  EXPECT_EQ(run(smoothFile() + " -o " + out + " --precision quant"), 1);  // quant needs a step
+  EXPECT_NE(lastStderr().find("--precision quant needs --threshold"), std::string::npos) << lastStderr();
+  EXPECT_EQ(run(smoothFile() + " -o " + out + " --precision quant --threshold 1e-9"), 5);  // levels overflow
+  EXPECT_NE(lastStderr().find("more than 15 bits"), std::string::npos) << lastStderr();
   EXPECT_FALSE(fs::exists(out)) << "a failed run must leave no output";
   for (auto& e : fs::directory_iterator(d))
     EXPECT_EQ(e.path().filename().string().find(".canopy-tmp."), std::string::npos) << e.path();

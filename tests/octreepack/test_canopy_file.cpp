@@ -31,6 +31,7 @@ namespace {
 const std::string kFrozen = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v1.1.canopy";
 const std::string kFrozenV1 = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v1.0.canopy";
 const std::string kFrozenChaar = std::string(CANOPY_SOURCE_DIR) + "/tests/haar/data/small_v1_0.chaar";
+const std::string kFrozenChaarQuant = std::string(CANOPY_SOURCE_DIR) + "/tests/haar/data/small_v2_0.chaar";
 
 // The Haar-lit model of the 1.1 file: every cell of the frozen .chaar's lattice occupied.
 op::ModelSource haarModelSource(const haar::ChaarData& d) {
@@ -429,6 +430,27 @@ TEST(CanopyFile, CraftedHaarPagesAndLocationsAreRejectedEvenWithValidChecksums) 
 
 // Light items are float16 through canopy/half.h; the writer's policy on top is saturation: out of
 // range lighting becomes +-65504, never infinity. Pins the bits the frozen file and the player use.
+// A quantised .chaar (2.0) packs as float16 light items of its sampler's values; its Haar pages
+// (no layout for quantised bricks yet) are refused with Unsupported, not mis-packed.
+TEST(CanopyFile, QuantisedChaarPacksAsLightItemsAndItsHaarPagesAreRefused) {
+  const haar::ChaarData q = haar::readChaar(kFrozenChaarQuant);
+  ASSERT_EQ(q.precision(), haar::Precision::Quant);
+  try {
+    canopyHaarPagesFromChaar(q);
+    ADD_FAILURE() << "quantised Haar pages accepted";
+  } catch (const canopy::Error& e) {
+    EXPECT_EQ(e.code(), canopy::ExitCode::Unsupported) << e.what();
+  }
+  const op::LightFn fn = op::chaarLightFn(q.view());
+  std::vector<float> o(3 * kCanopyLightBases);
+  fn(0, 3, 2, o.data());
+  const haar::Rgb s = haar::chaarSample(q.view(), 7, 0.0f, 3.0f, 2.0f);
+  EXPECT_EQ(o[3 * 7 + 1], s.g);
+  EXPECT_GT(s.g, 0.0f);
+  const op::BuiltModel m = op::buildOctree(haarModelSource(q), "quantlit", fn);
+  EXPECT_FALSE(m.light.empty());
+}
+
 TEST(CanopyFile, LightItemsAreSaturatingFloat16) {
   EXPECT_EQ(canopy::canopyFloatToHalf(1.0f), 0x3c00);
   EXPECT_EQ(canopy::canopyFloatToHalf(65504.0f), 0x7bff);
