@@ -9,7 +9,7 @@
 #   (OAK64.light.vdb: canopy-voxelize oak_medium.glb --resolution 64 | canopy-lbsolve, the defaults)
 #   ../shared/scripts/bundle-libs .gpu/canopy.tar.xz build/bin/{bench_haar_gpu,test_haar_cuda,test_play_cuda,\
 #      test_octreepack} -- /tmp/hs/q.chaar /tmp/hs/b16.chaar /tmp/hs/b32.chaar OAK64.light.vdb
-# There:  bash bench/gpu-quant.sh       (.gpu carried; logs and tables under $OUT)
+# There:  [FILES="q b16 b32"] bash bench/gpu-quant.sh       (.gpu carried; logs and tables under $OUT)
 #   1. CUDA tests: test_haar_cuda on the oak's real light and on the synthetic field (decode and
 #      sampling, GPU == CPU bit for bit, fp32, fp16 and quant), test_play_cuda and test_octreepack's
 #      device sampling (the float sampler now runs through sampleMasked).
@@ -25,7 +25,7 @@ gtest test_play_cuda "$BIN/test_play_cuda"
 gtest test_octreepack_cuda "$BIN/test_octreepack" --gtest_filter='*cuda*'
 step bench_haar_gpu
 for round in 1 2; do
-  for p in q b16 b32; do
+  for p in ${FILES:-q b16 b32}; do
     timeout 200 bench_haar_gpu "$S/$p.chaar" > "$O/bench_haar_gpu_${p}_$round.md" 2>&1 || status=1
     echo "--- $p round $round"
     grep -E "all 19|check:|compressed on device" "$O/bench_haar_gpu_${p}_$round.md"

@@ -357,7 +357,7 @@ CANOPY_HD inline void decodeBrick(const BrickRecord& rec, const Reader& read, fl
 // channel for the details (QuantRecord::widths). Reading a field set takes a 64-bit window at its
 // bit position (two aligned word loads; each base stream ends with one zero word for the second).
 
-constexpr float kQuantDeadZone = 0.7f;     // |v| / step below this stores 0
+constexpr float kQuantDeadZone = 0.7f;     // |v| / step below this stores 0     // |v| / step below this stores 0     // |v| / step below this stores 0     // |v| / step below this stores 0
 constexpr int kQuantMaxWidth = 15;         // bits per field
 constexpr int32_t kQuantMaxLevel = 16383;  // |q| <= 2^14 - 1 (15-bit fields, one level of margin)
 
@@ -398,41 +398,116 @@ CANOPY_HD CANOPY_FORCEINLINE uint64_t bitWindow(const uint64_t* words, uint64_t 
   const uint64_t lo = words[i], hi = words[i + 1];
   return sh ? (lo >> sh) | (hi << (64u - sh)) : lo;
 }
-// The signed field of width w (0..15) at bit `at` of a window.
-CANOPY_HD CANOPY_FORCEINLINE int32_t signedField(uint64_t window, uint32_t at, uint32_t w) {
-  const uint32_t v = uint32_t(window >> at) & ((1u << w) - 1u);
-  const uint32_t s = 32u - (w ? w : 1u);
-  return w ? int32_t(v << s) >> s : 0;
+// The 64 bits of a stream from bit pos as two halves. On the device from three aligned 32-bit
+// loads and two funnel shifts (a kept coefficient's fields end at or before the stream's last
+// used bit, so the third load stays inside the base's end word); on the CPU from bitWindow. Both
+// give the same bits.
+CANOPY_HD CANOPY_FORCEINLINE void quantWindow(const uint64_t* words, uint32_t pos, uint32_t& lo, uint32_t& hi) {
+#if defined(__CUDA_ARCH__)
+  const uint32_t* w = reinterpret_cast<const uint32_t*>(words);
+  const uint32_t i = pos >> 5, sh = pos & 31u;
+  const uint32_t a = __ldg(w + i), b = __ldg(w + i + 1), c = __ldg(w + i + 2);
+  lo = __funnelshift_r(a, b, sh);
+  hi = __funnelshift_r(b, c, sh);
+#else
+  const uint64_t win = bitWindow(words, pos);
+  lo = uint32_t(win);
+  hi = uint32_t(win >> 32);
+#endif
+}
+// Bits at .. at+31 of the window (at < 32).
+CANOPY_HD CANOPY_FORCEINLINE uint32_t windowBits(uint32_t lo, uint32_t hi, uint32_t at) {
+#if defined(__CUDA_ARCH__)
+  return __funnelshift_r(lo, hi, at);
+#else
+  return uint32_t(((uint64_t(hi) << 32) | lo) >> at);
+#endif
 }
 
-// The kept coefficients of a quantised brick record (the rank accessor of sampleMasked).
+// One group's (average or details) three field layouts, fixed per brick: offsets in the window and
+// the shifts that sign-extend a field of width w (32 - w; 31 and a zero result for w = 0).
+struct QuantFieldLayout {
+  uint32_t at1, at2;  // offsets of the second and third field (the first is at 0)
+  uint32_t s0, s1, s2;
+  bool z0, z1, z2;  // width 0: the channel is 0
+  CANOPY_HD CANOPY_FORCEINLINE explicit QuantFieldLayout(uint32_t widths3) {
+    const uint32_t w0 = widths3 & 0xfu, w1 = (widths3 >> 4) & 0xfu, w2 = (widths3 >> 8) & 0xfu;
+    at1 = w0;
+    at2 = w0 + w1;
+    s0 = w0 ? 32u - w0 : 31u;
+    s1 = w1 ? 32u - w1 : 31u;
+    s2 = w2 ? 32u - w2 : 31u;
+    z0 = w0 == 0;
+    z1 = w1 == 0;
+    z2 = w2 == 0;
+  }
+  CANOPY_HD CANOPY_FORCEINLINE Rgb levels(const uint64_t* words, uint32_t pos) const {
+    uint32_t lo, hi;
+    quantWindow(words, pos, lo, hi);
+    const int32_t q0 = int32_t(lo << s0) >> s0;
+    const int32_t q1 = int32_t(windowBits(lo, hi, at1) << s1) >> s1;
+    const int32_t q2 = int32_t(windowBits(lo, hi, at2) << s2) >> s2;
+    return Rgb{z0 ? 0.0f : float(q0), z1 ? 0.0f : float(q1), z2 ? 0.0f : float(q2)};
+  }
+};
+
+// (Y, R-Y, B-Y) -> RGB.
+CANOPY_HD CANOPY_FORCEINLINE Rgb quantToRgb(const Rgb& v) { return Rgb{addRn(v.r, v.g), v.r, addRn(v.r, v.b)}; }
+
+// The kept coefficients of a quantised brick record (the rank accessor of sampleMasked and
+// decodeMasked): levels times the coefficient's step.
 struct QuantBrick {
   const uint64_t* words;  // the base's stream
   const float* step;      // the base's four steps
-  uint64_t pos0;          // record.bitOffset
-  uint32_t widths;
-  uint32_t has0, avgBits, detailBits;
+  QuantFieldLayout avg, detail;
+  uint32_t pos0, has0, avgBits, detailBits;
   CANOPY_HD CANOPY_FORCEINLINE QuantBrick(const QuantRecord& r, const uint64_t* w, const float* st)
-      : words(w), step(st), pos0(r.bitOffset), widths(r.widths), has0(r.maskLo & 1u), avgBits(r.groupBits(0)),
-        detailBits(r.groupBits(1)) {}
+      : words(w), step(st), avg(r.widths & 0xfffu), detail(r.widths >> 12), pos0(r.bitOffset), has0(r.maskLo & 1u),
+        avgBits(r.groupBits(0)), detailBits(r.groupBits(1)) {}
   CANOPY_HD CANOPY_FORCEINLINE Rgb operator()(uint32_t j, uint32_t c) const {
-    const bool avg = c == 0;
-    const uint64_t pos = avg ? pos0 : pos0 + has0 * avgBits + uint64_t(j - has0) * detailBits;
-    const uint32_t w = avg ? widths : widths >> 12;
-    const uint32_t w0 = w & 0xfu, w1 = (w >> 4) & 0xfu, w2 = (w >> 8) & 0xfu;
-    const uint64_t win = bitWindow(words, pos);
+    const Rgb q = c == 0 ? avg.levels(words, pos0) : detail.levels(words, pos0 + has0 * avgBits + (j - has0) * detailBits);
     const uint32_t n = fineDetailAxes(c);
     const float st = n < 2 ? (n == 0 ? step[0] : step[1]) : (n == 2 ? step[2] : step[3]);
-    return Rgb{mulRn(float(signedField(win, 0, w0)), st), mulRn(float(signedField(win, w0, w1)), st),
-               mulRn(float(signedField(win, w0 + w1, w2)), st)};
+    return Rgb{mulRn(q.r, st), mulRn(q.g, st), mulRn(q.b, st)};
   }
-  // (Y, R-Y, B-Y) -> RGB.
-  CANOPY_HD CANOPY_FORCEINLINE Rgb finish(const Rgb& v) const { return Rgb{addRn(v.r, v.g), v.r, addRn(v.r, v.b)}; }
+  CANOPY_HD CANOPY_FORCEINLINE Rgb finish(const Rgb& v) const { return quantToRgb(v); }
 };
 
-CANOPY_HD inline Rgb sampleQuantBrick(const QuantRecord& rec, const uint64_t* words, const float* step, int lx, int ly,
-                                      int lz, float fx, float fy, float fz) {
-  return sampleMasked(rec.mask(), false, QuantBrick(rec, words, step), lx, ly, lz, fx, fy, fz);
+// Trilinear sample of a quantised brick: the weighted sum of sampleMasked over the integer levels,
+// the steps folded in (sqrt(2) into each axis's fine-detail weights, T applied once to the sum),
+// then (Y, R-Y, B-Y) -> RGB. CPU and GPU agree bit for bit; decodeQuantBrick then trilinear agrees
+// up to float rounding (the steps are applied in another order).
+CANOPY_HD inline Rgb sampleQuantBrick(const QuantRecord& rec, const uint64_t* words, float T, int lx, int ly, int lz,
+                                      float fx, float fy, float fz) {
+  const uint64_t mask = rec.mask();
+  if (mask == 0) return Rgb{};
+  const uint32_t has0 = rec.maskLo & 1u;
+  Rgb out;
+  if (has0) {  // the average: weight 1 on every axis
+    const Rgb a = QuantFieldLayout(rec.widths & 0xfffu).levels(words, rec.bitOffset);
+    if (mask == 1u) return quantToRgb(Rgb{mulRn(a.r, T), mulRn(a.g, T), mulRn(a.b, T)});  // the fast path
+    out = a;
+  }
+  FootprintWeights fw = footprintWeights(mask & ~uint64_t(1), false, lx, ly, lz, fx, fy, fz);
+  const float r2 = 1.41421356f;
+  fw.wx[2] = mulRn(fw.wx[2], r2), fw.wx[3] = mulRn(fw.wx[3], r2);
+  fw.wy[2] = mulRn(fw.wy[2], r2), fw.wy[3] = mulRn(fw.wy[3], r2);
+  fw.wz[2] = mulRn(fw.wz[2], r2), fw.wz[3] = mulRn(fw.wz[3], r2);
+  const QuantFieldLayout d(rec.widths >> 12);
+  const uint32_t detailBits = rec.groupBits(1);
+  // Detail of rank j (counting the average) starts at base + (j - has0) * detailBits.
+  const uint32_t base = rec.bitOffset + has0 * rec.groupBits(0) - has0 * detailBits;
+  const uint32_t maskLo = rec.maskLo, maskHi = rec.maskHi;
+  for (uint32_t need = uint32_t(fw.need); need; need &= need - 1u) {
+    const uint32_t c = lowestBit32(need);
+    accumulate(out, d.levels(words, base + popcount32(maskLo & ((1u << c) - 1u)) * detailBits), fw(c));
+  }
+  const uint32_t baseHi = base + popcount32(maskLo) * detailBits;
+  for (uint32_t need = uint32_t(fw.need >> 32); need; need &= need - 1u) {
+    const uint32_t c = lowestBit32(need);
+    accumulate(out, d.levels(words, baseHi + popcount32(maskHi & ((1u << c) - 1u)) * detailBits), fw(c + 32u));
+  }
+  return quantToRgb(Rgb{mulRn(out.r, T), mulRn(out.g, T), mulRn(out.b, T)});
 }
 CANOPY_HD inline void decodeQuantBrick(const QuantRecord& rec, const uint64_t* words, const float* step,
                                        float out[3][kBrickValues]) {

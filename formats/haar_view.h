@@ -87,8 +87,8 @@ CANOPY_HD inline Rgb chaarSample(const ChaarView& v, int base, float x, float y,
   const uint64_t off = v.baseCoefOffset[base];
   if (v.precision == Precision::Quant)
     return sampleQuantBrick(v.quantRecords[uint64_t(base) * v.slotCount + at.slot],
-                            static_cast<const uint64_t*>(v.coefs) + off, v.quantStep[base], at.lx, at.ly, at.lz, at.fx,
-                            at.fy, at.fz);
+                            static_cast<const uint64_t*>(v.coefs) + off, v.quantStep[base][0], at.lx, at.ly, at.lz,
+                            at.fx, at.fy, at.fz);
   const BrickRecord rec = v.records[uint64_t(base) * v.slotCount + at.slot];
   if (v.precision == Precision::Fp16) {
     const CoefReader16 read{static_cast<const uint16_t*>(v.coefs) + 3 * off};

@@ -432,8 +432,9 @@ TEST(HaarEncode, EmptyLightStoresNoBricks) {
   EXPECT_EQ(dense, dark.rgb);
 }
 
-// The quantised stream's fields: random widths (0..15) at every bit position read back exactly
-// (bitWindow + signedField against a bit-by-bit writer).
+// The quantised stream's fields: three consecutive fields of random widths (0..15, as one
+// coefficient's Y, R-Y, B-Y) at every bit position read back exactly (QuantFieldLayout against a
+// bit-by-bit writer).
 TEST(HaarQuant, FieldsReadBackAtEveryBitPosition) {
   std::mt19937 rng(5);
   std::vector<uint64_t> words(64, 0);
@@ -454,12 +455,12 @@ TEST(HaarQuant, FieldsReadBackAtEveryBitPosition) {
     pos += w;
   }
   EXPECT_GT(fields.size(), 400u);
-  for (const Field& f : fields) ASSERT_EQ(signedField(bitWindow(words.data(), f.pos), 0, f.w), f.v) << f.pos;
-  // Three consecutive fields from one window (as QuantBrick reads a coefficient).
   for (size_t i = 0; i + 2 < fields.size(); ++i) {
-    const uint64_t win = bitWindow(words.data(), fields[i].pos);
-    ASSERT_EQ(signedField(win, fields[i].w, fields[i + 1].w), fields[i + 1].v);
-    ASSERT_EQ(signedField(win, fields[i].w + fields[i + 1].w, fields[i + 2].w), fields[i + 2].v);
+    const QuantFieldLayout layout(fields[i].w | fields[i + 1].w << 4 | fields[i + 2].w << 8);
+    const Rgb q = layout.levels(words.data(), uint32_t(fields[i].pos));
+    ASSERT_EQ(q.r, float(fields[i].v)) << fields[i].pos;
+    ASSERT_EQ(q.g, float(fields[i + 1].v)) << fields[i].pos;
+    ASSERT_EQ(q.b, float(fields[i + 2].v)) << fields[i].pos;
   }
   EXPECT_EQ(fineDetailAxes(brickIndex(0, 1, 0)), 0u);
   EXPECT_EQ(fineDetailAxes(brickIndex(2, 1, 3)), 2u);
