@@ -362,7 +362,7 @@ constexpr int kQuantMaxWidth = 15;         // bits per field
 constexpr int32_t kQuantMaxLevel = 16383;  // |q| <= 2^14 - 1 (15-bit fields, one level of margin)
 
 // One brick of one quantised base: 16 bytes on disk and in memory.
-struct QuantRecord {
+struct alignas(16) QuantRecord {  // (aligned: one 16-byte load on the device)
   uint32_t maskLo = 0, maskHi = 0;  // kept coefficients (bit c = coefficient c)
   uint32_t bitOffset = 0;           // first bit of the brick's fields in the base's stream
   uint32_t widths = 0;              // nibbles: 0-2 the average's Y, R-Y, B-Y widths, 3-5 the details'; 6-7 zero
@@ -402,14 +402,17 @@ CANOPY_HD CANOPY_FORCEINLINE uint64_t bitWindow(const uint64_t* words, uint64_t 
 // loads and two funnel shifts (a kept coefficient's fields end at or before the stream's last
 // used bit, so the third load stays inside the base's end word); on the CPU from bitWindow. Both
 // give the same bits.
-CANOPY_HD CANOPY_FORCEINLINE void quantWindow(const uint64_t* words, uint32_t pos, uint32_t& lo, uint32_t& hi) {
+// `wide`: the fields may reach past the second word (more than 33 bits); otherwise the third
+// load is skipped (its bits are never used).
+CANOPY_HD CANOPY_FORCEINLINE void quantWindow(const uint64_t* words, uint32_t pos, bool wide, uint32_t& lo, uint32_t& hi) {
 #if defined(__CUDA_ARCH__)
   const uint32_t* w = reinterpret_cast<const uint32_t*>(words);
   const uint32_t i = pos >> 5, sh = pos & 31u;
-  const uint32_t a = __ldg(w + i), b = __ldg(w + i + 1), c = __ldg(w + i + 2);
+  const uint32_t a = __ldg(w + i), b = __ldg(w + i + 1), c = wide ? __ldg(w + i + 2) : 0u;
   lo = __funnelshift_r(a, b, sh);
   hi = __funnelshift_r(b, c, sh);
 #else
+  (void)wide;
   const uint64_t win = bitWindow(words, pos);
   lo = uint32_t(win);
   hi = uint32_t(win >> 32);
@@ -430,8 +433,10 @@ struct QuantFieldLayout {
   uint32_t at1, at2;  // offsets of the second and third field (the first is at 0)
   uint32_t s0, s1, s2;
   bool z0, z1, z2;  // width 0: the channel is 0
+  bool wide;        // more than 33 bits: the window needs a third word
   CANOPY_HD CANOPY_FORCEINLINE explicit QuantFieldLayout(uint32_t widths3) {
     const uint32_t w0 = widths3 & 0xfu, w1 = (widths3 >> 4) & 0xfu, w2 = (widths3 >> 8) & 0xfu;
+    wide = w0 + w1 + w2 > 33u;
     at1 = w0;
     at2 = w0 + w1;
     s0 = w0 ? 32u - w0 : 31u;
@@ -443,7 +448,7 @@ struct QuantFieldLayout {
   }
   CANOPY_HD CANOPY_FORCEINLINE Rgb levels(const uint64_t* words, uint32_t pos) const {
     uint32_t lo, hi;
-    quantWindow(words, pos, lo, hi);
+    quantWindow(words, pos, wide, lo, hi);
     const int32_t q0 = int32_t(lo << s0) >> s0;
     const int32_t q1 = int32_t(windowBits(lo, hi, at1) << s1) >> s1;
     const int32_t q2 = int32_t(windowBits(lo, hi, at2) << s2) >> s2;

@@ -79,7 +79,9 @@ inline ChaarData encodeLights(const LatticeGeom& g, const std::vector<DenseLight
   a.indexToModel[12] = -0.5;
   for (uint32_t b = 0; b < lights.size(); ++b) {
     LiftedBase lb(g, lights[b], p, "synthetic B" + std::to_string(b));
-    a.codes.push_back(lb.encode(E >= 0 ? lb.searchThreshold(E) : T));
+    // (Quant with T = 0: each base's finest step.)
+    const float t = p == Precision::Quant && T == 0.0f ? lb.minQuantStep() : T;
+    a.codes.push_back(lb.encode(E >= 0 ? lb.searchThreshold(E) : t));
     a.directions.push_back(latticeDirection(b));
     a.valueMax.push_back(lb.valueMax());
   }

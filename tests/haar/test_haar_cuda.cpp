@@ -34,6 +34,7 @@ ChaarData lightFile(Precision p, float threshold) {
       LiftedBase lb(g, light, p, path);
       // (Quant: the threshold is the step; at least the smallest step the base's levels fit.)
       a.codes.push_back(lb.encode(p == Precision::Quant ? std::max(threshold, lb.minQuantStep()) : threshold));
+      if (p == Precision::Quant) a.threshold = -1;  // per base
       a.directions.push_back(dir);
       a.valueMax.push_back(lb.valueMax());
     }
@@ -91,4 +92,5 @@ TEST(HaarCuda, cuda_DecodeEqualsCpuBitForBitQuant) {
   if (canopy::cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA device";
   compareAll(lightFile(Precision::Quant, 0.003f));
   compareAll(lightFile(Precision::Quant, 0.03f));
+  compareAll(lightFile(Precision::Quant, 0.0f));  // the finest steps: fields wider than two words
 }
