@@ -315,6 +315,19 @@ TEST(HaarTool, SweepWritesTablePlotAndJson) {
     if (r["base"] == "all" && std::fabs(r["threshold"].get<double>() - 0.01) < 1e-9) {
       EXPECT_EQ(r["bytes"].get<uint64_t>(), fs::file_size(real));
     }
+  // The same for quantised coefficients (2.0 files: 16-byte records, bit streams).
+  ASSERT_EQ(run("sweep " + smoothFile() + " --thresholds 0.002,0.01 --precision quant -o " + prefix + "q --json", &out), 0)
+      << lastStderr();
+  const nlohmann::json jq = nlohmann::json::parse(slurp(prefix + "q.json"));
+  ASSERT_EQ(run(smoothFile() + " -o " + real + " --threshold 0.01 --precision quant -q"), 0);
+  int checked = 0;
+  for (const auto& r : jq["rows"])
+    if (r["base"] == "all" && std::fabs(r["threshold"].get<double>() - 0.01) < 1e-9) {
+      EXPECT_EQ(r["bytes"].get<uint64_t>(), fs::file_size(real));
+      ++checked;
+    }
+  EXPECT_EQ(checked, 1);
+  EXPECT_NE(run("sweep " + smoothFile() + " --precision quant -o " + prefix + "q0"), 0);  // the default list has 0
   const std::string png = slurp(prefix + ".png");
   ASSERT_GT(png.size(), 1000u);
   EXPECT_EQ(png.substr(1, 3), "PNG");
