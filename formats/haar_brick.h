@@ -22,6 +22,9 @@
 // nonzero values):
 // the encoder uses it where it is no larger and no less exact than the Haar brick, and at threshold
 // 0, where a float Haar round trip is not always exact.
+//
+// Quantised bases (Precision::Quant, .chaar 2.0) store integer levels in bit streams with 16-byte
+// records instead: see "quantised coefficients" below.
 #pragma once
 #include <cstdint>
 
@@ -293,7 +296,8 @@ CANOPY_HD CANOPY_FORCEINLINE void accumulate(Rgb& out, const Rgb& v, float w) {
 
 // Trilinear sample of a brick given its mask and its kept coefficients by rank: coef(j, c) returns
 // the j-th kept coefficient (in mask order), which is coefficient c of the brick; coef.finish()
-// maps the sum to RGB (identity for float streams, the colour transform for quantised ones).
+// maps the sum to RGB. The float sampler (sampleBrick); quantised bricks have their own,
+// sampleQuantBrick, which folds the steps into the weights.
 // (lx, ly, lz) in 0..2 is the lower texel of the 2^3 footprint (brick-local), (fx, fy, fz) in
 // [0, 1] the fractions. The terms are summed in coefficient order.
 template <class Coefs>
@@ -354,10 +358,11 @@ CANOPY_HD inline void decodeBrick(const BrickRecord& rec, const Reader& read, fl
 // its record's bitOffset: the average's three channels (if mask bit 0 is set), then each kept
 // detail's three channels in mask order; a field is a two's-complement integer of its width, the
 // widths (0..15 bits, 0 = all zero) are per brick, one per channel for the average and one per
-// channel for the details (QuantRecord::widths). Reading a field set takes a 64-bit window at its
-// bit position (two aligned word loads; each base stream ends with one zero word for the second).
+// channel for the details (QuantRecord::widths). A coefficient's three fields are read from one
+// 64-bit window at its bit position (quantWindow); each base stream ends with one zero word, so
+// the window's loads never leave the stream.
 
-constexpr float kQuantDeadZone = 0.7f;     // |v| / step below this stores 0     // |v| / step below this stores 0     // |v| / step below this stores 0     // |v| / step below this stores 0
+constexpr float kQuantDeadZone = 0.7f;     // |v| / step below this stores 0
 constexpr int kQuantMaxWidth = 15;         // bits per field
 constexpr int32_t kQuantMaxLevel = 16383;  // |q| <= 2^14 - 1 (15-bit fields, one level of margin)
 
