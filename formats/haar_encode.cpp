@@ -254,8 +254,11 @@ LiftedBase::Result LiftedBase::encodeQuantBrick(size_t k, const float step[4], Q
 }
 
 BaseCode LiftedBase::encodeQuant(float T) const {
-  if (!(T > 0) || !std::isfinite(T) || T >= 1e30f)
+  if (!(T > 0) || !std::isfinite(T))
     throw unsupported(name_ + ": quantised coefficients need a threshold (their step) > 0, not " + std::to_string(T));
+  if (T >= 1e30f)  // the reader's bound: 2^14 levels of sqrt(2)^3 T stay finite
+    throw unsupported(name_ + ": quantisation step " + std::to_string(T) + " is 1e30 or more (values this large need "
+                      "--precision fp32)");
   if (T < minQuantStep_)
     throw unsupported(name_ + ": threshold " + std::to_string(T) + " is below " + std::to_string(minQuantStep_) +
                       ", where a quantised coefficient would need more than 15 bits; raise it or use --precision "

@@ -542,4 +542,10 @@ TEST(HaarQuant, StepTradesSizeForErrorAndIsRefusedWhereLevelsOverflow) {
     }
   }
   EXPECT_NO_THROW(lb.encode(lb.minQuantStep()));
+  // Values so large that even the finest step is beyond the reader's bound (1e30): refused.
+  DenseLight huge = light;
+  for (float& v : huge.rgb) v *= 1e36f;
+  LiftedBase hb(g, huge, Precision::Quant, "huge");
+  EXPECT_GE(hb.minQuantStep(), 1e30f);
+  EXPECT_THROW(hb.encode(hb.minQuantStep()), canopy::Error);
 }
