@@ -202,24 +202,22 @@ ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) 
   d.slots.resize(brickCount);
   std::memcpy(d.slots.data(), sectionPtr(kSecSlots), h.sections[kSecSlots].size);
   d.records.resize(uint64_t(h.baseCount) * h.slotCount);
-  if (quant) {
+  if (quant) {  // (levels are bounded by their widths; the records are checked below)
     d.quantRecords.resize(d.records.size());
     std::memcpy(static_cast<void*>(d.quantRecords.data()), sectionPtr(kSecRecords), h.sections[kSecRecords].size);
     d.quantWords.resize(h.sections[kSecCoefs].size / 8);
     std::memcpy(d.quantWords.data(), sectionPtr(kSecCoefs), h.sections[kSecCoefs].size);
   } else {
     std::memcpy(static_cast<void*>(d.records.data()), sectionPtr(kSecRecords), h.sections[kSecRecords].size);
-  }
-  if (quant) {
-    // Checked with the records below.
-  } else if (h.precision == 1) {
-    d.coefs16.resize(3 * h.coefCount);
-    std::memcpy(d.coefs16.data(), sectionPtr(kSecCoefs), h.sections[kSecCoefs].size);
-    for (uint16_t v : d.coefs16) ck.require(isFiniteHalf(v), "non-finite coefficient");
-  } else {
-    d.coefs32.resize(3 * h.coefCount);
-    std::memcpy(d.coefs32.data(), sectionPtr(kSecCoefs), h.sections[kSecCoefs].size);
-    for (float v : d.coefs32) ck.require(std::isfinite(v), "non-finite coefficient");
+    if (h.precision == 1) {
+      d.coefs16.resize(3 * h.coefCount);
+      std::memcpy(d.coefs16.data(), sectionPtr(kSecCoefs), h.sections[kSecCoefs].size);
+      for (uint16_t v : d.coefs16) ck.require(isFiniteHalf(v), "non-finite coefficient");
+    } else {
+      d.coefs32.resize(3 * h.coefCount);
+      std::memcpy(d.coefs32.data(), sectionPtr(kSecCoefs), h.sections[kSecCoefs].size);
+      for (float v : d.coefs32) ck.require(std::isfinite(v), "non-finite coefficient");
+    }
   }
 
   // Bases: streams consecutive and covering COEFS exactly.

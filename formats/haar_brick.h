@@ -295,16 +295,16 @@ CANOPY_HD CANOPY_FORCEINLINE void accumulate(Rgb& out, const Rgb& v, float w) {
 }
 
 // Trilinear sample of a brick given its mask and its kept coefficients by rank: coef(j, c) returns
-// the j-th kept coefficient (in mask order), which is coefficient c of the brick; coef.finish()
-// maps the sum to RGB. The float sampler (sampleBrick); quantised bricks have their own,
-// sampleQuantBrick, which folds the steps into the weights.
+// the j-th kept coefficient (in mask order), which is coefficient c of the brick. The float
+// sampler (sampleBrick); quantised bricks have their own, sampleQuantBrick, which folds the steps
+// into the weights.
 // (lx, ly, lz) in 0..2 is the lower texel of the 2^3 footprint (brick-local), (fx, fy, fz) in
 // [0, 1] the fractions. The terms are summed in coefficient order.
 template <class Coefs>
 CANOPY_HD inline Rgb sampleMasked(uint64_t mask, bool raw, const Coefs& coef, int lx, int ly, int lz, float fx,
                                   float fy, float fz) {
   if (mask == 0) return Rgb{};
-  if (mask == 1u && !raw) return coef.finish(coef(0u, 0u));  // only the average: the fast path
+  if (mask == 1u && !raw) return coef(0u, 0u);  // only the average: the fast path
   const FootprintWeights fw = footprintWeights(mask, raw, lx, ly, lz, fx, fy, fz);
   const uint32_t maskLo = uint32_t(mask), maskHi = uint32_t(mask >> 32);
   Rgb out;
@@ -319,10 +319,11 @@ CANOPY_HD inline Rgb sampleMasked(uint64_t mask, bool raw, const Coefs& coef, in
     const uint32_t c = lowestBit32(need);
     accumulate(out, coef(rankHi + popcount32(maskHi & ((1u << c) - 1u)), c + 32u), fw(c + 32u));
   }
-  return coef.finish(out);
+  return out;
 }
 
-// The kept coefficients of a float brick record: entries first, first + 1, ... of a stream.
+// The kept coefficients of a float brick record: entries first, first + 1, ... of a stream
+// (finish: decodeMasked's per-value map, the identity here).
 template <class Reader>
 struct RankedEntries {
   const Reader& read;
@@ -388,57 +389,54 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t fineDetailAxes(uint32_t c) {
   return ((c >> 1) & 1u) + ((c >> 3) & 1u) + ((c >> 5) & 1u);
 }
 
+// The step factor per fine-detail axis.
+constexpr double kQuantFineFactor = 1.4142135623730951;  // sqrt(2)
+
 // The four steps of a base with step T: T * sqrt(2)^n for n = 0..3 fine-detail axes, each rounded
 // to float once (readers compute them on the host, so CPU and GPU use the same bits).
 inline void quantSteps(float T, float step[4]) {
-  const double r = 1.4142135623730951;
   double s = double(T);
-  for (int n = 0; n < 4; ++n, s *= r) step[n] = float(s);
+  for (int n = 0; n < 4; ++n, s *= kQuantFineFactor) step[n] = float(s);
 }
 
-// Bits pos .. pos+63 of a word stream (the stream has a word after the last field's).
-CANOPY_HD CANOPY_FORCEINLINE uint64_t bitWindow(const uint64_t* words, uint64_t pos) {
-  const uint64_t i = pos >> 6;
-  const uint32_t sh = uint32_t(pos & 63u);
-  const uint64_t lo = words[i], hi = words[i + 1];
-  return sh ? (lo >> sh) | (hi << (64u - sh)) : lo;
+// 32-bit word i of a stream of little-endian 64-bit words.
+CANOPY_HD CANOPY_FORCEINLINE uint32_t streamWord(const uint64_t* words, uint32_t i) {
+#if defined(__CUDA_ARCH__)
+  return __ldg(reinterpret_cast<const uint32_t*>(words) + i);
+#else
+  return uint32_t(words[i >> 1] >> (32u * (i & 1u)));
+#endif
 }
-// The 64 bits of a stream from bit pos as two halves. On the device from three aligned 32-bit
-// loads and two funnel shifts (a kept coefficient's fields end at or before the stream's last
-// used bit, so the third load stays inside the base's end word); on the CPU from bitWindow. Both
-// give the same bits.
-// `wide`: the fields may reach past the second word (more than 33 bits); otherwise the third
-// load is skipped (its bits are never used).
+// Bits sh .. sh+31 of hi:lo (sh < 32): the device's funnel shift.
+CANOPY_HD CANOPY_FORCEINLINE uint32_t funnelRight(uint32_t lo, uint32_t hi, uint32_t sh) {
+#if defined(__CUDA_ARCH__)
+  return __funnelshift_r(lo, hi, sh);
+#else
+  return uint32_t(((uint64_t(hi) << 32) | lo) >> sh);
+#endif
+}
+// The 64 bits of a stream from bit pos as two halves, from three aligned 32-bit words and two
+// funnel shifts (a kept coefficient's fields end at or before the stream's last used bit, so the
+// third word lies inside the base's end word). `wide`: the fields may reach past the second word
+// (more than 33 bits); otherwise the third word is not read (its bits are never used). CPU and
+// device run the same steps; only the load and the funnel shift are intrinsics on the device.
 CANOPY_HD CANOPY_FORCEINLINE void quantWindow(const uint64_t* words, uint32_t pos, bool wide, uint32_t& lo, uint32_t& hi) {
-#if defined(__CUDA_ARCH__)
-  const uint32_t* w = reinterpret_cast<const uint32_t*>(words);
   const uint32_t i = pos >> 5, sh = pos & 31u;
-  const uint32_t a = __ldg(w + i), b = __ldg(w + i + 1), c = wide ? __ldg(w + i + 2) : 0u;
-  lo = __funnelshift_r(a, b, sh);
-  hi = __funnelshift_r(b, c, sh);
-#else
-  (void)wide;
-  const uint64_t win = bitWindow(words, pos);
-  lo = uint32_t(win);
-  hi = uint32_t(win >> 32);
-#endif
-}
-// Bits at .. at+31 of the window (at < 32).
-CANOPY_HD CANOPY_FORCEINLINE uint32_t windowBits(uint32_t lo, uint32_t hi, uint32_t at) {
-#if defined(__CUDA_ARCH__)
-  return __funnelshift_r(lo, hi, at);
-#else
-  return uint32_t(((uint64_t(hi) << 32) | lo) >> at);
-#endif
+  const uint32_t a = streamWord(words, i), b = streamWord(words, i + 1), c = wide ? streamWord(words, i + 2) : 0u;
+  lo = funnelRight(a, b, sh);
+  hi = funnelRight(b, c, sh);
 }
 
-// float(q) for |q| < 2^22, exactly. On the device with an integer add and a float subtract (the
-// bits of 1.5 * 2^23 + q), which issue at full rate, instead of a conversion instruction.
+// float(q) for |q| < 2^22, exactly: the bits of 1.5 * 2^23 + q minus 1.5 * 2^23 (an integer add
+// and a float subtract, which issue at full rate on the device, instead of a conversion).
 CANOPY_HD CANOPY_FORCEINLINE float levelToFloat(int32_t q) {
+  const uint32_t u = 0x4B400000u + uint32_t(q);
 #if defined(__CUDA_ARCH__)
-  return __fsub_rn(__int_as_float(0x4B400000 + q), 12582912.0f);
+  return __fsub_rn(__uint_as_float(u), 12582912.0f);
 #else
-  return float(q);
+  float f;
+  __builtin_memcpy(&f, &u, 4);
+  return f - 12582912.0f;
 #endif
 }
 
@@ -465,8 +463,8 @@ struct QuantFieldLayout {
     uint32_t lo, hi;
     quantWindow(words, pos, wide, lo, hi);
     const int32_t q0 = int32_t(lo << s0) >> s0;
-    const int32_t q1 = int32_t(windowBits(lo, hi, at1) << s1) >> s1;
-    const int32_t q2 = int32_t(windowBits(lo, hi, at2) << s2) >> s2;
+    const int32_t q1 = int32_t(funnelRight(lo, hi, at1) << s1) >> s1;
+    const int32_t q2 = int32_t(funnelRight(lo, hi, at2) << s2) >> s2;
     return Rgb{levelToFloat(z0 ? 0 : q0), levelToFloat(z1 ? 0 : q1), levelToFloat(z2 ? 0 : q2)};
   }
 };
@@ -474,7 +472,7 @@ struct QuantFieldLayout {
 // (Y, R-Y, B-Y) -> RGB.
 CANOPY_HD CANOPY_FORCEINLINE Rgb quantToRgb(const Rgb& v) { return Rgb{addRn(v.r, v.g), v.r, addRn(v.r, v.b)}; }
 
-// The kept coefficients of a quantised brick record (the rank accessor of sampleMasked and
+// The kept coefficients of a quantised brick record (the rank accessor of
 // decodeMasked): levels times the coefficient's step.
 struct QuantBrick {
   const uint64_t* words;  // the base's stream
@@ -509,7 +507,7 @@ CANOPY_HD inline Rgb sampleQuantBrick(const QuantRecord& rec, const uint64_t* wo
     out = a;
   }
   FootprintWeights fw = footprintWeights(mask & ~uint64_t(1), false, lx, ly, lz, fx, fy, fz);
-  const float r2 = 1.41421356f;
+  const float r2 = float(kQuantFineFactor);
   fw.wx[2] = mulRn(fw.wx[2], r2), fw.wx[3] = mulRn(fw.wx[3], r2);
   fw.wy[2] = mulRn(fw.wy[2], r2), fw.wy[3] = mulRn(fw.wy[3], r2);
   fw.wz[2] = mulRn(fw.wz[2], r2), fw.wz[3] = mulRn(fw.wz[3], r2);

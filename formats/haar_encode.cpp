@@ -47,6 +47,20 @@ uint32_t fieldWidth(int32_t q) {
   return w;
 }
 
+// A decoded brick against its input: the max |error| over all 4^3 texels and channels, and the sum
+// of squared errors over the texels the brick owns (its core inside the lattice). Exact in double.
+void brickError(const float dec[3][kBrickValues], const float orig[3][kBrickValues], const uint8_t inside[kBrickValues],
+                double& maxErr, double& sumSq) {
+  maxErr = 0;
+  sumSq = 0;
+  for (int ch = 0; ch < 3; ++ch)
+    for (int c = 0; c < kBrickValues; ++c) {
+      const double e = std::fabs(double(dec[ch][c]) - double(orig[ch][c]));
+      maxErr = std::max(maxErr, e);
+      if (inside[c]) sumSq += e * e;
+    }
+}
+
 // ORs the low n (<= 64) bits of v into the stream at bit pos (the words there are zero).
 void putBits(uint64_t* words, uint64_t pos, uint64_t v, uint32_t n) {
   if (n == 0) return;
@@ -120,7 +134,7 @@ LiftedBase::LiftedBase(const LatticeGeom& geom, const DenseLight& light, Precisi
       for (int ch = 0; ch < 3; ++ch)
         for (int c = 0; c < kBrickValues; ++c)
           worst = std::max(worst, std::fabs(double(lifted_[k * 192 + size_t(ch) * 64 + size_t(c)])) /
-                                      std::pow(1.4142135623730951, int(fineDetailAxes(uint32_t(c)))));
+                                      std::pow(kQuantFineFactor, int(fineDetailAxes(uint32_t(c)))));
     minQuantStep_ = float(worst / double(kQuantMaxLevel - 1));
   }
 }
@@ -154,14 +168,7 @@ LiftedBase::Result LiftedBase::encodeBrick(size_t k, float threshold, float* coe
     decodeBrick(rec, CoefReader32{q}, dec);
     r.mask = mask;
     r.raw = raw;
-    r.err = 0;
-    r.sumSq = 0;
-    for (int ch = 0; ch < 3; ++ch)
-      for (int c = 0; c < kBrickValues; ++c) {
-        const double e = std::fabs(double(dec[ch][c]) - double(orig[ch][c]));  // exact
-        r.err = std::max(r.err, e);
-        if (inside[c]) r.sumSq += double(e) * double(e);
-      }
+    brickError(dec, orig, inside, r.err, r.sumSq);
   };
 
   // Haar: the average always, details with any channel above the threshold.
@@ -244,12 +251,7 @@ LiftedBase::Result LiftedBase::encodeQuantBrick(size_t k, const float step[4], Q
   float dec[3][kBrickValues];
   decodeQuantBrick(rec, words, step, dec);
   Result r{mask, false, 0.0, 0.0};
-  for (int ch = 0; ch < 3; ++ch)
-    for (int c = 0; c < kBrickValues; ++c) {
-      const double e = std::fabs(double(dec[ch][c]) - double(orig[ch][c]));
-      r.err = std::max(r.err, e);
-      if (inside[c]) r.sumSq += e * e;
-    }
+  brickError(dec, orig, inside, r.err, r.sumSq);
   return r;
 }
 
@@ -288,7 +290,7 @@ BaseCode LiftedBase::encodeQuant(float T) const {
   for (const QuantRecord& r : code.quant) total += r.bits();
   if (total > 0xffffffffull)
     throw unsupported(name_ + ": more than 2^32 bits in one base's quantised stream; raise the threshold");
-  code.words.assign(size_t((total + 63) / 64) + 1, 0);  // + 1: putBits may touch the word after
+  code.words.assign(size_t((total + 63) / 64), 0);
   size_t k = 0;
   for (uint64_t b = 0; b < geom_.bricks; ++b) {
     QuantRecord& r = code.quant[b];
@@ -303,7 +305,6 @@ BaseCode LiftedBase::encodeQuant(float T) const {
     bit += bits;
     next += uint64_t(popcount64(r.mask()));
   }
-  code.words.resize(size_t((total + 63) / 64));
   code.coefCount = next;
   return code;
 }

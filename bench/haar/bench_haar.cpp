@@ -121,13 +121,13 @@ int main(int argc, char** argv) {
       // Bisection in log space on T for the largest T with RMS <= 1% of the max.
       // (Quant: the threshold is the step, > 0 and at least the step where every level fits.)
       const bool quant = precision == Precision::Quant;
-      const double floor = quant ? std::max(double(lb.minQuantStep()), 1e-30) : 0.0;
-      double lo = floor, hi = std::max(lb.valueMax(), floor);
-      BaseCode best = lb.encode(float(floor));
+      const double stepFloor = quant ? std::max(double(lb.minQuantStep()), 1e-30) : 0.0;
+      double lo = stepFloor, hi = std::max(lb.valueMax(), stepFloor);
+      BaseCode best = lb.encode(float(stepFloor));
       if (rmsOf(lb.encode(float(hi)), g) <= target) {
         best = lb.encode(float(hi));
       } else {
-        lo = std::max(hi * 1e-7, floor);
+        lo = std::max(hi * 1e-7, stepFloor);
         for (int it = 0; it < 30; ++it) {
           const double mid = std::sqrt(lo * hi);
           BaseCode c = lb.encode(float(mid));
