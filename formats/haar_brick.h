@@ -202,10 +202,11 @@ CANOPY_HD CANOPY_FORCEINLINE float trilinear(const float v[2][2][2], float fx, f
 //   l = 1: W = [1,  1-2f,  f-1,   f   ]
 //   l = 2: W = [1, -1,     0,     1-2f]
 // and for a raw brick (values, no transform) W(k) = 1-f at k = l, f at k = l+1, else 0. Only the
-// kept coefficients whose W is non-zero on all three axes are read (footprintNeedMask): at most 27
-// of a Haar brick's 64, 8 of a raw brick's, in one loop over their bits. Branch-free per
-// coefficient, so the 32 samples of a warp in 32 different bricks do not diverge (as a per-row or
-// per-slab structure does).
+// kept coefficients whose W is non-zero on all three axes are read (footprintNeedMask): 3 per axis
+// at l = 0 or 2, 4 at l = 1, so 27 to 64 of a Haar brick's 64, and 8 of a raw brick's, in one loop
+// over their bits. Branch-free per coefficient; but a warp runs its loop as often as its busiest
+// lane needs (on the oak's light about 2.7 times the mean: see haar_warp.cuh, which spreads the
+// terms of a warp's 32 samples evenly over its lanes).
 //
 // The sum is in coefficient order with explicitly rounded operations: CPU and CUDA give the same
 // bits. It is not the same rounding as decoding the brick (decodeBrick) and interpolating its 8
@@ -243,7 +244,7 @@ CANOPY_HD CANOPY_FORCEINLINE uint64_t coefficientBox(uint32_t nx, uint32_t ny, u
 // The axis coefficients whose W is non-zero for a footprint at l (0..2): s and D always, d0 for
 // l <= 1, d1 for l >= 1.
 CANOPY_HD CANOPY_FORCEINLINE uint32_t axisNeedBits(int l) { return l == 0 ? 0x7u : (l == 1 ? 0xfu : 0xbu); }
-// The coefficients a Haar brick's footprint at (lx, ly, lz) depends on (at most 27 of 64).
+// The coefficients a Haar brick's footprint at (lx, ly, lz) depends on (27 to 64 of 64).
 CANOPY_HD CANOPY_FORCEINLINE uint64_t footprintNeedMask(int lx, int ly, int lz) {
   return coefficientBox(axisNeedBits(lx), axisNeedBits(ly), axisNeedBits(lz));
 }
@@ -265,8 +266,8 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t lowestBit32(uint32_t v) {  // v != 0
 
 // The per-axis weights of a footprint and the kept coefficients it needs (raw or Haar brick).
 struct FootprintWeights {
-  float wx[4], wy[4], wz[4];
-  uint64_t need;  // mask bits whose weight is non-zero on all three axes
+  float wx[4] = {}, wy[4] = {}, wz[4] = {};
+  uint64_t need = 0;  // mask bits whose weight is non-zero on all three axes
   // The weight of coefficient c (x + 4y + 16z).
   CANOPY_HD CANOPY_FORCEINLINE float operator()(uint32_t c) const {
     return mulRn(mulRn(pickWeight(wx, c & 3u), pickWeight(wy, (c >> 2) & 3u)), pickWeight(wz, c >> 4));
@@ -288,10 +289,39 @@ CANOPY_HD CANOPY_FORCEINLINE FootprintWeights footprintWeights(uint64_t mask, bo
   }
   return fw;
 }
-CANOPY_HD CANOPY_FORCEINLINE void accumulate(Rgb& out, const Rgb& v, float w) {
-  out.r = addRn(out.r, mulRn(v.r, w));
-  out.g = addRn(out.g, mulRn(v.g, w));
-  out.b = addRn(out.b, mulRn(v.b, w));
+CANOPY_HD CANOPY_FORCEINLINE Rgb weighted(const Rgb& v, float w) { return Rgb{mulRn(v.r, w), mulRn(v.g, w), mulRn(v.b, w)}; }
+CANOPY_HD CANOPY_FORCEINLINE void addTo(Rgb& out, const Rgb& t) {
+  out.r = addRn(out.r, t.r);
+  out.g = addRn(out.g, t.g);
+  out.b = addRn(out.b, t.b);
+}
+
+// The rank of kept coefficient c (the number of kept coefficients below it) in mask maskHi:maskLo.
+CANOPY_HD CANOPY_FORCEINLINE uint32_t keptRank(uint32_t maskLo, uint32_t maskHi, uint32_t c) {
+  const uint32_t lo = c < 32u ? maskLo & ((1u << c) - 1u) : maskLo;
+  const uint32_t hi = c < 32u ? 0u : maskHi & ((1u << (c & 31u)) - 1u);
+  return popcount32(lo) + popcount32(hi);
+}
+
+// A sample's sum: out + the terms coef(rank, c) * fw(c) over the kept coefficients c it needs, in
+// increasing c. Both samplers (float and quantised) are this sum; the warp sampler
+// (haar_warp.cuh) computes the same terms spread over a warp's lanes and adds them in the same
+// order, so every sampler gives the same bits.
+template <class Coefs>
+CANOPY_HD CANOPY_FORCEINLINE Rgb sumTerms(Rgb out, const FootprintWeights& fw, uint32_t maskLo, uint32_t maskHi,
+                                          const Coefs& coef) {
+  // The mask's two 32-bit halves in two loops: 32-bit bit scans and popcounts (measured on an H200:
+  // 20.4 against 16.5 G samples/s for one loop over the 64-bit set).
+  for (uint32_t need = uint32_t(fw.need); need; need &= need - 1u) {
+    const uint32_t c = lowestBit32(need);
+    addTo(out, weighted(coef(popcount32(maskLo & ((1u << c) - 1u)), c), fw(c)));
+  }
+  const uint32_t rankHi = popcount32(maskLo);
+  for (uint32_t need = uint32_t(fw.need >> 32); need; need &= need - 1u) {
+    const uint32_t c = lowestBit32(need);
+    addTo(out, weighted(coef(rankHi + popcount32(maskHi & ((1u << c) - 1u)), c + 32u), fw(c + 32u)));
+  }
+  return out;
 }
 
 // Trilinear sample of a brick given its mask and its kept coefficients by rank: coef(j, c) returns
@@ -305,21 +335,8 @@ CANOPY_HD inline Rgb sampleMasked(uint64_t mask, bool raw, const Coefs& coef, in
                                   float fy, float fz) {
   if (mask == 0) return Rgb{};
   if (mask == 1u && !raw) return coef(0u, 0u);  // only the average: the fast path
-  const FootprintWeights fw = footprintWeights(mask, raw, lx, ly, lz, fx, fy, fz);
-  const uint32_t maskLo = uint32_t(mask), maskHi = uint32_t(mask >> 32);
-  Rgb out;
-  // The mask's two 32-bit halves in two loops: 32-bit bit scans and popcounts (measured on an H200:
-  // 20.4 against 16.5 G samples/s for one loop over the 64-bit set).
-  for (uint32_t need = uint32_t(fw.need); need; need &= need - 1u) {
-    const uint32_t c = lowestBit32(need);
-    accumulate(out, coef(popcount32(maskLo & ((1u << c) - 1u)), c), fw(c));
-  }
-  const uint32_t rankHi = popcount32(maskLo);
-  for (uint32_t need = uint32_t(fw.need >> 32); need; need &= need - 1u) {
-    const uint32_t c = lowestBit32(need);
-    accumulate(out, coef(rankHi + popcount32(maskHi & ((1u << c) - 1u)), c + 32u), fw(c + 32u));
-  }
-  return out;
+  return sumTerms(Rgb{}, footprintWeights(mask, raw, lx, ly, lz, fx, fy, fz), uint32_t(mask), uint32_t(mask >> 32),
+                  coef);
 }
 
 // The kept coefficients of a float brick record: entries first, first + 1, ... of a stream
@@ -383,6 +400,18 @@ struct alignas(16) QuantRecord {  // (aligned: one 16-byte load on the device)
   }
 };
 static_assert(sizeof(QuantRecord) == 16, "QuantRecord is 16 bytes on disk and on the device");
+
+// A record read whole (one 16-byte load on the device, not one load per field as it is used).
+CANOPY_HD CANOPY_FORCEINLINE QuantRecord loadQuantRecord(const QuantRecord* p) {
+#if defined(__CUDA_ARCH__)
+  const uint4 u = __ldg(reinterpret_cast<const uint4*>(p));
+  QuantRecord r;
+  r.maskLo = u.x, r.maskHi = u.y, r.bitOffset = u.z, r.widths = u.w;
+  return r;
+#else
+  return *p;
+#endif
+}
 
 // The number of axes along which coefficient c (x + 4y + 16z) is a fine detail (axis index 2 or 3).
 CANOPY_HD CANOPY_FORCEINLINE uint32_t fineDetailAxes(uint32_t c) {
@@ -491,41 +520,51 @@ struct QuantBrick {
   CANOPY_HD CANOPY_FORCEINLINE Rgb finish(const Rgb& v) const { return quantToRgb(v); }
 };
 
-// Trilinear sample of a quantised brick: the weighted sum of sampleMasked over the integer levels,
-// the steps folded in (sqrt(2) into each axis's fine-detail weights, T applied once to the sum),
-// then (Y, R-Y, B-Y) -> RGB. CPU and GPU agree bit for bit; decodeQuantBrick then trilinear agrees
-// up to float rounding (the steps are applied in another order).
+// The detail fields of a quantised brick by rank (counting the average): sumTerms' accessor.
+struct QuantDetails {
+  const uint64_t* words;  // the base's stream
+  QuantFieldLayout layout;
+  uint32_t base, bits;  // the detail of rank j starts at bit base + j * bits (unsigned wrap-around)
+  CANOPY_HD CANOPY_FORCEINLINE QuantDetails(const uint64_t* w, uint32_t widths3, uint32_t base_, uint32_t bits_)
+      : words(w), layout(widths3), base(base_), bits(bits_) {}
+  CANOPY_HD CANOPY_FORCEINLINE Rgb operator()(uint32_t j, uint32_t) const { return layout.levels(words, base + j * bits); }
+};
+
+// What a quantised sample needs besides its details: the average's levels (weight 1 on every axis,
+// the sum's start), the weights (sqrt(2) folded into each axis's fine-detail weights) and needed
+// details (none for an average-only brick), and where the details are.
+struct QuantSamplePlan {
+  Rgb init;
+  FootprintWeights fw;
+  uint32_t base = 0, widths = 0, bits = 0;  // QuantDetails' position rule and the details' three widths
+};
+CANOPY_HD CANOPY_FORCEINLINE QuantSamplePlan quantSamplePlan(const QuantRecord& rec, const uint64_t* words, int lx,
+                                                             int ly, int lz, float fx, float fy, float fz) {
+  QuantSamplePlan p;
+  const uint32_t has0 = rec.maskLo & 1u;
+  if (has0) p.init = QuantFieldLayout(rec.widths & 0xfffu).levels(words, rec.bitOffset);
+  p.widths = rec.widths >> 12;
+  p.bits = rec.groupBits(1);
+  p.base = rec.bitOffset + has0 * rec.groupBits(0) - has0 * p.bits;
+  p.fw = footprintWeights(rec.mask() & ~uint64_t(1), false, lx, ly, lz, fx, fy, fz);  // (none needed: average only)
+  const float r2 = float(kQuantFineFactor);
+  p.fw.wx[2] = mulRn(p.fw.wx[2], r2), p.fw.wx[3] = mulRn(p.fw.wx[3], r2);
+  p.fw.wy[2] = mulRn(p.fw.wy[2], r2), p.fw.wy[3] = mulRn(p.fw.wy[3], r2);
+  p.fw.wz[2] = mulRn(p.fw.wz[2], r2), p.fw.wz[3] = mulRn(p.fw.wz[3], r2);
+  return p;
+}
+// The sum of levels to RGB: times the base's step T, then (Y, R-Y, B-Y) -> RGB.
+CANOPY_HD CANOPY_FORCEINLINE Rgb quantFinish(const Rgb& sum, float T) { return quantToRgb(weighted(sum, T)); }
+
+// Trilinear sample of a quantised brick: sumTerms over the integer levels, the steps folded in
+// (sqrt(2) into each axis's fine-detail weights, T applied once to the sum), then (Y, R-Y, B-Y) ->
+// RGB. CPU and GPU agree bit for bit; decodeQuantBrick then trilinear agrees up to float rounding
+// (the steps are applied in another order).
 CANOPY_HD inline Rgb sampleQuantBrick(const QuantRecord& rec, const uint64_t* words, float T, int lx, int ly, int lz,
                                       float fx, float fy, float fz) {
-  const uint64_t mask = rec.mask();
-  if (mask == 0) return Rgb{};
-  const uint32_t has0 = rec.maskLo & 1u;
-  Rgb out;
-  if (has0) {  // the average: weight 1 on every axis
-    const Rgb a = QuantFieldLayout(rec.widths & 0xfffu).levels(words, rec.bitOffset);
-    if (mask == 1u) return quantToRgb(Rgb{mulRn(a.r, T), mulRn(a.g, T), mulRn(a.b, T)});  // the fast path
-    out = a;
-  }
-  FootprintWeights fw = footprintWeights(mask & ~uint64_t(1), false, lx, ly, lz, fx, fy, fz);
-  const float r2 = float(kQuantFineFactor);
-  fw.wx[2] = mulRn(fw.wx[2], r2), fw.wx[3] = mulRn(fw.wx[3], r2);
-  fw.wy[2] = mulRn(fw.wy[2], r2), fw.wy[3] = mulRn(fw.wy[3], r2);
-  fw.wz[2] = mulRn(fw.wz[2], r2), fw.wz[3] = mulRn(fw.wz[3], r2);
-  const QuantFieldLayout d(rec.widths >> 12);
-  const uint32_t detailBits = rec.groupBits(1);
-  // Detail of rank j (counting the average) starts at base + (j - has0) * detailBits.
-  const uint32_t base = rec.bitOffset + has0 * rec.groupBits(0) - has0 * detailBits;
-  const uint32_t maskLo = rec.maskLo, maskHi = rec.maskHi;
-  for (uint32_t need = uint32_t(fw.need); need; need &= need - 1u) {
-    const uint32_t c = lowestBit32(need);
-    accumulate(out, d.levels(words, base + popcount32(maskLo & ((1u << c) - 1u)) * detailBits), fw(c));
-  }
-  const uint32_t baseHi = base + popcount32(maskLo) * detailBits;
-  for (uint32_t need = uint32_t(fw.need >> 32); need; need &= need - 1u) {
-    const uint32_t c = lowestBit32(need);
-    accumulate(out, d.levels(words, baseHi + popcount32(maskHi & ((1u << c) - 1u)) * detailBits), fw(c + 32u));
-  }
-  return quantToRgb(Rgb{mulRn(out.r, T), mulRn(out.g, T), mulRn(out.b, T)});
+  if (rec.maskLo == 0 && rec.maskHi == 0) return Rgb{};
+  const QuantSamplePlan p = quantSamplePlan(rec, words, lx, ly, lz, fx, fy, fz);
+  return quantFinish(sumTerms(p.init, p.fw, rec.maskLo, rec.maskHi, QuantDetails(words, p.widths, p.base, p.bits)), T);
 }
 CANOPY_HD inline void decodeQuantBrick(const QuantRecord& rec, const uint64_t* words, const float* step,
                                        float out[3][kBrickValues]) {

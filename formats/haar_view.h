@@ -86,7 +86,7 @@ CANOPY_HD inline Rgb chaarSample(const ChaarView& v, int base, float x, float y,
   if (at.slot == kEmptySlot) return Rgb{};
   const uint64_t off = v.baseCoefOffset[base];
   if (v.precision == Precision::Quant)
-    return sampleQuantBrick(v.quantRecords[uint64_t(base) * v.slotCount + at.slot],
+    return sampleQuantBrick(loadQuantRecord(v.quantRecords + uint64_t(base) * v.slotCount + at.slot),
                             static_cast<const uint64_t*>(v.coefs) + off, v.quantStep[base][0], at.lx, at.ly, at.lz,
                             at.fx, at.fy, at.fz);
   const BrickRecord rec = v.records[uint64_t(base) * v.slotCount + at.slot];
