@@ -205,8 +205,10 @@ CANOPY_HD CANOPY_FORCEINLINE float trilinear(const float v[2][2][2], float fx, f
 // kept coefficients whose W is non-zero on all three axes are read (footprintNeedMask): 3 per axis
 // at l = 0 or 2, 4 at l = 1, so 27 to 64 of a Haar brick's 64, and 8 of a raw brick's, in one loop
 // over their bits. Branch-free per coefficient; but a warp runs its loop as often as its busiest
-// lane needs (on the oak's light about 2.7 times the mean: see haar_warp.cuh, which spreads the
-// terms of a warp's 32 samples evenly over its lanes).
+// lane needs: on oak_medium's light at 64^3 (1 % RMS) 30.2 iterations for a mean of 11.1 needed
+// coefficients per lane (quant), 25.8 for 7.3 (fp16). Spreading a warp's terms evenly over its
+// lanes (same terms, same order of addition, through shared memory) was tried and measured slower
+// (bench/RESULTS.md, 2026-12-02: quant 9.5 against 11.6 G samples/s on an H200).
 //
 // The sum is in coefficient order with explicitly rounded operations: CPU and CUDA give the same
 // bits. It is not the same rounding as decoding the brick (decodeBrick) and interpolating its 8
@@ -272,6 +274,11 @@ struct FootprintWeights {
   CANOPY_HD CANOPY_FORCEINLINE float operator()(uint32_t c) const {
     return mulRn(mulRn(pickWeight(wx, c & 3u), pickWeight(wy, (c >> 2) & 3u)), pickWeight(wz, c >> 4));
   }
+  // The same for c + 32 * h, c in 0..31, within half h (z in {2h, 2h + 1}) of the mask: the z
+  // weight is one select.
+  CANOPY_HD CANOPY_FORCEINLINE float inHalf(uint32_t c, int h) const {
+    return mulRn(mulRn(pickWeight(wx, c & 3u), pickWeight(wy, (c >> 2) & 3u)), (c & 16u) ? wz[2 * h + 1] : wz[2 * h]);
+  }
 };
 CANOPY_HD CANOPY_FORCEINLINE FootprintWeights footprintWeights(uint64_t mask, bool raw, int lx, int ly, int lz, float fx,
                                                              float fy, float fz) {
@@ -296,17 +303,8 @@ CANOPY_HD CANOPY_FORCEINLINE void addTo(Rgb& out, const Rgb& t) {
   out.b = addRn(out.b, t.b);
 }
 
-// The rank of kept coefficient c (the number of kept coefficients below it) in mask maskHi:maskLo.
-CANOPY_HD CANOPY_FORCEINLINE uint32_t keptRank(uint32_t maskLo, uint32_t maskHi, uint32_t c) {
-  const uint32_t lo = c < 32u ? maskLo & ((1u << c) - 1u) : maskLo;
-  const uint32_t hi = c < 32u ? 0u : maskHi & ((1u << (c & 31u)) - 1u);
-  return popcount32(lo) + popcount32(hi);
-}
-
 // A sample's sum: out + the terms coef(rank, c) * fw(c) over the kept coefficients c it needs, in
-// increasing c. Both samplers (float and quantised) are this sum; the warp sampler
-// (haar_warp.cuh) computes the same terms spread over a warp's lanes and adds them in the same
-// order, so every sampler gives the same bits.
+// increasing c. Both samplers (float and quantised) are this sum.
 template <class Coefs>
 CANOPY_HD CANOPY_FORCEINLINE Rgb sumTerms(Rgb out, const FootprintWeights& fw, uint32_t maskLo, uint32_t maskHi,
                                           const Coefs& coef) {
@@ -314,12 +312,12 @@ CANOPY_HD CANOPY_FORCEINLINE Rgb sumTerms(Rgb out, const FootprintWeights& fw, u
   // 20.4 against 16.5 G samples/s for one loop over the 64-bit set).
   for (uint32_t need = uint32_t(fw.need); need; need &= need - 1u) {
     const uint32_t c = lowestBit32(need);
-    addTo(out, weighted(coef(popcount32(maskLo & ((1u << c) - 1u)), c), fw(c)));
+    addTo(out, weighted(coef(popcount32(maskLo & ((1u << c) - 1u)), c), fw.inHalf(c, 0)));
   }
   const uint32_t rankHi = popcount32(maskLo);
   for (uint32_t need = uint32_t(fw.need >> 32); need; need &= need - 1u) {
     const uint32_t c = lowestBit32(need);
-    addTo(out, weighted(coef(rankHi + popcount32(maskHi & ((1u << c) - 1u)), c + 32u), fw(c + 32u)));
+    addTo(out, weighted(coef(rankHi + popcount32(maskHi & ((1u << c) - 1u)), c + 32u), fw.inHalf(c, 1)));
   }
   return out;
 }
@@ -436,65 +434,68 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t streamWord(const uint64_t* words, uint32_t
   return uint32_t(words[i >> 1] >> (32u * (i & 1u)));
 #endif
 }
-// Bits sh .. sh+31 of hi:lo (sh < 32): the device's funnel shift.
+// Bits sh .. sh+31 of hi:lo (sh taken mod 32): the device's funnel shift.
 CANOPY_HD CANOPY_FORCEINLINE uint32_t funnelRight(uint32_t lo, uint32_t hi, uint32_t sh) {
 #if defined(__CUDA_ARCH__)
   return __funnelshift_r(lo, hi, sh);
 #else
-  return uint32_t(((uint64_t(hi) << 32) | lo) >> sh);
+  return uint32_t(((uint64_t(hi) << 32) | lo) >> (sh & 31u));
 #endif
 }
 // The 64 bits of a stream from bit pos as two halves, from three aligned 32-bit words and two
 // funnel shifts (a kept coefficient's fields end at or before the stream's last used bit, so the
-// third word lies inside the base's end word). `wide`: the fields may reach past the second word
-// (more than 33 bits); otherwise the third word is not read (its bits are never used). CPU and
-// device run the same steps; only the load and the funnel shift are intrinsics on the device.
-CANOPY_HD CANOPY_FORCEINLINE void quantWindow(const uint64_t* words, uint32_t pos, bool wide, uint32_t& lo, uint32_t& hi) {
-  const uint32_t i = pos >> 5, sh = pos & 31u;
-  const uint32_t a = streamWord(words, i), b = streamWord(words, i + 1), c = wide ? streamWord(words, i + 2) : 0u;
-  lo = funnelRight(a, b, sh);
-  hi = funnelRight(b, c, sh);
+// third word lies inside the base's end word). CPU and device run the same steps; only the load and
+// the funnel shift are intrinsics on the device. (Reading the third word only for triples over 33
+// bits was measured slower: 13.77 against 13.97 G samples/s on an H200.)
+CANOPY_HD CANOPY_FORCEINLINE void quantWindow(const uint64_t* words, uint32_t pos, uint32_t& lo, uint32_t& hi) {
+  const uint32_t i = pos >> 5;
+  const uint32_t a = streamWord(words, i), b = streamWord(words, i + 1), c = streamWord(words, i + 2);
+  lo = funnelRight(a, b, pos);
+  hi = funnelRight(b, c, pos);
 }
 
-// float(q) for |q| < 2^22, exactly: the bits of 1.5 * 2^23 + q minus 1.5 * 2^23 (an integer add
-// and a float subtract, which issue at full rate on the device, instead of a conversion).
-CANOPY_HD CANOPY_FORCEINLINE float levelToFloat(int32_t q) {
-  const uint32_t u = 0x4B400000u + uint32_t(q);
-#if defined(__CUDA_ARCH__)
-  return __fsub_rn(__uint_as_float(u), 12582912.0f);
-#else
-  float f;
-  __builtin_memcpy(&f, &u, 4);
-  return f - 12582912.0f;
-#endif
-}
-
-// One group's (average or details) three field layouts, fixed per brick: offsets in the window and
-// the shifts that sign-extend a field of width w (32 - w; 31 and a zero result for w = 0).
-struct QuantFieldLayout {
-  uint32_t at1, at2;  // offsets of the second and third field (the first is at 0)
-  uint32_t s0, s1, s2;
-  bool z0, z1, z2;  // width 0: the channel is 0
-  bool wide;        // more than 33 bits: the window needs a third word
-  CANOPY_HD CANOPY_FORCEINLINE explicit QuantFieldLayout(uint32_t widths3) {
-    const uint32_t w0 = widths3 & 0xfu, w1 = (widths3 >> 4) & 0xfu, w2 = (widths3 >> 8) & 0xfu;
-    wide = w0 + w1 + w2 > 33u;
-    at1 = w0;
-    at2 = w0 + w1;
-    s0 = w0 ? 32u - w0 : 31u;
-    s1 = w1 ? 32u - w1 : 31u;
-    s2 = w2 ? 32u - w2 : 31u;
-    z0 = w0 == 0;
-    z1 = w1 == 0;
-    z2 = w2 == 0;
+// A two's-complement field of width w (0..15) to float, exactly, without shifts or a conversion:
+// flipping its sign bit gives q + 2^(w-1) as an unsigned field u; with the exponent bits of
+// 1.5 * 2^23 ORed in (they lie above bit 22), the word is the float 1.5 * 2^23 + u, and adding
+// -(1.5 * 2^23 + 2^(w-1)) leaves q. Mask, flip and OR are one three-input logic instruction on the
+// device ((x & m) ^ k with k = sign bit | exponent bits), then one float add. Width 0: m = 0, so
+// the result is 0.
+struct QuantField {
+  uint32_t m, k;  // the field's mask, and its sign bit | 0x4B400000
+  float o;        // -(1.5 * 2^23 + 2^(w-1)); -1.5 * 2^23 at w = 0
+  CANOPY_HD CANOPY_FORCEINLINE explicit QuantField(uint32_t w) {
+    m = (1u << w) - 1u;
+    const uint32_t sign = (m + 1u) >> 1;
+    k = sign | 0x4B400000u;
+    o = -(12582912.0f + float(sign));  // exact: an integer below 2^24
   }
+  CANOPY_HD CANOPY_FORCEINLINE float operator()(uint32_t x) const {
+    const uint32_t u = (x & m) ^ k;
+#if defined(__CUDA_ARCH__)
+    return __fadd_rn(__uint_as_float(u), o);
+#else
+    float f;
+    __builtin_memcpy(&f, &u, 4);
+    return f + o;
+#endif
+  }
+};
+
+// One group's (average or details) three field layouts, fixed per brick: the offsets of the second
+// and third field in the window (the first is at 0) and each field's decoding constants.
+struct QuantFieldLayout {
+  uint32_t at1, at2;
+  QuantField f0, f1, f2;
+  CANOPY_HD CANOPY_FORCEINLINE explicit QuantFieldLayout(uint32_t widths3)
+      : at1(widths3 & 0xfu),
+        at2((widths3 & 0xfu) + ((widths3 >> 4) & 0xfu)),
+        f0(widths3 & 0xfu),
+        f1((widths3 >> 4) & 0xfu),
+        f2((widths3 >> 8) & 0xfu) {}
   CANOPY_HD CANOPY_FORCEINLINE Rgb levels(const uint64_t* words, uint32_t pos) const {
     uint32_t lo, hi;
-    quantWindow(words, pos, wide, lo, hi);
-    const int32_t q0 = int32_t(lo << s0) >> s0;
-    const int32_t q1 = int32_t(funnelRight(lo, hi, at1) << s1) >> s1;
-    const int32_t q2 = int32_t(funnelRight(lo, hi, at2) << s2) >> s2;
-    return Rgb{levelToFloat(z0 ? 0 : q0), levelToFloat(z1 ? 0 : q1), levelToFloat(z2 ? 0 : q2)};
+    quantWindow(words, pos, lo, hi);
+    return Rgb{f0(lo), f1(funnelRight(lo, hi, at1)), f2(funnelRight(lo, hi, at2))};
   }
 };
 

@@ -4,7 +4,6 @@
 
 #include "canopy/parallel_cuda.cuh"
 #include "formats/haar_view.h"
-#include "formats/haar_warp.cuh"
 
 namespace canopy::haar {
 namespace {
@@ -24,20 +23,6 @@ __global__ void sampleKernel(ChaarView v, uint32_t base, const float* __restrict
   const size_t i = blockIdx.x * size_t(blockDim.x) + threadIdx.x;
   if (i >= n) return;
   const Rgb c = chaarSample(v, int(base), pts[3 * i], pts[3 * i + 1], pts[3 * i + 2]);
-  out[3 * i] = c.r;
-  out[3 * i + 1] = c.g;
-  out[3 * i + 2] = c.b;
-}
-
-constexpr int kWarpBlock = 128;
-__global__ void __launch_bounds__(kWarpBlock) sampleWarpKernel(ChaarView v, uint32_t base, const float* __restrict__ pts,
-                                                               size_t n, float* __restrict__ out) {
-  __shared__ ChaarWarpScratch<> scratch[kWarpBlock / 32];
-  const size_t i = blockIdx.x * size_t(blockDim.x) + threadIdx.x;
-  const bool active = i < n;  // the whole warp samples together
-  const Rgb c = chaarSampleWarp(v, int(base), active ? pts[3 * i] : 0.0f, active ? pts[3 * i + 1] : 0.0f,
-                                active ? pts[3 * i + 2] : 0.0f, active, scratch[threadIdx.x / 32]);
-  if (!active) return;
   out[3 * i] = c.r;
   out[3 * i + 1] = c.g;
   out[3 * i + 2] = c.b;
@@ -77,23 +62,20 @@ ChaarDevice::~ChaarDevice() {
   cudaFree(coefs_);
 }
 
-void ChaarDevice::sampleDevice(uint32_t base, const float* pts, size_t n, float* out, void* stream, Sampler s) const {
+void ChaarDevice::sampleDevice(uint32_t base, const float* pts, size_t n, float* out, void* stream) const {
   if (n == 0) return;
   if (base >= view_.baseCount) throw usageError("ChaarDevice::sample: base out of range");
-  const int block = kWarpBlock;
+  const int block = 128;
   const size_t grid = (n + block - 1) / block;
-  if (s == Sampler::Warp)
-    sampleWarpKernel<<<unsigned(grid), block, 0, static_cast<cudaStream_t>(stream)>>>(view_, base, pts, n, out);
-  else
-    sampleKernel<<<unsigned(grid), block, 0, static_cast<cudaStream_t>(stream)>>>(view_, base, pts, n, out);
+  sampleKernel<<<unsigned(grid), block, 0, static_cast<cudaStream_t>(stream)>>>(view_, base, pts, n, out);
   CANOPY_CUDA_CHECK(cudaGetLastError());
 }
 
-void ChaarDevice::sample(uint32_t base, const float* ptsHost, size_t n, float* rgbHost, Sampler s) const {
+void ChaarDevice::sample(uint32_t base, const float* ptsHost, size_t n, float* rgbHost) const {
   if (n == 0) return;
   cuda::DeviceBuffer<float> pts(3 * n), out(3 * n);
   pts.upload(ptsHost, 3 * n);
-  sampleDevice(base, pts.data(), n, out.data(), nullptr, s);
+  sampleDevice(base, pts.data(), n, out.data());
   CANOPY_CUDA_CHECK(cudaDeviceSynchronize());
   out.download(rgbHost, 3 * n);
 }

@@ -5,10 +5,8 @@
 // its own code (include formats/haar_view.h in the .cu). The sampler is one thread per sample: it
 // reads the brick's 12-byte record, finds each needed coefficient with the mask and a popcount
 // (listing 5.5's rule, without the shared-memory staging, barriers or 64-thread cooperation) and
-// reconstructs only the 2^3 texels of its footprint. formats/haar_warp.cuh has the same sampler for
-// a warp's 32 lanes together (the terms spread evenly over the lanes; same bits). sample() and
-// decodeDense() are the batch entry points used by tests and benchmarks. No CUDA headers here: host
-// code can include it.
+// reconstructs only the 2^3 texels of its footprint. sample() and decodeDense() are the batch
+// entry points used by tests and benchmarks. No CUDA headers here: host code can include it.
 #pragma once
 #include <cstddef>
 #include <cstdint>
@@ -17,9 +15,6 @@
 #include "formats/chaar.h"
 
 namespace canopy::haar {
-
-// Which device sampler a batch uses: chaarSample per thread, or chaarSampleWarp (haar_warp.cuh).
-enum class Sampler { Thread, Warp };
 
 class ChaarDevice {
  public:
@@ -33,10 +28,9 @@ class ChaarDevice {
   size_t deviceBytes() const { return bytes_; }
 
   // Trilinear samples of `base` at n index-space points (xyz triples, host memory) -> rgb triples.
-  void sample(uint32_t base, const float* pointsHost, size_t n, float* rgbHost, Sampler s = Sampler::Thread) const;
+  void sample(uint32_t base, const float* pointsHost, size_t n, float* rgbHost) const;
   // Same with device pointers (no copies): for benchmarks. `stream` is a cudaStream_t.
-  void sampleDevice(uint32_t base, const float* pointsDev, size_t n, float* rgbDev, void* stream = nullptr,
-                    Sampler s = Sampler::Thread) const;
+  void sampleDevice(uint32_t base, const float* pointsDev, size_t n, float* rgbDev, void* stream = nullptr) const;
   // Every lattice cell decoded from its owning brick on the GPU (layout of decodeBaseDense).
   void decodeDense(uint32_t base, std::vector<float>& out) const;
 

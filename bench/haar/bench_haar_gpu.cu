@@ -19,7 +19,6 @@
 #include "canopy/parallel_cuda.cuh"
 #include "formats/haar_cuda.h"
 #include "formats/haar_view.h"
-#include "formats/haar_warp.cuh"
 
 using namespace canopy::haar;
 
@@ -39,25 +38,6 @@ __global__ void compressedKernel(ChaarView v, int base, const float4* pts, size_
   }
   const float s = c.r + c.g + c.b;
   if (s == -1.0f) atomicAdd(sum, s);  // never true for light; keeps the sample live
-}
-
-// The same with chaarSampleWarp (kCapacity terms per chunk), 128 threads (4 warps) per block.
-template <uint32_t kCapacity>
-__global__ void __launch_bounds__(128) warpKernel(ChaarView v, int base, const float4* pts, size_t n, float* sum, float* out) {
-  __shared__ ChaarWarpScratch<kCapacity> scratch[4];
-  const size_t i = blockIdx.x * size_t(blockDim.x) + threadIdx.x;
-  const bool active = i < n;
-  const float4 p = active ? pts[i] : make_float4(0, 0, 0, 0);
-  const Rgb c = chaarSampleWarp(v, base, p.x, p.y, p.z, active, scratch[threadIdx.x / 32]);
-  if (!active) return;
-  if (out) {
-    out[3 * i] = c.r;
-    out[3 * i + 1] = c.g;
-    out[3 * i + 2] = c.b;
-    return;
-  }
-  const float s = c.r + c.g + c.b;
-  if (s == -1.0f) atomicAdd(sum, s);
 }
 
 __global__ void textureKernel(cudaTextureObject_t tex, int3 mn, const float4* pts, size_t n, float* sum) {
@@ -197,12 +177,11 @@ int main(int argc, char** argv) {
     std::vector<float> outGpu(3 * nCpu);
     size_t mismatchCpu = 0;
     const unsigned grid = unsigned((n + 127) / 128), gridCheck = unsigned((nCpu + 127) / 128);
-    std::printf("| points | base | compressed Gsamples/s (per thread) | warp sampler, 128 / 256 / 512-term chunks | "
-                "texture Gsamples/s | array Gsamples/s | compressed / texture (per thread; best warp) |\n");
-    std::printf("|---|---|---|---|---|---|---|\n");
+    std::printf("| points | base | compressed Gsamples/s | texture Gsamples/s | array Gsamples/s | compressed / texture |\n");
+    std::printf("|---|---|---|---|---|---|\n");
     for (int set = 0; set < 2; ++set) {
       pts.upload(ptsHost[set].data(), n);
-      double totC = 0, totT = 0, totA = 0, totW[3] = {0, 0, 0};
+      double totC = 0, totT = 0, totA = 0;
       for (uint32_t b = 0; b < d.baseCount(); ++b) {
         std::vector<float> dense;
         decodeBaseDense(d, b, dense);
@@ -234,28 +213,14 @@ int main(int argc, char** argv) {
         const ChaarView v = dev.view();
         // Correctness: the GPU's samples are the CPU's, bit for bit.
         compressedKernel<<<gridCheck, 128>>>(v, int(b), pts.data(), nCpu, sum.data(), outDev.data());
+        outDev.download(outGpu.data(), outGpu.size());
         const ChaarView hv = d.view();
-        auto check = [&] {
-          outDev.download(outGpu.data(), outGpu.size());
-          for (size_t i = 0; i < nCpu; ++i) {
-            const Rgb c = chaarSample(hv, int(b), ptsHost[set][i].x, ptsHost[set][i].y, ptsHost[set][i].z);
-            mismatchCpu += std::memcmp(&c.r, &outGpu[3 * i], 4) != 0 || std::memcmp(&c.g, &outGpu[3 * i + 1], 4) != 0 ||
-                           std::memcmp(&c.b, &outGpu[3 * i + 2], 4) != 0;
-          }
-        };
-        check();
-        warpKernel<128><<<gridCheck, 128>>>(v, int(b), pts.data(), nCpu, sum.data(), outDev.data());
-        check();
-        warpKernel<256><<<gridCheck, 128>>>(v, int(b), pts.data(), nCpu, sum.data(), outDev.data());
-        check();
-        warpKernel<512><<<gridCheck, 128>>>(v, int(b), pts.data(), nCpu, sum.data(), outDev.data());
-        check();
+        for (size_t i = 0; i < nCpu; ++i) {
+          const Rgb c = chaarSample(hv, int(b), ptsHost[set][i].x, ptsHost[set][i].y, ptsHost[set][i].z);
+          mismatchCpu += std::memcmp(&c.r, &outGpu[3 * i], 4) != 0 || std::memcmp(&c.g, &outGpu[3 * i + 1], 4) != 0 ||
+                         std::memcmp(&c.b, &outGpu[3 * i + 2], 4) != 0;
+        }
         const float msC = bestMs(reps, [&] { compressedKernel<<<grid, 128>>>(v, int(b), pts.data(), n, sum.data(), nullptr); });
-        const float msW[3] = {
-            bestMs(reps, [&] { warpKernel<128><<<grid, 128>>>(v, int(b), pts.data(), n, sum.data(), nullptr); }),
-            bestMs(reps, [&] { warpKernel<256><<<grid, 128>>>(v, int(b), pts.data(), n, sum.data(), nullptr); }),
-            bestMs(reps, [&] { warpKernel<512><<<grid, 128>>>(v, int(b), pts.data(), n, sum.data(), nullptr); })};
-        for (int k = 0; k < 3; ++k) totW[k] += msW[k];
         const float msT = bestMs(reps, [&] { textureKernel<<<grid, 128>>>(tex, mn, pts.data(), n, sum.data()); });
         const float msA = bestMs(reps, [&] { arrayKernel<<<grid, 128>>>(denseDev.data(), mn, mx, pts.data(), n, sum.data()); });
         totC += msC;
@@ -263,21 +228,17 @@ int main(int argc, char** argv) {
         totA += msA;
         auto rate = [&](double ms) { return ms > 0 ? n / (ms * 1e6) : 0.0; };
         if (b % 6 == 0 || b + 1 == d.baseCount())
-          std::printf("| %s | %s | %.2f | %.2f / %.2f / %.2f | %.2f | %.2f | %.2fx; %.2fx |\n",
-                      set == 0 ? "stored bricks" : "lattice box", baseName(b).c_str(), rate(msC), rate(msW[0]),
-                      rate(msW[1]), rate(msW[2]), rate(msT), rate(msA), msT / msC,
-                      msT / std::min({msW[0], msW[1], msW[2]}));
+          std::printf("| %s | %s | %.2f | %.2f | %.2f | %.2fx |\n", set == 0 ? "stored bricks" : "lattice box",
+                      baseName(b).c_str(), rate(msC), rate(msT), rate(msA), msT / msC);
         cudaDestroyTextureObject(tex);
         cudaFreeArray(arr);
       }
       const double nb = double(n) * d.baseCount();
       auto rate = [&](double ms) { return ms > 0 ? nb / (ms * 1e6) : 0.0; };
-      std::printf("| %s | **all %u** | **%.2f** | **%.2f / %.2f / %.2f** | **%.2f** | **%.2f** | **%.2fx; %.2fx** (target >= "
-                  "0.5x) |\n",
-                  set == 0 ? "stored bricks" : "lattice box", d.baseCount(), rate(totC), rate(totW[0]), rate(totW[1]),
-                  rate(totW[2]), rate(totT), rate(totA), totT / totC, totT / std::min({totW[0], totW[1], totW[2]}));
+      std::printf("| %s | **all %u** | **%.2f** | **%.2f** | **%.2f** | **%.2fx** (target >= 0.5x) |\n",
+                  set == 0 ? "stored bricks" : "lattice box", d.baseCount(), rate(totC), rate(totT), rate(totA), totT / totC);
     }
-    std::printf("\ncheck: GPU != CPU (bits) in %zu samples (of %zu per base, point set and sampler)\n", mismatchCpu, nCpu);
+    std::printf("\ncheck: GPU != CPU (bits) in %zu samples (of %zu per base and point set)\n", mismatchCpu, nCpu);
     std::printf("\ncompressed on device: %.2f MiB; dense float4 texture per base: %.2f MiB\n",
                 double(dev.deviceBytes()) / (1 << 20), double(dim[0]) * dim[1] * dim[2] * 16 / (1 << 20));
     return mismatchCpu ? 3 : 0;
