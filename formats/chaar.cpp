@@ -94,9 +94,10 @@ void checkQuantRecords(ChaarData& d, uint32_t b, const Checker& ck) {
     const QuantRecord& q = d.quantRecords[uint64_t(b) * h.slotCount + s];
     const std::string at = bn + " slot " + str(s);
     const uint64_t m = q.mask();
-    ck.require((q.widths >> 24) == 0, at + " has reserved width bits set");
-    ck.require((m & 1u) || q.groupBits(0) == 0, at + " has average widths without an average");
-    ck.require((m & ~uint64_t(1)) || q.groupBits(1) == 0, at + " has detail widths without details");
+    ck.require(((q.widths >> 24) & 0x7fu) == 0, at + " has reserved width bits set");
+    ck.require(!q.raw() || h.versionMinor >= 1, at + " is a raw brick in a 2.0 file");
+    ck.require(q.hasAverage() || q.groupBits(0) == 0, at + " has average widths without an average");
+    ck.require((m & ~uint64_t(q.hasAverage())) || q.groupBits(1) == 0, at + " has detail widths without details");
     ck.require(q.bitOffset == bit, at + " bit offset out of order or out of range");
     bit += q.bits();
     ck.require(bit <= 64 * uint64_t(e.quantWords), at + " fields run past the base's stream");
@@ -143,7 +144,7 @@ ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) 
   ck.require(quant == (h.versionMajor == 2), quant ? "quantised coefficients in a 1.x file"
                                                    : "float coefficients in a 2.x file");
   // The newest minor of the file's major that this reader knows.
-  const uint16_t knownMinor = h.versionMajor == 1 ? kChaarVersionMinor : 0;
+  const uint16_t knownMinor = h.versionMajor == 1 ? kChaarVersionMinor : kChaarVersion2Minor;
   for (int a = 0; a < 3; ++a) {
     const int64_t dim = int64_t(h.latticeMax[a]) - h.latticeMin[a] + 1;
     ck.require(dim >= 1 && dim <= kMaxLatticeEdge, "bad lattice bounds on axis " + str(a));
@@ -310,8 +311,10 @@ std::vector<uint8_t> serializeChaar(ChaarData& d) {
   // flags stay 1.0, byte for byte.
   bool flagged = false;
   for (const ChaarBaseEntry& e : d.bases) flagged = flagged || e.flags != 0;
+  bool rawQuant = false;  // 2.1 only where a brick is raw: other quantised files stay 2.0, byte for byte
+  for (const QuantRecord& q : d.quantRecords) rawQuant = rawQuant || q.raw();
   h.versionMajor = quant ? 2 : 1;
-  h.versionMinor = quant ? 0 : (flagged ? kChaarVersionMinor : 0);
+  h.versionMinor = quant ? (rawQuant ? kChaarVersion2Minor : 0) : (flagged ? kChaarVersionMinor : 0);
   h.headerSize = sizeof(ChaarHeader);
   h.baseCount = uint32_t(d.bases.size());
   const bool fp16 = h.precision == uint32_t(Precision::Fp16);

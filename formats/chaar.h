@@ -50,7 +50,8 @@ namespace canopy::haar {
 
 constexpr char kChaarMagic[8] = {'C', 'N', 'P', 'Y', 'H', 'A', 'A', 'R'};
 constexpr uint16_t kChaarVersionMajor = 2;  // the newest major this reader reads (2: Quant)
-constexpr uint16_t kChaarVersionMinor = 1;  // the newest 1.x minor (2.x: 0)
+constexpr uint16_t kChaarVersionMinor = 1;   // the newest 1.x minor
+constexpr uint16_t kChaarVersion2Minor = 1;  // the newest 2.x minor (2.1: raw quantised bricks)
 constexpr int kChaarSectionCount = 5;
 enum ChaarSection : int { kSecMeta = 0, kSecBases = 1, kSecSlots = 2, kSecRecords = 3, kSecCoefs = 4 };
 constexpr int kMaxLatticeEdge = 1 << 15;  // per axis; a light lattice is 64..512 in practice

@@ -381,20 +381,30 @@ CANOPY_HD inline void decodeBrick(const BrickRecord& rec, const Reader& read, fl
 constexpr float kQuantDeadZone = 0.7f;     // |v| / step below this stores 0
 constexpr int kQuantMaxWidth = 15;         // bits per field
 constexpr int32_t kQuantMaxLevel = 16383;  // |q| <= 2^14 - 1 (15-bit fields, one level of margin)
+// Raw quantised bricks (.chaar 2.1): the brick's values (Y, R-Y, B-Y), not its coefficients, each
+// q = round(v / (kQuantRawFactor * T)); flagged by kQuantRawBit in QuantRecord::widths. The encoder
+// stores a brick raw where its Haar form keeps more than kQuantRawAbove coefficients: a sample then
+// needs at most 8 fields instead of up to 64 (bench/RESULTS.md, 2026-12-02).
+constexpr uint32_t kQuantRawBit = 0x80000000u;
+constexpr float kQuantRawFactor = 4.0f;  // a power of two: T * 4 is exact
+constexpr int kQuantRawAbove = 16;
 
 // One brick of one quantised base: 16 bytes on disk and in memory.
 struct alignas(16) QuantRecord {  // (aligned: one 16-byte load on the device)
   uint32_t maskLo = 0, maskHi = 0;  // kept coefficients (bit c = coefficient c)
   uint32_t bitOffset = 0;           // first bit of the brick's fields in the base's stream
-  uint32_t widths = 0;              // nibbles: 0-2 the average's Y, R-Y, B-Y widths, 3-5 the details'; 6-7 zero
+  uint32_t widths = 0;              // nibbles: 0-2 the average's Y, R-Y, B-Y widths, 3-5 the details'; bits
+                                    // 24-30 zero; bit 31 kQuantRawBit (2.1: values, with the details' widths)
   CANOPY_HD uint64_t mask() const { return uint64_t(maskLo) | (uint64_t(maskHi) << 32); }
+  CANOPY_HD bool raw() const { return (widths & kQuantRawBit) != 0; }
   CANOPY_HD uint32_t width(int group, int ch) const { return (widths >> (4 * (3 * group + ch))) & 0xfu; }
   CANOPY_HD uint32_t groupBits(int group) const { return width(group, 0) + width(group, 1) + width(group, 2); }
+  // 1 where the brick stores an average (mask bit 0 of a Haar brick) with the group-0 widths.
+  CANOPY_HD uint32_t hasAverage() const { return raw() ? 0u : (maskLo & 1u); }
   // Bits of all the brick's fields.
   CANOPY_HD uint64_t bits() const {
-    const uint64_t m = mask();
-    const uint32_t has0 = uint32_t(m & 1u);
-    return uint64_t(has0) * groupBits(0) + uint64_t(popcount64(m) - int(has0)) * groupBits(1);
+    const uint32_t has0 = hasAverage();
+    return uint64_t(has0) * groupBits(0) + uint64_t(popcount64(mask()) - int(has0)) * groupBits(1);
   }
 };
 static_assert(sizeof(QuantRecord) == 16, "QuantRecord is 16 bytes on disk and on the device");
@@ -419,11 +429,14 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t fineDetailAxes(uint32_t c) {
 // The step factor per fine-detail axis.
 constexpr double kQuantFineFactor = 1.4142135623730951;  // sqrt(2)
 
-// The four steps of a base with step T: T * sqrt(2)^n for n = 0..3 fine-detail axes, each rounded
-// to float once (readers compute them on the host, so CPU and GPU use the same bits).
-inline void quantSteps(float T, float step[4]) {
+// The steps of a base with step T: T * sqrt(2)^n for n = 0..3 fine-detail axes, each rounded to
+// float once (readers compute them on the host, so CPU and GPU use the same bits), and step[4] =
+// T * kQuantRawFactor for raw bricks' values.
+constexpr int kQuantSteps = 5;
+inline void quantSteps(float T, float step[kQuantSteps]) {
   double s = double(T);
   for (int n = 0; n < 4; ++n, s *= kQuantFineFactor) step[n] = float(s);
+  step[4] = T * kQuantRawFactor;
 }
 
 // 32-bit word i of a stream of little-endian 64-bit words.
@@ -506,16 +519,18 @@ CANOPY_HD CANOPY_FORCEINLINE Rgb quantToRgb(const Rgb& v) { return Rgb{addRn(v.r
 // decodeMasked): levels times the coefficient's step.
 struct QuantBrick {
   const uint64_t* words;  // the base's stream
-  const float* step;      // the base's four steps
+  const float* step;      // the base's steps (quantSteps)
   QuantFieldLayout avg, detail;
   uint32_t pos0, has0, avgBits, detailBits;
+  bool raw;
   CANOPY_HD CANOPY_FORCEINLINE QuantBrick(const QuantRecord& r, const uint64_t* w, const float* st)
-      : words(w), step(st), avg(r.widths & 0xfffu), detail(r.widths >> 12), pos0(r.bitOffset), has0(r.maskLo & 1u),
-        avgBits(r.groupBits(0)), detailBits(r.groupBits(1)) {}
+      : words(w), step(st), avg(r.widths & 0xfffu), detail((r.widths >> 12) & 0xfffu), pos0(r.bitOffset),
+        has0(r.hasAverage()), avgBits(r.groupBits(0)), detailBits(r.groupBits(1)), raw(r.raw()) {}
   CANOPY_HD CANOPY_FORCEINLINE Rgb operator()(uint32_t j, uint32_t c) const {
-    const Rgb q = c == 0 ? avg.levels(words, pos0) : detail.levels(words, pos0 + has0 * avgBits + (j - has0) * detailBits);
+    const Rgb q = c == 0 && has0 ? avg.levels(words, pos0)
+                                 : detail.levels(words, pos0 + has0 * avgBits + (j - has0) * detailBits);
     const uint32_t n = fineDetailAxes(c);
-    const float st = n < 2 ? (n == 0 ? step[0] : step[1]) : (n == 2 ? step[2] : step[3]);
+    const float st = raw ? step[4] : n < 2 ? (n == 0 ? step[0] : step[1]) : (n == 2 ? step[2] : step[3]);
     return Rgb{mulRn(q.r, st), mulRn(q.g, st), mulRn(q.b, st)};
   }
   CANOPY_HD CANOPY_FORCEINLINE Rgb finish(const Rgb& v) const { return quantToRgb(v); }
@@ -532,44 +547,51 @@ struct QuantDetails {
 };
 
 // What a quantised sample needs besides its details: the average's levels (weight 1 on every axis,
-// the sum's start), the weights (sqrt(2) folded into each axis's fine-detail weights) and needed
-// details (none for an average-only brick), and where the details are.
+// the sum's start), the weights (Haar: sqrt(2) folded into each axis's fine-detail weights; raw:
+// the trilinear weights) and needed fields (none for an average-only brick), where the fields are,
+// and the step that scales the sum.
 struct QuantSamplePlan {
   Rgb init;
   FootprintWeights fw;
-  uint32_t base = 0, widths = 0, bits = 0;  // QuantDetails' position rule and the details' three widths
+  uint32_t base = 0, widths = 0, bits = 0;  // QuantDetails' position rule and the three widths
+  bool raw = false;
 };
 CANOPY_HD CANOPY_FORCEINLINE QuantSamplePlan quantSamplePlan(const QuantRecord& rec, const uint64_t* words, int lx,
                                                              int ly, int lz, float fx, float fy, float fz) {
   QuantSamplePlan p;
-  const uint32_t has0 = rec.maskLo & 1u;
+  p.raw = rec.raw();
+  const uint32_t has0 = rec.hasAverage();
   if (has0) p.init = QuantFieldLayout(rec.widths & 0xfffu).levels(words, rec.bitOffset);
-  p.widths = rec.widths >> 12;
+  p.widths = (rec.widths >> 12) & 0xfffu;
   p.bits = rec.groupBits(1);
   p.base = rec.bitOffset + has0 * rec.groupBits(0) - has0 * p.bits;
-  p.fw = footprintWeights(rec.mask() & ~uint64_t(1), false, lx, ly, lz, fx, fy, fz);  // (none needed: average only)
+  p.fw = footprintWeights(rec.mask() & ~uint64_t(has0), p.raw, lx, ly, lz, fx, fy, fz);  // (none: average only)
+  if (p.raw) return p;
   const float r2 = float(kQuantFineFactor);
   p.fw.wx[2] = mulRn(p.fw.wx[2], r2), p.fw.wx[3] = mulRn(p.fw.wx[3], r2);
   p.fw.wy[2] = mulRn(p.fw.wy[2], r2), p.fw.wy[3] = mulRn(p.fw.wy[3], r2);
   p.fw.wz[2] = mulRn(p.fw.wz[2], r2), p.fw.wz[3] = mulRn(p.fw.wz[3], r2);
   return p;
 }
-// The sum of levels to RGB: times the base's step T, then (Y, R-Y, B-Y) -> RGB.
-CANOPY_HD CANOPY_FORCEINLINE Rgb quantFinish(const Rgb& sum, float T) { return quantToRgb(weighted(sum, T)); }
+// The sum of levels to RGB: times the step (T, or a raw brick's kQuantRawFactor * T), then
+// (Y, R-Y, B-Y) -> RGB.
+CANOPY_HD CANOPY_FORCEINLINE Rgb quantFinish(const Rgb& sum, float step) { return quantToRgb(weighted(sum, step)); }
 
 // Trilinear sample of a quantised brick: sumTerms over the integer levels, the steps folded in
-// (sqrt(2) into each axis's fine-detail weights, T applied once to the sum), then (Y, R-Y, B-Y) ->
-// RGB. CPU and GPU agree bit for bit; decodeQuantBrick then trilinear agrees up to float rounding
-// (the steps are applied in another order).
-CANOPY_HD inline Rgb sampleQuantBrick(const QuantRecord& rec, const uint64_t* words, float T, int lx, int ly, int lz,
-                                      float fx, float fy, float fz) {
+// (sqrt(2) into each axis's fine-detail weights, the base step applied once to the sum), then
+// (Y, R-Y, B-Y) -> RGB. `T` and `rawStep` are the base's step[0] and step[4]. CPU and GPU agree
+// bit for bit; decodeQuantBrick then trilinear agrees up to float rounding (the steps are applied
+// in another order).
+CANOPY_HD inline Rgb sampleQuantBrick(const QuantRecord& rec, const uint64_t* words, float T, float rawStep, int lx,
+                                      int ly, int lz, float fx, float fy, float fz) {
   if (rec.maskLo == 0 && rec.maskHi == 0) return Rgb{};
   const QuantSamplePlan p = quantSamplePlan(rec, words, lx, ly, lz, fx, fy, fz);
-  return quantFinish(sumTerms(p.init, p.fw, rec.maskLo, rec.maskHi, QuantDetails(words, p.widths, p.base, p.bits)), T);
+  return quantFinish(sumTerms(p.init, p.fw, rec.maskLo, rec.maskHi, QuantDetails(words, p.widths, p.base, p.bits)),
+                     p.raw ? rawStep : T);
 }
 CANOPY_HD inline void decodeQuantBrick(const QuantRecord& rec, const uint64_t* words, const float* step,
                                        float out[3][kBrickValues]) {
-  decodeMasked(rec.mask(), false, QuantBrick(rec, words, step), out);
+  decodeMasked(rec.mask(), rec.raw(), QuantBrick(rec, words, step), out);
 }
 
 }  // namespace canopy::haar

@@ -110,6 +110,7 @@ LiftedBase::LiftedBase(const LatticeGeom& geom, const DenseLight& light, Precisi
   for (uint64_t b = 0; b < geom.bricks; ++b)
     if (nonEmpty_[b]) brickIds_.push_back(int64_t(b));
   lifted_.resize(brickIds_.size() * 3 * kBrickValues);
+  std::vector<double> valuePeak(brickIds_.size(), 0.0);  // Quant: largest |Y|, |R-Y|, |B-Y| of the brick
   parallelFor(int64_t(brickIds_.size()), [&](int64_t k) {
     float v[3][kBrickValues];
     uint8_t inside[kBrickValues];
@@ -122,19 +123,23 @@ LiftedBase::LiftedBase(const LatticeGeom& geom, const DenseLight& light, Precisi
         else  // (Y, R-Y, B-Y) with Y = G, exact in double
           d[c] = ch == 0 ? double(v[1][c]) : double(v[ch == 1 ? 0 : 2][c]) - double(v[1][c]);
       }
+      for (int c = 0; c < kBrickValues; ++c) valuePeak[size_t(k)] = std::max(valuePeak[size_t(k)], std::fabs(d[c]));
       liftBrick(d);
       for (int c = 0; c < kBrickValues; ++c) lifted_[size_t(k) * 192 + ch * 64 + c] = float(d[c]);
     }
   }, 64);
   if (precision_ == Precision::Quant) {
-    // The largest |coefficient| / sqrt(2)^(fine axes), over kQuantMaxLevel - 1 (one level of margin
-    // for the rounding of the steps): the smallest step at which every level fits 15 bits.
+    // The largest |coefficient| / sqrt(2)^(fine axes) (and |value| / kQuantRawFactor, should the
+    // brick be stored raw), over kQuantMaxLevel - 1 (one level of margin for the rounding of the
+    // steps): the smallest step at which every level fits 15 bits.
     double worst = 0;
-    for (size_t k = 0; k < brickIds_.size(); ++k)
+    for (size_t k = 0; k < brickIds_.size(); ++k) {
+      worst = std::max(worst, valuePeak[k] / double(kQuantRawFactor));
       for (int ch = 0; ch < 3; ++ch)
         for (int c = 0; c < kBrickValues; ++c)
           worst = std::max(worst, std::fabs(double(lifted_[k * 192 + size_t(ch) * 64 + size_t(c)])) /
                                       std::pow(kQuantFineFactor, int(fineDetailAxes(uint32_t(c)))));
+    }
     minQuantStep_ = float(worst / double(kQuantMaxLevel - 1));
   }
 }
@@ -231,26 +236,44 @@ LiftedBase::Result LiftedBase::encodeQuantBrick(size_t k, const float step[4], Q
       if (qi) mask |= uint64_t(1) << c;
     }
   }
+  // Dense bricks raw: their values (Y, R-Y, B-Y) at the raw step, rounded (a sample then needs at
+  // most 8 fields; the coefficients' dead zone does not apply to values).
+  const bool raw = popcount64(mask) > kQuantRawAbove;
+  if (raw) {
+    mask = 0;
+    for (int c = 0; c < kBrickValues; ++c) {
+      for (int ch = 0; ch < 3; ++ch) {
+        const double y = double(orig[1][c]);
+        const double v = (ch == 0 ? y : double(orig[ch == 1 ? 0 : 2][c]) - y) / double(step[4]);
+        const int64_t qi = std::max<int64_t>(-kQuantMaxLevel, std::min<int64_t>(kQuantMaxLevel, std::llround(v)));
+        q[c][ch] = int32_t(qi);
+        if (qi) mask |= uint64_t(1) << c;
+      }
+    }
+  }
+  // Widths: group 0 the average's (Haar), group 1 the details' or (raw) every value's.
+  auto group = [&](int c) { return raw || c != 0 ? 1 : 0; };
   uint32_t w[2][3] = {};
   for (int c = 0; c < kBrickValues; ++c)
     if ((mask >> c) & 1u)
-      for (int ch = 0; ch < 3; ++ch) w[c != 0][ch] = std::max(w[c != 0][ch], fieldWidth(q[c][ch]));
+      for (int ch = 0; ch < 3; ++ch) w[group(c)][ch] = std::max(w[group(c)][ch], fieldWidth(q[c][ch]));
   rec = QuantRecord{};
   rec.maskLo = uint32_t(mask);
   rec.maskHi = uint32_t(mask >> 32);
   for (int g = 0; g < 2; ++g)
     for (int ch = 0; ch < 3; ++ch) rec.widths |= w[g][ch] << (4 * (3 * g + ch));
+  if (raw) rec.widths |= kQuantRawBit;
   uint64_t pos = 0;
   for (int c = 0; c < kBrickValues; ++c)
     if ((mask >> c) & 1u)
       for (int ch = 0; ch < 3; ++ch) {
-        putBits(words, pos, uint64_t(uint32_t(q[c][ch])), w[c != 0][ch]);
-        pos += w[c != 0][ch];
+        putBits(words, pos, uint64_t(uint32_t(q[c][ch])), w[group(c)][ch]);
+        pos += w[group(c)][ch];
       }
   // Measured with the readers' decoder.
   float dec[3][kBrickValues];
   decodeQuantBrick(rec, words, step, dec);
-  Result r{mask, false, 0.0, 0.0};
+  Result r{mask, raw, 0.0, 0.0};
   brickError(dec, orig, inside, r.err, r.sumSq);
   return r;
 }
@@ -265,7 +288,7 @@ BaseCode LiftedBase::encodeQuant(float T) const {
     throw unsupported(name_ + ": threshold " + std::to_string(T) + " is below " + std::to_string(minQuantStep_) +
                       ", where a quantised coefficient would need more than 15 bits; raise it or use --precision "
                       "fp16 or fp32");
-  float step[4];
+  float step[kQuantSteps];
   quantSteps(T, step);
   const size_t n = brickIds_.size();
   std::vector<Result> res(n);
@@ -314,7 +337,7 @@ float LiftedBase::searchQuantStep(float maxError, int* probes) const {
   int tries = 0;
   auto errorAt = [&](float T) {
     ++tries;
-    float step[4];
+    float step[kQuantSteps];
     quantSteps(T, step);
     std::vector<double> err(n);
     parallelFor(int64_t(n), [&](int64_t k) {

@@ -28,7 +28,7 @@ struct ChaarView {
   const void* coefs = nullptr;            // all bases' streams: float[3n], uint16_t[3n] or (Quant) uint64_t words
   uint64_t baseCoefOffset[kMaxBases] = {};  // first entry (Quant: first word) of each base's stream in coefs
   const QuantRecord* quantRecords = nullptr;  // [base * slotCount + slot] (Quant)
-  float quantStep[kMaxBases][4] = {};          // each base's four steps (quantSteps; Quant)
+  float quantStep[kMaxBases][kQuantSteps] = {};  // each base's steps (quantSteps; Quant)
 };
 
 CANOPY_HD CANOPY_FORCEINLINE float clampf(float v, float lo, float hi) {
@@ -87,7 +87,8 @@ CANOPY_HD inline Rgb chaarSample(const ChaarView& v, int base, float x, float y,
   const uint64_t off = v.baseCoefOffset[base];
   if (v.precision == Precision::Quant)
     return sampleQuantBrick(loadQuantRecord(v.quantRecords + uint64_t(base) * v.slotCount + at.slot),
-                            static_cast<const uint64_t*>(v.coefs) + off, v.quantStep[base][0], at.lx, at.ly, at.lz,
+                            static_cast<const uint64_t*>(v.coefs) + off, v.quantStep[base][0], v.quantStep[base][4],
+                            at.lx, at.ly, at.lz,
                             at.fx, at.fy, at.fz);
   const BrickRecord rec = v.records[uint64_t(base) * v.slotCount + at.slot];
   if (v.precision == Precision::Fp16) {

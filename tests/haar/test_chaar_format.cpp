@@ -27,8 +27,14 @@ constexpr float FROZEN_SAMPLE_R = 0x1.e8ccp-2f, FROZEN_SAMPLE_G = 0x1.0f99p-1f, 
 constexpr uint64_t FROZEN2_DENSE_HASH = 0x6dac22a9050ef3baULL;
 constexpr float FROZEN2_SAMPLE_R = 0x1.ff26dap-2f, FROZEN2_SAMPLE_G = 0x1.19c696p-1f, FROZEN2_SAMPLE_B = 0x1.a88932p-2f;
 
+// And for the 2.1 file (raw quantised bricks; B03 at the same point = 0.560000002, 0.560000002,
+// 0.400000006).
+constexpr uint64_t FROZEN21_DENSE_HASH = 0x7fca36a1f7295f72ULL;
+constexpr float FROZEN21_SAMPLE_R = 0x1.1eb852p-1f, FROZEN21_SAMPLE_G = 0x1.1eb852p-1f, FROZEN21_SAMPLE_B = 0x1.99999ap-2f;
+
 const std::string kFrozen = std::string(CANOPY_SOURCE_DIR) + "/tests/haar/data/small_v1_0.chaar";
 const std::string kFrozen2 = std::string(CANOPY_SOURCE_DIR) + "/tests/haar/data/small_v2_0.chaar";
+const std::string kFrozen21 = std::string(CANOPY_SOURCE_DIR) + "/tests/haar/data/small_v2_1.chaar";
 
 std::vector<uint8_t> frozenBytes(const std::string& path = kFrozen) {
   const auto b = canopy::readFile(path);
@@ -119,8 +125,34 @@ TEST(ChaarFrozen, QuantisedV2DecodesToKnownValues) {
   EXPECT_EQ(serializeChaar(copy), bytes);
 }
 
+// Frozen by `canopy-haar small.light.vdb -o small_v2_1.chaar --threshold 0.04 --precision quant`
+// (the same input, 2026-12-02): 80 of its 150 bricks with light are raw. Must never change while the
+// format is 2.x.
+TEST(ChaarFrozen, QuantisedV21WithRawBricksDecodesToKnownValues) {
+  const std::vector<uint8_t> bytes = frozenBytes(kFrozen21);
+  const ChaarData d = parseChaar(bytes.data(), bytes.size(), kFrozen21);
+  EXPECT_EQ(d.header.versionMajor, 2);
+  EXPECT_EQ(d.header.versionMinor, 1);
+  EXPECT_EQ(d.precision(), Precision::Quant);
+  EXPECT_FLOAT_EQ(d.bases[5].quantStep, 0.04f);
+  size_t raw = 0, haar = 0;
+  for (const QuantRecord& q : d.quantRecords) {
+    raw += q.raw();
+    haar += !q.raw() && q.mask() != 0;
+  }
+  EXPECT_EQ(raw, 80u);
+  EXPECT_EQ(haar, 70u);
+  const Rgb s = chaarSample(d.view(), 3, 0.25f, 2.5f, 1.75f);
+  EXPECT_EQ(denseHash(d), FROZEN21_DENSE_HASH);
+  EXPECT_EQ(s.r, FROZEN21_SAMPLE_R);
+  EXPECT_EQ(s.g, FROZEN21_SAMPLE_G);
+  EXPECT_EQ(s.b, FROZEN21_SAMPLE_B);
+  ChaarData copy = d;
+  EXPECT_EQ(serializeChaar(copy), bytes);
+}
+
 TEST(ChaarFrozen, EveryTruncatedPrefixIsRejected) {
-  for (const std::string& path : {kFrozen, kFrozen2}) {
+  for (const std::string& path : {kFrozen, kFrozen2, kFrozen21}) {
     const std::vector<uint8_t> bytes = frozenBytes(path);
     for (size_t n = 0; n < bytes.size(); ++n) {
       std::vector<uint8_t> t(bytes.begin(), bytes.begin() + long(n));
@@ -130,7 +162,7 @@ TEST(ChaarFrozen, EveryTruncatedPrefixIsRejected) {
 }
 
 TEST(ChaarFrozen, EveryFlippedByteIsRejected) {
-  for (const std::string& path : {kFrozen, kFrozen2}) {
+  for (const std::string& path : {kFrozen, kFrozen2, kFrozen21}) {
     std::vector<uint8_t> bytes = frozenBytes(path);
     for (size_t i = 0; i < bytes.size(); ++i) {
       for (uint8_t flip : {uint8_t(0x01), uint8_t(0x80)}) {
@@ -276,12 +308,13 @@ TEST(ChaarFormat, ScatteredSunBaseFlagsAreVersion1_1) {
 TEST(ChaarFormat, QuantisedFilesWithBadFieldsAreRejected) {
   using namespace canopy::haar::testing;
   const LatticeGeom g = makeGeom(7, 6, 5);
-  const ChaarData good = encodeLights(g, {smoothLight(g, 1), randomLight(g, 2)}, 0.01f, -1.0f, Precision::Quant);
+  const ChaarData good = encodeLights(g, {smoothLight(g, 1), randomLight(g, 2)}, 0.03f, -1.0f, Precision::Quant);
   {
     ChaarData copy = good;
     const std::vector<uint8_t> bytes = serializeChaar(copy);
     const ChaarData back = parseChaar(bytes.data(), bytes.size(), "good");
     EXPECT_EQ(back.header.versionMajor, 2);
+    EXPECT_EQ(back.header.versionMinor, 1) << "raw bricks: a 2.1 file";
     EXPECT_EQ(back.quantWords, good.quantWords);
     ChaarData again = back;
     EXPECT_EQ(serializeChaar(again), bytes);
@@ -291,16 +324,20 @@ TEST(ChaarFormat, QuantisedFilesWithBadFieldsAreRejected) {
     edit(d);
     expectRejected(serializeChaar(d), what, needle);
   };
-  // The first slot of base 0 with an average and details, and the base's used bits.
+  // The first Haar slot of base 0 with an average and details, its first raw slot, and the base's
+  // used bits.
   const uint32_t slots = good.header.slotCount;
-  uint32_t full = slots;
+  const size_t records = good.quantRecords.size();
+  size_t full = records, raw = records;  // (in any base)
   uint64_t used = 0;
-  for (uint32_t s = 0; s < slots; ++s) {
-    const QuantRecord& q = good.quantRecords[s];
-    if (full == slots && (q.maskLo & 1u) && (q.mask() >> 1)) full = s;
-    used += q.bits();
+  for (size_t i = 0; i < records; ++i) {
+    const QuantRecord& q = good.quantRecords[i];
+    if (full == records && q.hasAverage() && (q.mask() >> 1)) full = i;
+    if (raw == records && q.raw()) raw = i;
+    if (i < slots) used += q.bits();
   }
-  ASSERT_LT(full, slots);
+  ASSERT_LT(full, records);
+  ASSERT_LT(raw, records) << "the random light has dense bricks: some are raw";
   rejects("reserved width bits", "reserved width bits", [&](ChaarData& d) { d.quantRecords[full].widths |= 1u << 28; });
   rejects("bit offset", "bit offset", [&](ChaarData& d) { d.quantRecords[slots - 1].bitOffset += 1; });
   rejects("wider field", "base B00", [&](ChaarData& d) { d.quantRecords[slots - 1].widths += 1u << 12; });
@@ -310,6 +347,27 @@ TEST(ChaarFormat, QuantisedFilesWithBadFieldsAreRejected) {
     d.quantRecords[full].maskLo &= 1u;
     d.quantRecords[full].maskHi = 0;
   });
+  rejects("raw brick with average widths", "average widths without an average",
+          [&](ChaarData& d) { d.quantRecords[raw].widths |= 1u; });
+  rejects("raw brick, no values", "detail widths without details", [&](ChaarData& d) {
+    d.quantRecords[raw].maskLo = 0;
+    d.quantRecords[raw].maskHi = 0;
+  });
+  rejects("Haar brick flagged raw", "base B0", [&](ChaarData& d) { d.quantRecords[full].widths |= kQuantRawBit; });
+  {  // a raw brick in a file that claims 2.0
+    ChaarData c = good;
+    std::vector<uint8_t> as20 = serializeChaar(c);
+    const uint16_t minor0 = 0;
+    std::memcpy(&as20[10], &minor0, 2);
+    fixHeaderCrc(as20);
+    expectRejected(as20, "raw in 2.0", "raw brick in a 2.0 file");
+  }
+  {  // without raw bricks the writer still writes 2.0
+    ChaarData c = encodeLights(g, {smoothLight(g, 1)}, 0.05f, -1.0f, Precision::Quant);
+    for (const QuantRecord& q : c.quantRecords) ASSERT_FALSE(q.raw());
+    const std::vector<uint8_t> bytes = serializeChaar(c);
+    EXPECT_EQ(parseChaar(bytes.data(), bytes.size(), "smooth").header.versionMinor, 0);
+  }
   ASSERT_NE(used % 64, 0u) << "the tail test needs unused bits in base 0's last word";
   rejects("tail bits", "nonzero bits after its last field",
           [&](ChaarData& d) { d.quantWords[d.bases[0].quantWords - 1] |= uint64_t(1) << 63; });

@@ -477,7 +477,7 @@ TEST(HaarQuant, FieldsReadBackAtEveryBitPosition) {
 TEST(HaarQuant, SampleEqualsDecodeThenTrilinearWithinRounding) {
   const LatticeGeom g = makeGeom(14, 12, 10, -3, 1, 2);
   const std::vector<DenseLight> lights = {smoothLight(g, 2), randomLight(g, 7), smoothLight(g, 12, 4.0f)};
-  int compared = 0;
+  int compared = 0, rawSamples = 0, haarSamples = 0;
   for (float T : {0.001f, 0.01f, 0.1f}) {
     const ChaarData d = encodeLights(g, lights, T, -1.0f, Precision::Quant);
     const ChaarView v = d.view();
@@ -505,10 +505,16 @@ TEST(HaarQuant, SampleEqualsDecodeThenTrilinearWithinRounding) {
         ASSERT_NEAR(c.g, want[1], tol) << "T " << T << " base " << b;
         ASSERT_NEAR(c.b, want[2], tol) << "T " << T << " base " << b;
         compared += want[1] != 0.0f;
+        if (at.slot != kEmptySlot) {
+          const QuantRecord& q = v.quantRecords[uint64_t(b) * v.slotCount + at.slot];
+          (q.raw() ? rawSamples : haarSamples) += q.mask() != 0;
+        }
       }
     }
   }
   EXPECT_GT(compared, 15000);  // of 36000: most points have light
+  EXPECT_GT(rawSamples, 3000);  // both kinds of quantised brick (dense ones are stored raw)
+  EXPECT_GT(haarSamples, 3000);
 }
 
 // The step is the error dial: a larger step stores fewer bits and errs more; the encoder's
