@@ -101,7 +101,7 @@ void checkQuantRecords(ChaarData& d, uint32_t b, const Checker& ck) {
     ck.require(q.bitOffset == bit, at + " bit offset out of order or out of range");
     bit += q.bits();
     ck.require(bit <= 64 * uint64_t(e.quantWords), at + " fields run past the base's stream");
-    d.records[uint64_t(b) * h.slotCount + s].set(m, uint32_t(entries), false);
+    d.records[uint64_t(b) * h.slotCount + s].set(m, uint32_t(entries), q.raw());
     entries += uint64_t(popcount64(m));
   }
   ck.require((bit + 63) / 64 == e.quantWords, bn + " stream is longer than its records' fields");

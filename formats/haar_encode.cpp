@@ -304,6 +304,7 @@ BaseCode LiftedBase::encodeQuant(float T) const {
   for (size_t k = 0; k < n; ++k) {
     code.quant[size_t(brickIds_[k])] = recs[k];
     code.brickCount += res[k].mask != 0;
+    code.rawBrickCount += res[k].raw;
     code.maxError = std::max(code.maxError, res[k].err);
     code.sumSqError += res[k].sumSq;
   }
@@ -317,7 +318,7 @@ BaseCode LiftedBase::encodeQuant(float T) const {
   size_t k = 0;
   for (uint64_t b = 0; b < geom_.bricks; ++b) {
     QuantRecord& r = code.quant[b];
-    code.bricks[b].set(r.mask(), uint32_t(next), false);
+    code.bricks[b].set(r.mask(), uint32_t(next), r.raw());
     r.bitOffset = uint32_t(bit);
     const uint64_t bits = r.bits();
     if (bits) {
