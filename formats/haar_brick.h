@@ -270,12 +270,8 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t lowestBit32(uint32_t v) {  // v != 0
 struct FootprintWeights {
   float wx[4] = {}, wy[4] = {}, wz[4] = {};
   uint64_t need = 0;  // mask bits whose weight is non-zero on all three axes
-  // The weight of coefficient c (x + 4y + 16z).
-  CANOPY_HD CANOPY_FORCEINLINE float operator()(uint32_t c) const {
-    return mulRn(mulRn(pickWeight(wx, c & 3u), pickWeight(wy, (c >> 2) & 3u)), pickWeight(wz, c >> 4));
-  }
-  // The same for c + 32 * h, c in 0..31, within half h (z in {2h, 2h + 1}) of the mask: the z
-  // weight is one select.
+  // The weight of coefficient c + 32 * h (x + 4y + 16z), c in 0..31, in half h of the mask (z in
+  // {2h, 2h + 1}: the z weight is one select): wx(x) * wy(y) * wz(z), rounded in that order.
   CANOPY_HD CANOPY_FORCEINLINE float inHalf(uint32_t c, int h) const {
     return mulRn(mulRn(pickWeight(wx, c & 3u), pickWeight(wy, (c >> 2) & 3u)), (c & 16u) ? wz[2 * h + 1] : wz[2 * h]);
   }
@@ -303,7 +299,7 @@ CANOPY_HD CANOPY_FORCEINLINE void addTo(Rgb& out, const Rgb& t) {
   out.b = addRn(out.b, t.b);
 }
 
-// A sample's sum: out + the terms coef(rank, c) * fw(c) over the kept coefficients c it needs, in
+// A sample's sum: out + the terms coef(rank, c) * weight(c) over the kept coefficients c it needs, in
 // increasing c. Both samplers (float and quantised) are this sum.
 template <class Coefs>
 CANOPY_HD CANOPY_FORCEINLINE Rgb sumTerms(Rgb out, const FootprintWeights& fw, uint32_t maskLo, uint32_t maskHi,

@@ -104,51 +104,47 @@ TEST(ChaarFrozen, DecodesToKnownValues) {
   EXPECT_EQ(serializeChaar(copy), bytes);
 }
 
+// A frozen quantised file: its version, step, raw and Haar brick counts, decoded values (hash),
+// one sample's bits, and its byte-identical round trip.
+void expectFrozenQuant(const std::string& path, uint16_t minor, float step, size_t raw, size_t haar, uint64_t hash,
+                       const float sample[3]) {
+  const std::vector<uint8_t> bytes = frozenBytes(path);
+  const ChaarData d = parseChaar(bytes.data(), bytes.size(), path);
+  EXPECT_EQ(d.header.versionMajor, 2);
+  EXPECT_EQ(d.header.versionMinor, minor);
+  EXPECT_EQ(d.baseCount(), 19u);
+  EXPECT_EQ(d.precision(), Precision::Quant);
+  EXPECT_FLOAT_EQ(d.header.threshold, step);
+  EXPECT_FLOAT_EQ(d.bases[5].quantStep, step);
+  size_t r = 0, h = 0;
+  for (const QuantRecord& q : d.quantRecords) {
+    r += q.raw();
+    h += !q.raw() && q.mask() != 0;
+  }
+  EXPECT_EQ(r, raw);
+  EXPECT_EQ(h, haar);
+  const Rgb s = chaarSample(d.view(), 3, 0.25f, 2.5f, 1.75f);
+  EXPECT_EQ(denseHash(d), hash);
+  EXPECT_EQ(s.r, sample[0]);
+  EXPECT_EQ(s.g, sample[1]);
+  EXPECT_EQ(s.b, sample[2]);
+  ChaarData copy = d;
+  EXPECT_EQ(serializeChaar(copy), bytes);
+}
+
 // Frozen by `canopy-haar small.light.vdb -o small_v2_0.chaar --threshold 0.004 --precision quant`
 // (the same input; tests/haar/data/README.md): must never change while the format is 2.x.
 TEST(ChaarFrozen, QuantisedV2DecodesToKnownValues) {
-  const std::vector<uint8_t> bytes = frozenBytes(kFrozen2);
-  const ChaarData d = parseChaar(bytes.data(), bytes.size(), kFrozen2);
-  EXPECT_EQ(d.header.versionMajor, 2);
-  EXPECT_EQ(d.header.versionMinor, 0);
-  EXPECT_EQ(d.baseCount(), 19u);
-  EXPECT_EQ(d.precision(), Precision::Quant);
-  EXPECT_FLOAT_EQ(d.header.threshold, 0.004f);
-  EXPECT_FLOAT_EQ(d.bases[5].quantStep, 0.004f);
-  const ChaarView v = d.view();
-  const Rgb s = chaarSample(v, 3, 0.25f, 2.5f, 1.75f);
-  EXPECT_EQ(denseHash(d), FROZEN2_DENSE_HASH);
-  EXPECT_EQ(s.r, FROZEN2_SAMPLE_R);
-  EXPECT_EQ(s.g, FROZEN2_SAMPLE_G);
-  EXPECT_EQ(s.b, FROZEN2_SAMPLE_B);
-  ChaarData copy = d;
-  EXPECT_EQ(serializeChaar(copy), bytes);
+  const float sample[3] = {FROZEN2_SAMPLE_R, FROZEN2_SAMPLE_G, FROZEN2_SAMPLE_B};
+  expectFrozenQuant(kFrozen2, 0, 0.004f, 0, 152, FROZEN2_DENSE_HASH, sample);
 }
 
 // Frozen by `canopy-haar small.light.vdb -o small_v2_1.chaar --threshold 0.04 --precision quant`
 // (the same input, 2026-12-02): 80 of its 150 bricks with light are raw. Must never change while the
 // format is 2.x.
 TEST(ChaarFrozen, QuantisedV21WithRawBricksDecodesToKnownValues) {
-  const std::vector<uint8_t> bytes = frozenBytes(kFrozen21);
-  const ChaarData d = parseChaar(bytes.data(), bytes.size(), kFrozen21);
-  EXPECT_EQ(d.header.versionMajor, 2);
-  EXPECT_EQ(d.header.versionMinor, 1);
-  EXPECT_EQ(d.precision(), Precision::Quant);
-  EXPECT_FLOAT_EQ(d.bases[5].quantStep, 0.04f);
-  size_t raw = 0, haar = 0;
-  for (const QuantRecord& q : d.quantRecords) {
-    raw += q.raw();
-    haar += !q.raw() && q.mask() != 0;
-  }
-  EXPECT_EQ(raw, 80u);
-  EXPECT_EQ(haar, 70u);
-  const Rgb s = chaarSample(d.view(), 3, 0.25f, 2.5f, 1.75f);
-  EXPECT_EQ(denseHash(d), FROZEN21_DENSE_HASH);
-  EXPECT_EQ(s.r, FROZEN21_SAMPLE_R);
-  EXPECT_EQ(s.g, FROZEN21_SAMPLE_G);
-  EXPECT_EQ(s.b, FROZEN21_SAMPLE_B);
-  ChaarData copy = d;
-  EXPECT_EQ(serializeChaar(copy), bytes);
+  const float sample[3] = {FROZEN21_SAMPLE_R, FROZEN21_SAMPLE_G, FROZEN21_SAMPLE_B};
+  expectFrozenQuant(kFrozen21, 1, 0.04f, 80, 70, FROZEN21_DENSE_HASH, sample);
 }
 
 TEST(ChaarFrozen, EveryTruncatedPrefixIsRejected) {
@@ -354,14 +350,16 @@ TEST(ChaarFormat, QuantisedFilesWithBadFieldsAreRejected) {
     d.quantRecords[raw].maskHi = 0;
   });
   rejects("Haar brick flagged raw", "base B0", [&](ChaarData& d) { d.quantRecords[full].widths |= kQuantRawBit; });
-  {  // a raw brick in a file that claims 2.0
+  // The good file claiming another version (checksums fixed).
+  auto rejectsAsVersion = [&](uint16_t major, uint16_t minor, const char* what, const std::string& needle) {
     ChaarData c = good;
-    std::vector<uint8_t> as20 = serializeChaar(c);
-    const uint16_t minor0 = 0;
-    std::memcpy(&as20[10], &minor0, 2);
-    fixHeaderCrc(as20);
-    expectRejected(as20, "raw in 2.0", "raw brick in a 2.0 file");
-  }
+    std::vector<uint8_t> bytes = serializeChaar(c);
+    std::memcpy(&bytes[8], &major, 2);
+    std::memcpy(&bytes[10], &minor, 2);
+    fixHeaderCrc(bytes);
+    expectRejected(bytes, what, needle);
+  };
+  rejectsAsVersion(2, 0, "raw in 2.0", "raw brick in a 2.0 file");
   {  // without raw bricks the writer still writes 2.0
     ChaarData c = encodeLights(g, {smoothLight(g, 1)}, 0.05f, -1.0f, Precision::Quant);
     for (const QuantRecord& q : c.quantRecords) ASSERT_FALSE(q.raw());
@@ -379,12 +377,7 @@ TEST(ChaarFormat, QuantisedFilesWithBadFieldsAreRejected) {
   rejects("nan step", "quantisation step", [&](ChaarData& d) { d.bases[1].quantStep = NAN; });
   rejects("huge step", "quantisation step", [&](ChaarData& d) { d.bases[1].quantStep = 1e31f; });
   // Quantised coefficients claiming 1.x, and float files carrying quantisation fields.
-  ChaarData q = good;
-  std::vector<uint8_t> asV1 = serializeChaar(q);
-  const uint16_t major1 = 1;
-  std::memcpy(&asV1[8], &major1, 2);
-  fixHeaderCrc(asV1);
-  expectRejected(asV1, "quant as 1.x", "quantised coefficients in a 1.x file");
+  rejectsAsVersion(1, 1, "quant as 1.x", "quantised coefficients in a 1.x file");
   ChaarData f = encodeLights(g, {smoothLight(g, 1)}, 0.01f);
   f.bases[0].quantStep = 0.5f;
   expectRejected(serializeChaar(f), "float with a step", "quantisation fields in a float file");
