@@ -23,3 +23,8 @@ gtest() {  # gtest NAME BINARY [args]: verdicts on stdout, the log under $O; a f
   grep -E "^\[ +(OK|FAILED|PASSED|SKIPPED) +\]|RMS" "$log"
   ! grep -q "SKIPPED" "$log" || status=1
 }
+sampler_checks() {  # sampler_checks LIGHT.vdb: the Haar sampler's users on the device, against the CPU
+  CANOPY_HAAR_LIGHT_VDB=$1 gtest test_haar_cuda_oak "$BIN/test_haar_cuda"
+  gtest test_play_cuda "$BIN/test_play_cuda"
+  gtest test_octreepack_cuda "$BIN/test_octreepack" --gtest_filter='*cuda*'
+}

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # gpu-quant.sh: the GPU checks and the sampling rate of the quantised Haar codec
-# (canopy-haar --precision quant, .chaar 2.0) beside fp16 and fp32, in one device call.
+# (canopy-haar --precision quant, .chaar 2.x) beside fp16 and fp32, in one device call.
 #
 # Here (from the repo root, after a Release build with -DCMAKE_CUDA_ARCHITECTURES=90):
 #   build/bin/bench_haar OAK64.light.vdb --precision quant --write-chaar /tmp/hs/q.chaar   # 1% volume RMS
@@ -12,17 +12,15 @@
 # There:  [FILES="q b16 b32"] bash bench/gpu-quant.sh       (.gpu carried; logs and tables under $OUT)
 #   1. CUDA tests: test_haar_cuda on the oak's real light and on the synthetic field (decode and
 #      sampling, GPU == CPU bit for bit, fp32, fp16 and quant), test_play_cuda and test_octreepack's
-#      device sampling (the float sampler now runs through sampleMasked).
+#      device sampling (sampler_checks in gpu-common.sh; the float sampler runs through sumTerms).
 #   2. bench_haar_gpu on the three files, twice in turn: compressed vs a float4 texture vs a plain
 #      array, GPU samples checked against the CPU's.
 set -u
 source "$(dirname "$0")/gpu-common.sh"
 S=$B/share
 step tests
-CANOPY_HAAR_LIGHT_VDB=$S/oak64.light.vdb gtest test_haar_cuda_oak "$BIN/test_haar_cuda"
+sampler_checks "$S/oak64.light.vdb"
 gtest test_haar_cuda_synthetic "$BIN/test_haar_cuda"
-gtest test_play_cuda "$BIN/test_play_cuda"
-gtest test_octreepack_cuda "$BIN/test_octreepack" --gtest_filter='*cuda*'
 step bench_haar_gpu
 for round in 1 2; do
   for p in ${FILES:-q b16 b32}; do

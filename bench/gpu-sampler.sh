@@ -21,9 +21,7 @@ set -u
 source "$(dirname "$0")/gpu-common.sh"
 S=$B/share
 step tests
-CANOPY_HAAR_LIGHT_VDB=$S/oak64.light.vdb gtest test_haar_cuda "$BIN/test_haar_cuda"
-gtest test_play_cuda "$BIN/test_play_cuda"
-gtest test_octreepack_cuda "$BIN/test_octreepack" --gtest_filter='*cuda*'
+sampler_checks "$S/oak64.light.vdb"
 gtest test_core_cuda "$BIN/test_core" --gtest_filter="*cuda*"
 step bench_haar_gpu
 for p in 32 16; do

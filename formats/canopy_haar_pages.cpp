@@ -14,7 +14,7 @@ CanopyHaarPages canopyHaarPagesFromChaar(const haar::ChaarData& d, uint32_t page
     throw invalidInput("canopy writer: a .chaar with " + std::to_string(h.baseCount) + " bases; Haar light needs " +
                        std::to_string(kCanopyLightBases));
   if (d.precision() == haar::Precision::Quant)
-    throw unsupported("canopy writer: quantised Haar light (.chaar 2.0) has no Haar page layout yet");
+    throw unsupported("canopy writer: quantised Haar light (.chaar 2.x) has no Haar page layout yet");
   CanopyHaarPages out;
   out.precision = h.precision;
   out.threshold = h.threshold;

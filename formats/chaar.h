@@ -29,8 +29,13 @@
 // base's bit offsets the running sum of its records' bits in slot order; COEFS holds each base's
 // stream (quantWords little-endian u64, bits past the last field zero) followed by one zero word,
 // base after base (coefOffset = the base's first word); header coefCount = kept coefficients. A
-// writer writes 2.0 only for Quant, so fp32/fp16 files stay 1.x byte for byte; 1.x readers
-// reject 2.0 files (a newer major), a 2.0 reader reads every 1.x file.
+// writer writes 2.x only for Quant, so fp32/fp16 files stay 1.x byte for byte; 1.x readers
+// reject 2.x files (a newer major), a 2.x reader reads every 1.x file.
+//
+// Version 2.1 adds raw quantised bricks (bit 31 of QuantRecord::widths: the brick's values, not
+// its coefficients, with the details' widths and no average; haar_brick.h kQuantRawBit), each
+// base's `rawBricks` counting them. The writer writes 2.1 only where a brick is raw, so other
+// quantised files stay 2.0 byte for byte; a raw flag in a 2.0 file is rejected.
 //
 // A reader (parseChaar) trusts nothing: it rejects bad magic, a newer major version, truncation,
 // trailing bytes, checksum mismatch, sections out of range or overlapping, inconsistent counts,
@@ -102,8 +107,8 @@ struct ChaarBaseEntry {    // 64 bytes
   float valueMax;          // 44 largest input value (any channel): the PSNR peak
   uint32_t brickCount;     // 48 bricks with light in this base (mask != 0)
   uint32_t rawBrickCount;  // 52 of those, stored raw (no transform)
-  float quantStep;         // 56 (2.0, Quant) the base's step T (haar_brick.h quantSteps); zero otherwise
-  uint32_t quantWords;     // 60 (2.0, Quant) 64-bit words of the base's stream, without its zero end word
+  float quantStep;         // 56 (2.x, Quant) the base's step T (haar_brick.h quantSteps); zero otherwise
+  uint32_t quantWords;     // 60 (2.x, Quant) 64-bit words of the base's stream, without its zero end word
 };
 static_assert(sizeof(ChaarBaseEntry) == 64, "ChaarBaseEntry is 64 bytes");
 
@@ -122,9 +127,9 @@ struct ChaarData {
   std::vector<BrickRecord> records;
   std::vector<float> coefs32;           // 3 * coefCount floats when precision == fp32
   std::vector<uint16_t> coefs16;        // 3 * coefCount halves when precision == fp16
-  // Quant (2.0): the on-disk records and the bit streams (each base's words, then one zero word).
-  // `records` then holds their masks with `first` = the running entry index (raw never set), so
-  // code that only counts coefficients or looks at masks serves every precision.
+  // Quant (2.x): the on-disk records and the bit streams (each base's words, then one zero word).
+  // `records` then holds their masks, raw flags and `first` = the running entry index, so code
+  // that only counts coefficients or looks at masks serves every precision.
   std::vector<QuantRecord> quantRecords;
   std::vector<uint64_t> quantWords;
 

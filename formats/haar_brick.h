@@ -23,8 +23,8 @@
 // the encoder uses it where it is no larger and no less exact than the Haar brick, and at threshold
 // 0, where a float Haar round trip is not always exact.
 //
-// Quantised bases (Precision::Quant, .chaar 2.0) store integer levels in bit streams with 16-byte
-// records instead: see "quantised coefficients" below.
+// Quantised bases (Precision::Quant, .chaar 2.0 and 2.1) store integer levels in bit streams with
+// 16-byte records instead: see "quantised coefficients" below.
 #pragma once
 #include <cstdint>
 
@@ -356,7 +356,7 @@ CANOPY_HD inline void decodeBrick(const BrickRecord& rec, const Reader& read, fl
   decodeMasked(rec.mask(), rec.raw(), RankedEntries<Reader>{read, rec.first()}, out);
 }
 
-// ---- quantised coefficients (Precision::Quant, .chaar 2.0) ------------------------------------
+// ---- quantised coefficients (Precision::Quant, .chaar 2.0 and 2.1) -----------------------------
 //
 // A quantised base stores integers: channel values are first taken to (Y, R-Y, B-Y) with Y = G
 // (the light's channels are strongly correlated, so the two differences are small), lifted as
@@ -511,20 +511,33 @@ struct QuantFieldLayout {
 // (Y, R-Y, B-Y) -> RGB.
 CANOPY_HD CANOPY_FORCEINLINE Rgb quantToRgb(const Rgb& v) { return Rgb{addRn(v.r, v.g), v.r, addRn(v.r, v.b)}; }
 
-// The kept coefficients of a quantised brick record (the rank accessor of
-// decodeMasked): levels times the coefficient's step.
+// The detail fields of a quantised brick by rank j (counting the average, as the mask does; a raw
+// brick's values are all "details"): detail j starts at bit base + j * bits of the base's stream,
+// base = bitOffset + hasAverage * (average bits - detail bits) (unsigned wrap-around).
+struct QuantDetails {
+  const uint64_t* words;  // the base's stream
+  QuantFieldLayout layout;
+  uint32_t base, bits;
+  CANOPY_HD CANOPY_FORCEINLINE QuantDetails(const QuantRecord& r, const uint64_t* w)
+      : words(w), layout((r.widths >> 12) & 0xfffu), base(r.bitOffset + r.hasAverage() * (r.groupBits(0) - r.groupBits(1))),
+        bits(r.groupBits(1)) {}
+  CANOPY_HD CANOPY_FORCEINLINE Rgb operator()(uint32_t j, uint32_t) const { return layout.levels(words, base + j * bits); }
+};
+
+// The kept coefficients of a quantised brick record (the rank accessor of decodeMasked): levels
+// times the coefficient's step.
 struct QuantBrick {
   const uint64_t* words;  // the base's stream
   const float* step;      // the base's steps (quantSteps)
-  QuantFieldLayout avg, detail;
-  uint32_t pos0, has0, avgBits, detailBits;
-  bool raw;
+  QuantFieldLayout avg;
+  QuantDetails details;
+  uint32_t pos0;
+  bool has0, raw;
   CANOPY_HD CANOPY_FORCEINLINE QuantBrick(const QuantRecord& r, const uint64_t* w, const float* st)
-      : words(w), step(st), avg(r.widths & 0xfffu), detail((r.widths >> 12) & 0xfffu), pos0(r.bitOffset),
-        has0(r.hasAverage()), avgBits(r.groupBits(0)), detailBits(r.groupBits(1)), raw(r.raw()) {}
+      : words(w), step(st), avg(r.widths & 0xfffu), details(r, w), pos0(r.bitOffset), has0(r.hasAverage() != 0),
+        raw(r.raw()) {}
   CANOPY_HD CANOPY_FORCEINLINE Rgb operator()(uint32_t j, uint32_t c) const {
-    const Rgb q = c == 0 && has0 ? avg.levels(words, pos0)
-                                 : detail.levels(words, pos0 + has0 * avgBits + (j - has0) * detailBits);
+    const Rgb q = c == 0 && has0 ? avg.levels(words, pos0) : details(j, c);
     const uint32_t n = fineDetailAxes(c);
     const float st = raw ? step[4] : n < 2 ? (n == 0 ? step[0] : step[1]) : (n == 2 ? step[2] : step[3]);
     return Rgb{mulRn(q.r, st), mulRn(q.g, st), mulRn(q.b, st)};
@@ -532,58 +545,29 @@ struct QuantBrick {
   CANOPY_HD CANOPY_FORCEINLINE Rgb finish(const Rgb& v) const { return quantToRgb(v); }
 };
 
-// The detail fields of a quantised brick by rank (counting the average): sumTerms' accessor.
-struct QuantDetails {
-  const uint64_t* words;  // the base's stream
-  QuantFieldLayout layout;
-  uint32_t base, bits;  // the detail of rank j starts at bit base + j * bits (unsigned wrap-around)
-  CANOPY_HD CANOPY_FORCEINLINE QuantDetails(const uint64_t* w, uint32_t widths3, uint32_t base_, uint32_t bits_)
-      : words(w), layout(widths3), base(base_), bits(bits_) {}
-  CANOPY_HD CANOPY_FORCEINLINE Rgb operator()(uint32_t j, uint32_t) const { return layout.levels(words, base + j * bits); }
-};
-
-// What a quantised sample needs besides its details: the average's levels (weight 1 on every axis,
-// the sum's start), the weights (Haar: sqrt(2) folded into each axis's fine-detail weights; raw:
-// the trilinear weights) and needed fields (none for an average-only brick), where the fields are,
-// and the step that scales the sum.
-struct QuantSamplePlan {
-  Rgb init;
-  FootprintWeights fw;
-  uint32_t base = 0, widths = 0, bits = 0;  // QuantDetails' position rule and the three widths
-  bool raw = false;
-};
-CANOPY_HD CANOPY_FORCEINLINE QuantSamplePlan quantSamplePlan(const QuantRecord& rec, const uint64_t* words, int lx,
-                                                             int ly, int lz, float fx, float fy, float fz) {
-  QuantSamplePlan p;
-  p.raw = rec.raw();
-  const uint32_t has0 = rec.hasAverage();
-  if (has0) p.init = QuantFieldLayout(rec.widths & 0xfffu).levels(words, rec.bitOffset);
-  p.widths = (rec.widths >> 12) & 0xfffu;
-  p.bits = rec.groupBits(1);
-  p.base = rec.bitOffset + has0 * rec.groupBits(0) - has0 * p.bits;
-  p.fw = footprintWeights(rec.mask() & ~uint64_t(has0), p.raw, lx, ly, lz, fx, fy, fz);  // (none: average only)
-  if (p.raw) return p;
-  const float r2 = float(kQuantFineFactor);
-  p.fw.wx[2] = mulRn(p.fw.wx[2], r2), p.fw.wx[3] = mulRn(p.fw.wx[3], r2);
-  p.fw.wy[2] = mulRn(p.fw.wy[2], r2), p.fw.wy[3] = mulRn(p.fw.wy[3], r2);
-  p.fw.wz[2] = mulRn(p.fw.wz[2], r2), p.fw.wz[3] = mulRn(p.fw.wz[3], r2);
-  return p;
-}
-// The sum of levels to RGB: times the step (T, or a raw brick's kQuantRawFactor * T), then
-// (Y, R-Y, B-Y) -> RGB.
-CANOPY_HD CANOPY_FORCEINLINE Rgb quantFinish(const Rgb& sum, float step) { return quantToRgb(weighted(sum, step)); }
-
-// Trilinear sample of a quantised brick: sumTerms over the integer levels, the steps folded in
-// (sqrt(2) into each axis's fine-detail weights, the base step applied once to the sum), then
-// (Y, R-Y, B-Y) -> RGB. `T` and `rawStep` are the base's step[0] and step[4]. CPU and GPU agree
-// bit for bit; decodeQuantBrick then trilinear agrees up to float rounding (the steps are applied
-// in another order).
+// Trilinear sample of a quantised brick: sumTerms over the integer levels, starting from the
+// average's levels (weight 1 on every axis), with the steps folded in (Haar: sqrt(2) into each
+// axis's fine-detail weights; raw: the trilinear weights), the base step (`T`, or `rawStep` = T *
+// kQuantRawFactor for a raw brick: the base's step[0] and step[4]) applied once to the sum, then
+// (Y, R-Y, B-Y) -> RGB. CPU and GPU agree bit for bit; decodeQuantBrick then trilinear agrees up to
+// float rounding (the steps are applied in another order).
 CANOPY_HD inline Rgb sampleQuantBrick(const QuantRecord& rec, const uint64_t* words, float T, float rawStep, int lx,
                                       int ly, int lz, float fx, float fy, float fz) {
   if (rec.maskLo == 0 && rec.maskHi == 0) return Rgb{};
-  const QuantSamplePlan p = quantSamplePlan(rec, words, lx, ly, lz, fx, fy, fz);
-  return quantFinish(sumTerms(p.init, p.fw, rec.maskLo, rec.maskHi, QuantDetails(words, p.widths, p.base, p.bits)),
-                     p.raw ? rawStep : T);
+  const bool raw = rec.raw();
+  const uint32_t has0 = rec.hasAverage();
+  Rgb init;
+  if (has0) init = QuantFieldLayout(rec.widths & 0xfffu).levels(words, rec.bitOffset);
+  // (An average-only brick needs no details: fw.need is 0.)
+  FootprintWeights fw = footprintWeights(rec.mask() & ~uint64_t(has0), raw, lx, ly, lz, fx, fy, fz);
+  if (!raw) {
+    const float r2 = float(kQuantFineFactor);
+    fw.wx[2] = mulRn(fw.wx[2], r2), fw.wx[3] = mulRn(fw.wx[3], r2);
+    fw.wy[2] = mulRn(fw.wy[2], r2), fw.wy[3] = mulRn(fw.wy[3], r2);
+    fw.wz[2] = mulRn(fw.wz[2], r2), fw.wz[3] = mulRn(fw.wz[3], r2);
+  }
+  const Rgb sum = sumTerms(init, fw, rec.maskLo, rec.maskHi, QuantDetails(rec, words));
+  return quantToRgb(weighted(sum, raw ? rawStep : T));
 }
 CANOPY_HD inline void decodeQuantBrick(const QuantRecord& rec, const uint64_t* words, const float* step,
                                        float out[3][kBrickValues]) {

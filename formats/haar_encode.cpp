@@ -39,6 +39,12 @@ float quantize(float v, Precision p) { return p == Precision::Fp16 ? halfToFloat
 // 64-bit window reads past them.
 constexpr int kQuantBrickWords = (kBrickValues * 3 * kQuantMaxWidth + 63) / 64 + 1;
 
+// Channel ch of the quantised codec's colour space at value c of a gathered brick: Y = G, R - Y,
+// B - Y (exact in double).
+double quantChannel(const float v[3][kBrickValues], int ch, int c) {
+  return ch == 0 ? double(v[1][c]) : double(v[ch == 1 ? 0 : 2][c]) - double(v[1][c]);
+}
+
 // Two's-complement bits that hold q (0 for q = 0).
 uint32_t fieldWidth(int32_t q) {
   if (q == 0) return 0;
@@ -110,7 +116,7 @@ LiftedBase::LiftedBase(const LatticeGeom& geom, const DenseLight& light, Precisi
   for (uint64_t b = 0; b < geom.bricks; ++b)
     if (nonEmpty_[b]) brickIds_.push_back(int64_t(b));
   lifted_.resize(brickIds_.size() * 3 * kBrickValues);
-  std::vector<double> valuePeak(brickIds_.size(), 0.0);  // Quant: largest |Y|, |R-Y|, |B-Y| of the brick
+  std::vector<double> valuePeak(brickIds_.size(), 0.0);  // largest |value| of the brick (Quant: |Y|, |R-Y|, |B-Y|)
   parallelFor(int64_t(brickIds_.size()), [&](int64_t k) {
     float v[3][kBrickValues];
     uint8_t inside[kBrickValues];
@@ -118,12 +124,9 @@ LiftedBase::LiftedBase(const LatticeGeom& geom, const DenseLight& light, Precisi
     for (int ch = 0; ch < 3; ++ch) {
       double d[kBrickValues];
       for (int c = 0; c < kBrickValues; ++c) {
-        if (precision_ != Precision::Quant)
-          d[c] = v[ch][c];
-        else  // (Y, R-Y, B-Y) with Y = G, exact in double
-          d[c] = ch == 0 ? double(v[1][c]) : double(v[ch == 1 ? 0 : 2][c]) - double(v[1][c]);
+        d[c] = precision_ == Precision::Quant ? quantChannel(v, ch, c) : double(v[ch][c]);
+        valuePeak[size_t(k)] = std::max(valuePeak[size_t(k)], std::fabs(d[c]));
       }
-      for (int c = 0; c < kBrickValues; ++c) valuePeak[size_t(k)] = std::max(valuePeak[size_t(k)], std::fabs(d[c]));
       liftBrick(d);
       for (int c = 0; c < kBrickValues; ++c) lifted_[size_t(k) * 192 + ch * 64 + c] = float(d[c]);
     }
@@ -219,7 +222,8 @@ LiftedBase::Result LiftedBase::encodeBrick(size_t k, float threshold, float* coe
   return best;
 }
 
-LiftedBase::Result LiftedBase::encodeQuantBrick(size_t k, const float step[4], QuantRecord& rec, uint64_t* words) const {
+LiftedBase::Result LiftedBase::encodeQuantBrick(size_t k, const float step[kQuantSteps], QuantRecord& rec,
+                                                uint64_t* words) const {
   float orig[3][kBrickValues];
   uint8_t inside[kBrickValues];
   gather(brickIds_[k], orig, inside);
@@ -243,8 +247,7 @@ LiftedBase::Result LiftedBase::encodeQuantBrick(size_t k, const float step[4], Q
     mask = 0;
     for (int c = 0; c < kBrickValues; ++c) {
       for (int ch = 0; ch < 3; ++ch) {
-        const double y = double(orig[1][c]);
-        const double v = (ch == 0 ? y : double(orig[ch == 1 ? 0 : 2][c]) - y) / double(step[4]);
+        const double v = quantChannel(orig, ch, c) / double(step[4]);
         const int64_t qi = std::max<int64_t>(-kQuantMaxLevel, std::min<int64_t>(kQuantMaxLevel, std::llround(v)));
         q[c][ch] = int32_t(qi);
         if (qi) mask |= uint64_t(1) << c;

@@ -87,9 +87,10 @@ class LiftedBase {
     double sumSq;
   };
   Result encodeBrick(size_t k, float threshold, float* coefOut) const;
-  // Quant: quantises brick k with the four steps; fills the record's mask and widths and writes
-  // its fields from bit 0 of `words` (which must hold kQuantBrickWords zeroed words).
-  Result encodeQuantBrick(size_t k, const float step[4], QuantRecord& rec, uint64_t* words) const;
+  // Quant: quantises brick k with the base's steps (quantSteps), as a raw brick where its Haar
+  // form keeps more than kQuantRawAbove coefficients; fills the record's mask, widths and raw flag
+  // and writes its fields from bit 0 of `words` (which must hold kQuantBrickWords zeroed words).
+  Result encodeQuantBrick(size_t k, const float step[kQuantSteps], QuantRecord& rec, uint64_t* words) const;
   BaseCode encodeQuant(float step) const;
   float searchQuantStep(float maxError, int* probes) const;
   void gather(int64_t brick, float out[3][kBrickValues], uint8_t* coreInside) const;

@@ -88,8 +88,7 @@ CANOPY_HD inline Rgb chaarSample(const ChaarView& v, int base, float x, float y,
   if (v.precision == Precision::Quant)
     return sampleQuantBrick(loadQuantRecord(v.quantRecords + uint64_t(base) * v.slotCount + at.slot),
                             static_cast<const uint64_t*>(v.coefs) + off, v.quantStep[base][0], v.quantStep[base][4],
-                            at.lx, at.ly, at.lz,
-                            at.fx, at.fy, at.fz);
+                            at.lx, at.ly, at.lz, at.fx, at.fy, at.fz);
   const BrickRecord rec = v.records[uint64_t(base) * v.slotCount + at.slot];
   if (v.precision == Precision::Fp16) {
     const CoefReader16 read{static_cast<const uint16_t*>(v.coefs) + 3 * off};
@@ -105,7 +104,7 @@ CANOPY_HD inline bool decodeSlot(const ChaarView& v, int base, uint32_t slot, fl
   const uint64_t off = v.baseCoefOffset[base];
   const uint64_t r = uint64_t(base) * v.slotCount + slot;
   if (v.precision == Precision::Quant) {
-    const QuantRecord q = v.quantRecords[r];
+    const QuantRecord q = loadQuantRecord(v.quantRecords + r);
     if (q.mask() == 0) return false;
     decodeQuantBrick(q, static_cast<const uint64_t*>(v.coefs) + off, v.quantStep[base], out);
     return true;

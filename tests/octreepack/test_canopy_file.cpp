@@ -430,7 +430,7 @@ TEST(CanopyFile, CraftedHaarPagesAndLocationsAreRejectedEvenWithValidChecksums) 
 
 // Light items are float16 through canopy/half.h; the writer's policy on top is saturation: out of
 // range lighting becomes +-65504, never infinity. Pins the bits the frozen file and the player use.
-// A quantised .chaar (2.0) packs as float16 light items of its sampler's values; its Haar pages
+// A quantised .chaar (2.x) packs as float16 light items of its sampler's values; its Haar pages
 // (no layout for quantised bricks yet) are refused with Unsupported, not mis-packed.
 TEST(CanopyFile, QuantisedChaarPacksAsLightItemsAndItsHaarPagesAreRefused) {
   const haar::ChaarData q = haar::readChaar(kFrozenChaarQuant);

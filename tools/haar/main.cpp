@@ -52,7 +52,7 @@ int main(int argc, char** argv) {
   thr->excludes(me);
   app.add_option("--precision", precision,
                  "coefficients: fp32, fp16, or quant (integers in steps of T, sqrt(2) T per fine-detail axis, on "
-                 "G, R-G, B-G; the smallest files, .chaar 2.0; needs T > 0 or --max-error)")
+                 "G, R-G, B-G; the smallest files, .chaar 2.x; needs T > 0 or --max-error)")
       ->capture_default_str();
 
   std::string decIn, decOut;

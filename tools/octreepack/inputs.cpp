@@ -133,7 +133,7 @@ LightVdb readChaarLight(const std::string& path, const ModelSource& model, bool 
   for (const haar::ChaarBaseEntry& e : data->bases) beam.push_back((e.flags & haar::kChaarBaseScattered) == 0);
   out.scatteredSun = vdbio::sunBasesScattered(path, beam);
   if (withHaar && data->precision() == haar::Precision::Quant)
-    throw unsupported(path + ": quantised Haar light (.chaar 2.0, canopy-haar --precision quant) cannot be packed as "
+    throw unsupported(path + ": quantised Haar light (.chaar 2.x, canopy-haar --precision quant) cannot be packed as "
                       "exact Haar pages yet; pass --no-haar-light (light items only) or encode it with --precision fp16");
   if (withHaar) out.haar = std::make_shared<const CanopyHaarPages>(canopyHaarPagesFromChaar(*data));
   out.fn = [data, fn = chaarLightFn(data->view())](int32_t i, int32_t j, int32_t k, float* o) { fn(i, j, k, o); };  // keeps data alive
