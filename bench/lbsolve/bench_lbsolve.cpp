@@ -3,10 +3,12 @@
 //
 //   bench_lbsolve [--device cpu|cuda|cuda:N] [--sizes 128,256] [--solves-sizes 128]
 //                 [--iterations 64] [--schemes shift,shift-split,push,push-fused,pull,pull-fused] [--fill plant|full|plant,full]
-//                 [--lattices a.density.vdb,b.density.vdb]
+//                 [--lattices a.density.vdb,b.density.vdb] [--in-flight 1,2,3] [--rows scattered,z-major]
 //
-// Throughput: one solve run for I/4 and for I iterations (tolerance 0); the difference divided by
-// 3I/4 x nodes removes fixed costs (initialisation, gathering the result). "Node updates/s" counts
+// Throughput: K solves in flight on one GPU (--in-flight, CudaRun::solvesPerGpu; 1 by default),
+// each run for I/4 and for I iterations (tolerance 0); the difference divided by K x 3I/4 x nodes
+// removes fixed costs (initialisation, gathering the result). --rows compares the pull schemes'
+// row orders (CudaRun::scatterRows). "Node updates/s" counts
 // lattice nodes advanced by one iteration, whatever the scheme does at each node. Bytes per update:
 // - push and pull: the nominal traffic of collide.h's push update: 19 floats read + 19 floats
 //   written + 4 bytes of coded density = 156 B per node (pull moves the same values, pull_stream.h);
@@ -167,17 +169,40 @@ double copyBandwidth(const Device& dev) {
   return 2.0 * bytes / best;
 }
 
-double solveSeconds(const DenseLattice& L, const Device& dev, CudaScheme scheme, int iterations) {
+// K solves of `iterations` each (bases 4.., green), all in flight at once on one GPU.
+double solveSeconds(const DenseLattice& L, const Device& dev, const CudaRun& run, int iterations) {
+  std::vector<SolveSpec> specs;
+  for (int k = 0; k < run.solvesPerGpu; ++k) specs.push_back(baseSpec(4 + k % 15, 1, iterations, 0.f));
   const auto t0 = Clock::now();
-  runSolves(L, {baseSpec(4, 1, iterations, 0.f)}, dev, {}, scheme);
+  runSolves(L, specs, dev, {}, run);
   return since(t0);
+}
+
+bool isPullScheme(CudaScheme c) { return c == CudaScheme::Pull || c == CudaScheme::PullFused; }
+
+// The runs to measure: every scheme x in-flight count, and for the pull schemes each row order.
+std::vector<CudaRun> runsOf(const std::vector<CudaScheme>& schemes, const std::vector<int>& inFlight,
+                            const std::vector<std::string>& rowOrders) {
+  std::vector<CudaRun> runs;
+  for (CudaScheme c : schemes)
+    for (const auto& rows : rowOrders) {
+      if (rows != rowOrders.front() && !isPullScheme(c)) continue;
+      for (int k : inFlight) {
+        CudaRun r(c);
+        r.solvesPerGpu = k;
+        r.scatterRows = rows == "scattered";
+        runs.push_back(r);
+      }
+    }
+  return runs;
 }
 }  // namespace
 
 int main(int argc, char** argv) try {
   std::string deviceSpec = "auto";
   std::vector<int> sizes{128, 256}, solveSizes{128};
-  std::vector<std::string> schemeNames{"shift"}, fills{"plant"}, lattices;
+  std::vector<std::string> schemeNames{"shift"}, fills{"plant"}, lattices, rowOrders{"scattered"};
+  std::vector<int> inFlight{1};
   int iterations = 64;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string k = argv[i], v = argv[i + 1];
@@ -188,10 +213,13 @@ int main(int argc, char** argv) try {
     else if (k == "--schemes") schemeNames = parseWords(v);
     else if (k == "--fill") fills = parseWords(v);
     else if (k == "--lattices") lattices = parseWords(v);
+    else if (k == "--in-flight") inFlight = parseList(v);
+    else if (k == "--rows") rowOrders = parseWords(v);
     else {
       std::fprintf(stderr,
                    "usage: bench_lbsolve [--device D] [--sizes 128,256] [--solves-sizes 128] [--iterations 64]\n"
-                   "                     [--schemes shift,shift-split,push,push-fused,pull,pull-fused] [--fill plant,full] [--lattices a.vdb,...]\n");
+                   "                     [--schemes shift,shift-split,push,push-fused,pull,pull-fused] [--fill plant,full] [--lattices a.vdb,...]\n"
+                   "                     [--in-flight 1,2,3] [--rows scattered,z-major]\n");
       return 1;
     }
   }
@@ -205,7 +233,19 @@ int main(int argc, char** argv) try {
   std::vector<CudaScheme> schemes;
   for (const auto& w : schemeNames) schemes.push_back(parseScheme(w));
   if (!dev.isCuda()) schemes = {CudaScheme::Shift};  // the CPU has one scheme (the reference)
-  auto schemeLabel = [&](CudaScheme c) { return dev.isCuda() ? std::string(cudaSchemeName(c)) : std::string("cpu"); };
+  for (const auto& r : rowOrders)
+    if (r != "scattered" && r != "z-major") throw std::runtime_error("unknown row order '" + r + "' (scattered, z-major)");
+  for (int k : inFlight)
+    if (k < 1) throw std::runtime_error("--in-flight counts must be >= 1");
+  if (!dev.isCuda()) inFlight = {1};
+  const std::vector<CudaRun> runs = runsOf(schemes, inFlight, rowOrders);
+  auto schemeLabel = [&](const CudaRun& r) {
+    if (!dev.isCuda()) return std::string("cpu");
+    std::string label = cudaSchemeName(r.scheme);
+    if (isPullScheme(r.scheme) && rowOrders.size() > 1) label += r.scatterRows ? " (scattered rows)" : " (z-major rows)";
+    if (inFlight.size() > 1 || r.solvesPerGpu > 1) label += " x" + std::to_string(r.solvesPerGpu) + " in flight";
+    return label;
+  };
   std::string devName = dev.str();
 #ifdef CANOPY_HAS_CUDA
   if (dev.isCuda()) {
@@ -224,14 +264,14 @@ int main(int argc, char** argv) try {
     for (int n : sizes) {
       const DenseLattice L = makeLattice(n, fill);
       const double occupied = double(occupiedNodes(L)) / double(L.dims.count());
-      for (CudaScheme scheme : schemes) {
-        solveSeconds(L, one, scheme, 2);  // warm-up (allocation, first launch)
+      for (const CudaRun& run : runs) {
+        solveSeconds(L, one, run, 2);  // warm-up (allocation, first launch)
         const int i1 = std::max(1, iterations / 4), i2 = std::max(i1 + 1, iterations);
-        const double t1 = solveSeconds(L, one, scheme, i1), t2 = solveSeconds(L, one, scheme, i2);
-        const double rate = double(L.dims.count()) * (i2 - i1) / std::max(t2 - t1, 1e-9);
-        const double bytes = bytesPerUpdate(L, one, scheme);
+        const double t1 = solveSeconds(L, one, run, i1), t2 = solveSeconds(L, one, run, i2);
+        const double rate = double(L.dims.count()) * run.solvesPerGpu * (i2 - i1) / std::max(t2 - t1, 1e-9);
+        const double bytes = bytesPerUpdate(L, one, run.scheme);
         std::printf("| %s %d^3 | %s | %lld | %.1f%% | %.3g | %.1f | %.1f | %.1f%% |\n", fill.c_str(), n,
-                    schemeLabel(scheme).c_str(), (long long)L.dims.count(), 100.0 * occupied, rate, bytes,
+                    schemeLabel(run).c_str(), (long long)L.dims.count(), 100.0 * occupied, rate, bytes,
                     rate * bytes / 1e9, 100.0 * rate * bytes / bw);
         std::fflush(stdout);
       }
@@ -245,10 +285,10 @@ int main(int argc, char** argv) try {
       for (int c = 0; c < 3; ++c) specs.push_back(baseSpec(b, c, 2 * edge, 1e-4f));
     std::vector<Device> devices{dev};
     if (dev.isCuda() && dev.index < 0 && cudaDeviceCount() > 1) devices.insert(devices.begin(), one);
-    for (CudaScheme scheme : schemes)
+    for (const CudaRun& run : runs)
       for (const Device& d : devices) {
         const auto t0 = Clock::now();
-        const auto r = runSolves(L, specs, d, {}, scheme);
+        const auto r = runSolves(L, specs, d, {}, run);
         const double s = since(t0);
         int lo = 1 << 30, hi = 0;
         double updates = 0;
@@ -259,7 +299,7 @@ int main(int argc, char** argv) try {
         }
         const std::string devLabel =
             d.isCuda() && d.index < 0 ? "cuda x" + std::to_string(cudaDeviceCount()) : d.str();
-        std::printf("| %s | %s | %s | %.3f s | %d..%d | %.3g |\n", label.c_str(), schemeLabel(scheme).c_str(),
+        std::printf("| %s | %s | %s | %.3f s | %d..%d | %.3g |\n", label.c_str(), schemeLabel(run).c_str(),
                     devLabel.c_str(), s, lo, hi, updates / s);
         std::fflush(stdout);
       }

@@ -29,7 +29,8 @@ void validateOptions(const LbsolveOptions& o) {
   if (o.scene.empty() && o.input.empty()) throw usageError("no input lattice given");
   if (!o.scene.empty() && o.sun) throw usageError("--scene and --sun cannot be combined");
   if (o.iterations < 0) throw usageError("--iterations must be >= 0");
-  parseCudaScheme(o.cudaScheme);  // an unknown name fails before any work
+  parseCudaRun(o);  // an unknown scheme fails before any work
+  if (o.solvesPerGpu < 1 || o.solvesPerGpu > 64) throw usageError("--solves-per-gpu must lie in [1, 64]");
   if (!(o.tolerance >= 0.f) || !std::isfinite(o.tolerance)) throw usageError("--tolerance must be >= 0");
   if (o.tolerance == 0.f && o.iterations == 0)
     throw usageError("--tolerance 0 needs --iterations N (the number of iterations to run)");
@@ -75,10 +76,14 @@ void stampRun(openvdb::MetaMap& m, const std::string& kind, const LbsolveOptions
   m.insertMeta("canopy_convergence", openvdb::StringMetadata(conv.dump()));
 }
 
-CudaScheme parseCudaScheme(const std::string& name) {
+CudaRun parseCudaRun(const LbsolveOptions& o) {
   for (CudaScheme c : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::Pull})
-    if (name == cudaSchemeName(c)) return c;
-  throw usageError("--cuda-scheme must be shift, shift-split, push or pull, not '" + name + "'");
+    if (o.cudaScheme == cudaSchemeName(c)) {
+      CudaRun run(c);
+      run.solvesPerGpu = o.solvesPerGpu;
+      return run;
+    }
+  throw usageError("--cuda-scheme must be shift, shift-split, push or pull, not '" + o.cudaScheme + "'");
 }
 
 OmegaSet channelOmega(const LightParams& p, int c) {
@@ -88,7 +93,7 @@ OmegaSet channelOmega(const LightParams& p, int c) {
 // Runs specs with a progress bar and a log line per solve; fills report.solves (names given).
 std::vector<SolveResult> runWithProgress(const DenseLattice& lattice, const std::vector<SolveSpec>& specs,
                                          const std::vector<LbsolveSolve>& labels, const Device& device,
-                                         LbsolveReport& report, CudaScheme scheme) {
+                                         LbsolveReport& report, const CudaRun& run) {
   static const char* kChannel[] = {"R", "G", "B", "L"};
   Progress progress("lbsolve " + std::to_string(specs.size()) + " solves", int64_t(specs.size()));
   auto results = runSolves(lattice, specs, device, [&](size_t k, const SolveResult& r) {
@@ -96,7 +101,7 @@ std::vector<SolveResult> runWithProgress(const DenseLattice& lattice, const std:
     if (!isQuiet() && !isatty(2))
       logInfo(labels[k].grid + " " + kChannel[labels[k].channel] + ": " + std::to_string(r.iterations) +
               " iterations, residual " + std::to_string(r.residual) + ", " + std::to_string(r.seconds) + " s");
-  }, scheme);
+  }, run);
   progress.done();
   report.solves = labels;
   for (size_t k = 0; k < specs.size(); ++k) {
@@ -169,7 +174,7 @@ LbsolveReport solvePlant(const LbsolveOptions& o) {
       for (int m = 0; m < kQ; ++m) boundary[m] = (b == 0 || m == b) ? 1.f : 0.f;  // §4.2
       for (int c = 0; c < 3; ++c) addSpec(lattice::baseName(b), c, boundary);
     }
-    auto results = runWithProgress(L.dense, specs, labels, o.device, report, parseCudaScheme(o.cudaScheme));
+    auto results = runWithProgress(L.dense, specs, labels, o.device, report, parseCudaRun(o));
     report.sunBases = o.scatteredSunBases ? "scattered" : "total";
     if (o.scatteredSunBases) {
       // B_j - U_j: the light of the sun bases that was scattered at least once (beam.h).
@@ -201,7 +206,7 @@ LbsolveReport solvePlant(const LbsolveOptions& o) {
     for (int m = 0; m < kQ; ++m) boundary[m] = o.ambient;
     for (int k = 0; k < 3; ++k) boundary[w.base[k]] += w.weight[k];
     for (int c = 0; c < 3; ++c) addSpec("light", c, boundary);
-    auto results = runWithProgress(L.dense, specs, labels, o.device, report, parseCudaScheme(o.cudaScheme));
+    auto results = runWithProgress(L.dense, specs, labels, o.device, report, parseCudaRun(o));
     auto g = makeLightGrid("light", L, results, 0);
     g->insertMeta("canopy_sun", openvdb::Vec3SMetadata(openvdb::Vec3s(s[0], s[1], s[2])));
     g->insertMeta("canopy_sun_bases", openvdb::Vec3IMetadata(openvdb::Vec3i(w.base[0], w.base[1], w.base[2])));

@@ -25,9 +25,10 @@ void stampRun(openvdb::MetaMap& m, const std::string& kind, const LbsolveOptions
 OmegaSet channelOmega(const LightParams& p, int channel);
 std::vector<SolveResult> runWithProgress(const DenseLattice& lattice, const std::vector<SolveSpec>& specs,
                                          const std::vector<LbsolveSolve>& labels, const Device& device,
-                                         LbsolveReport& report, CudaScheme scheme = CudaScheme::Shift);
-// LbsolveOptions::cudaScheme -> CudaScheme; throws Usage for an unknown or benchmark-only name.
-CudaScheme parseCudaScheme(const std::string& name);
+                                         LbsolveReport& report, const CudaRun& run = CudaRun());
+// LbsolveOptions::cudaScheme and solvesPerGpu -> CudaRun; throws Usage for an unknown or
+// benchmark-only scheme name.
+CudaRun parseCudaRun(const LbsolveOptions& o);
 // Scene mode (scene.cpp).
 LbsolveReport solveScene(const LbsolveOptions& o);
 

@@ -56,6 +56,10 @@ int main(int argc, char** argv) {
                  "CUDA streaming scheme: shift (index shift, work at occupied nodes only), shift-split, push "
                  "(listing 5.2 over every node) or pull (every node, aligned stores in tiles of 32 nodes); all give the CPU's bits")
       ->capture_default_str();
+  app.add_option("--solves-per-gpu", o.solvesPerGpu,
+                 "CUDA: solves in flight on each GPU (own stream and buffers; fewer where memory is short); "
+                 "the results do not depend on it")
+      ->capture_default_str();
   std::string sunBases = "scattered";
   app.add_option("--sun-bases", sunBases,
                  "Sun bases B01..B18: scattered (the direct beam removed; the player adds its own shadowed direct sun) "

@@ -140,7 +140,7 @@ LbsolveReport solveScene(const LbsolveOptions& o) {
     specs.push_back(s);
     labels.push_back({lattice::baseName(b), 3});
   }
-  auto results = runWithProgress(coarse, specs, labels, o.device, report);
+  auto results = runWithProgress(coarse, specs, labels, o.device, report, parseCudaRun(o));
 
   vdbio::LatticeMeta meta;
   meta.min = openvdb::Coord(0);

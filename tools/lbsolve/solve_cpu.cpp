@@ -119,9 +119,10 @@ int64_t cudaSolverBytes(const DenseLattice& l, CudaScheme scheme) {
 }
 
 #ifndef CANOPY_HAS_CUDA
-std::unique_ptr<Solver> makeCudaSolver(const DenseLattice&, int, CudaScheme) {
+std::unique_ptr<Solver> makeCudaSolver(const DenseLattice&, int, const CudaRun&) {
   throw unsupported("--device cuda: this build of Canopy has no CUDA backend");
 }
+int64_t cudaFreeBytes(int) { return 0; }
 #endif
 
 }  // namespace canopy::lb

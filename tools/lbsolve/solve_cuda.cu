@@ -25,6 +25,7 @@
 // (tests/lbsolve/test_lbsolve_cuda.cpp). PushFused and PullFused use explicit fmaf (benchmark only).
 #include <algorithm>
 #include <cstdio>
+#include <numeric>
 #include <cstring>
 
 #include "canopy/errors.h"
@@ -126,15 +127,51 @@ __global__ void pushGatherKernel(const float* __restrict__ cur, int64_t n, const
 
 // ---- Pull scheme (pull_stream.h) -------------------------------------------------------------
 
-// Interior leaf and empty nodes (wood nodes: pullWoodKernel); grid (ceil(nx / 128), ny, nz), so a
-// warp covers one tile of 32 nodes: every load of a direction reads 128 contiguous bytes (shifted by
-// at most one node, i.e. two tiles), every store writes 128 aligned bytes.
+// The order in which a pull launch visits the lattice rows (y, z): block k takes x-block
+// k % xBlocks of row (k / xBlocks) * stride mod rows. With stride 1 that is z-major order, and the
+// blocks resident at any moment cover a few z-slices: while they cross the plant nearly every warp
+// runs the 19 x 19 collision and the memory system idles, while they cross the air nearly none
+// does and the arithmetic units idle. A stride near rows x 0.618 (coprime with rows, so every row
+// is visited once) makes consecutive blocks sample the whole lattice evenly, so collisions and
+// pure streaming overlap throughout the launch. The x-blocks of one row stay consecutive: the
+// sectors that two neighbouring tiles share (loads shifted by one node) are still read close
+// together in time.
+struct RowOrder {
+  int64_t rows = 1, stride = 1;
+  int xBlocks = 1;
+};
+
+RowOrder pullRowOrder(const Dims& d, bool scatter) {
+  RowOrder o;
+  o.rows = int64_t(d.ny) * d.nz;
+  o.xBlocks = (d.nx + kBlockX - 1) / kBlockX;
+  if (scatter && o.rows > 2) {
+    int64_t s = std::max<int64_t>(1, int64_t(double(o.rows) * 0.6180339887498949));
+    while (std::gcd(s, o.rows) != 1) ++s;
+    o.stride = s;
+  }
+  return o;
+}
+
+__device__ __forceinline__ void pullRowOf(const RowOrder& o, const Dims& d, int& x, int& y, int& z) {
+  const int64_t k = blockIdx.x;
+  const int64_t r = k / o.xBlocks;
+  const int64_t row = (r * o.stride) % o.rows;
+  x = int(k - r * o.xBlocks) * kBlockX + int(threadIdx.x);
+  y = int(row % d.ny);
+  z = int(row / d.ny);
+}
+
+// Interior leaf and empty nodes (wood nodes: pullWoodKernel); one block per 128 nodes of a row, in
+// the order `order`, so a warp covers one tile of 32 nodes: every load of a direction reads 128
+// contiguous bytes (shifted by at most one node, i.e. two tiles), every store writes 128 aligned
+// bytes.
 template <bool Fused>
-__global__ void __launch_bounds__(kBlockX) pullLeafKernel(const OmegaSet omega, const PullLayout L,
+__global__ void __launch_bounds__(kBlockX) pullLeafKernel(const OmegaSet omega, const PullLayout L, const RowOrder order,
                                                           const float* __restrict__ coded,
                                                           const float* __restrict__ in, float* __restrict__ out) {
-  const int x = int(blockIdx.x) * kBlockX + int(threadIdx.x);
-  const int y = int(blockIdx.y), z = int(blockIdx.z);
+  int x, y, z;
+  pullRowOf(order, L.d, x, y, z);
   if (!L.d.interior(x, y, z)) return;  // boundary: its post values are fixed
   // The 19 arrival loads first, the density after them: branching on the density before issuing
   // them would put a second memory round trip in front of every node.
@@ -356,8 +393,9 @@ bool isPull(CudaScheme scheme) { return scheme == CudaScheme::Pull || scheme == 
 
 class CudaSolver final : public Solver {
  public:
-  CudaSolver(const DenseLattice& l, int gpu, CudaScheme scheme)
-      : lat_(l), gpu_(gpu), scheme_(scheme), pull_(pullLayout(l.dims)) {
+  CudaSolver(const DenseLattice& l, int gpu, const CudaRun& run)
+      : lat_(l), gpu_(gpu), scheme_(run.scheme), pull_(pullLayout(l.dims)), order_(pullRowOrder(l.dims, run.scatterRows)) {
+    const CudaScheme scheme = run.scheme;
     CANOPY_CUDA_CHECK(cudaSetDevice(gpu));
     size_t freeBytes = 0, totalBytes = 0;
     CANOPY_CUDA_CHECK(cudaMemGetInfo(&freeBytes, &totalBytes));
@@ -501,8 +539,8 @@ class CudaSolver final : public Solver {
         CANOPY_CUDA_CHECK(cudaGetLastError());
       }
       const bool fused = scheme_ == CudaScheme::PullFused;
-      (fused ? pullLeafKernel<true> : pullLeafKernel<false>)<<<grid(), kBlockX, 0, stream_>>>(omega, pull_, coded_.data(),
-                                                                                           cur_, prev_);
+      (fused ? pullLeafKernel<true> : pullLeafKernel<false>)<<<unsigned(order_.rows * order_.xBlocks), kBlockX, 0,
+                                                               stream_>>>(omega, pull_, order_, coded_.data(), cur_, prev_);
       CANOPY_CUDA_CHECK(cudaGetLastError());
       const int64_t woodCount = int64_t(wood_.size());
       if (woodCount > 0) {
@@ -577,6 +615,7 @@ class CudaSolver final : public Solver {
   int gpu_;
   CudaScheme scheme_;
   PullLayout pull_;  // pull: the tiled layout of bufA_/bufB_
+  RowOrder order_;   // pull: the leaf kernel's row order
   cudaStream_t stream_ = nullptr;
   Boundary boundary_values_{};
   float fixedTotal_ = 0.f;   // total of a boundary node
@@ -599,8 +638,15 @@ class CudaSolver final : public Solver {
 
 }  // namespace
 
-std::unique_ptr<Solver> makeCudaSolver(const DenseLattice& lattice, int gpu, CudaScheme scheme) {
-  return std::make_unique<CudaSolver>(lattice, gpu, scheme);
+std::unique_ptr<Solver> makeCudaSolver(const DenseLattice& lattice, int gpu, const CudaRun& run) {
+  return std::make_unique<CudaSolver>(lattice, gpu, run);
+}
+
+int64_t cudaFreeBytes(int gpu) {
+  CANOPY_CUDA_CHECK(cudaSetDevice(gpu));
+  size_t freeBytes = 0, totalBytes = 0;
+  CANOPY_CUDA_CHECK(cudaMemGetInfo(&freeBytes, &totalBytes));
+  return int64_t(freeBytes);
 }
 
 }  // namespace canopy::lb

@@ -1,6 +1,7 @@
 // solver.cpp: the convergence loop shared by both backends, and the multi-GPU work queue.
 #include "solver.h"
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <exception>
@@ -50,7 +51,7 @@ SolveResult Solver::solve(const SolveSpec& spec) {
 std::vector<SolveResult> runSolves(const DenseLattice& lattice, const std::vector<SolveSpec>& specs,
                                    const Device& device,
                                    const std::function<void(size_t, const SolveResult&)>& onDone,
-                                   CudaScheme scheme) {
+                                   const CudaRun& run) {
   std::vector<SolveResult> results(specs.size());
   std::mutex doneMutex;
   auto finished = [&](size_t k) {
@@ -73,26 +74,46 @@ std::vector<SolveResult> runSolves(const DenseLattice& lattice, const std::vecto
     for (int g = 0; g < cudaDeviceCount(); ++g) gpus.push_back(g);
   }
   if (gpus.empty()) throw unsupported("--device cuda: no CUDA GPU is available");
+  const size_t perGpu = size_t(std::max(1, run.solvesPerGpu));
+  const int64_t need = cudaSolverBytes(lattice, run.scheme);
   std::atomic<size_t> next{0};
-  std::vector<std::exception_ptr> errors(gpus.size());
+  std::mutex errorMutex;
+  std::exception_ptr error;
+  auto guarded = [&](auto&& f) {
+    try {
+      f();
+    } catch (...) {
+      std::lock_guard<std::mutex> lock(errorMutex);
+      if (!error) error = std::current_exception();
+      next = specs.size();  // stop the other solvers early
+    }
+  };
+  auto work = [&](Solver& solver) {
+    for (size_t k = next++; k < specs.size(); k = next++) {
+      results[k] = solver.solve(specs[k]);
+      finished(k);
+    }
+  };
   std::vector<std::thread> threads;
-  for (size_t t = 0; t < gpus.size(); ++t) {
-    threads.emplace_back([&, t] {
-      try {
-        auto solver = makeCudaSolver(lattice, gpus[t], scheme);
-        for (size_t k = next++; k < specs.size(); k = next++) {
-          results[k] = solver->solve(specs[k]);
-          finished(k);
-        }
-      } catch (...) {
-        errors[t] = std::current_exception();
-        next = specs.size();  // stop the other GPUs early
-      }
+  for (int gpu : gpus) {
+    threads.emplace_back([&, gpu] {
+      guarded([&] {
+        // The GPU's solvers are made one after another, so that each sees the memory the ones
+        // before it took; a further solver is made only while another fits (with 1/8 to spare).
+        std::vector<std::unique_ptr<Solver>> solvers;
+        solvers.push_back(makeCudaSolver(lattice, gpu, run));
+        while (solvers.size() < std::min(perGpu, specs.size()) && cudaFreeBytes(gpu) >= need + need / 8)
+          solvers.push_back(makeCudaSolver(lattice, gpu, run));
+        std::vector<std::thread> more;
+        for (size_t s = 1; s < solvers.size(); ++s)
+          more.emplace_back([&, s] { guarded([&] { work(*solvers[s]); }); });
+        guarded([&] { work(*solvers[0]); });
+        for (auto& t : more) t.join();
+      });
     });
   }
   for (auto& th : threads) th.join();
-  for (auto& e : errors)
-    if (e) std::rethrow_exception(e);
+  if (error) std::rethrow_exception(error);
   return results;
 }
 

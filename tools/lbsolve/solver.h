@@ -76,10 +76,25 @@ class Solver {
 enum class CudaScheme { Shift, ShiftSplit, Push, PushFused, Pull, PullFused };
 const char* cudaSchemeName(CudaScheme scheme);
 
+// How the CUDA solves run (bench/lbsolve/NOTES.md, fourth round, has the measurements). None of
+// these changes a result: every solve has its own buffers and computes the same bits.
+struct CudaRun {
+  CudaRun(CudaScheme s = CudaScheme::Shift) : scheme(s) {}  // NOLINT: a scheme alone is a CudaRun
+  CudaScheme scheme;
+  // Solves in flight on each GPU, each with its own stream and buffers, so that one solve's
+  // launches fill the gaps of another's (a launch's ramp and tail, the host round trip of a
+  // residual check). Fewer run where the GPU's free memory does not hold them all (never fewer
+  // than one).
+  int solvesPerGpu = 1;
+  // Pull and pull-fused: the lattice rows (y, z) taken by a launch's blocks in a scattered order
+  // (pullRowOrder) rather than z-major, so that the warps that collide (the plant) and those that
+  // only stream (the air around it) are resident side by side all through the launch.
+  bool scatterRows = true;
+};
+
 std::unique_ptr<Solver> makeCpuSolver(const DenseLattice& lattice);
 // Throws canopy::Error(Unsupported) in a build without CUDA.
-std::unique_ptr<Solver> makeCudaSolver(const DenseLattice& lattice, int gpu,
-                                       CudaScheme scheme = CudaScheme::Shift);
+std::unique_ptr<Solver> makeCudaSolver(const DenseLattice& lattice, int gpu, const CudaRun& run = CudaRun());
 
 // Bytes of device memory a CUDA solver needs for this lattice. Push: 2 x 19 floats + coded density
 // per node, the wood-node list, plus the stored-node index list and its values. Pull: the same with
@@ -88,13 +103,16 @@ std::unique_ptr<Solver> makeCudaSolver(const DenseLattice& lattice, int gpu,
 // stored nodes.
 int64_t cudaSolverBytes(const DenseLattice& lattice, CudaScheme scheme = CudaScheme::Shift);
 
-// Runs every spec; results[k] belongs to specs[k]. CPU: one solver, specs in order. CUDA: one
-// solver per GPU (device.index >= 0: that GPU only; -1: every GPU), each taking the next spec from
-// a shared queue, so several GPUs share the 57 solves. onDone(k, result) is called (serialised)
-// as each solve finishes.
+// Runs every spec; results[k] belongs to specs[k]. CPU: one solver, specs in order. CUDA:
+// run.solvesPerGpu solvers per GPU (device.index >= 0: that GPU only; -1: every GPU), each on its
+// own host thread taking the next spec from a shared queue, so several GPUs, and several streams
+// of one GPU, share the 57 solves. onDone(k, result) is called (serialised) as each solve finishes.
 std::vector<SolveResult> runSolves(const DenseLattice& lattice, const std::vector<SolveSpec>& specs,
                                    const Device& device,
                                    const std::function<void(size_t, const SolveResult&)>& onDone = {},
-                                   CudaScheme scheme = CudaScheme::Shift);
+                                   const CudaRun& run = CudaRun());
+
+// Free device memory of GPU `gpu` in bytes (0 in a build without CUDA).
+int64_t cudaFreeBytes(int gpu);
 
 }  // namespace canopy::lb

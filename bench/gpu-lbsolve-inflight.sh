@@ -1,0 +1,68 @@
+#!/usr/bin/env bash
+# gpu-lbsolve-inflight.sh: the GPU checks and measurements of 2026-12-02's afternoon session (issue 3,
+# bench/lbsolve/NOTES.md, fourth round), in one device call: the pull kernel's scattered row order
+# and several solves in flight per GPU (solver.h, CudaRun).
+#
+# Here (repo root, Release build with -DCMAKE_CUDA_ARCHITECTURES=90):
+#   ../shared/scripts/bundle-libs .gpu/canopy.tar.xz build/bin/{canopy-voxelize,canopy-lbsolve,\
+#      test_lbsolve_cuda,bench_lbsolve,bench_lbsolve_streams} -- ../shared
+# There:  PHASES="tests dense streams solves tool" bash bench/gpu-lbsolve-inflight.sh  (.gpu carried)
+#   tests:   test_lbsolve_cuda: every exact scheme bit for bit against the CPU, with 1, 3 and 8 solves
+#            in flight and both pull row orders.
+#   dense:   bench_lbsolve, synthetic plant 128^3 and 256^3, pull and pull-fused, both row orders,
+#            1..3 solves in flight: node updates/s and the fraction of the copy bandwidth.
+#   streams: bench_lbsolve_streams (the traffic alone, per layout: the ceiling for each kernel).
+#   solves:  the 57 solves of the synthetic 128^3 plant and of oak_medium at 128^3, shift and pull,
+#            1..4 in flight.
+#   tool:    canopy-lbsolve on the oak at 128^3, --solves-per-gpu 1..4: wall time, and the light files
+#            must be byte-identical.
+set -u
+source "$(dirname "$0")/gpu-common.sh"
+PHASES=${PHASES:-tests dense streams solves tool}
+has() { [[ " $PHASES " == *" $1 "* ]]; }
+ASSET=$built/../shared/assets/plants/oak_medium.glb
+if has tests; then
+  step tests
+  gtest test_lbsolve_cuda "$BIN/test_lbsolve_cuda"
+  grep -E "in flight|oak 40" "$O/test_lbsolve_cuda.log" | head -40
+fi
+if has dense; then
+  step dense
+  timeout 300 bench_lbsolve --device cuda --sizes 128,256 --fill plant --schemes "${DENSE_SCHEMES:-pull,pull-fused}" \
+    --rows scattered,z-major --in-flight 1,2,3 --iterations 400 --solves-sizes "" > "$O/bench_dense.md" 2>&1 || status=1
+  grep -E "copy|^\| plant" "$O/bench_dense.md"
+fi
+if has streams; then
+  step streams
+  timeout 120 bench_lbsolve_streams --sizes 128,256 > "$O/bench_streams.md" 2>&1 || status=1
+  grep -E "^\|" "$O/bench_streams.md" | head -30
+fi
+if has solves || has tool; then
+  canopy-voxelize "$ASSET" -o "$O/oak128.density.vdb" --resolution 128 -q || status=1
+fi
+if has solves; then
+  step solves
+  timeout 400 bench_lbsolve --device cuda --sizes "" --schemes shift,pull --in-flight 1,2,3,4 --solves-sizes 128 \
+    --lattices "$O/oak128.density.vdb" > "$O/bench_solves.md" 2>&1 || status=1
+  grep -E "^\| " "$O/bench_solves.md"
+fi
+if has tool; then
+  step tool
+  for k in 1 2 3 4; do
+    t0=$(date +%s.%N)
+    canopy-lbsolve "$O/oak128.density.vdb" -o "$O/oak128.k$k.light.vdb" --device cuda --solves-per-gpu $k -q --json \
+      > "$O/lbsolve_k$k.json" || status=1
+    t1=$(date +%s.%N)
+    echo "canopy-lbsolve oak128 --solves-per-gpu $k: $(awk "BEGIN{printf \"%.3f\", $t1 - $t0}") s wall (process)," \
+      "report seconds $(python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["seconds"])' "$O/lbsolve_k$k.json")"
+  done
+  for k in 2 3 4; do
+    cmp -s "$O/oak128.k1.light.vdb" "$O/oak128.k$k.light.vdb" && echo "light file k=$k: byte-identical to k=1" ||
+      { echo "FAILED: light file k=$k differs from k=1"; status=1; }
+  done
+  rm -f "$O"/oak128.*.light.vdb
+fi
+rm -f "$O/oak128.density.vdb"
+date -u
+[[ $status = 0 ]] && rm -f "$O"/test_*.log
+exit $status
