@@ -1,16 +1,21 @@
 #!/usr/bin/env bash
 # gpu-lbsolve-inflight.sh: the GPU checks and measurements of 2026-12-02's afternoon session (issue 3,
-# bench/lbsolve/NOTES.md, fourth round), in one device call: the pull kernel's scattered row order
-# and several solves in flight per GPU (solver.h, CudaRun).
+# bench/lbsolve/NOTES.md, fourth round; issue 6, bench/play/NOTES.md, fourth round), in one device
+# call: several lbsolve solves in flight per GPU (solver.h, CudaRun), the pull kernel with aligned
+# loads (pull-aligned), and the player's step without its per-hit segment array. (Its first run, at
+# 5803f29, also compared the pull kernel's rows in a scattered order, since removed: slower.)
 #
-# Here (repo root, Release build with -DCMAKE_CUDA_ARCHITECTURES=90):
+# Here (repo root, Release build with -DCMAKE_CUDA_ARCHITECTURES=90; the grove from
+# `make -C pipelines scene RESOLUTION=64 DEVICE=cpu BIN=$PWD/build/bin O=/tmp/grove`, copied to
+# /tmp/grove-in/grove.canopy):
 #   ../shared/scripts/bundle-libs .gpu/canopy.tar.xz build/bin/{canopy-voxelize,canopy-lbsolve,\
-#      test_lbsolve_cuda,bench_lbsolve,bench_lbsolve_streams} -- ../shared
-# There:  PHASES="tests dense streams solves tool" bash bench/gpu-lbsolve-inflight.sh  (.gpu carried)
+#      test_lbsolve_cuda,bench_lbsolve,bench_lbsolve_streams,test_play_cuda,bench-play} -- ../shared /tmp/grove-in
+# There:  PHASES="tests dense streams solves tool play" bash bench/gpu-lbsolve-inflight.sh  (.gpu carried)
 #   tests:   test_lbsolve_cuda: every exact scheme bit for bit against the CPU, with 1, 3 and 8 solves
-#            in flight and both pull row orders.
-#   dense:   bench_lbsolve, synthetic plant 128^3 and 256^3, pull and pull-fused, both row orders,
-#            1..3 solves in flight: node updates/s and the fraction of the copy bandwidth.
+#            in flight; test_play_cuda (GPU frames against the CPU reference).
+#   dense:   bench_lbsolve, synthetic plant 128^3 and 256^3 (and the full box), pull, pull-aligned
+#            and pull-fused, 1 and 3 solves in flight: node updates/s and the fraction of the copy
+#            bandwidth.
 #   streams: bench_lbsolve_streams (the traffic alone, per layout: the ceiling for each kernel).
 #   solves:  the 57 solves of the synthetic 128^3 plant and of oak_medium at 128^3, shift and pull,
 #            1..4 in flight.
@@ -25,12 +30,14 @@ if has tests; then
   step tests
   gtest test_lbsolve_cuda "$BIN/test_lbsolve_cuda"
   grep -E "in flight|oak 40" "$O/test_lbsolve_cuda.log" | head -40
+  [[ -x $BIN/test_play_cuda ]] && gtest test_play_cuda "$BIN/test_play_cuda"
 fi
 if has dense; then
   step dense
-  timeout 300 bench_lbsolve --device cuda --sizes 128,256 --fill plant --schemes "${DENSE_SCHEMES:-pull,pull-fused}" \
-    --rows scattered,z-major --in-flight 1,2,3 --iterations 400 --solves-sizes "" > "$O/bench_dense.md" 2>&1 || status=1
-  grep -E "copy|^\| plant" "$O/bench_dense.md"
+  timeout 300 bench_lbsolve --device cuda --sizes 128,256 --fill "${DENSE_FILL:-plant}" \
+    --schemes "${DENSE_SCHEMES:-pull,pull-aligned,pull-fused}" --in-flight "${DENSE_IN_FLIGHT:-1,3}" --iterations 400 \
+    --solves-sizes "" > "$O/bench_dense.md" 2>&1 || status=1
+  grep -E "copy|^\| (plant|full)" "$O/bench_dense.md"
 fi
 if has streams; then
   step streams
@@ -63,6 +70,15 @@ if has tool; then
   rm -f "$O"/oak128.*.light.vdb
 fi
 rm -f "$O/oak128.density.vdb"
+if has play; then
+  step play
+  extra=()
+  [[ -e $B/share/grove-in/grove.canopy ]] && extra=(--extra grove="$B/share/grove-in/grove.canopy")
+  timeout 300 bench-play "$O/bench" --device cuda --size 1920x1080 --frames "${FRAMES:-120}" --cache-mb 1024 \
+    ${PLAY_VARIANTS:---shadows map} "${extra[@]}" 2> "$O/bench_play.err" | tee "$O/bench_play.md" || status=1
+  for n in forest-orbit grove; do [[ -e $O/bench/$n.png ]] && cp "$O/bench/$n.png" "$O/play-$n.png"; done
+  rm -rf "$O/bench"
+fi
 date -u
 [[ $status = 0 ]] && rm -f "$O"/test_*.log
 exit $status

@@ -1018,8 +1018,12 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
     walkRetire(w, t);
     if (w.count == 0 && w.done) break;
     float next = w.done ? tMax : w.tCellExit;
-    float k = 0.0f, kc[3] = {0.0f, 0.0f, 0.0f};
-    Segment seg[kHitCapacity];
+    // Each segment with matter is shaded as it is found, into two sums over the segments: its
+    // extinction x albedo (which the step's sun transmittance will scale) and that times its
+    // indirect light (which depends on the segment alone: its light is sampled at its own point).
+    // No per-hit segment array is kept for a second pass (it was 16 x 56 bytes of local memory
+    // written at every step).
+    float k = 0.0f, kAlbedo[3] = {0.0f, 0.0f, 0.0f}, kIndirect[3] = {0.0f, 0.0f, 0.0f};
     bool active = false;
     const float footprint = t * pixelAngle;
     float minCell = 3.0e38f;
@@ -1027,7 +1031,6 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
       Hit& hit = w.hits[h];
       if (hit.tin > t) {
         next = hit.tin < next ? hit.tin : next;
-        seg[h].k = 0.0f;
         continue;
       }
       active = true;
@@ -1036,14 +1039,21 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
       if (t < hit.hold.until && segmentLevel(s, inst, s.models[inst.model].depth, footprint) >= hit.hold.level) {
         // the same empty segment as at the previous step (EmptyHold): k = 0 up to its end
         CANOPY_PLAY_COUNT(s, heldSegments, 1);
-        seg[h].k = 0.0f;
         next = hit.hold.end < next ? hit.hold.end : next;
         continue;
       }
-      seg[h] = instanceSegment(s, inst, o, d, t, hit.tout, footprint, true, w.caches[hit.slot],
-                               s.shade.holdEmpty ? &hit.hold : nullptr);
-      k += seg[h].k;
-      next = seg[h].tEnd < next ? seg[h].tEnd : next;
+      const Segment g = instanceSegment(s, inst, o, d, t, hit.tout, footprint, true, w.caches[hit.slot],
+                                        s.shade.holdEmpty ? &hit.hold : nullptr);
+      next = g.tEnd < next ? g.tEnd : next;
+      if (g.k <= 0.0f) continue;
+      k += g.k;
+      float ind[3];
+      segmentIndirect<kWithLight>(s, inst, g, o, d, ind);
+      for (int c = 0; c < 3; ++c) {
+        const float ka = g.k * g.albedo[c];
+        kAlbedo[c] += ka;
+        kIndirect[c] += ka * ind[c];
+      }
     }
     if (!active && w.count == 0) {
       if (w.done) break;
@@ -1069,14 +1079,8 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
         shadowT = tm;
         shadowSpacing = 2.0f * footprint > 1.5f * minCell ? 2.0f * footprint : 1.5f * minCell;
       }
-      for (int h = 0; h < w.count; ++h) {
-        if (w.hits[h].tin > t || seg[h].k <= 0.0f) continue;
-        float ind[3];
-        segmentIndirect<kWithLight>(s, s.instances[w.hits[h].instance], seg[h], o, d, ind);
-        for (int c = 0; c < 3; ++c) kc[c] += seg[h].k * seg[h].albedo[c] * (s.shade.direct[c] * sunT + ind[c]);
-      }
       const float scale = T * alpha / k;
-      for (int c = 0; c < 3; ++c) r.rgb[c] += scale * kc[c];
+      for (int c = 0; c < 3; ++c) r.rgb[c] += scale * (kAlbedo[c] * s.shade.direct[c] * sunT + kIndirect[c]);
     }
     T *= 1.0f - alpha;
     t = next;

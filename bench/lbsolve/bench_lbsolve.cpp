@@ -3,12 +3,11 @@
 //
 //   bench_lbsolve [--device cpu|cuda|cuda:N] [--sizes 128,256] [--solves-sizes 128]
 //                 [--iterations 64] [--schemes shift,shift-split,push,push-fused,pull,pull-fused] [--fill plant|full|plant,full]
-//                 [--lattices a.density.vdb,b.density.vdb] [--in-flight 1,2,3] [--rows scattered,z-major]
+//                 [--lattices a.density.vdb,b.density.vdb] [--in-flight 1,2,3]
 //
 // Throughput: K solves in flight on one GPU (--in-flight, CudaRun::solvesPerGpu; 1 by default),
 // each run for I/4 and for I iterations (tolerance 0); the difference divided by K x 3I/4 x nodes
-// removes fixed costs (initialisation, gathering the result). --rows compares the pull schemes'
-// row orders (CudaRun::scatterRows). "Node updates/s" counts
+// removes fixed costs (initialisation, gathering the result). "Node updates/s" counts
 // lattice nodes advanced by one iteration, whatever the scheme does at each node. Bytes per update:
 // - push and pull: the nominal traffic of collide.h's push update: 19 floats read + 19 floats
 //   written + 4 bytes of coded density = 156 B per node (pull moves the same values, pull_stream.h);
@@ -67,7 +66,7 @@ std::vector<int> parseList(const std::string& s) {
 }
 
 CudaScheme parseScheme(const std::string& s) {
-  for (CudaScheme c : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::PushFused, CudaScheme::Pull, CudaScheme::PullFused})
+  for (CudaScheme c : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::PushFused, CudaScheme::Pull, CudaScheme::PullFused, CudaScheme::PullAligned})
     if (s == cudaSchemeName(c)) return c;
   throw std::runtime_error("unknown scheme '" + s + "' (shift, shift-split, push, push-fused, pull, pull-fused)");
 }
@@ -81,7 +80,7 @@ int64_t occupiedNodes(const DenseLattice& L) {
 // Nominal device-memory bytes per lattice node and iteration (see the header comment).
 double bytesPerUpdate(const DenseLattice& L, const Device& dev, CudaScheme scheme) {
   if (!dev.isCuda() || scheme == CudaScheme::Push || scheme == CudaScheme::PushFused || scheme == CudaScheme::Pull ||
-      scheme == CudaScheme::PullFused)
+      scheme == CudaScheme::PullFused || scheme == CudaScheme::PullAligned)
     return (2 * kQ + 1) * 4.0;
   const Dims d = L.dims;
   double bytes = 0;
@@ -178,21 +177,14 @@ double solveSeconds(const DenseLattice& L, const Device& dev, const CudaRun& run
   return since(t0);
 }
 
-bool isPullScheme(CudaScheme c) { return c == CudaScheme::Pull || c == CudaScheme::PullFused; }
-
-// The runs to measure: every scheme x in-flight count, and for the pull schemes each row order.
-std::vector<CudaRun> runsOf(const std::vector<CudaScheme>& schemes, const std::vector<int>& inFlight,
-                            const std::vector<std::string>& rowOrders) {
+// The runs to measure: every scheme x in-flight count.
+std::vector<CudaRun> runsOf(const std::vector<CudaScheme>& schemes, const std::vector<int>& inFlight) {
   std::vector<CudaRun> runs;
   for (CudaScheme c : schemes)
-    for (const auto& rows : rowOrders) {
-      if (rows != rowOrders.front() && !isPullScheme(c)) continue;
-      for (int k : inFlight) {
-        CudaRun r(c);
-        r.solvesPerGpu = k;
-        r.scatterRows = rows == "scattered";
-        runs.push_back(r);
-      }
+    for (int k : inFlight) {
+      CudaRun r(c);
+      r.solvesPerGpu = k;
+      runs.push_back(r);
     }
   return runs;
 }
@@ -201,7 +193,7 @@ std::vector<CudaRun> runsOf(const std::vector<CudaScheme>& schemes, const std::v
 int main(int argc, char** argv) try {
   std::string deviceSpec = "auto";
   std::vector<int> sizes{128, 256}, solveSizes{128};
-  std::vector<std::string> schemeNames{"shift"}, fills{"plant"}, lattices, rowOrders{"scattered"};
+  std::vector<std::string> schemeNames{"shift"}, fills{"plant"}, lattices;
   std::vector<int> inFlight{1};
   int iterations = 64;
   for (int i = 1; i + 1 < argc; i += 2) {
@@ -214,12 +206,11 @@ int main(int argc, char** argv) try {
     else if (k == "--fill") fills = parseWords(v);
     else if (k == "--lattices") lattices = parseWords(v);
     else if (k == "--in-flight") inFlight = parseList(v);
-    else if (k == "--rows") rowOrders = parseWords(v);
     else {
       std::fprintf(stderr,
                    "usage: bench_lbsolve [--device D] [--sizes 128,256] [--solves-sizes 128] [--iterations 64]\n"
                    "                     [--schemes shift,shift-split,push,push-fused,pull,pull-fused] [--fill plant,full] [--lattices a.vdb,...]\n"
-                   "                     [--in-flight 1,2,3] [--rows scattered,z-major]\n");
+                   "                     [--in-flight 1,2,3]\n");
       return 1;
     }
   }
@@ -233,16 +224,13 @@ int main(int argc, char** argv) try {
   std::vector<CudaScheme> schemes;
   for (const auto& w : schemeNames) schemes.push_back(parseScheme(w));
   if (!dev.isCuda()) schemes = {CudaScheme::Shift};  // the CPU has one scheme (the reference)
-  for (const auto& r : rowOrders)
-    if (r != "scattered" && r != "z-major") throw std::runtime_error("unknown row order '" + r + "' (scattered, z-major)");
   for (int k : inFlight)
     if (k < 1) throw std::runtime_error("--in-flight counts must be >= 1");
   if (!dev.isCuda()) inFlight = {1};
-  const std::vector<CudaRun> runs = runsOf(schemes, inFlight, rowOrders);
+  const std::vector<CudaRun> runs = runsOf(schemes, inFlight);
   auto schemeLabel = [&](const CudaRun& r) {
     if (!dev.isCuda()) return std::string("cpu");
     std::string label = cudaSchemeName(r.scheme);
-    if (isPullScheme(r.scheme) && rowOrders.size() > 1) label += r.scatterRows ? " (scattered rows)" : " (z-major rows)";
     if (inFlight.size() > 1 || r.solvesPerGpu > 1) label += " x" + std::to_string(r.solvesPerGpu) + " in flight";
     return label;
   };

@@ -74,9 +74,11 @@ struct SoA {
 };
 // Array of structure of arrays: tiles of 32 consecutive nodes (32 consecutive x; N % 32 == 0), the
 // tile's 19 arrays of 32 floats contiguous (2432 B): a warp's 19 loads are one contiguous block.
-struct AoSoA {
-  __host__ __device__ int64_t at(int m, int64_t idx) const { return ((idx >> 5) * kQ + m) * 32 + (idx & 31); }
+template <int T>
+struct AoSoAT {
+  __host__ __device__ int64_t at(int m, int64_t idx) const { return ((idx / T) * kQ + m) * T + idx % T; }
 };
+using AoSoA = AoSoAT<32>;
 
 __device__ __forceinline__ float load(const float* p) {
   float v;
@@ -170,7 +172,8 @@ __global__ void pushKernel(Lay lay, int N, const float* __restrict__ coded, cons
 
 // The pull pattern: interior node r reads value m from r - c_m and writes it to r itself (boundary
 // threads return at once), after the density read and test. Writes are aligned, reads shifted.
-template <class Lay, bool Staged>
+// Cs: the stores with the streaming cache hint (st.global.cs, evict first).
+template <class Lay, bool Staged, bool Cs = false>
 __global__ void pullKernel(Lay lay, int N, const float* __restrict__ coded, const float* __restrict__ in,
                            float* __restrict__ out) {
   const int x = int(blockIdx.x) * kBlockX + int(threadIdx.x), y = int(blockIdx.y), z = int(blockIdx.z);
@@ -187,7 +190,13 @@ __global__ void pullKernel(Lay lay, int N, const float* __restrict__ coded, cons
   if (Staged) {
     fence();
 #pragma unroll
-    for (int m = 0; m < kQ; ++m) out[lay.at(m, idx)] = f[m];
+    for (int m = 0; m < kQ; ++m) {
+      if (Cs) {
+        __stcs(out + lay.at(m, idx), f[m]);
+      } else {
+        out[lay.at(m, idx)] = f[m];
+      }
+    }
   }
 }
 
@@ -377,6 +386,13 @@ void runSize(Bench& b) {
   if (N % 32 == 0) {
     run(b, "aosoa-push-stage", tiles, true, Pattern::Shift, push(pushKernel<AoSoA, true, 1>, tiles, grid, blk));
     run(b, "aosoa-pull-stage", tiles, true, Pattern::Shift, pull(pullKernel<AoSoA, true>, tiles));
+    // Tiles of 64, 128 and 256 nodes (a direction's run of a block: 256 B, 512 B, 512 B), and the
+    // stores with the streaming hint.
+    run(b, "aosoa-pull-stage-cs", tiles, true, Pattern::Shift, pull(pullKernel<AoSoA, true, true>, tiles));
+    run(b, "aosoa64-pull-stage", AoSoAT<64>{}, true, Pattern::Shift, pull(pullKernel<AoSoAT<64>, true>, AoSoAT<64>{}));
+    run(b, "aosoa128-pull-stage", AoSoAT<128>{}, true, Pattern::Shift, pull(pullKernel<AoSoAT<128>, true>, AoSoAT<128>{}));
+    if (N % 256 == 0 || (int64_t(N) * N) % 256 == 0)
+      run(b, "aosoa256-pull-stage", AoSoAT<256>{}, true, Pattern::Shift, pull(pullKernel<AoSoAT<256>, true>, AoSoAT<256>{}));
   }
 }
 

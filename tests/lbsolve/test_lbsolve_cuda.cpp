@@ -105,7 +105,7 @@ TEST(LbsolveCuda, cuda_MatchesCpuPerNodeOn64CubedPlantForAll19BasesRGB) {
 
 TEST(LbsolveCuda, cuda_EmptyOddSizedAndOccupiedBoundaryLatticesMatchCpu) {
   if (cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA GPU";
-  for (CudaScheme scheme : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::Pull}) {
+  for (CudaScheme scheme : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::Pull, CudaScheme::PullAligned}) {
     const std::string name = cudaSchemeName(scheme);
     // Odd sizes exercise the partial thread block in x and the boundary tests in every direction.
     const std::vector<float> zero(size_t(131) * 5 * 7, 0.f);
@@ -164,7 +164,7 @@ TEST(LbsolveCuda, cuda_MatchesCpuOnTheRealOakLattice) {
   const int cap = 2 * std::max({L.dims.nx, L.dims.ny, L.dims.nz});
   const auto specs = allSpecs(cap, 1e-4f);
   const auto cpu = runSolves(L, specs, kCpu);
-  for (CudaScheme scheme : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::Pull})
+  for (CudaScheme scheme : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::Pull, CudaScheme::PullAligned})
     compare(cpu, runSolves(L, specs, kGpu0, {}, scheme), std::string("oak 40, ") + cudaSchemeName(scheme));
   // push-fused, pull-fused: fixed iterations (their residuals differ in the last bits, which could move a stop).
   const auto fixed = allSpecs(cap, 0.f);
@@ -174,24 +174,20 @@ TEST(LbsolveCuda, cuda_MatchesCpuOnTheRealOakLattice) {
 }
 
 // Several solves in flight on one GPU (CudaRun::solvesPerGpu: own streams and buffers, one host
-// thread each) and the pull schemes' row orders change no bit: every exact scheme with 1, 3 and 8
-// solves in flight, pull with z-major and scattered rows, against the CPU. 8 in flight on 57
-// solves also exercises the shared queue's hand-out with solvers finishing in any order.
-TEST(LbsolveCuda, cuda_SolvesInFlightAndRowOrdersKeepTheCpuBits) {
+// thread each) change no bit: every exact scheme with 1, 3 and 8 solves in flight, against the CPU.
+// 8 in flight on 57 solves also exercises the shared queue's hand-out with solvers finishing in any
+// order.
+TEST(LbsolveCuda, cuda_SolvesInFlightKeepTheCpuBits) {
   if (cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA GPU";
   const fixtures::Plant plant = fixtures::makePlant(48, 7);
   const DenseLattice L = fixtures::denseOf(48, 48, 48, plant.density, plant.wood);
   const auto specs = allSpecs(96, 1e-4f);
   const auto cpu = runSolves(L, specs, kCpu);
-  for (CudaScheme scheme : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::Pull})
-    for (int inFlight : {1, 3, 8})
-      for (bool scatter : {true, false}) {
-        if (!scatter && scheme != CudaScheme::Pull) continue;
-        CudaRun run(scheme);
-        run.solvesPerGpu = inFlight;
-        run.scatterRows = scatter;
-        compare(cpu, runSolves(L, specs, kGpu0, {}, run),
-                std::string("plant 48^3, ") + cudaSchemeName(scheme) + ", " + std::to_string(inFlight) + " in flight" +
-                    (scheme == CudaScheme::Pull ? (scatter ? ", scattered rows" : ", z-major rows") : ""));
-      }
+  for (CudaScheme scheme : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::Pull, CudaScheme::PullAligned})
+    for (int inFlight : {1, 3, 8}) {
+      CudaRun run(scheme);
+      run.solvesPerGpu = inFlight;
+      compare(cpu, runSolves(L, specs, kGpu0, {}, run),
+              std::string("plant 48^3, ") + cudaSchemeName(scheme) + ", " + std::to_string(inFlight) + " in flight");
+    }
 }

@@ -25,7 +25,6 @@
 // (tests/lbsolve/test_lbsolve_cuda.cpp). PushFused and PullFused use explicit fmaf (benchmark only).
 #include <algorithm>
 #include <cstdio>
-#include <numeric>
 #include <cstring>
 
 #include "canopy/errors.h"
@@ -127,51 +126,18 @@ __global__ void pushGatherKernel(const float* __restrict__ cur, int64_t n, const
 
 // ---- Pull scheme (pull_stream.h) -------------------------------------------------------------
 
-// The order in which a pull launch visits the lattice rows (y, z): block k takes x-block
-// k % xBlocks of row (k / xBlocks) * stride mod rows. With stride 1 that is z-major order, and the
-// blocks resident at any moment cover a few z-slices: while they cross the plant nearly every warp
-// runs the 19 x 19 collision and the memory system idles, while they cross the air nearly none
-// does and the arithmetic units idle. A stride near rows x 0.618 (coprime with rows, so every row
-// is visited once) makes consecutive blocks sample the whole lattice evenly, so collisions and
-// pure streaming overlap throughout the launch. The x-blocks of one row stay consecutive: the
-// sectors that two neighbouring tiles share (loads shifted by one node) are still read close
-// together in time.
-struct RowOrder {
-  int64_t rows = 1, stride = 1;
-  int xBlocks = 1;
-};
-
-RowOrder pullRowOrder(const Dims& d, bool scatter) {
-  RowOrder o;
-  o.rows = int64_t(d.ny) * d.nz;
-  o.xBlocks = (d.nx + kBlockX - 1) / kBlockX;
-  if (scatter && o.rows > 2) {
-    int64_t s = std::max<int64_t>(1, int64_t(double(o.rows) * 0.6180339887498949));
-    while (std::gcd(s, o.rows) != 1) ++s;
-    o.stride = s;
-  }
-  return o;
-}
-
-__device__ __forceinline__ void pullRowOf(const RowOrder& o, const Dims& d, int& x, int& y, int& z) {
-  const int64_t k = blockIdx.x;
-  const int64_t r = k / o.xBlocks;
-  const int64_t row = (r * o.stride) % o.rows;
-  x = int(k - r * o.xBlocks) * kBlockX + int(threadIdx.x);
-  y = int(row % d.ny);
-  z = int(row / d.ny);
-}
-
-// Interior leaf and empty nodes (wood nodes: pullWoodKernel); one block per 128 nodes of a row, in
-// the order `order`, so a warp covers one tile of 32 nodes: every load of a direction reads 128
-// contiguous bytes (shifted by at most one node, i.e. two tiles), every store writes 128 aligned
-// bytes.
+// Interior leaf and empty nodes (wood nodes: pullWoodKernel); grid (ceil(nx / 128), ny, nz), so a
+// warp covers one tile of 32 nodes: every load of a direction reads 128 contiguous bytes (shifted by
+// at most one node, i.e. two tiles), every store writes 128 aligned bytes. The blocks run in z-major
+// order, so a launch's resident blocks read and write a few neighbouring z-slices; blocks scattered
+// over the lattice (to mix the plant's colliding warps with the air's streaming ones) were slower
+// by 7-13 points of the copy bandwidth (bench/lbsolve/NOTES.md, fourth round).
 template <bool Fused>
-__global__ void __launch_bounds__(kBlockX) pullLeafKernel(const OmegaSet omega, const PullLayout L, const RowOrder order,
+__global__ void __launch_bounds__(kBlockX) pullLeafKernel(const OmegaSet omega, const PullLayout L,
                                                           const float* __restrict__ coded,
                                                           const float* __restrict__ in, float* __restrict__ out) {
-  int x, y, z;
-  pullRowOf(order, L.d, x, y, z);
+  const int x = int(blockIdx.x) * kBlockX + int(threadIdx.x);
+  const int y = int(blockIdx.y), z = int(blockIdx.z);
   if (!L.d.interior(x, y, z)) return;  // boundary: its post values are fixed
   // The 19 arrival loads first, the density after them: branching on the density before issuing
   // them would put a second memory round trip in front of every node.
@@ -180,6 +146,55 @@ __global__ void __launch_bounds__(kBlockX) pullLeafKernel(const OmegaSet omega, 
   const float c = coded[L.d.index(x, y, z)];
   if (c < 0.f) return;  // a wood node: pullWoodKernel
   pullCollideStore<kLeafKind, Fused>(omega, L, c, f, out, x, y, z);
+}
+
+// The same with every global load of the arrivals aligned (PullAligned): thread x loads direction
+// m's slot of its own x in the row (y - c_my, z - c_mz), whole 128-byte tile lines; the value it
+// needs, that of x - c_mx, comes from the neighbouring lane by a shuffle, across the block's warps
+// through shared memory, and at the block's two ends from one scalar global load. The same values
+// as pullLoad, so the same bits. Blocks are uniform in (y, z), so a boundary row leaves as a block.
+__global__ void __launch_bounds__(kBlockX) pullLeafAlignedKernel(const OmegaSet omega, const PullLayout L,
+                                                                 const float* __restrict__ coded,
+                                                                 const float* __restrict__ in, float* __restrict__ out) {
+  const int x0 = int(blockIdx.x) * kBlockX, x = x0 + int(threadIdx.x);
+  const int y = int(blockIdx.y), z = int(blockIdx.z);
+  if (y < 1 || z < 1 || y > L.d.ny - 2 || z > L.d.nz - 2) return;  // boundary rows: fixed post values
+  constexpr int kWarps = kBlockX / 32;
+  __shared__ float first[kWarps][kQ], last[kWarps][kQ];  // each warp's lane 0 and lane 31 values
+  const int lane = int(threadIdx.x) % 32, warp = int(threadIdx.x) / 32;
+  const bool inRow = x < L.nxp;  // slots exist up to the padded row end
+  float v[kQ];
+  CANOPY_UNROLL
+  for (int m = 0; m < kQ; ++m)
+    v[m] = inRow ? in[pullSlot(L, m, x, y - lattice::dir(m, 1), z - lattice::dir(m, 2))] : 0.f;
+  const float c = x < L.d.nx ? coded[L.d.index(x, y, z)] : 0.f;
+  CANOPY_UNROLL
+  for (int m = 0; m < kQ; ++m) {
+    if (lattice::dir(m, 0) > 0 && lane == 31) last[warp][m] = v[m];
+    if (lattice::dir(m, 0) < 0 && lane == 0) first[warp][m] = v[m];
+  }
+  __syncthreads();
+  const bool node = x >= 1 && x <= L.d.nx - 2;  // interior node (y and z are interior)
+  float f[kQ];
+  CANOPY_UNROLL
+  for (int m = 0; m < kQ; ++m) {
+    const int dx = lattice::dir(m, 0);
+    if (dx == 0) {
+      f[m] = v[m];
+    } else if (dx > 0) {  // the value of x - 1
+      const float up = __shfl_up_sync(0xffffffffu, v[m], 1);
+      f[m] = lane > 0 ? up : (warp > 0 ? last[warp - 1][m] : 0.f);
+      if (lane == 0 && warp == 0 && node)
+        f[m] = in[pullSlot(L, m, x - 1, y - lattice::dir(m, 1), z - lattice::dir(m, 2))];
+    } else {  // the value of x + 1
+      const float down = __shfl_down_sync(0xffffffffu, v[m], 1);
+      f[m] = lane < 31 ? down : (warp < kWarps - 1 ? first[warp + 1][m] : 0.f);
+      if (lane == 31 && warp == kWarps - 1 && node)
+        f[m] = in[pullSlot(L, m, x + 1, y - lattice::dir(m, 1), z - lattice::dir(m, 2))];
+    }
+  }
+  if (!node || c < 0.f) return;  // not an interior node; a wood node: pullWoodKernel
+  pullCollideStore<kLeafKind, false>(omega, L, c, f, out, x, y, z);
 }
 
 template <bool Fused>
@@ -389,13 +404,14 @@ void uploadVector(cuda::DeviceBuffer<T>& buffer, const std::vector<T>& v) {
 int64_t blocksFor(int64_t count) { return (count + kBlockX - 1) / kBlockX; }
 
 bool isShift(CudaScheme scheme) { return scheme == CudaScheme::Shift || scheme == CudaScheme::ShiftSplit; }
-bool isPull(CudaScheme scheme) { return scheme == CudaScheme::Pull || scheme == CudaScheme::PullFused; }
+bool isPull(CudaScheme scheme) {
+  return scheme == CudaScheme::Pull || scheme == CudaScheme::PullFused || scheme == CudaScheme::PullAligned;
+}
 
 class CudaSolver final : public Solver {
  public:
-  CudaSolver(const DenseLattice& l, int gpu, const CudaRun& run)
-      : lat_(l), gpu_(gpu), scheme_(run.scheme), pull_(pullLayout(l.dims)), order_(pullRowOrder(l.dims, run.scatterRows)) {
-    const CudaScheme scheme = run.scheme;
+  CudaSolver(const DenseLattice& l, int gpu, CudaScheme scheme)
+      : lat_(l), gpu_(gpu), scheme_(scheme), pull_(pullLayout(l.dims)) {
     CANOPY_CUDA_CHECK(cudaSetDevice(gpu));
     size_t freeBytes = 0, totalBytes = 0;
     CANOPY_CUDA_CHECK(cudaMemGetInfo(&freeBytes, &totalBytes));
@@ -539,8 +555,12 @@ class CudaSolver final : public Solver {
         CANOPY_CUDA_CHECK(cudaGetLastError());
       }
       const bool fused = scheme_ == CudaScheme::PullFused;
-      (fused ? pullLeafKernel<true> : pullLeafKernel<false>)<<<unsigned(order_.rows * order_.xBlocks), kBlockX, 0,
-                                                               stream_>>>(omega, pull_, order_, coded_.data(), cur_, prev_);
+      if (scheme_ == CudaScheme::PullAligned) {
+        pullLeafAlignedKernel<<<grid(), kBlockX, 0, stream_>>>(omega, pull_, coded_.data(), cur_, prev_);
+      } else {
+        (fused ? pullLeafKernel<true> : pullLeafKernel<false>)<<<grid(), kBlockX, 0, stream_>>>(omega, pull_, coded_.data(),
+                                                                                             cur_, prev_);
+      }
       CANOPY_CUDA_CHECK(cudaGetLastError());
       const int64_t woodCount = int64_t(wood_.size());
       if (woodCount > 0) {
@@ -615,7 +635,6 @@ class CudaSolver final : public Solver {
   int gpu_;
   CudaScheme scheme_;
   PullLayout pull_;  // pull: the tiled layout of bufA_/bufB_
-  RowOrder order_;   // pull: the leaf kernel's row order
   cudaStream_t stream_ = nullptr;
   Boundary boundary_values_{};
   float fixedTotal_ = 0.f;   // total of a boundary node
@@ -639,7 +658,7 @@ class CudaSolver final : public Solver {
 }  // namespace
 
 std::unique_ptr<Solver> makeCudaSolver(const DenseLattice& lattice, int gpu, const CudaRun& run) {
-  return std::make_unique<CudaSolver>(lattice, gpu, run);
+  return std::make_unique<CudaSolver>(lattice, gpu, run.scheme);
 }
 
 int64_t cudaFreeBytes(int gpu) {

@@ -73,11 +73,13 @@ class Solver {
 //               variants that measure what the unfused arithmetic costs; not bitwise equal to the
 //               CPU reference.
 // All but PushFused and PullFused compute the CPU reference's bits (same IEEE operations in the same order).
-enum class CudaScheme { Shift, ShiftSplit, Push, PushFused, Pull, PullFused };
+//   PullAligned: Pull with every global load of the arrivals aligned to the 32-node tiles, the
+//               one-node x shift done by warp shuffles (the CPU's bits; benchmark only).
+enum class CudaScheme { Shift, ShiftSplit, Push, PushFused, Pull, PullFused, PullAligned };
 const char* cudaSchemeName(CudaScheme scheme);
 
-// How the CUDA solves run (bench/lbsolve/NOTES.md, fourth round, has the measurements). None of
-// these changes a result: every solve has its own buffers and computes the same bits.
+// How the CUDA solves run (bench/lbsolve/NOTES.md, fourth round, has the measurements). Nothing
+// here changes a result: every solve has its own buffers and computes the same bits.
 struct CudaRun {
   CudaRun(CudaScheme s = CudaScheme::Shift) : scheme(s) {}  // NOLINT: a scheme alone is a CudaRun
   CudaScheme scheme;
@@ -86,10 +88,6 @@ struct CudaRun {
   // residual check). Fewer run where the GPU's free memory does not hold them all (never fewer
   // than one).
   int solvesPerGpu = 1;
-  // Pull and pull-fused: the lattice rows (y, z) taken by a launch's blocks in a scattered order
-  // (pullRowOrder) rather than z-major, so that the warps that collide (the plant) and those that
-  // only stream (the air around it) are resident side by side all through the launch.
-  bool scatterRows = true;
 };
 
 std::unique_ptr<Solver> makeCpuSolver(const DenseLattice& lattice);
