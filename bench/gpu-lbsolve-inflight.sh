@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # gpu-lbsolve-inflight.sh: the GPU checks and measurements of 2026-12-02's afternoon session (issue 3,
 # bench/lbsolve/NOTES.md, fourth round; issue 6, bench/play/NOTES.md, fourth round), in one device
-# call: several lbsolve solves in flight per GPU (solver.h, CudaRun), the pull kernel with aligned
-# loads (pull-aligned), and the player's step without its per-hit segment array. (Its first run, at
-# 5803f29, also compared the pull kernel's rows in a scattered order, since removed: slower.)
+# call: several lbsolve solves in flight per GPU (solver.h, CudaRun) and the player's step without
+# its per-hit segment array. (Earlier runs also compared variants of the pull kernel since removed,
+# both no faster: rows in a scattered order at 5803f29, aligned loads with shuffles at 6cb7807.)
 #
 # Here (repo root, Release build with -DCMAKE_CUDA_ARCHITECTURES=90; the grove from
 # `make -C pipelines scene RESOLUTION=64 DEVICE=cpu BIN=$PWD/build/bin O=/tmp/grove`, copied to
@@ -13,9 +13,9 @@
 # There:  PHASES="tests dense streams solves tool play" bash bench/gpu-lbsolve-inflight.sh  (.gpu carried)
 #   tests:   test_lbsolve_cuda: every exact scheme bit for bit against the CPU, with 1, 3 and 8 solves
 #            in flight; test_play_cuda (GPU frames against the CPU reference).
-#   dense:   bench_lbsolve, synthetic plant 128^3 and 256^3 (and the full box), pull, pull-aligned
-#            and pull-fused, 1 and 3 solves in flight: node updates/s and the fraction of the copy
-#            bandwidth.
+#   dense:   bench_lbsolve, synthetic plant 128^3 and 256^3 (DENSE_FILL=plant,full: and the full box),
+#            pull and pull-fused, 1 and 3 solves in flight: node updates/s and the fraction of the
+#            copy bandwidth.
 #   streams: bench_lbsolve_streams (the traffic alone, per layout: the ceiling for each kernel).
 #   solves:  the 57 solves of the synthetic 128^3 plant and of oak_medium at 128^3, shift and pull,
 #            1..4 in flight.
@@ -35,7 +35,7 @@ fi
 if has dense; then
   step dense
   timeout 300 bench_lbsolve --device cuda --sizes 128,256 --fill "${DENSE_FILL:-plant}" \
-    --schemes "${DENSE_SCHEMES:-pull,pull-aligned,pull-fused}" --in-flight "${DENSE_IN_FLIGHT:-1,3}" --iterations 400 \
+    --schemes "${DENSE_SCHEMES:-pull,pull-fused}" --in-flight "${DENSE_IN_FLIGHT:-1,3}" --iterations 400 \
     --solves-sizes "" > "$O/bench_dense.md" 2>&1 || status=1
   grep -E "copy|^\| (plant|full)" "$O/bench_dense.md"
 fi

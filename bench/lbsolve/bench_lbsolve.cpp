@@ -66,7 +66,7 @@ std::vector<int> parseList(const std::string& s) {
 }
 
 CudaScheme parseScheme(const std::string& s) {
-  for (CudaScheme c : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::PushFused, CudaScheme::Pull, CudaScheme::PullFused, CudaScheme::PullAligned})
+  for (CudaScheme c : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::PushFused, CudaScheme::Pull, CudaScheme::PullFused})
     if (s == cudaSchemeName(c)) return c;
   throw std::runtime_error("unknown scheme '" + s + "' (shift, shift-split, push, push-fused, pull, pull-fused)");
 }
@@ -80,7 +80,7 @@ int64_t occupiedNodes(const DenseLattice& L) {
 // Nominal device-memory bytes per lattice node and iteration (see the header comment).
 double bytesPerUpdate(const DenseLattice& L, const Device& dev, CudaScheme scheme) {
   if (!dev.isCuda() || scheme == CudaScheme::Push || scheme == CudaScheme::PushFused || scheme == CudaScheme::Pull ||
-      scheme == CudaScheme::PullFused || scheme == CudaScheme::PullAligned)
+      scheme == CudaScheme::PullFused)
     return (2 * kQ + 1) * 4.0;
   const Dims d = L.dims;
   double bytes = 0;

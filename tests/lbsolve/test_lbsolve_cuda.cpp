@@ -105,7 +105,7 @@ TEST(LbsolveCuda, cuda_MatchesCpuPerNodeOn64CubedPlantForAll19BasesRGB) {
 
 TEST(LbsolveCuda, cuda_EmptyOddSizedAndOccupiedBoundaryLatticesMatchCpu) {
   if (cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA GPU";
-  for (CudaScheme scheme : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::Pull, CudaScheme::PullAligned}) {
+  for (CudaScheme scheme : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::Pull}) {
     const std::string name = cudaSchemeName(scheme);
     // Odd sizes exercise the partial thread block in x and the boundary tests in every direction.
     const std::vector<float> zero(size_t(131) * 5 * 7, 0.f);
@@ -164,7 +164,7 @@ TEST(LbsolveCuda, cuda_MatchesCpuOnTheRealOakLattice) {
   const int cap = 2 * std::max({L.dims.nx, L.dims.ny, L.dims.nz});
   const auto specs = allSpecs(cap, 1e-4f);
   const auto cpu = runSolves(L, specs, kCpu);
-  for (CudaScheme scheme : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::Pull, CudaScheme::PullAligned})
+  for (CudaScheme scheme : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::Pull})
     compare(cpu, runSolves(L, specs, kGpu0, {}, scheme), std::string("oak 40, ") + cudaSchemeName(scheme));
   // push-fused, pull-fused: fixed iterations (their residuals differ in the last bits, which could move a stop).
   const auto fixed = allSpecs(cap, 0.f);
@@ -183,7 +183,7 @@ TEST(LbsolveCuda, cuda_SolvesInFlightKeepTheCpuBits) {
   const DenseLattice L = fixtures::denseOf(48, 48, 48, plant.density, plant.wood);
   const auto specs = allSpecs(96, 1e-4f);
   const auto cpu = runSolves(L, specs, kCpu);
-  for (CudaScheme scheme : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::Pull, CudaScheme::PullAligned})
+  for (CudaScheme scheme : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::Pull})
     for (int inFlight : {1, 3, 8}) {
       CudaRun run(scheme);
       run.solvesPerGpu = inFlight;

@@ -148,55 +148,6 @@ __global__ void __launch_bounds__(kBlockX) pullLeafKernel(const OmegaSet omega, 
   pullCollideStore<kLeafKind, Fused>(omega, L, c, f, out, x, y, z);
 }
 
-// The same with every global load of the arrivals aligned (PullAligned): thread x loads direction
-// m's slot of its own x in the row (y - c_my, z - c_mz), whole 128-byte tile lines; the value it
-// needs, that of x - c_mx, comes from the neighbouring lane by a shuffle, across the block's warps
-// through shared memory, and at the block's two ends from one scalar global load. The same values
-// as pullLoad, so the same bits. Blocks are uniform in (y, z), so a boundary row leaves as a block.
-__global__ void __launch_bounds__(kBlockX) pullLeafAlignedKernel(const OmegaSet omega, const PullLayout L,
-                                                                 const float* __restrict__ coded,
-                                                                 const float* __restrict__ in, float* __restrict__ out) {
-  const int x0 = int(blockIdx.x) * kBlockX, x = x0 + int(threadIdx.x);
-  const int y = int(blockIdx.y), z = int(blockIdx.z);
-  if (y < 1 || z < 1 || y > L.d.ny - 2 || z > L.d.nz - 2) return;  // boundary rows: fixed post values
-  constexpr int kWarps = kBlockX / 32;
-  __shared__ float first[kWarps][kQ], last[kWarps][kQ];  // each warp's lane 0 and lane 31 values
-  const int lane = int(threadIdx.x) % 32, warp = int(threadIdx.x) / 32;
-  const bool inRow = x < L.nxp;  // slots exist up to the padded row end
-  float v[kQ];
-  CANOPY_UNROLL
-  for (int m = 0; m < kQ; ++m)
-    v[m] = inRow ? in[pullSlot(L, m, x, y - lattice::dir(m, 1), z - lattice::dir(m, 2))] : 0.f;
-  const float c = x < L.d.nx ? coded[L.d.index(x, y, z)] : 0.f;
-  CANOPY_UNROLL
-  for (int m = 0; m < kQ; ++m) {
-    if (lattice::dir(m, 0) > 0 && lane == 31) last[warp][m] = v[m];
-    if (lattice::dir(m, 0) < 0 && lane == 0) first[warp][m] = v[m];
-  }
-  __syncthreads();
-  const bool node = x >= 1 && x <= L.d.nx - 2;  // interior node (y and z are interior)
-  float f[kQ];
-  CANOPY_UNROLL
-  for (int m = 0; m < kQ; ++m) {
-    const int dx = lattice::dir(m, 0);
-    if (dx == 0) {
-      f[m] = v[m];
-    } else if (dx > 0) {  // the value of x - 1
-      const float up = __shfl_up_sync(0xffffffffu, v[m], 1);
-      f[m] = lane > 0 ? up : (warp > 0 ? last[warp - 1][m] : 0.f);
-      if (lane == 0 && warp == 0 && node)
-        f[m] = in[pullSlot(L, m, x - 1, y - lattice::dir(m, 1), z - lattice::dir(m, 2))];
-    } else {  // the value of x + 1
-      const float down = __shfl_down_sync(0xffffffffu, v[m], 1);
-      f[m] = lane < 31 ? down : (warp < kWarps - 1 ? first[warp + 1][m] : 0.f);
-      if (lane == 31 && warp == kWarps - 1 && node)
-        f[m] = in[pullSlot(L, m, x + 1, y - lattice::dir(m, 1), z - lattice::dir(m, 2))];
-    }
-  }
-  if (!node || c < 0.f) return;  // not an interior node; a wood node: pullWoodKernel
-  pullCollideStore<kLeafKind, false>(omega, L, c, f, out, x, y, z);
-}
-
 template <bool Fused>
 __global__ void __launch_bounds__(kBlockX) pullWoodKernel(const OmegaSet omega, const PullLayout L,
                                                           const float* __restrict__ coded,
@@ -404,9 +355,7 @@ void uploadVector(cuda::DeviceBuffer<T>& buffer, const std::vector<T>& v) {
 int64_t blocksFor(int64_t count) { return (count + kBlockX - 1) / kBlockX; }
 
 bool isShift(CudaScheme scheme) { return scheme == CudaScheme::Shift || scheme == CudaScheme::ShiftSplit; }
-bool isPull(CudaScheme scheme) {
-  return scheme == CudaScheme::Pull || scheme == CudaScheme::PullFused || scheme == CudaScheme::PullAligned;
-}
+bool isPull(CudaScheme scheme) { return scheme == CudaScheme::Pull || scheme == CudaScheme::PullFused; }
 
 class CudaSolver final : public Solver {
  public:
@@ -555,12 +504,8 @@ class CudaSolver final : public Solver {
         CANOPY_CUDA_CHECK(cudaGetLastError());
       }
       const bool fused = scheme_ == CudaScheme::PullFused;
-      if (scheme_ == CudaScheme::PullAligned) {
-        pullLeafAlignedKernel<<<grid(), kBlockX, 0, stream_>>>(omega, pull_, coded_.data(), cur_, prev_);
-      } else {
-        (fused ? pullLeafKernel<true> : pullLeafKernel<false>)<<<grid(), kBlockX, 0, stream_>>>(omega, pull_, coded_.data(),
-                                                                                             cur_, prev_);
-      }
+      (fused ? pullLeafKernel<true> : pullLeafKernel<false>)<<<grid(), kBlockX, 0, stream_>>>(omega, pull_, coded_.data(),
+                                                                                           cur_, prev_);
       CANOPY_CUDA_CHECK(cudaGetLastError());
       const int64_t woodCount = int64_t(wood_.size());
       if (woodCount > 0) {

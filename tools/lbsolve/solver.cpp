@@ -21,7 +21,6 @@ const char* cudaSchemeName(CudaScheme scheme) {
     case CudaScheme::PushFused: return "push-fused";
     case CudaScheme::Pull: return "pull";
     case CudaScheme::PullFused: return "pull-fused";
-    case CudaScheme::PullAligned: return "pull-aligned";
   }
   return "?";
 }

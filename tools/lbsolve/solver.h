@@ -73,9 +73,7 @@ class Solver {
 //               variants that measure what the unfused arithmetic costs; not bitwise equal to the
 //               CPU reference.
 // All but PushFused and PullFused compute the CPU reference's bits (same IEEE operations in the same order).
-//   PullAligned: Pull with every global load of the arrivals aligned to the 32-node tiles, the
-//               one-node x shift done by warp shuffles (the CPU's bits; benchmark only).
-enum class CudaScheme { Shift, ShiftSplit, Push, PushFused, Pull, PullFused, PullAligned };
+enum class CudaScheme { Shift, ShiftSplit, Push, PushFused, Pull, PullFused };
 const char* cudaSchemeName(CudaScheme scheme);
 
 // How the CUDA solves run (bench/lbsolve/NOTES.md, fourth round, has the measurements). Nothing
