@@ -611,9 +611,7 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
   const float eps = fmaxf(1e-3f / cellsPerWorld, fabsf(t) * 1e-6f);
   const uint32_t level = segmentLevel(s, inst, m.depth, footprint);
   const V3 up = uo + ud * (t + eps);
-  // Cleared only where it holds something: the hold lives in the hit list (local memory on the
-  // device), and a store at every evaluated segment costs more than the load that avoids it.
-  if (hold && hold->until != -3.0e38f) hold->until = -3.0e38f;
+  if (hold) hold->until = -3.0e38f;
   CANOPY_PLAY_COUNT(s, segments, 1);
   if (!s.shade.descentCache || !descentCovers(cache, up, level)) {
     cache.d = descendResident(s, m, up, level, shading);

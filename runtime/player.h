@@ -43,7 +43,7 @@ struct PlayOptions {
   bool descentCache = true;          // reuse a ray's last octree descent per instance (same image, fewer descents)
   bool holdEmpty = true;             // keep an instance's empty leaf segment over later steps (same image, cone.h EmptyHold)
   bool exactLight = false;           // --light exact: the finest level of Haar-lit models from their Haar pages (the .chaar's values)
-  int pixelMinBlocks = 0;            // CUDA, map/no shadows: pixel kernel built for >= 6 or 8 blocks of 128 per SM (0: unconstrained)
+  int pixelMinBlocks = 0;            // CUDA, map/no shadows: pixel kernel built for >= 6 or 8 blocks of 128 per SM, -1 unconstrained (0: the default, 6 without LB light, unconstrained with it)
   int warpTileWidth = 8;             // CUDA: a warp renders a warpTileWidth x (32 / warpTileWidth) tile
   bool countWork = false;            // CPU only: count cones, steps, samples, shadow work (report "work")
   float background[3] = {0.60f, 0.72f, 0.85f};  // linear RGB behind the scene (PNG only)

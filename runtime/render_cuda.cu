@@ -37,10 +37,12 @@ struct PixelKernel {
 
 // The pixel kernel: 128 threads per block; kMinBlocks > 0 asks ptxas for at least that many
 // resident blocks per SM (__launch_bounds__: fewer registers, maybe spills), 0 leaves it free.
-// Map kernels: unconstrained by default (ptxas -v, sm_90: 81 registers without light, 128 with it),
-// which measured 1-4% faster on the forest and the grove than 6 blocks (77 registers; 80 and 12
-// bytes of spills with light) and 8 (64, with spills) (bench/play/NOTES.md); 6 and 8 remain timing
-// knobs (setPixelOccupancy). Shadow-cone kernel: 5 (96 registers, as before the light change).
+// Map kernels by default: 6 blocks for scenes without LB light, unconstrained with it (ptxas -v,
+// sm_90: 87 registers and a 2568-byte stack free, 12 bytes of spills at 6 blocks; 128 registers
+// with light). Measured on an H200 since a step keeps no per-hit segment array (bench/play/NOTES.md,
+// fourth round): 6 blocks took the forest orbit 43.19 -> 42.49 ms and the walk 15.41 -> 14.84 ms,
+// the grove (lit) 14.44 -> 14.90 ms; 8 blocks was slower on all three. setPixelOccupancy overrides
+// it (6, 8, or -1 for unconstrained). Shadow-cone kernel: 5 (96 registers, as before the light change).
 constexpr int kPixelBlock = 128;
 template <bool kWithCones, bool kWithLight, int kMinBlocks>
 __global__ void __launch_bounds__(kPixelBlock, kMinBlocks > 0 ? kMinBlocks : 1) pixelKernel(PixelKernel<kWithCones, kWithLight> k, int64_t n) {
@@ -201,9 +203,10 @@ class CudaBackend final : public Backend {
   }
   template <bool kWithLight>
   void launchMap(const PixelKernel<false, kWithLight>& k, int64_t threads) {
-    if (minBlocks_ >= 8)
+    const int blocks = minBlocks_ != 0 ? minBlocks_ : (kWithLight ? -1 : 6);
+    if (blocks >= 8)
       launchPixels<false, kWithLight, 8>(k, threads, compute_);
-    else if (minBlocks_ >= 6)
+    else if (blocks >= 6)
       launchPixels<false, kWithLight, 6>(k, threads, compute_);
     else
       launchPixels<false, kWithLight, 0>(k, threads, compute_);
