@@ -1021,7 +1021,7 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
     // Each segment with matter is shaded as it is found, into two sums over the segments: its
     // extinction x albedo (which the step's sun transmittance will scale) and that times its
     // indirect light (which depends on the segment alone: its light is sampled at its own point).
-    // No per-hit segment array is kept for a second pass (it was 16 x 56 bytes of local memory
+    // No per-hit segment array is kept for a second pass (it was 16 x 64 bytes of local memory
     // written at every step).
     float k = 0.0f, kAlbedo[3] = {0.0f, 0.0f, 0.0f}, kIndirect[3] = {0.0f, 0.0f, 0.0f};
     bool active = false;
