@@ -119,7 +119,7 @@ int64_t cudaSolverBytes(const DenseLattice& l, CudaScheme scheme) {
 }
 
 #ifndef CANOPY_HAS_CUDA
-std::unique_ptr<Solver> makeCudaSolver(const DenseLattice&, int, const CudaRun&) {
+std::unique_ptr<Solver> makeCudaSolver(const DenseLattice&, int, CudaScheme) {
   throw unsupported("--device cuda: this build of Canopy has no CUDA backend");
 }
 int64_t cudaFreeBytes(int) { return 0; }

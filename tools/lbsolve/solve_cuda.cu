@@ -345,6 +345,16 @@ __global__ void shiftGatherKernel(const ShiftOffsets s, const Dims d, float fixe
 }
 
 // ---- The solver ------------------------------------------------------------------------------
+}  // namespace
+
+int64_t cudaFreeBytes(int gpu) {
+  CANOPY_CUDA_CHECK(cudaSetDevice(gpu));
+  size_t freeBytes = 0, totalBytes = 0;
+  CANOPY_CUDA_CHECK(cudaMemGetInfo(&freeBytes, &totalBytes));
+  return int64_t(freeBytes);
+}
+
+namespace {
 
 template <class T>
 void uploadVector(cuda::DeviceBuffer<T>& buffer, const std::vector<T>& v) {
@@ -361,11 +371,9 @@ class CudaSolver final : public Solver {
  public:
   CudaSolver(const DenseLattice& l, int gpu, CudaScheme scheme)
       : lat_(l), gpu_(gpu), scheme_(scheme), pull_(pullLayout(l.dims)) {
-    CANOPY_CUDA_CHECK(cudaSetDevice(gpu));
-    size_t freeBytes = 0, totalBytes = 0;
-    CANOPY_CUDA_CHECK(cudaMemGetInfo(&freeBytes, &totalBytes));
+    const int64_t freeBytes = cudaFreeBytes(gpu);  // also makes `gpu` this thread's device
     const int64_t need = cudaSolverBytes(l, scheme);
-    if (need > int64_t(freeBytes))
+    if (need > freeBytes)
       throw runtimeError("GPU " + std::to_string(gpu) + " has " + std::to_string(freeBytes >> 20) +
                          " MiB free, the lattice needs " + std::to_string(need >> 20) + " MiB");
     const Dims d = l.dims;
@@ -602,15 +610,8 @@ class CudaSolver final : public Solver {
 
 }  // namespace
 
-std::unique_ptr<Solver> makeCudaSolver(const DenseLattice& lattice, int gpu, const CudaRun& run) {
-  return std::make_unique<CudaSolver>(lattice, gpu, run.scheme);
-}
-
-int64_t cudaFreeBytes(int gpu) {
-  CANOPY_CUDA_CHECK(cudaSetDevice(gpu));
-  size_t freeBytes = 0, totalBytes = 0;
-  CANOPY_CUDA_CHECK(cudaMemGetInfo(&freeBytes, &totalBytes));
-  return int64_t(freeBytes);
+std::unique_ptr<Solver> makeCudaSolver(const DenseLattice& lattice, int gpu, CudaScheme scheme) {
+  return std::make_unique<CudaSolver>(lattice, gpu, scheme);
 }
 
 }  // namespace canopy::lb

@@ -101,9 +101,9 @@ std::vector<SolveResult> runSolves(const DenseLattice& lattice, const std::vecto
         // The GPU's solvers are made one after another, so that each sees the memory the ones
         // before it took; a further solver is made only while another fits (with 1/8 to spare).
         std::vector<std::unique_ptr<Solver>> solvers;
-        solvers.push_back(makeCudaSolver(lattice, gpu, run));
+        solvers.push_back(makeCudaSolver(lattice, gpu, run.scheme));
         while (solvers.size() < std::min(perGpu, specs.size()) && cudaFreeBytes(gpu) >= need + need / 8)
-          solvers.push_back(makeCudaSolver(lattice, gpu, run));
+          solvers.push_back(makeCudaSolver(lattice, gpu, run.scheme));
         std::vector<std::thread> more;
         for (size_t s = 1; s < solvers.size(); ++s)
           more.emplace_back([&, s] { guarded([&] { work(*solvers[s]); }); });

@@ -90,7 +90,7 @@ struct CudaRun {
 
 std::unique_ptr<Solver> makeCpuSolver(const DenseLattice& lattice);
 // Throws canopy::Error(Unsupported) in a build without CUDA.
-std::unique_ptr<Solver> makeCudaSolver(const DenseLattice& lattice, int gpu, const CudaRun& run = CudaRun());
+std::unique_ptr<Solver> makeCudaSolver(const DenseLattice& lattice, int gpu, CudaScheme scheme = CudaScheme::Shift);
 
 // Bytes of device memory a CUDA solver needs for this lattice. Push: 2 x 19 floats + coded density
 // per node, the wood-node list, plus the stored-node index list and its values. Pull: the same with
