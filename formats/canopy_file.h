@@ -333,6 +333,53 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyVoxelIndex(uint32_t x, uint32_t y, u
   return x + kCanopyBrickVoxels * (y + kCanopyBrickVoxels * z);
 }
 
+// Empty-block masks: derived by the reader, not stored in the file. Sub-block (jx, jy, jz),
+// j in [0,4), is the node-local box [j/4, (j+1)/4) on each axis (2 brick voxels); a trilinear
+// sample anywhere in it (canopySampleBrick) reads only stored voxels 2j .. 2j+3 on each axis. Bit
+// jx + 4 jy + 16 jz of a brick's mask is set when all of those 4^3 voxels have density 0, so the
+// density is exactly 0 everywhere in the sub-block. An octant (o in {0,1}^3, the box [o/2, o/2 +
+// 1/2)) is empty when its eight sub-blocks are: bits kCanopyOctantBits << canopyOctantShift(o).
+// A set bit is a proof; a clear one proves nothing (a page without masks reads as all clear).
+constexpr uint64_t kCanopyOctantBits = 0x330033ull;  // sub-blocks {0,1} x {0,1} x {0,1}
+CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyOctantShift(uint32_t ox, uint32_t oy, uint32_t oz) {
+  return 2u * ox + 8u * oy + 32u * oz;
+}
+
+inline uint64_t canopyBrickEmptyBlocks(CanopyBrickView b) {
+  uint64_t mask = 0;
+  for (uint32_t jz = 0; jz < 4; ++jz)
+    for (uint32_t jy = 0; jy < 4; ++jy)
+      for (uint32_t jx = 0; jx < 4; ++jx) {
+        bool empty = true;
+        for (uint32_t z = 2 * jz; empty && z < 2 * jz + 4; ++z)
+          for (uint32_t y = 2 * jy; empty && y < 2 * jy + 4; ++y)
+            for (uint32_t x = 2 * jx; empty && x < 2 * jx + 4; ++x) empty = b.density[canopyVoxelIndex(x, y, z)] == 0.0f;
+        if (empty) mask |= 1ull << (jx + 4 * jy + 16 * jz);
+      }
+  return mask;
+}
+
+// Where a page image keeps its bricks' masks (8 bytes per brick slot, after the last brick's
+// payload, in the page's zero padding), or 0 when the padding is too small to hold them.
+inline uint32_t canopyBrickMaskOffset(uint32_t pageBytes, uint32_t bricksPerPage) {
+  const uint64_t off = sizeof(CanopyPageHeader) + uint64_t(bricksPerPage) * kCanopyBrickBytes;
+  return off + 8ull * bricksPerPage <= pageBytes ? uint32_t(off) : 0u;
+}
+
+// Fills a verified brick page image's masks (a reader does this after the checksum, so the image
+// no longer matches the file's bytes there; nothing checks them again). Other kinds: unchanged.
+inline void canopyFillBrickMasks(void* page, uint32_t pageBytes, uint32_t bricksPerPage) {
+  CanopyPageHeader ph;
+  std::memcpy(&ph, page, sizeof ph);
+  const uint32_t off = canopyBrickMaskOffset(pageBytes, bricksPerPage);
+  if (ph.kind != uint32_t(CanopyPageKind::Brick) || off == 0) return;
+  unsigned char* masks = static_cast<unsigned char*>(page) + off;
+  for (uint32_t i = 0; i < bricksPerPage; ++i) {
+    const uint64_t m = i < ph.itemCount ? canopyBrickEmptyBlocks(canopyBrickInPage(page, i)) : 0;
+    std::memcpy(masks + 8 * i, &m, 8);
+  }
+}
+
 // Trilinear sample of a brick at node-local coordinates l in [0,1]^3 (0 = the node's lower
 // corner). Density is interpolated; albedo and wood are density-weighted (the same weighting as the
 // MIP), so empty voxels do not darken a leaf's colour. At the centre of an interior voxel the result

@@ -177,6 +177,7 @@ struct ShadeParams {
   uint32_t shadowMapMaxVoxels;  // kShadowsMap: voxels grow until a grid has at most this many
   int descentCache;         // 1: reuse a ray's last descent per instance (DescentCache); 0: always descend
   int holdEmpty;            // 1: a primary ray keeps an instance's empty leaf segment to its end (EmptyHold)
+  int skipEmptyBlocks;      // 1: a brick step in an empty octant or sub-block goes to its end (emptyBlockBox)
   int exactLight;           // 1 (--light exact): the finest level of Haar-lit models samples the Haar pages
 };
 
@@ -202,7 +203,7 @@ struct ShadowMapView {
 // Work done by the CPU reference (bench-play --count-work; never counted on the GPU).
 struct WorkCounters {
   uint64_t cones, primarySteps, shadedSamples, segments, descents, brickSamples, shadowCones, shadowSteps, shadowMapLookups,
-      shadowMapSteps, heldSegments;
+      shadowMapSteps, heldSegments, emptySteps, zeroBrickSamples, emptyBlockSkips;
 };
 
 struct SceneView {
@@ -222,6 +223,7 @@ struct SceneView {
   uint32_t stamp;
   uint32_t pageBytes;
   uint32_t bricksPerPage;
+  uint32_t brickMaskOffset;      // where a brick page image keeps its empty-block masks (0: no masks, no skip)
   uint32_t lightItemsPerPage;
   uint32_t litModels;            // models with LB light (0: renderPixel takes the path without light code)
   SceneLightView light;
@@ -592,6 +594,30 @@ struct EmptyHold {
   uint32_t level;  // the leaf's level
 };
 
+// The empty box of a brick (formats/canopy_file.h, empty-block masks) that holds unit point u: its
+// octant if that is empty, else its sub-block if that is, else none (false). The brick covers
+// [brickLo, brickLo + brickSize) in unit space (inv = 1 / brickSize); lo/size: the box there.
+CANOPY_HD CANOPY_FORCEINLINE bool emptyBlockBox(uint64_t mask, V3 u, const float brickLo[3], float brickSize, float inv, float lo[3],
+                                                float& size) {
+  uint32_t j[3];
+  for (int a = 0; a < 3; ++a) {
+    const float q = floorf((comp(u, a) - brickLo[a]) * inv * 4.0f);
+    j[a] = q < 0.0f ? 0u : (q > 3.0f ? 3u : uint32_t(q));
+  }
+  const uint32_t shift = canopyOctantShift(j[0] >> 1, j[1] >> 1, j[2] >> 1);
+  if (((mask >> shift) & kCanopyOctantBits) == kCanopyOctantBits) {
+    size = 0.5f * brickSize;
+    for (int a = 0; a < 3; ++a) lo[a] = brickLo[a] + float(j[a] >> 1) * size;
+    return true;
+  }
+  if ((mask >> (j[0] + 4u * j[1] + 16u * j[2])) & 1u) {
+    size = 0.25f * brickSize;
+    for (int a = 0; a < 3; ++a) lo[a] = brickLo[a] + float(j[a]) * size;
+    return true;
+  }
+  return false;
+}
+
 // The octree level instanceSegment() picks for footprint (world) at instance `inst`.
 CANOPY_HD CANOPY_FORCEINLINE uint32_t segmentLevel(const SceneView& s, const InstanceView& inst, uint32_t depth, float footprint) {
   return levelForFootprint(depth, footprint / inst.cellWorld, s.shade.lodBias);
@@ -646,16 +672,42 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
     return g;
   }
   writeStamp(s.slotUsed + d.brickPoolSlot, s.stamp);
+  const float inv = 1.0f / d.brickSize;
+  if (s.shade.skipEmptyBlocks && s.brickMaskOffset != 0) {
+    float lo[3], size;
+    const uint64_t mask = *reinterpret_cast<const uint64_t*>(d.brickPage + s.brickMaskOffset + 8u * d.brickSlotInPage);
+    if (mask != 0 && emptyBlockBox(mask, up, d.brickLo, d.brickSize, inv, lo, size)) {
+      // k = 0 up to the empty box's end: the samples a march would take there all read 0
+      CANOPY_PLAY_COUNT(s, emptyBlockSkips, 1);
+      float tEnd = nodeExit(uo, ud, lo, size);
+      tEnd = tEnd > t + eps ? tEnd : t + eps;
+      tEnd = tEnd < tExit ? tEnd : tExit;
+      g.tEnd = tEnd < tout ? tEnd : tout;
+      g.k = 0.0f;
+      g.albedo[0] = g.albedo[1] = g.albedo[2] = 0.0f;
+      if (hold) {
+        // Evaluated again at t' < until with the footprint's level still >= d.level (so equal to it
+        // where the node has children: the level only gets coarser along the ray), the descent
+        // reaches the same node and brick, the point lies in the same box, and the same exits
+        // give the same end (the argument of EmptyHold).
+        const float epsEnd = fmaxf(1e-3f / cellsPerWorld, fabsf(g.tEnd) * 1e-6f);
+        hold->until = g.tEnd - 3.0f * epsEnd;
+        hold->end = g.tEnd;
+        hold->level = d.level;
+      }
+      return g;
+    }
+  }
   CANOPY_PLAY_COUNT(s, brickSamples, 1);
   const float voxelCells = float(m.rootCells >> 3) * d.size;  // this level's voxel, in cells
   float tEnd = t + s.shade.stepFactor * voxelCells / cellsPerWorld;
   tEnd = tEnd < tExit ? tEnd : tExit;
   tEnd = tEnd < tout ? tEnd : tout;
   const V3 um = uo + ud * (0.5f * (t + tEnd));
-  const float inv = 1.0f / d.brickSize;
   const CanopySample c = canopySampleBrick(canopyBrickInPage(d.brickPage, d.brickSlotInPage), (um.x - d.brickLo[0]) * inv,
                                            (um.y - d.brickLo[1]) * inv, (um.z - d.brickLo[2]) * inv);
   g.k = s.shade.sigma * c.density * cellsPerWorld;
+  if (c.density == 0.0f) CANOPY_PLAY_COUNT(s, zeroBrickSamples, 1);
   g.albedo[0] = c.albedo[0], g.albedo[1] = c.albedo[1], g.albedo[2] = c.albedo[2];
   g.tEnd = tEnd;
   if (shading && g.k > 0.0f) segmentLight(s, m, d, um, 0.5f * (t + tEnd), g);
@@ -1063,6 +1115,7 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
     }
     if (next > tMax) next = tMax;
     CANOPY_PLAY_COUNT(s, primarySteps, 1);
+    if (k == 0.0f) CANOPY_PLAY_COUNT(s, emptySteps, 1);
     const float dt = next - t;
     const float alpha = 1.0f - expf(-k * dt);
     if (alpha > 0.0f && T * alpha > kMinContribution) {

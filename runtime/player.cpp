@@ -258,6 +258,7 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   shade.shadowMapBias = o.shadowMapBias;
   shade.descentCache = o.descentCache ? 1 : 0;
   shade.holdEmpty = o.holdEmpty ? 1 : 0;
+  shade.skipEmptyBlocks = o.skipEmptyBlocks ? 1 : 0;
   shade.exactLight = o.exactLight ? 1 : 0;
   shade.shadowMapMaxVoxels = o.shadowMapMaxVoxels;
   WorkCounters work{};
@@ -358,7 +359,10 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
                  {"shadow_steps", work.shadowSteps},
                  {"shadow_map_lookups", work.shadowMapLookups},
                  {"shadow_map_steps", work.shadowMapSteps},
-                 {"held_segments", work.heldSegments}};
+                 {"held_segments", work.heldSegments},
+                 {"empty_steps", work.emptySteps},
+                 {"zero_brick_samples", work.zeroBrickSamples},
+                 {"empty_block_skips", work.emptyBlockSkips}};
   char line[512];
   std::snprintf(line, sizeof(line),
                 "canopy-play: %d frame(s) %dx%d on %s: median %.2f ms, p95 %.2f ms; cache hit rate %.1f%%; streamed %llu pages "

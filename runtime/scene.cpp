@@ -290,6 +290,7 @@ SceneView hostSceneView(const HostScene& s) {
   }
   v.pageBytes = s.pageBytes;
   v.bricksPerPage = s.bricksPerPage;
+  v.brickMaskOffset = canopyBrickMaskOffset(s.pageBytes, s.bricksPerPage);
   v.lightItemsPerPage = s.lightItemsPerPage > 0 ? s.lightItemsPerPage : 1;
   v.litModels = s.litModels;
   v.light = s.light;

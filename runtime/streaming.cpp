@@ -43,7 +43,9 @@ void Streamer::loaderMain() {
     lock.unlock();
     const auto t0 = std::chrono::steady_clock::now();
     try {
-      file_.readPage(job.page, staging_ + size_t(job.buffer) * pageBytes_);
+      unsigned char* page = staging_ + size_t(job.buffer) * pageBytes_;
+      file_.readPage(job.page, page);
+      canopyFillBrickMasks(page, pageBytes_, file_.header().bricksPerPage);  // cone.h's empty-block skip
       job.ok = true;
     } catch (const std::exception& e) {
       job.ok = false;
