@@ -337,14 +337,8 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyVoxelIndex(uint32_t x, uint32_t y, u
 // j in [0,4), is the node-local box [j/4, (j+1)/4) on each axis (2 brick voxels); a trilinear
 // sample anywhere in it (canopySampleBrick) reads only stored voxels 2j .. 2j+3 on each axis. Bit
 // jx + 4 jy + 16 jz of a brick's mask is set when all of those 4^3 voxels have density 0, so the
-// density is exactly 0 everywhere in the sub-block. An octant (o in {0,1}^3, the box [o/2, o/2 +
-// 1/2)) is empty when its eight sub-blocks are: bits kCanopyOctantBits << canopyOctantShift(o).
-// A set bit is a proof; a clear one proves nothing (a page without masks reads as all clear).
-constexpr uint64_t kCanopyOctantBits = 0x330033ull;  // sub-blocks {0,1} x {0,1} x {0,1}
-CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyOctantShift(uint32_t ox, uint32_t oy, uint32_t oz) {
-  return 2u * ox + 8u * oy + 32u * oz;
-}
-
+// density is exactly 0 everywhere in the sub-block. A set bit is a proof; a clear one proves
+// nothing (a page without masks reads as all clear).
 inline uint64_t canopyBrickEmptyBlocks(CanopyBrickView b) {
   uint64_t mask = 0;
   for (uint32_t jz = 0; jz < 4; ++jz)

@@ -177,7 +177,7 @@ struct ShadeParams {
   uint32_t shadowMapMaxVoxels;  // kShadowsMap: voxels grow until a grid has at most this many
   int descentCache;         // 1: reuse a ray's last descent per instance (DescentCache); 0: always descend
   int holdEmpty;            // 1: a primary ray keeps an instance's empty leaf segment to its end (EmptyHold)
-  int skipEmptyBlocks;      // 1: a brick step in an empty octant or sub-block goes to its end (emptyBlockBox)
+  int skipEmptyBlocks;      // 1: a brick step in an empty sub-block goes to the end of the empty run (emptyRunEnd)
   int exactLight;           // 1 (--light exact): the finest level of Haar-lit models samples the Haar pages
 };
 
@@ -594,28 +594,35 @@ struct EmptyHold {
   uint32_t level;  // the leaf's level
 };
 
-// The empty box of a brick (formats/canopy_file.h, empty-block masks) that holds unit point u: its
-// octant if that is empty, else its sub-block if that is, else none (false). The brick covers
-// [brickLo, brickLo + brickSize) in unit space (inv = 1 / brickSize); lo/size: the box there.
-CANOPY_HD CANOPY_FORCEINLINE bool emptyBlockBox(uint64_t mask, V3 u, const float brickLo[3], float brickSize, float inv, float lo[3],
-                                                float& size) {
-  uint32_t j[3];
+// The end of the run of empty sub-blocks (formats/canopy_file.h, empty-block masks) of a brick
+// that the ray o + t d (unit space) crosses from unit point u on: false when u's sub-block is not
+// empty, else true and tEnd = where the ray enters the first sub-block that is not, or leaves the
+// brick ([brickLo, brickLo + brickSize), inv = 1 / brickSize). A 3D-DDA over the 4^3 sub-blocks;
+// each plane's crossing is computed from the plane alone (as nodeExit does), so a walk that starts
+// in a later sub-block of the same run ends at the same value.
+CANOPY_HD inline bool emptyRunEnd(uint64_t mask, V3 uo, V3 ud, V3 u, const float brickLo[3], float brickSize, float inv, float& tEnd) {
+  int j[3];
   for (int a = 0; a < 3; ++a) {
     const float q = floorf((comp(u, a) - brickLo[a]) * inv * 4.0f);
-    j[a] = q < 0.0f ? 0u : (q > 3.0f ? 3u : uint32_t(q));
+    j[a] = q < 0.0f ? 0 : (q > 3.0f ? 3 : int(q));
   }
-  const uint32_t shift = canopyOctantShift(j[0] >> 1, j[1] >> 1, j[2] >> 1);
-  if (((mask >> shift) & kCanopyOctantBits) == kCanopyOctantBits) {
-    size = 0.5f * brickSize;
-    for (int a = 0; a < 3; ++a) lo[a] = brickLo[a] + float(j[a] >> 1) * size;
-    return true;
+  if (!((mask >> (j[0] + 4 * j[1] + 16 * j[2])) & 1u)) return false;
+  const float q = 0.25f * brickSize;
+  float tn[3];
+  int st[3];
+  for (int a = 0; a < 3; ++a) {
+    const float da = comp(ud, a);
+    st[a] = fabsf(da) < 1e-30f ? 0 : (da > 0.0f ? 1 : -1);
+    tn[a] = st[a] == 0 ? 3.0e38f : (brickLo[a] + float(j[a] + (st[a] > 0)) * q - comp(uo, a)) / da;
   }
-  if ((mask >> (j[0] + 4u * j[1] + 16u * j[2])) & 1u) {
-    size = 0.25f * brickSize;
-    for (int a = 0; a < 3; ++a) lo[a] = brickLo[a] + float(j[a]) * size;
-    return true;
+  for (;;) {
+    int a = tn[1] < tn[0] ? 1 : 0;
+    a = tn[2] < tn[a] ? 2 : a;
+    tEnd = tn[a];
+    j[a] += st[a];
+    if (st[a] == 0 || j[a] < 0 || j[a] > 3 || !((mask >> (j[0] + 4 * j[1] + 16 * j[2])) & 1u)) return true;
+    tn[a] = (brickLo[a] + float(j[a] + (st[a] > 0)) * q - comp(uo, a)) / comp(ud, a);
   }
-  return false;
 }
 
 // The octree level instanceSegment() picks for footprint (world) at instance `inst`.
@@ -674,12 +681,11 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
   writeStamp(s.slotUsed + d.brickPoolSlot, s.stamp);
   const float inv = 1.0f / d.brickSize;
   if (s.shade.skipEmptyBlocks && s.brickMaskOffset != 0) {
-    float lo[3], size;
     const uint64_t mask = *reinterpret_cast<const uint64_t*>(d.brickPage + s.brickMaskOffset + 8u * d.brickSlotInPage);
-    if (mask != 0 && emptyBlockBox(mask, up, d.brickLo, d.brickSize, inv, lo, size)) {
-      // k = 0 up to the empty box's end: the samples a march would take there all read 0
+    float tEnd;
+    if (mask != 0 && emptyRunEnd(mask, uo, ud, up, d.brickLo, d.brickSize, inv, tEnd)) {
+      // k = 0 up to the empty run's end: the samples a march would take there all read 0
       CANOPY_PLAY_COUNT(s, emptyBlockSkips, 1);
-      float tEnd = nodeExit(uo, ud, lo, size);
       tEnd = tEnd > t + eps ? tEnd : t + eps;
       tEnd = tEnd < tExit ? tEnd : tExit;
       g.tEnd = tEnd < tout ? tEnd : tout;
@@ -688,8 +694,10 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
       if (hold) {
         // Evaluated again at t' < until with the footprint's level still >= d.level (so equal to it
         // where the node has children: the level only gets coarser along the ray), the descent
-        // reaches the same node and brick, the point lies in the same box, and the same exits
-        // give the same end (the argument of EmptyHold).
+        // reaches the same node and brick, the point lies in a later sub-block of the same run, and
+        // the walk from there ends at the same plane, computed alike (the argument of EmptyHold;
+        // where the ray grazes a sub-block edge within float rounding, the point's sub-block may
+        // be the diagonal neighbour of the walk's, and the two could differ).
         const float epsEnd = fmaxf(1e-3f / cellsPerWorld, fabsf(g.tEnd) * 1e-6f);
         hold->until = g.tEnd - 3.0f * epsEnd;
         hold->end = g.tEnd;
