@@ -11,18 +11,11 @@
 #   2. bench-play, 1920x1080, 1 GiB cache, FRAMES (120) frames, the variants in PLAY_VARIANTS
 #      (default: the skip, and without it for comparison; each scene's last frame is compared with
 #      the first variant's: RMS).
-#   3. PROFILE=1: Nsight Compute on one orbit frame's pixel kernel, where ncu is installed (PHASES:
-#      "tests play" by default; with PROFILE=1 and PHASES=none, a short bench-play run (FRAMES=2)
-#      only writes the forest).
+#   3. PROFILE=1: Nsight Compute on one orbit frame's pixel kernel, where ncu is installed.
 set -u
 source "$(dirname "$0")/gpu-common.sh"
-PHASES=${PHASES:-tests play}
-has() { [[ " $PHASES " == *" $1 "* ]]; }
-if has tests; then
 step tests
 gtest test_play_cuda "$BIN/test_play_cuda"
-fi
-if has play || [[ ${PROFILE:-0} = 1 ]]; then
 step play
 extra=()
 [[ -e $B/share/grove-in/grove.canopy ]] && extra=(--extra grove="$B/share/grove-in/grove.canopy")
@@ -30,22 +23,20 @@ timeout 400 bench-play "$O/bench" --device cuda --size 1920x1080 --frames "${FRA
   ${PLAY_VARIANTS:---shadows map --shadows map-noskip} "${extra[@]}" 2> "$O/bench_play.err" | tee "$O/bench_play.md" || status=1
 for n in plant forest-orbit forest-walk grove; do [[ -e $O/bench/$n.png ]] && cp "$O/bench/$n.png" "$O/play-$n.png"; done
 cp "$O/bench/results.json" "$O/bench_play.json" 2>/dev/null
-fi
 if [[ ${PROFILE:-0} = 1 ]]; then
   step profile
   NCU=$(command -v ncu || ls /usr/local/cuda/bin/ncu 2>/dev/null || true)
   if [[ -n $NCU ]]; then
-    mkdir -p "$O/ncu"
     timeout 200 "$NCU" --kernel-name regex:'[Pp]ixel' --launch-skip 9 --launch-count 1 \
-      --section SpeedOfLight --section Occupancy --section WarpStateStats --section LaunchStats --section MemoryWorkloadAnalysis --section ComputeWorkloadAnalysis --section InstructionStats \
+      --section SpeedOfLight --section Occupancy --section WarpStateStats --section LaunchStats --section MemoryWorkloadAnalysis \
       canopy-play "$O/bench/forest.canopy" --device cuda --size 1920x1080 --frames 10 --camera orbit:elevation=30,distance=55 \
-      -o "$O/ncu/f_%04d.exr" > "$O/ncu.txt" 2>&1 || echo "ncu failed (see ncu.txt)"
-    grep -vE "^==PROF==" "$O/ncu.txt" | tail -150
+      -o "$O/ncu-frame.exr" > "$O/ncu.txt" 2>&1 || echo "ncu failed (see ncu.txt)"
+    grep -vE "^==PROF==" "$O/ncu.txt" | tail -80
   else
     echo "no ncu on this host"
   fi
 fi
-rm -rf "$O/bench" "$O/ncu"
+rm -rf "$O/bench" "$O"/ncu-frame*.exr
 date -u
 [[ $status = 0 ]] && rm -f "$O"/test_*.log
 exit $status

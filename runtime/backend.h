@@ -39,8 +39,6 @@ class Backend {
   // CUDA: the pixel kernel compiled for at least this many blocks of 128 threads per SM (6 or 8;
   // 0, the default: unconstrained; map and no-shadow modes; a timing knob)
   virtual void setPixelOccupancy(int minBlocks) { (void)minBlocks; }
-  // CUDA: a lane whose cone has finished takes the next pixel (render_cuda.cu pixelRefillKernel).
-  virtual void setPixelRefill(bool refill) { (void)refill; }
   // Counts the work of the following renders into `work` (CPU reference only; others ignore it).
   virtual void countWork(WorkCounters* work) { (void)work; }
   // The last render's sun transmittance map (kShadowsMap; dim all 1 otherwise).

@@ -1013,6 +1013,11 @@ CANOPY_HD inline float shadowMapLookup(const ShadowMapView& m, V3 p) {
   return c0 + (c1 - c0) * f[2];
 }
 
+struct ConeResult {
+  float rgb[3];           // premultiplied radiance
+  float transmittance;
+};
+
 // Transmittance from p towards the sun (shadow cone, footprint starts at `footprint0`).
 CANOPY_HD inline float shadowTransmittance(const SceneView& s, V3 p, float footprint0) {
   const V3 d = s.shade.toSun;
@@ -1058,114 +1063,93 @@ CANOPY_HD inline float shadowTransmittance(const SceneView& s, V3 p, float footp
 // kWithCones: compiled with the shadow-cone path (kShadowsCone); without it that mode is treated
 // as kShadowsOff, so the CUDA kernel of the other modes carries neither the shadow cone's instance
 // walk (its hit list and descent caches in local memory) nor its registers. Same code otherwise.
-//
-// The march is a state (ConeState) advanced one step at a time (coneStep), so that a GPU thread
-// whose cone has finished can take the next pixel while the other lanes of its warp still march
-// (render_cuda.cu); renderPixelT runs the steps of one cone to the end. Either way a cone's result
-// is computed by the same operations in the same order.
-struct ConeState {
-  InstanceWalk w;
-  V3 o, d;
-  float pixelAngle, tMax;
-  float t, T;
-  float sunT, shadowT, shadowSpacing;
-  float rgb[3];  // premultiplied radiance so far
-};
-
-CANOPY_HD inline void coneBegin(const SceneView& s, ConeState& c, V3 o, V3 d, float pixelAngle, float tMax) {
-  c.rgb[0] = c.rgb[1] = c.rgb[2] = 0.0f;
-  CANOPY_PLAY_COUNT(s, cones, 1);
-  c.o = o;
-  c.d = d;
-  c.pixelAngle = pixelAngle;
-  c.tMax = tMax;
-  walkBegin(s, c.w, o, d, 0.0f, tMax);
-  c.t = 0.0f;
-  c.T = 1.0f;
-  c.sunT = 1.0f, c.shadowT = -3.0e38f, c.shadowSpacing = 0.0f;
-}
-
-// One step of the march (or one skip of an empty grid cell); false when the cone has finished.
 template <bool kWithCones, bool kWithLight = true>
-CANOPY_HD inline bool coneStep(const SceneView& s, ConeState& c) {
-  InstanceWalk& w = c.w;
-  const V3 o = c.o, d = c.d;
-  const float tMax = c.tMax;
-  float t = c.t;
-  walkRetire(w, t);
-  if (w.count == 0 && w.done) return false;
-  float next = w.done ? tMax : w.tCellExit;
-  // Each segment with matter is shaded as it is found, into two sums over the segments: its
-  // extinction x albedo (which the step's sun transmittance will scale) and that times its
-  // indirect light (which depends on the segment alone: its light is sampled at its own point).
-  // No per-hit segment array is kept for a second pass (it was 16 x 64 bytes of local memory
-  // written at every step).
-  float k = 0.0f, kAlbedo[3] = {0.0f, 0.0f, 0.0f}, kIndirect[3] = {0.0f, 0.0f, 0.0f};
-  bool active = false;
-  const float footprint = t * c.pixelAngle;
-  float minCell = 3.0e38f;
-  for (int h = 0; h < w.count; ++h) {
-    Hit& hit = w.hits[h];
-    if (hit.tin > t) {
-      next = hit.tin < next ? hit.tin : next;
+CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixelAngle, float tMax) {
+  ConeResult r;
+  r.rgb[0] = r.rgb[1] = r.rgb[2] = 0.0f;
+  r.transmittance = 1.0f;
+  CANOPY_PLAY_COUNT(s, cones, 1);
+  InstanceWalk w;
+  walkBegin(s, w, o, d, 0.0f, tMax);
+  float t = 0.0f;
+  float T = 1.0f;
+  float sunT = 1.0f, shadowT = -3.0e38f, shadowSpacing = 0.0f;
+  while (true) {
+    walkRetire(w, t);
+    if (w.count == 0 && w.done) break;
+    float next = w.done ? tMax : w.tCellExit;
+    // Each segment with matter is shaded as it is found, into two sums over the segments: its
+    // extinction x albedo (which the step's sun transmittance will scale) and that times its
+    // indirect light (which depends on the segment alone: its light is sampled at its own point).
+    // No per-hit segment array is kept for a second pass (it was 16 x 64 bytes of local memory
+    // written at every step).
+    float k = 0.0f, kAlbedo[3] = {0.0f, 0.0f, 0.0f}, kIndirect[3] = {0.0f, 0.0f, 0.0f};
+    bool active = false;
+    const float footprint = t * pixelAngle;
+    float minCell = 3.0e38f;
+    for (int h = 0; h < w.count; ++h) {
+      Hit& hit = w.hits[h];
+      if (hit.tin > t) {
+        next = hit.tin < next ? hit.tin : next;
+        continue;
+      }
+      active = true;
+      const InstanceView& inst = s.instances[hit.instance];
+      minCell = inst.cellWorld < minCell ? inst.cellWorld : minCell;
+      if (t < hit.hold.until && segmentLevel(s, inst, s.models[inst.model].depth, footprint) >= hit.hold.level) {
+        // the same empty segment as at the previous step (EmptyHold): k = 0 up to its end
+        CANOPY_PLAY_COUNT(s, heldSegments, 1);
+        next = hit.hold.end < next ? hit.hold.end : next;
+        continue;
+      }
+      const Segment g = instanceSegment(s, inst, o, d, t, hit.tout, footprint, true, w.caches[hit.slot],
+                                        s.shade.holdEmpty ? &hit.hold : nullptr);
+      next = g.tEnd < next ? g.tEnd : next;
+      if (g.k <= 0.0f) continue;
+      k += g.k;
+      float ind[3];
+      segmentIndirect<kWithLight>(s, inst, g, o, d, ind);
+      for (int c = 0; c < 3; ++c) {
+        const float ka = g.k * g.albedo[c];
+        kAlbedo[c] += ka;
+        kIndirect[c] += ka * ind[c];
+      }
+    }
+    if (!active && w.count == 0) {
+      if (w.done) break;
+      t = w.tCellExit;
+      walkAdvance(s, w, o, d, t);
       continue;
     }
-    active = true;
-    const InstanceView& inst = s.instances[hit.instance];
-    minCell = inst.cellWorld < minCell ? inst.cellWorld : minCell;
-    if (t < hit.hold.until && segmentLevel(s, inst, s.models[inst.model].depth, footprint) >= hit.hold.level) {
-      // the same empty segment as at the previous step (EmptyHold): k = 0 up to its end
-      CANOPY_PLAY_COUNT(s, heldSegments, 1);
-      next = hit.hold.end < next ? hit.hold.end : next;
-      continue;
+    if (next > tMax) next = tMax;
+    CANOPY_PLAY_COUNT(s, primarySteps, 1);
+    if (k == 0.0f) CANOPY_PLAY_COUNT(s, emptySteps, 1);
+    const float dt = next - t;
+    const float alpha = 1.0f - expf(-k * dt);
+    if (alpha > 0.0f && T * alpha > kMinContribution) {
+      const float tm = t + 0.5f * dt;
+      const V3 p = o + d * tm;
+      CANOPY_PLAY_COUNT(s, shadedSamples, 1);
+      if (s.shade.shadows == kShadowsMap) {
+        sunT = shadowMapLookup(s.shadowMap, p);
+        CANOPY_PLAY_COUNT(s, shadowMapLookups, 1);
+      } else if (kWithCones && s.shade.shadows == kShadowsCone && !(tm - shadowT < shadowSpacing)) {
+        // One shadow cone per shadow interval: samples closer than about a voxel (1.5 cells of the
+        // nearest active instance, or two footprints) to the last shadow origin reuse its value.
+        sunT = shadowTransmittance(s, p, footprint);
+        shadowT = tm;
+        shadowSpacing = 2.0f * footprint > 1.5f * minCell ? 2.0f * footprint : 1.5f * minCell;
+      }
+      const float scale = T * alpha / k;
+      for (int c = 0; c < 3; ++c) r.rgb[c] += scale * (kAlbedo[c] * s.shade.direct[c] * sunT + kIndirect[c]);
     }
-    const Segment g = instanceSegment(s, inst, o, d, t, hit.tout, footprint, true, w.caches[hit.slot],
-                                      s.shade.holdEmpty ? &hit.hold : nullptr);
-    next = g.tEnd < next ? g.tEnd : next;
-    if (g.k <= 0.0f) continue;
-    k += g.k;
-    float ind[3];
-    segmentIndirect<kWithLight>(s, inst, g, o, d, ind);
-    for (int ch = 0; ch < 3; ++ch) {
-      const float ka = g.k * g.albedo[ch];
-      kAlbedo[ch] += ka;
-      kIndirect[ch] += ka * ind[ch];
-    }
+    T *= 1.0f - alpha;
+    t = next;
+    if (T < s.shade.stopT || t >= tMax) break;
+    while (!w.done && t >= w.tCellExit) walkAdvance(s, w, o, d, t);
   }
-  if (!active && w.count == 0) {
-    if (w.done) return false;
-    c.t = w.tCellExit;
-    walkAdvance(s, w, o, d, c.t);
-    return true;
-  }
-  if (next > tMax) next = tMax;
-  CANOPY_PLAY_COUNT(s, primarySteps, 1);
-  if (k == 0.0f) CANOPY_PLAY_COUNT(s, emptySteps, 1);
-  const float dt = next - t;
-  const float alpha = 1.0f - expf(-k * dt);
-  if (alpha > 0.0f && c.T * alpha > kMinContribution) {
-    const float tm = t + 0.5f * dt;
-    const V3 p = o + d * tm;
-    CANOPY_PLAY_COUNT(s, shadedSamples, 1);
-    if (s.shade.shadows == kShadowsMap) {
-      c.sunT = shadowMapLookup(s.shadowMap, p);
-      CANOPY_PLAY_COUNT(s, shadowMapLookups, 1);
-    } else if (kWithCones && s.shade.shadows == kShadowsCone && !(tm - c.shadowT < c.shadowSpacing)) {
-      // One shadow cone per shadow interval: samples closer than about a voxel (1.5 cells of the
-      // nearest active instance, or two footprints) to the last shadow origin reuse its value.
-      c.sunT = shadowTransmittance(s, p, footprint);
-      c.shadowT = tm;
-      c.shadowSpacing = 2.0f * footprint > 1.5f * minCell ? 2.0f * footprint : 1.5f * minCell;
-    }
-    const float scale = c.T * alpha / k;
-    for (int ch = 0; ch < 3; ++ch) c.rgb[ch] += scale * (kAlbedo[ch] * s.shade.direct[ch] * c.sunT + kIndirect[ch]);
-  }
-  c.T *= 1.0f - alpha;
-  t = next;
-  c.t = t;
-  if (c.T < s.shade.stopT || t >= tMax) return false;
-  while (!w.done && t >= w.tCellExit) walkAdvance(s, w, o, d, t);
-  return true;
+  r.transmittance = T;
+  return r;
 }
 
 // ------------------------------------------------------------------------------------------------
@@ -1187,31 +1171,19 @@ CANOPY_HD inline V3 cameraRay(const CameraView& c, int x, int y, float& footprin
   return d * (1.0f / len);
 }
 
-// The cone of pixel i of the frame (i = x + width y): begun into c, and its result written into
-// rgba once coneStep() returned false (premultiplied RGB, alpha = 1 - T).
-CANOPY_HD inline void pixelConeBegin(const SceneView& s, const CameraView& cam, int64_t i, ConeState& c) {
-  const int x = int(i % cam.width), y = int(i / cam.width);
-  float fpPerT;
-  const V3 d = cameraRay(cam, x, y, fpPerT);
-  coneBegin(s, c, cam.position, d, fpPerT, 3.0e37f);
-}
-CANOPY_HD CANOPY_FORCEINLINE void pixelConeEnd(const ConeState& c, int64_t i, float* rgba) {
-  rgba[4 * i + 0] = c.rgb[0];
-  rgba[4 * i + 1] = c.rgb[1];
-  rgba[4 * i + 2] = c.rgb[2];
-  rgba[4 * i + 3] = 1.0f - c.T;
-}
-
-// Renders pixel i of the frame into rgba. kWithCones must be true when s.shade.shadows ==
-// kShadowsCone, kWithLight when s.litModels > 0 (renderPixel() picks them; the CUDA backend
-// launches the kernel of the mode and scene).
+// Renders pixel i of the frame into rgba (premultiplied RGB, alpha = 1 - T). kWithCones must be
+// true when s.shade.shadows == kShadowsCone, kWithLight when s.litModels > 0 (renderPixel() picks
+// them; the CUDA backend launches the kernel of the mode and scene).
 template <bool kWithCones, bool kWithLight>
-CANOPY_HD inline void renderPixelT(const SceneView& s, const CameraView& cam, int64_t i, float* rgba) {
-  ConeState c;
-  pixelConeBegin(s, cam, i, c);
-  while (coneStep<kWithCones, kWithLight>(s, c)) {
-  }
-  pixelConeEnd(c, i, rgba);
+CANOPY_HD inline void renderPixelT(const SceneView& s, const CameraView& c, int64_t i, float* rgba) {
+  const int x = int(i % c.width), y = int(i / c.width);
+  float fpPerT;
+  const V3 d = cameraRay(c, x, y, fpPerT);
+  const ConeResult r = traceCone<kWithCones, kWithLight>(s, c.position, d, fpPerT, 3.0e37f);
+  rgba[4 * i + 0] = r.rgb[0];
+  rgba[4 * i + 1] = r.rgb[1];
+  rgba[4 * i + 2] = r.rgb[2];
+  rgba[4 * i + 3] = 1.0f - r.transmittance;
 }
 
 CANOPY_HD inline void renderPixel(const SceneView& s, const CameraView& c, int64_t i, float* rgba) {

@@ -265,7 +265,6 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   if (o.countWork) backend->countWork(&work);
   backend->setPixelTile(o.warpTileWidth, 32 / o.warpTileWidth);
   backend->setPixelOccupancy(o.pixelMinBlocks);
-  backend->setPixelRefill(o.refillLanes);
 
   std::vector<double> frameMs;
   std::vector<float> image;

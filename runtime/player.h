@@ -45,7 +45,6 @@ struct PlayOptions {
   bool skipEmptyBlocks = true;       // a brick step in an empty 2-voxel sub-block goes to the end of the empty run (cone.h emptyRunEnd)
   bool exactLight = false;           // --light exact: the finest level of Haar-lit models from their Haar pages (the .chaar's values)
   int pixelMinBlocks = 0;            // CUDA, map/no shadows: pixel kernel built for >= 6 or 8 blocks of 128 per SM, -1 unconstrained (0: the default, 6 without LB light, unconstrained with it)
-  bool refillLanes = true;           // CUDA: a lane whose cone has finished takes the next pixel (same image)
   int warpTileWidth = 8;             // CUDA: a warp renders a warpTileWidth x (32 / warpTileWidth) tile
   bool countWork = false;            // CPU only: count cones, steps, samples, shadow work (report "work")
   float background[3] = {0.60f, 0.72f, 0.85f};  // linear RGB behind the scene (PNG only)

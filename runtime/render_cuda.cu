@@ -25,17 +25,13 @@ struct PixelKernel {
   CameraView camera;
   float* out;
   int tilesX, tileW, tileH;
-  // The frame pixel of thread j, or -1 (the part of an edge tile outside the image).
-  __device__ int64_t pixelOf(int64_t j) const {
+  __device__ void operator()(int64_t j) const {
     const int64_t tile = j / (tileW * tileH);
     const int lane = int(j % (tileW * tileH));
     const int x = int(tile % tilesX) * tileW + lane % tileW;
     const int y = int(tile / tilesX) * tileH + lane / tileW;
-    return x >= camera.width || y >= camera.height ? -1 : int64_t(y) * camera.width + x;
-  }
-  __device__ void operator()(int64_t j) const {
-    const int64_t i = pixelOf(j);
-    if (i >= 0) renderPixelT<kWithCones, kWithLight>(scene, camera, i, out);
+    if (x >= camera.width || y >= camera.height) return;
+    renderPixelT<kWithCones, kWithLight>(scene, camera, int64_t(y) * camera.width + x, out);
   }
 };
 
@@ -52,61 +48,6 @@ template <bool kWithCones, bool kWithLight, int kMinBlocks>
 __global__ void __launch_bounds__(kPixelBlock, kMinBlocks > 0 ? kMinBlocks : 1) pixelKernel(PixelKernel<kWithCones, kWithLight> k, int64_t n) {
   const int64_t i = blockIdx.x * int64_t(kPixelBlock) + threadIdx.x;
   if (i < n) k(i);
-}
-
-// The same pixels with lanes refilled: a resident set of blocks whose threads take pixels (in the
-// thread order j above) from a counter, a warp at a time, and a lane whose cone has finished takes
-// the next pixel at once instead of idling until the warp's longest cone ends. In the forest orbit
-// (Nsight Compute, bench/play/NOTES.md, fifth round) a warp had 9.3 of its 32 threads active on
-// average: most lanes wait for a few long cones. Each pixel's cone is the same computation
-// (coneStep), so the image is the same bit for bit; only which thread runs it changes.
-template <bool kWithCones, bool kWithLight, int kMinBlocks>
-__global__ void __launch_bounds__(kPixelBlock, kMinBlocks > 0 ? kMinBlocks : 1)
-    pixelRefillKernel(PixelKernel<kWithCones, kWithLight> k, int64_t n, unsigned long long* counter) {
-  const unsigned lane = threadIdx.x & 31u;
-  ConeState c;
-  int64_t pixel = -1;  // this lane's pixel (-1: none)
-  bool more = true;    // the counter has not run out (the same in every lane of the warp)
-  for (;;) {
-    const unsigned need = __ballot_sync(0xFFFFFFFFu, pixel < 0);
-    if (need != 0u && more) {
-      const int leader = __ffs(int(need)) - 1;
-      unsigned long long base = 0;
-      if (int(lane) == leader) base = atomicAdd(counter, (unsigned long long)__popc(need));
-      base = __shfl_sync(0xFFFFFFFFu, base, leader);
-      if (base + __popc(need) >= (unsigned long long)n) more = false;
-      if (pixel < 0) {
-        const unsigned long long j = base + __popc(need & ((1u << lane) - 1u));
-        if (j < (unsigned long long)n) {
-          pixel = k.pixelOf(int64_t(j));
-          if (pixel >= 0) pixelConeBegin(k.scene, k.camera, pixel, c);
-        }
-      }
-    }
-    if (__ballot_sync(0xFFFFFFFFu, pixel >= 0) == 0u) {
-      if (!more) return;
-      continue;  // only pixels outside the image were taken: take more
-    }
-    if (pixel >= 0 && !coneStep<kWithCones, kWithLight>(k.scene, c)) {
-      pixelConeEnd(c, pixel, k.out);
-      pixel = -1;
-    }
-  }
-}
-
-template <bool kWithCones, bool kWithLight, int kMinBlocks>
-void launchPixelsRefill(const PixelKernel<kWithCones, kWithLight>& k, int64_t n, unsigned long long* counter, cudaStream_t stream) {
-  if (n <= 0) return;
-  // as many blocks as are resident at once on the device (a few microseconds to ask)
-  int device = 0, sms = 0, perSm = 0;
-  CANOPY_CUDA_CHECK(cudaGetDevice(&device));
-  CANOPY_CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
-  CANOPY_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&perSm, pixelRefillKernel<kWithCones, kWithLight, kMinBlocks>, kPixelBlock, 0));
-  const int64_t blocks = int64_t(sms) * (perSm > 0 ? perSm : 1);
-  CANOPY_CUDA_CHECK(cudaMemsetAsync(counter, 0, sizeof(unsigned long long), stream));
-  const int64_t needed = (n + kPixelBlock - 1) / kPixelBlock;
-  pixelRefillKernel<kWithCones, kWithLight, kMinBlocks><<<unsigned(needed < blocks ? needed : blocks), kPixelBlock, 0, stream>>>(k, n, counter);
-  CANOPY_CUDA_CHECK(cudaGetLastError());
 }
 
 template <bool kWithCones, bool kWithLight, int kMinBlocks>
@@ -251,12 +192,8 @@ class CudaBackend final : public Backend {
     const int64_t threads = int64_t(tilesX) * tilesY * tileW_ * tileH_;
     // one kernel per shadow path and per light (renderPixelT): the map's kernel for a scene
     // without lit models has neither shadow-cone nor LB light code
-    if (counter_.size() == 0) counter_.resize(1);
     if (shade.shadows == kShadowsCone) {
-      if (refill_)
-        launchPixelsRefill<true, true, 5>(PixelKernel<true, true>{v, camera, image_.data(), tilesX, tileW_, tileH_}, threads, counter_.data(), compute_);
-      else
-        launchPixels<true, true, 5>(PixelKernel<true, true>{v, camera, image_.data(), tilesX, tileW_, tileH_}, threads, compute_);
+      launchPixels<true, true, 5>(PixelKernel<true, true>{v, camera, image_.data(), tilesX, tileW_, tileH_}, threads, compute_);
     } else if (scene.litModels > 0) {
       launchMap(PixelKernel<false, true>{v, camera, image_.data(), tilesX, tileW_, tileH_}, threads);
     } else {
@@ -267,20 +204,12 @@ class CudaBackend final : public Backend {
   template <bool kWithLight>
   void launchMap(const PixelKernel<false, kWithLight>& k, int64_t threads) {
     const int blocks = minBlocks_ != 0 ? minBlocks_ : (kWithLight ? -1 : 6);
-    if (refill_) {
-      if (blocks >= 8)
-        launchPixelsRefill<false, kWithLight, 8>(k, threads, counter_.data(), compute_);
-      else if (blocks >= 6)
-        launchPixelsRefill<false, kWithLight, 6>(k, threads, counter_.data(), compute_);
-      else
-        launchPixelsRefill<false, kWithLight, 0>(k, threads, counter_.data(), compute_);
-    } else if (blocks >= 8) {
+    if (blocks >= 8)
       launchPixels<false, kWithLight, 8>(k, threads, compute_);
-    } else if (blocks >= 6) {
+    else if (blocks >= 6)
       launchPixels<false, kWithLight, 6>(k, threads, compute_);
-    } else {
+    else
       launchPixels<false, kWithLight, 0>(k, threads, compute_);
-    }
   }
   void readStamps(std::vector<uint32_t>& slotUsed, std::vector<uint32_t>& pageWanted) override {
     slotUsed.resize(slots_);
@@ -290,7 +219,6 @@ class CudaBackend final : public Backend {
   }
   void setPixelTile(int w, int h) override { tileW_ = w, tileH_ = h; }
   void setPixelOccupancy(int minBlocks) override { minBlocks_ = minBlocks; }
-  void setPixelRefill(bool refill) override { refill_ = refill; }
   void readImage(std::vector<float>& rgba) override {
     rgba.resize(image_.size());
     image_.download(rgba.data(), image_.size());
@@ -300,8 +228,6 @@ class CudaBackend final : public Backend {
   uint32_t pageBytes_, pageCount_, slots_ = 0;
   int tileW_ = 8, tileH_ = 4;
   int minBlocks_ = 0;
-  bool refill_ = true;
-  cuda::DeviceBuffer<unsigned long long> counter_;  // the refill kernel's next thread index
   cudaStream_t compute_ = nullptr, copy_ = nullptr;
   cudaEvent_t tableCopied_[2] = {nullptr, nullptr};
   int mirror_ = 0;

@@ -121,17 +121,6 @@ TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
                   rms(cpu, gpu), fractionWithin(cpu, gpu, 1e-2f));
       EXPECT_LT(rms(cpu, gpu), 2e-3) << k.file << " " << camera << " direct " << k.direct << " " << k.shadows;
       EXPECT_GT(fractionWithin(cpu, gpu, 1e-2f), 0.99) << k.file << " " << camera << " direct " << k.direct << " " << k.shadows;
-      // one thread per pixel instead of lanes that take the next pixel (render_cuda.cu
-      // pixelRefillKernel): the same cones, computed by another kernel
-      pl::PlayOptions rows = o;
-      rows.refillLanes = false;
-      std::vector<float> gpuRows;
-      pl::play(rows, cuda(), &gpuRows);
-      ASSERT_EQ(gpuRows.size(), gpu.size());
-      size_t same = 0;
-      for (size_t i = 0; i < gpu.size(); ++i) same += gpu[i] == gpuRows[i];
-      std::printf("  refilled lanes vs a thread per pixel: RMS %.2e, identical values %.6f\n", rms(gpu, gpuRows), double(same) / double(gpu.size()));
-      EXPECT_LT(rms(gpu, gpuRows), 1e-6) << k.file << " " << camera;
     }
   }
 }
