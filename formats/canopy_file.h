@@ -398,7 +398,6 @@ CANOPY_HD inline CanopySample canopySampleBrick(CanopyBrickView b, float lx, flo
     if (wt == 0.0f) continue;
     const uint32_t idx = canopyVoxelIndex(uint32_t(i0[0] + dx), uint32_t(i0[1] + dy), uint32_t(i0[2] + dz));
     const float d = b.density[idx];
-    if (d == 0.0f) continue;  // adds +0 to every sum: skipped, with its material load and unpacking
     const CanopySample m = canopyUnpack(d, b.material[idx]);
     dens += wt * d;
     const float wd = wt * d;

@@ -225,7 +225,6 @@ struct SceneView {
   uint32_t bricksPerPage;
   uint32_t brickMaskOffset;      // where a brick page image keeps its empty-block masks (0: no masks, no skip)
   uint32_t lightItemsPerPage;
-  int32_t brickPageShift, lightPageShift;  // log2 of bricksPerPage / lightItemsPerPage, -1 if not a power of 2
   uint32_t litModels;            // models with LB light (0: renderPixel takes the path without light code)
   SceneLightView light;
   ShadeParams shade;
@@ -388,13 +387,9 @@ struct Segment {
 constexpr uint32_t kHaarNone = 0xFFFFFFFFu;
 
 // Finest level whose voxel (2^(depth - L) lattice cells) is no larger than the footprint.
-// floor(log2(fp)) is read from fp's exponent bits (fp >= 1: a normal float or +inf), exactly and
-// without a log2f.
 CANOPY_HD inline uint32_t levelForFootprint(uint32_t depth, float footprintCells, float lodBias) {
   const float fp = footprintCells > 1.0f ? footprintCells : 1.0f;
-  uint32_t bits;
-  memcpy(&bits, &fp, sizeof bits);
-  float L = float(depth) - float(int32_t(bits >> 23) - 127) + lodBias;
+  float L = float(depth) - floorf(log2f(fp)) + lodBias;
   L = L < 0.0f ? 0.0f : (L > float(depth) ? float(depth) : L);
   return uint32_t(L);
 }
@@ -435,17 +430,8 @@ struct Descent {
   uint32_t coarsestLightPage;     // the shallowest brick's light page (asked for on a cold start)
 };
 
-// item / perPage and item % perPage: a shift and a mask where perPage is a power of two (8 bricks
-// and 2 light items per page in every file so far), not a run-time integer division.
-CANOPY_HD CANOPY_FORCEINLINE uint32_t pageOfItem(uint32_t item, uint32_t perPage, int32_t shift) {
-  return shift >= 0 ? item >> shift : item / perPage;
-}
-CANOPY_HD CANOPY_FORCEINLINE uint32_t slotOfItem(uint32_t item, uint32_t perPage, int32_t shift) {
-  return shift >= 0 ? item & (perPage - 1u) : item % perPage;
-}
-
 CANOPY_HD inline int32_t residentSlot(const SceneView& s, const ModelView& m, uint32_t brick, uint32_t& page) {
-  page = m.firstBrickPage + pageOfItem(brick, s.bricksPerPage, s.brickPageShift);
+  page = m.firstBrickPage + brick / s.bricksPerPage;
   return s.pageSlot[page];
 }
 
@@ -472,11 +458,11 @@ CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m,
   for (;;) {
     const bool last = !(d.level < maxLevel && d.node.child != kCanopyNone && d.node.child < m.tileCount);
     if (wantLight && d.node.brick != kCanopyNone) {
-      const uint32_t lpage = m.firstLightPage + pageOfItem(d.node.brick, s.lightItemsPerPage, s.lightPageShift);
+      const uint32_t lpage = m.firstLightPage + d.node.brick / s.lightItemsPerPage;
       const int32_t lslot = s.pageSlot[lpage];
       if (d.coarsestLightPage == kCanopyNone) d.coarsestLightPage = lpage;
       if (lslot >= 0) {
-        d.lightItem = canopyLightInPage(s.pool + size_t(lslot) * s.pageBytes, slotOfItem(d.node.brick, s.lightItemsPerPage, s.lightPageShift));
+        d.lightItem = canopyLightInPage(s.pool + size_t(lslot) * s.pageBytes, d.node.brick % s.lightItemsPerPage);
         d.lightPoolSlot = lslot;
         d.lightSize = d.size;
         for (int a = 0; a < 3; ++a) d.lightLo[a] = d.lo[a];
@@ -490,7 +476,7 @@ CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m,
       const int32_t slot = residentSlot(s, m, d.node.brick, page);
       if (slot >= 0) {
         d.brickPage = s.pool + size_t(slot) * s.pageBytes;
-        d.brickSlotInPage = slotOfItem(d.node.brick, s.bricksPerPage, s.brickPageShift);
+        d.brickSlotInPage = d.node.brick % s.bricksPerPage;
         d.brickPoolSlot = slot;
         d.brickSize = d.size;
         for (int a = 0; a < 3; ++a) d.brickLo[a] = d.lo[a];
@@ -751,7 +737,6 @@ struct InstanceWalk {
   Hit hits[kHitCapacity];             // small: the membership checks scan it, retiring shifts it
   DescentCache caches[kHitCapacity];  // by slot: a hit's last descent along the ray (valid = 0 when added)
   uint32_t freeSlots;                 // bit i: caches[i] belongs to no hit
-  uint32_t idBits;                    // bit (id % 32) of every listed instance id (and of some retired or replaced ones)
   int count;
   int cell[3];
   int stepDir[3];
@@ -774,12 +759,9 @@ CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 
   const int c = w.cell[0] + s.gridDim[0] * (w.cell[1] + s.gridDim[1] * w.cell[2]);
   for (uint32_t k = s.gridStart[c]; k < s.gridStart[c + 1]; ++k) {
     const uint32_t id = s.gridItems[k];
-    const uint32_t bit = 1u << (id & 31u);
-    if (w.idBits & bit) {  // maybe listed: scan the hits (a clear bit proves it is not)
-      bool present = false;
-      for (int h = 0; h < w.count; ++h) present |= w.hits[h].instance == id;
-      if (present) continue;
-    }
+    bool present = false;
+    for (int h = 0; h < w.count; ++h) present |= w.hits[h].instance == id;
+    if (present) continue;
     const InstanceView& inst = s.instances[id];
     // the exact interval: the ray against the lattice box in the instance's unit space (an
     // oriented box in world space; t is the same parameter in both spaces)
@@ -794,13 +776,11 @@ CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 
       if (w.hits[far].tin <= t0) continue;  // dropped; found again from a later cell it overlaps
       w.hits[far] = Hit{id, t0, t1, w.hits[far].slot, EmptyHold{-3.0e38f, 0.0f, 0u}};
       w.caches[w.hits[far].slot].valid = 0;
-      w.idBits |= bit;
     } else {
       const uint32_t slot = lowestSetBit(w.freeSlots);
       w.freeSlots &= ~(1u << slot);
       w.caches[slot].valid = 0;
       w.hits[w.count++] = Hit{id, t0, t1, slot, EmptyHold{-3.0e38f, 0.0f, 0u}};
-      w.idBits |= bit;
     }
   }
 }
@@ -808,7 +788,6 @@ CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 
 // Starts the walk for the ray o + t d, t in [tStart, tEnd].
 CANOPY_HD inline void walkBegin(const SceneView& s, InstanceWalk& w, V3 o, V3 d, float tStart, float tEnd) {
   w.count = 0;
-  w.idBits = 0;
   w.freeSlots = kHitCapacity >= 32 ? 0xFFFFFFFFu : (1u << kHitCapacity) - 1u;
   w.done = true;
   w.tCellExit = tEnd;
@@ -876,22 +855,15 @@ CANOPY_HD inline void walkAdvance(const SceneView& s, InstanceWalk& w, V3 o, V3 
 // Drops hits that ended before t.
 CANOPY_HD inline void walkRetire(InstanceWalk& w, float t) {
   int n = 0;
-  bool retired = false;
   for (int h = 0; h < w.count; ++h) {
     if (!(w.hits[h].tout > t)) {
       w.freeSlots |= 1u << w.hits[h].slot;
-      retired = true;
       continue;
     }
     if (n != h) w.hits[n] = w.hits[h];
     ++n;
   }
   w.count = n;
-  if (retired) {  // the retired ids' bits are cleared unless a listed id shares them
-    uint32_t bits = 0;
-    for (int h = 0; h < n; ++h) bits |= 1u << (w.hits[h].instance & 31u);
-    w.idBits = bits;
-  }
 }
 
 // ------------------------------------------------------------------------------------------------

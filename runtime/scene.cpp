@@ -292,9 +292,6 @@ SceneView hostSceneView(const HostScene& s) {
   v.bricksPerPage = s.bricksPerPage;
   v.brickMaskOffset = canopyBrickMaskOffset(s.pageBytes, s.bricksPerPage);
   v.lightItemsPerPage = s.lightItemsPerPage > 0 ? s.lightItemsPerPage : 1;
-  const auto log2Exact = [](uint32_t n) { return n != 0 && (n & (n - 1)) == 0 ? int32_t(__builtin_ctz(n)) : int32_t(-1); };
-  v.brickPageShift = log2Exact(v.bricksPerPage);
-  v.lightPageShift = log2Exact(v.lightItemsPerPage);
   v.litModels = s.litModels;
   v.light = s.light;
   v.light.values = s.hasSceneLight ? s.lightValues.data() : nullptr;
