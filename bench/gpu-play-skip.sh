@@ -10,7 +10,8 @@
 #   tests: test_play_cuda: GPU frames against the CPU reference, quarter cache against full cache.
 #   play:  bench-play, 1920x1080, 1 GiB cache, FRAMES (120) frames, the variants in PLAY_VARIANTS
 #          (default: the skip, and without it; each scene's last frame is compared with the first
-#          variant's: RMS).
+#          variant's: RMS). PREV_BIN=bench-play-prev (an earlier build's, bundled under that name):
+#          the same runs with it after, for an A/B comparison on one machine.
 #   PROFILE=1: Nsight Compute on one orbit frame's pixel kernel, where ncu is installed (needs the
 #          forest that the play phase writes: with PHASES=tests only, a 2-frame play run writes
 #          it). PROFILE_BIN=canopy-play-lineinfo (a canopy-play whose render_cuda.cu was compiled
@@ -32,6 +33,12 @@ if has play || [[ ${PROFILE:-0} = 1 ]]; then
     ${PLAY_VARIANTS:---shadows map --shadows map-noskip} "${extra[@]}" 2> "$O/bench_play.err" | tee "$O/bench_play.md" || status=1
   has play && for n in plant forest-orbit forest-walk grove; do [[ -e $O/bench/$n.png ]] && cp "$O/bench/$n.png" "$O/play-$n.png"; done
   cp "$O/bench/results.json" "$O/bench_play.json" 2>/dev/null
+  if [[ -n ${PREV_BIN:-} ]]; then  # the same runs with an earlier build's bench-play (A/B on one machine)
+    step "play with $PREV_BIN"
+    timeout 400 "$PREV_BIN" "$O/bench-prev" --device cuda --size 1920x1080 --frames "${FRAMES:-120}" --cache-mb 1024 \
+      ${PLAY_VARIANTS:---shadows map --shadows map-noskip} "${extra[@]}" 2> "$O/bench_play_prev.err" | tee "$O/bench_play_prev.md" || status=1
+    rm -rf "$O/bench-prev"
+  fi
 fi
 if [[ ${PROFILE:-0} = 1 ]]; then
   step profile

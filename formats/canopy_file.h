@@ -333,31 +333,36 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyVoxelIndex(uint32_t x, uint32_t y, u
   return x + kCanopyBrickVoxels * (y + kCanopyBrickVoxels * z);
 }
 
-// Empty-block masks: derived by the reader, not stored in the file. Sub-block (jx, jy, jz),
-// j in [0,4), is the node-local box [j/4, (j+1)/4) on each axis (2 brick voxels); a trilinear
-// sample anywhere in it (canopySampleBrick) reads only stored voxels 2j .. 2j+3 on each axis. Bit
-// jx + 4 jy + 16 jz of a brick's mask is set when all of those 4^3 voxels have density 0, so the
-// density is exactly 0 everywhere in the sub-block. A set bit is a proof; a clear one proves
-// nothing (a page without masks reads as all clear).
-inline uint64_t canopyBrickEmptyBlocks(CanopyBrickView b) {
-  uint64_t mask = 0;
-  for (uint32_t jz = 0; jz < 4; ++jz)
-    for (uint32_t jy = 0; jy < 4; ++jy)
-      for (uint32_t jx = 0; jx < 4; ++jx) {
+// Empty-cell masks: derived by the reader, not stored in the file. A brick's node is cut into
+// kCanopyEmptyCells^3 cells; cell (jx, jy, jz) is the node-local box [j/n, (j+1)/n) on each axis
+// (n = kCanopyEmptyCells, 8/n brick voxels wide), where a trilinear sample (canopySampleBrick)
+// reads only stored voxels 8j/n .. 8(j+1)/n + 1 on each axis. Bit i = jx + n (jy + n jz) of the
+// mask (word i / 64, bit i % 64) is set when all of those voxels have density 0, so the density is
+// exactly 0 everywhere in the cell. A set bit is a proof; a clear one proves nothing (a page
+// without masks reads as all clear).
+constexpr uint32_t kCanopyEmptyCells = 8;  // 4: 1.08x slower forest orbit (bench/play/NOTES.md, fifth round)
+constexpr uint32_t kCanopyEmptyWords = (kCanopyEmptyCells * kCanopyEmptyCells * kCanopyEmptyCells + 63) / 64;
+
+inline void canopyBrickEmptyCells(CanopyBrickView b, uint64_t mask[kCanopyEmptyWords]) {
+  constexpr uint32_t n = kCanopyEmptyCells, w = kCanopyBrickSize / n;
+  for (uint32_t i = 0; i < kCanopyEmptyWords; ++i) mask[i] = 0;
+  for (uint32_t jz = 0; jz < n; ++jz)
+    for (uint32_t jy = 0; jy < n; ++jy)
+      for (uint32_t jx = 0; jx < n; ++jx) {
         bool empty = true;
-        for (uint32_t z = 2 * jz; empty && z < 2 * jz + 4; ++z)
-          for (uint32_t y = 2 * jy; empty && y < 2 * jy + 4; ++y)
-            for (uint32_t x = 2 * jx; empty && x < 2 * jx + 4; ++x) empty = b.density[canopyVoxelIndex(x, y, z)] == 0.0f;
-        if (empty) mask |= 1ull << (jx + 4 * jy + 16 * jz);
+        for (uint32_t z = w * jz; empty && z < w * jz + w + 2; ++z)
+          for (uint32_t y = w * jy; empty && y < w * jy + w + 2; ++y)
+            for (uint32_t x = w * jx; empty && x < w * jx + w + 2; ++x) empty = b.density[canopyVoxelIndex(x, y, z)] == 0.0f;
+        const uint32_t i = jx + n * (jy + n * jz);
+        if (empty) mask[i / 64] |= 1ull << (i % 64);
       }
-  return mask;
 }
 
-// Where a page image keeps its bricks' masks (8 bytes per brick slot, after the last brick's
-// payload, in the page's zero padding), or 0 when the padding is too small to hold them.
+// Where a page image keeps its bricks' masks (kCanopyEmptyWords x 8 bytes per brick slot, after
+// the last brick's payload, in the page's zero padding), or 0 when the padding cannot hold them.
 inline uint32_t canopyBrickMaskOffset(uint32_t pageBytes, uint32_t bricksPerPage) {
   const uint64_t off = sizeof(CanopyPageHeader) + uint64_t(bricksPerPage) * kCanopyBrickBytes;
-  return off + 8ull * bricksPerPage <= pageBytes ? uint32_t(off) : 0u;
+  return off + 8ull * kCanopyEmptyWords * bricksPerPage <= pageBytes ? uint32_t(off) : 0u;
 }
 
 // Fills a verified brick page image's masks (a reader does this after the checksum, so the image
@@ -369,8 +374,9 @@ inline void canopyFillBrickMasks(void* page, uint32_t pageBytes, uint32_t bricks
   if (ph.kind != uint32_t(CanopyPageKind::Brick) || off == 0) return;
   unsigned char* masks = static_cast<unsigned char*>(page) + off;
   for (uint32_t i = 0; i < bricksPerPage; ++i) {
-    const uint64_t m = i < ph.itemCount ? canopyBrickEmptyBlocks(canopyBrickInPage(page, i)) : 0;
-    std::memcpy(masks + 8 * i, &m, 8);
+    uint64_t m[kCanopyEmptyWords] = {};
+    if (i < ph.itemCount) canopyBrickEmptyCells(canopyBrickInPage(page, i), m);
+    std::memcpy(masks + 8 * kCanopyEmptyWords * i, m, sizeof m);
   }
 }
 

@@ -594,20 +594,25 @@ struct EmptyHold {
   uint32_t level;  // the leaf's level
 };
 
-// The end of the run of empty sub-blocks (formats/canopy_file.h, empty-block masks) of a brick
-// that the ray o + t d (unit space) crosses from unit point u on: false when u's sub-block is not
-// empty, else true and tEnd = where the ray enters the first sub-block that is not, or leaves the
-// brick ([brickLo, brickLo + brickSize), inv = 1 / brickSize). A 3D-DDA over the 4^3 sub-blocks;
-// each plane's crossing is computed from the plane alone (as nodeExit does), so a walk that starts
-// in a later sub-block of the same run ends at the same value.
-CANOPY_HD inline bool emptyRunEnd(uint64_t mask, V3 uo, V3 ud, V3 u, const float brickLo[3], float brickSize, float inv, float& tEnd) {
+// The end of the run of empty cells (formats/canopy_file.h, empty-cell masks) of a brick that
+// the ray o + t d (unit space) crosses from unit point u on: false when u's cell is not empty, else
+// true and tEnd = where the ray enters the first cell that is not, or leaves the brick ([brickLo,
+// brickLo + brickSize), inv = 1 / brickSize). A 3D-DDA over the brick's n^3 cells; each plane's
+// crossing is computed from the plane alone (as nodeExit does), so a walk that starts in a later
+// cell of the same run ends at the same value.
+CANOPY_HD inline bool emptyRunEnd(const uint64_t* mask, V3 uo, V3 ud, V3 u, const float brickLo[3], float brickSize, float inv, float& tEnd) {
+  constexpr int n = int(kCanopyEmptyCells);
+  const auto empty = [mask](int x, int y, int z) {
+    const uint32_t i = uint32_t(x + n * (y + n * z));
+    return ((mask[i / 64] >> (i % 64)) & 1u) != 0;
+  };
   int j[3];
   for (int a = 0; a < 3; ++a) {
-    const float q = floorf((comp(u, a) - brickLo[a]) * inv * 4.0f);
-    j[a] = q < 0.0f ? 0 : (q > 3.0f ? 3 : int(q));
+    const float q = floorf((comp(u, a) - brickLo[a]) * inv * float(n));
+    j[a] = q < 0.0f ? 0 : (q > float(n - 1) ? n - 1 : int(q));
   }
-  if (!((mask >> (j[0] + 4 * j[1] + 16 * j[2])) & 1u)) return false;
-  const float q = 0.25f * brickSize;
+  if (!empty(j[0], j[1], j[2])) return false;
+  const float q = brickSize / float(n);
   float tn[3];
   int st[3];
   for (int a = 0; a < 3; ++a) {
@@ -620,7 +625,7 @@ CANOPY_HD inline bool emptyRunEnd(uint64_t mask, V3 uo, V3 ud, V3 u, const float
     a = tn[2] < tn[a] ? 2 : a;
     tEnd = tn[a];
     j[a] += st[a];
-    if (st[a] == 0 || j[a] < 0 || j[a] > 3 || !((mask >> (j[0] + 4 * j[1] + 16 * j[2])) & 1u)) return true;
+    if (st[a] == 0 || j[a] < 0 || j[a] > n - 1 || !empty(j[0], j[1], j[2])) return true;
     tn[a] = (brickLo[a] + float(j[a] + (st[a] > 0)) * q - comp(uo, a)) / comp(ud, a);
   }
 }
@@ -681,9 +686,9 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
   writeStamp(s.slotUsed + d.brickPoolSlot, s.stamp);
   const float inv = 1.0f / d.brickSize;
   if (s.shade.skipEmptyBlocks && s.brickMaskOffset != 0) {
-    const uint64_t mask = *reinterpret_cast<const uint64_t*>(d.brickPage + s.brickMaskOffset + 8u * d.brickSlotInPage);
+    const uint64_t* mask = reinterpret_cast<const uint64_t*>(d.brickPage + s.brickMaskOffset) + kCanopyEmptyWords * d.brickSlotInPage;
     float tEnd;
-    if (mask != 0 && emptyRunEnd(mask, uo, ud, up, d.brickLo, d.brickSize, inv, tEnd)) {
+    if (emptyRunEnd(mask, uo, ud, up, d.brickLo, d.brickSize, inv, tEnd)) {
       // k = 0 up to the empty run's end: the samples a march would take there all read 0
       CANOPY_PLAY_COUNT(s, emptyBlockSkips, 1);
       tEnd = tEnd > t + eps ? tEnd : t + eps;
