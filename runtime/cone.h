@@ -414,8 +414,6 @@ struct Descent {
   uint32_t level;
   float lo[3];
   float size;
-  uint32_t tile;   // the tile holding the node and its 7 siblings (kCanopyNone at the root)
-  uint32_t child;  // the node's index in it (x + 2y + 4z)
   // the brick to sample: the node's own if resident, else a resident ancestor's (fallbackLevel)
   const unsigned char* brickPage;  // nullptr: none resident
   uint32_t brickSlotInPage;
@@ -444,8 +442,6 @@ CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m,
   d.node = m.root;
   d.level = 0;
   d.size = 1.0f;
-  d.tile = kCanopyNone;
-  d.child = 0;
   d.lo[0] = d.lo[1] = d.lo[2] = 0.0f;
   d.brickPage = nullptr;
   d.brickSlotInPage = 0;
@@ -490,8 +486,6 @@ CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m,
     }
     if (last) break;
     const uint32_t c = canopyStepDown(x, d.lo, d.size);
-    d.tile = d.node.child;
-    d.child = c;
     d.node = m.tiles[size_t(d.node.child) * 8 + c];
     ++d.level;
   }
@@ -586,54 +580,26 @@ CANOPY_HD inline void segmentIndirect(const SceneView& s, const InstanceView& in
 
 // An instance's segment that stays what it is (k = 0, the same end) over later steps: the primary
 // march keeps it instead of evaluating the instance again at each step of its neighbours (another
-// instance's brick steps, while this one crosses empty space). instanceSegment() fills it for an
-// EMPTY LEAF (no children, no brick, density 0; its segment runs on through the siblings that are
-// empty leaves too) and for a RUN OF EMPTY CELLS of a brick (emptyRunEnd): evaluating the instance
-// again at any t' with
-//   t' < until   and   the footprint's level at t' >= level (the node's level)
-// descends to a leaf of the same run, or to the same brick node (the level only gets coarser along
-// the ray, so where the node has children the level is the same), and walks the same run to the
-// same end, bit for bit (cellRunEnd computes each plane's crossing from the plane alone): `until`
-// stops 3 epsilons (instanceSegment's eps at the segment's end, which bounds the eps at t') short
-// of the end, far more than the float rounding of the point (a few ulps of unit coordinates,
-// < 1e-3 cell) and of the exit. One exception: where the ray passes within float rounding of the
-// edge between two cells (or leaves) of a run, the point's cell may be the diagonal neighbour of
-// the walk's, and the two could differ. Everything else (brick samples, uniform nodes, misses,
-// shadow cones) is evaluated at every step.
+// instance's brick steps, while this one crosses an empty node). instanceSegment() fills it for an
+// EMPTY LEAF (no children, no brick, density 0): evaluating the instance again at any t' with
+//   t' < until   and   the footprint's level at t' >= level (the leaf's level)
+// descends to the same leaf (the point is inside it, and a leaf ends every descent that reaches its
+// level) and returns k = 0 with the same end, bit for bit: `until` stops 3 epsilons (instanceSegment's
+// eps at the segment's end, which bounds the eps at t') short of the end, far more than the float
+// rounding of the point (a few ulps of unit coordinates, < 1e-3 cell) and of the exit. Everything
+// else (bricks, uniform nodes, misses, shadow cones) is evaluated at every step as before.
 struct EmptyHold {
   float until;     // -inf: nothing held
   float end;       // the held segment's end (its tEnd)
   uint32_t level;  // the leaf's level
 };
 
-// The end of a run of empty cells along the ray o + t d (unit space): the box [lo, lo + size) is
-// cut into n^3 cells, the ray is in cell j (empty(j) true) and walks a 3D-DDA over the cells until
-// one is not empty or it leaves the box; the result is the t where that happens. Each plane's
+// The end of the run of empty cells (formats/canopy_file.h, empty-cell masks) of a brick that
+// the ray o + t d (unit space) crosses from unit point u on: false when u's cell is not empty, else
+// true and tEnd = where the ray enters the first cell that is not, or leaves the brick ([brickLo,
+// brickLo + brickSize), inv = 1 / brickSize). A 3D-DDA over the brick's n^3 cells; each plane's
 // crossing is computed from the plane alone (as nodeExit does), so a walk that starts in a later
 // cell of the same run ends at the same value.
-template <int n, class Empty>
-CANOPY_HD inline float cellRunEnd(const Empty& empty, V3 uo, V3 ud, int j[3], const float lo[3], float size) {
-  const float q = size / float(n);
-  float tn[3];
-  int st[3];
-  for (int a = 0; a < 3; ++a) {
-    const float da = comp(ud, a);
-    st[a] = fabsf(da) < 1e-30f ? 0 : (da > 0.0f ? 1 : -1);
-    tn[a] = st[a] == 0 ? 3.0e38f : (lo[a] + float(j[a] + (st[a] > 0)) * q - comp(uo, a)) / da;
-  }
-  for (;;) {
-    int a = tn[1] < tn[0] ? 1 : 0;
-    a = tn[2] < tn[a] ? 2 : a;
-    const float tEnd = tn[a];
-    j[a] += st[a];
-    if (st[a] == 0 || j[a] < 0 || j[a] > n - 1 || !empty(j[0], j[1], j[2])) return tEnd;
-    tn[a] = (lo[a] + float(j[a] + (st[a] > 0)) * q - comp(uo, a)) / comp(ud, a);
-  }
-}
-
-// The run of empty cells (formats/canopy_file.h, empty-cell masks) of a brick ([brickLo, brickLo
-// + brickSize), inv = 1 / brickSize) that the ray crosses from unit point u on: false when u's cell
-// is not empty, else true and tEnd = its end (cellRunEnd).
 CANOPY_HD inline bool emptyRunEnd(const uint64_t* mask, V3 uo, V3 ud, V3 u, const float brickLo[3], float brickSize, float inv, float& tEnd) {
   constexpr int n = int(kCanopyEmptyCells);
   const auto empty = [mask](int x, int y, int z) {
@@ -646,13 +612,22 @@ CANOPY_HD inline bool emptyRunEnd(const uint64_t* mask, V3 uo, V3 ud, V3 u, cons
     j[a] = q < 0.0f ? 0 : (q > float(n - 1) ? n - 1 : int(q));
   }
   if (!empty(j[0], j[1], j[2])) return false;
-  tEnd = cellRunEnd<n>(empty, uo, ud, j, brickLo, brickSize);
-  return true;
-}
-
-// An empty leaf: a constant node of density 0 without children (nothing below it, nothing in it).
-CANOPY_HD CANOPY_FORCEINLINE bool emptyLeaf(const ModelView& m, const CanopyNode& n) {
-  return n.density == 0.0f && n.brick == kCanopyNone && !(n.child != kCanopyNone && n.child < m.tileCount);
+  const float q = brickSize / float(n);
+  float tn[3];
+  int st[3];
+  for (int a = 0; a < 3; ++a) {
+    const float da = comp(ud, a);
+    st[a] = fabsf(da) < 1e-30f ? 0 : (da > 0.0f ? 1 : -1);
+    tn[a] = st[a] == 0 ? 3.0e38f : (brickLo[a] + float(j[a] + (st[a] > 0)) * q - comp(uo, a)) / da;
+  }
+  for (;;) {
+    int a = tn[1] < tn[0] ? 1 : 0;
+    a = tn[2] < tn[a] ? 2 : a;
+    tEnd = tn[a];
+    j[a] += st[a];
+    if (st[a] == 0 || j[a] < 0 || j[a] > n - 1 || !empty(j[0], j[1], j[2])) return true;
+    tn[a] = (brickLo[a] + float(j[a] + (st[a] > 0)) * q - comp(uo, a)) / comp(ud, a);
+  }
 }
 
 // The octree level instanceSegment() picks for footprint (world) at instance `inst`.
@@ -698,19 +673,9 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
       const float maxLen = kMaxConstantCells / cellsPerWorld;
       tEnd = tEnd < t + maxLen ? tEnd : t + maxLen;
     }
-    const bool empty = emptyLeaf(m, d.node);
-    if (empty && s.shade.skipEmptyBlocks && d.tile != kCanopyNone) {
-      // and on through the siblings that are empty leaves too (a DDA over the parent's 2^3 children)
-      const CanopyNode* sib = m.tiles + size_t(d.tile) * 8;
-      const auto emptySibling = [&m, sib](int x, int y, int z) { return emptyLeaf(m, sib[x + 2 * y + 4 * z]); };
-      int j[3] = {int(d.child & 1u), int((d.child >> 1) & 1u), int((d.child >> 2) & 1u)};
-      const float parentLo[3] = {d.lo[0] - float(j[0]) * d.size, d.lo[1] - float(j[1]) * d.size, d.lo[2] - float(j[2]) * d.size};
-      const float runEnd = cellRunEnd<2>(emptySibling, uo, ud, j, parentLo, 2.0f * d.size);
-      tEnd = runEnd > tEnd ? runEnd : tEnd;
-    }
     g.tEnd = tEnd < tout ? tEnd : tout;
     if (shading && g.k > 0.0f) segmentLight(s, m, d, uo + ud * (0.5f * (t + g.tEnd)), 0.5f * (t + g.tEnd), g);
-    if (hold && empty) {
+    if (hold && c.density == 0.0f && d.node.brick == kCanopyNone && !(d.node.child != kCanopyNone && d.node.child < m.tileCount)) {
       const float epsEnd = fmaxf(1e-3f / cellsPerWorld, fabsf(g.tEnd) * 1e-6f);
       hold->until = g.tEnd - 3.0f * epsEnd;
       hold->end = g.tEnd;
