@@ -16,7 +16,10 @@
 //      descent stops there or at a constant node. A constant node (empty or uniform) is one
 //      analytic segment to its exit (empty space skipped by node size; a uniform node is cut into
 //      pieces of at most kMaxConstantCells so that lighting is still sampled inside it). A brick
-//      node is marched with steps of stepFactor voxels, sampled at the step's midpoint.
+//      node is marched with steps of stepFactor voxels, sampled at the step's midpoint, except
+//      where the step starts in an empty cell (a voxel of the brick where the trilinear density is
+//      0 throughout, from the masks the loader derives for each brick page): the step then goes to
+//      the end of the run of empty cells (emptyRunEnd; ShadeParams::skipEmptyBlocks).
 //   4. Opacity of a step of length dt (world) with extinction per lattice cell sigma * density:
 //      alpha = 1 - exp(-sigma * density * dt * cellsPerWorld) (the length correction of §2; the
 //      stored density is a fraction of a lattice cell, so opacity does not depend on the
@@ -177,7 +180,7 @@ struct ShadeParams {
   uint32_t shadowMapMaxVoxels;  // kShadowsMap: voxels grow until a grid has at most this many
   int descentCache;         // 1: reuse a ray's last descent per instance (DescentCache); 0: always descend
   int holdEmpty;            // 1: a primary ray keeps an instance's empty leaf segment to its end (EmptyHold)
-  int skipEmptyBlocks;      // 1: a brick step in an empty sub-block goes to the end of the empty run (emptyRunEnd)
+  int skipEmptyBlocks;      // 1: a brick step in an empty cell goes to the end of the cell run (emptyRunEnd)
   int exactLight;           // 1 (--light exact): the finest level of Haar-lit models samples the Haar pages
 };
 
@@ -581,7 +584,8 @@ CANOPY_HD inline void segmentIndirect(const SceneView& s, const InstanceView& in
 // An instance's segment that stays what it is (k = 0, the same end) over later steps: the primary
 // march keeps it instead of evaluating the instance again at each step of its neighbours (another
 // instance's brick steps, while this one crosses an empty node). instanceSegment() fills it for an
-// EMPTY LEAF (no children, no brick, density 0): evaluating the instance again at any t' with
+// EMPTY LEAF (no children, no brick, density 0), and for a run of empty cells of a brick (the
+// argument is at that code, emptyRunEnd's use): evaluating the instance again at any t' with
 //   t' < until   and   the footprint's level at t' >= level (the leaf's level)
 // descends to the same leaf (the point is inside it, and a leaf ends every descent that reaches its
 // level) and returns k = 0 with the same end, bit for bit: `until` stops 3 epsilons (instanceSegment's
@@ -699,9 +703,9 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
       if (hold) {
         // Evaluated again at t' < until with the footprint's level still >= d.level (so equal to it
         // where the node has children: the level only gets coarser along the ray), the descent
-        // reaches the same node and brick, the point lies in a later sub-block of the same run, and
+        // reaches the same node and brick, the point lies in a later cell of the same run, and
         // the walk from there ends at the same plane, computed alike (the argument of EmptyHold;
-        // where the ray grazes a sub-block edge within float rounding, the point's sub-block may
+        // where the ray grazes a cell edge within float rounding, the point's cell may
         // be the diagonal neighbour of the walk's, and the two could differ).
         const float epsEnd = fmaxf(1e-3f / cellsPerWorld, fabsf(g.tEnd) * 1e-6f);
         hold->until = g.tEnd - 3.0f * epsEnd;

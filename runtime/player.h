@@ -42,7 +42,7 @@ struct PlayOptions {
   uint32_t shadowMapMaxVoxels = 1u << 23;  // ...grown until the grid (and the map) has at most this many voxels
   bool descentCache = true;          // reuse a ray's last octree descent per instance (same image, fewer descents)
   bool holdEmpty = true;             // keep an instance's empty leaf segment over later steps (same image, cone.h EmptyHold)
-  bool skipEmptyBlocks = true;       // a brick step in an empty 2-voxel sub-block goes to the end of the empty run (cone.h emptyRunEnd)
+  bool skipEmptyBlocks = true;       // a brick step in an empty one-voxel cell goes to the end of the cell run (cone.h emptyRunEnd)
   bool exactLight = false;           // --light exact: the finest level of Haar-lit models from their Haar pages (the .chaar's values)
   int pixelMinBlocks = 0;            // CUDA, map/no shadows: pixel kernel built for >= 6 or 8 blocks of 128 per SM, -1 unconstrained (0: the default, 6 without LB light, unconstrained with it)
   int warpTileWidth = 8;             // CUDA: a warp renders a warpTileWidth x (32 / warpTileWidth) tile
