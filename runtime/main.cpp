@@ -42,6 +42,9 @@ int main(int argc, char** argv) {
   app.add_option("--warp-tile", o.warpTileWidth, "CUDA: a warp renders a W x (32/W) pixel tile")->capture_default_str();
   bool noDescentCache = false;
   app.add_flag("--no-descent-cache", noDescentCache, "Descend the octree from the root for every segment (same image; for timing)");
+  bool noEmptySkip = false;
+  app.add_flag("--no-empty-skip", noEmptySkip,
+               "March the empty cells of bricks in half-voxel steps instead of skipping them (the sample phase changes by 0.1-0.4 % RMS; for comparison)");
   app.add_option("--shadow-map-voxels", o.shadowMapMaxVoxels, "Shadow map size cap (the voxel grows to fit)")->capture_default_str();
   std::string lightMode = "fast";
   app.add_option("--light", lightMode,
@@ -65,6 +68,7 @@ int main(int argc, char** argv) {
     o.directSun = !noDirect;
     if (app.count("--stop-opacity")) o.stopTransmittance = float(1.0 - stopOpacity);  // else exactly kStopT
     o.descentCache = !noDescentCache;
+    o.skipEmptyBlocks = !noEmptySkip;
     o.warmStart = !coldStart;
     o.exactLight = lightMode == "exact";
     tool.report() = canopy::play::play(o, tool.device());
