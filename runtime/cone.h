@@ -226,7 +226,7 @@ struct SceneView {
   uint32_t stamp;
   uint32_t pageBytes;
   uint32_t bricksPerPage;
-  uint32_t brickMaskOffset;      // where a brick page image keeps its empty-block masks (0: no masks, no skip)
+  uint32_t brickMaskOffset;      // where a brick page image keeps its empty-cell masks (0: no masks, no skip)
   uint32_t lightItemsPerPage;
   uint32_t litModels;            // models with LB light (0: renderPixel takes the path without light code)
   SceneLightView light;

@@ -45,7 +45,7 @@ void Streamer::loaderMain() {
     try {
       unsigned char* page = staging_ + size_t(job.buffer) * pageBytes_;
       file_.readPage(job.page, page);
-      canopyFillBrickMasks(page, pageBytes_, file_.header().bricksPerPage);  // cone.h's empty-block skip
+      canopyFillBrickMasks(page, pageBytes_, file_.header().bricksPerPage);  // for cone.h's empty-cell skip
       job.ok = true;
     } catch (const std::exception& e) {
       job.ok = false;
