@@ -33,11 +33,15 @@ if has tests; then
   [[ -x $BIN/test_play_cuda ]] && gtest test_play_cuda "$BIN/test_play_cuda"
 fi
 if has dense; then
-  step dense
-  timeout 300 bench_lbsolve --device cuda --sizes 128,256 --fill "${DENSE_FILL:-plant}" \
-    --schemes "${DENSE_SCHEMES:-pull,pull-fused}" --in-flight "${DENSE_IN_FLIGHT:-1,3}" --iterations 400 \
-    --solves-sizes "" > "$O/bench_dense.md" 2>&1 || status=1
-  grep -E "copy|^\| (plant|full)" "$O/bench_dense.md"
+  # PREV_BIN (e.g. bench_lbsolve-prev, an earlier build bundled under that name): the same rows
+  # with it after the current build's, for an A/B comparison on one machine
+  for b in bench_lbsolve ${PREV_BIN:-}; do
+    step "dense ($b)"
+    timeout 300 "$b" --device cuda --sizes 128,256 --fill "${DENSE_FILL:-plant}" \
+      --schemes "${DENSE_SCHEMES:-pull,pull-fused}" --in-flight "${DENSE_IN_FLIGHT:-1,3}" --iterations 400 \
+      --solves-sizes "" > "$O/bench_dense_$b.md" 2>&1 || status=1
+    grep -E "copy|^\| (plant|full)" "$O/bench_dense_$b.md"
+  done
 fi
 if has streams; then
   step streams
