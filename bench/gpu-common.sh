@@ -1,7 +1,7 @@
 # gpu-common.sh: sourced by the bench/gpu-*.sh scripts on the GPU host (bash, from the repo root,
 # with the bundle at .gpu/canopy.tar.xz carried): unpacks the bundle, puts its binaries and
 # libraries first on the paths, links the absolute paths the tests were built with, and defines
-# $B (bundle), $BIN, $O (= $OUT, the logs), $status and the helpers step and gtest.
+# $B (bundle), $BIN, $O (= $OUT, the logs), $status and the helpers step, has and gtest.
 set -o pipefail  # a failing step piped into tee fails the run
 here=$(pwd)
 B=/tmp/canopy-bundle
@@ -17,6 +17,7 @@ mkdir -p "$O"
 status=0
 nvidia-smi -L | tee "$O/device.txt"; date -u | tee -a "$O/device.txt"
 step() { echo "=== $1 $(date -u +%T)"; }
+has() { [[ " ${PHASES:-} " == *" $1 "* ]]; }  # has NAME: the script's $PHASES lists NAME
 gtest() {  # gtest NAME BINARY [args]: verdicts on stdout, the log under $O; a failure or skip fails the run
   local log=$O/$1.log; shift
   timeout 240 "$@" > "$log" 2>&1 || status=1

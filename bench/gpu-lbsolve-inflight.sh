@@ -24,7 +24,6 @@
 set -u
 source "$(dirname "$0")/gpu-common.sh"
 PHASES=${PHASES:-tests dense streams solves tool}
-has() { [[ " $PHASES " == *" $1 "* ]]; }
 ASSET=$built/../shared/assets/plants/oak_medium.glb
 if has tests; then
   step tests

@@ -19,7 +19,6 @@
 set -u
 source "$(dirname "$0")/gpu-common.sh"
 PHASES=${PHASES:-tests play}
-has() { [[ " $PHASES " == *" $1 "* ]]; }
 if has tests; then
   step tests
   gtest test_play_cuda "$BIN/test_play_cuda"

@@ -548,12 +548,10 @@ TEST(PullStreaming, MatchesThePushUpdateBitForBitAtEveryIteration) {
     for (int z = 1; z < d.nz - 1; ++z)
       for (int y = 1; y < d.ny - 1; ++y)
         for (int x = 1; x < d.nx - 1; ++x) {
-          const float c = coded[size_t(d.index(x, y, z))];
-          if (c < 0.f) {
-            pullUpdateNode<kWoodKind>(om, L, c, in.data(), out.data(), x, y, z);
-          } else {
-            pullUpdateNode<kLeafKind>(om, L, c, in.data(), out.data(), x, y, z);
-          }
+          // as the CUDA pull kernel: the arrivals, then the collision of either kind
+          float f[kQ];
+          pullLoad(L, in.data(), x, y, z, f);
+          pullCollideStoreEitherKind(om, L, coded[size_t(d.index(x, y, z))], f, out.data(), x, y, z);
         }
     std::swap(in, out);  // in: the post values of iteration t; out: of t - 1 (the arrivals of t)
     for (int z = 0; z < d.nz; ++z)

@@ -65,15 +65,18 @@ CANOPY_HD CANOPY_FORCEINLINE void pullCollideStore(const OmegaSet& om, const Pul
   for (int m = 0; m < kQ; ++m) out[pullSlot(L, m, x, y, z)] = post[m];
 }
 
-// One step at interior node (x, y, z): pullLoad, then pullCollideStore. (The CUDA leaf kernel
-// calls the two itself, reading the node's density between them, so that the density load does not
-// delay the 19 arrival loads.)
-template <int Kind = kAnyKind, bool Fused = false>
-CANOPY_HD CANOPY_FORCEINLINE void pullUpdateNode(const OmegaSet& om, const PullLayout& L, float coded,
-                                                 const float* in, float* out, int x, int y, int z) {
-  float f[kQ];
-  pullLoad(L, in, x, y, z, f);
-  pullCollideStore<Kind, Fused>(om, L, coded, f, out, x, y, z);
+// The same for a node of either kind, told by the sign of its coded density: each kind in its own
+// branch with its compile-time Omega offsets (not kAnyKind's run-time select of the matrix). The
+// CUDA pull kernel's per-node collision, after pullLoad and the read of the node's density (read
+// after the 19 arrival loads, so that it does not delay them); on the CPU,
+// tests/lbsolve/test_collide.cpp runs the same two calls.
+template <bool Fused = false>
+CANOPY_HD CANOPY_FORCEINLINE void pullCollideStoreEitherKind(const OmegaSet& om, const PullLayout& L, float coded, float f[kQ],
+                                                             float* out, int x, int y, int z) {
+  if (coded < 0.f)
+    pullCollideStore<kWoodKind, Fused>(om, L, coded, f, out, x, y, z);
+  else
+    pullCollideStore<kLeafKind, Fused>(om, L, coded, f, out, x, y, z);
 }
 
 // Boundary node (x, y, z): its post values, the collision of the fixed boundary values (what the

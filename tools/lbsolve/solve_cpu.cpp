@@ -111,8 +111,7 @@ int64_t cudaSolverBytes(const DenseLattice& l, CudaScheme scheme) {
   if (scheme == CudaScheme::Push || scheme == CudaScheme::PushFused)
     return n * (2 * kQ + 1) * int64_t(sizeof(float)) + wood * int64_t(sizeof(int64_t)) + stored;
   if (scheme == CudaScheme::Pull || scheme == CudaScheme::PullFused)
-    return 2 * pullStateFloats(pullLayout(d)) * int64_t(sizeof(float)) + 2 * n * int64_t(sizeof(float)) +
-           wood * int64_t(sizeof(int64_t)) + stored;
+    return 2 * pullStateFloats(pullLayout(d)) * int64_t(sizeof(float)) + 2 * n * int64_t(sizeof(float)) + stored;
   const int64_t boundary = n - int64_t(std::max(d.nx - 2, 0)) * std::max(d.ny - 2, 0) * std::max(d.nz - 2, 0);
   return n * (kQ + 2) * int64_t(sizeof(float)) + occupied * int64_t(sizeof(int64_t) + sizeof(float)) +
          boundary * int64_t(sizeof(int64_t)) + stored;

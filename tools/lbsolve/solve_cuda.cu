@@ -144,14 +144,10 @@ __global__ void __launch_bounds__(kBlockX) pullLeafKernel(const OmegaSet omega, 
   float f[kQ];
   pullLoad(L, in, x, y, z, f);
   const float c = coded[L.d.index(x, y, z)];
-  // A wood node (the trunk: a few warps) takes the other branch, with its own compile-time Omega
-  // offsets, on the values already loaded. (Until 2026-12-02 a second kernel per iteration updated
-  // the wood nodes from a list, loading their arrivals again, scattered; Nsight Compute showed this
-  // kernel alone at 3.53 TB/s while the iteration as a whole ran at 72.6 % of the copy bandwidth.)
-  if (c < 0.f)
-    pullCollideStore<kWoodKind, Fused>(omega, L, c, f, out, x, y, z);
-  else
-    pullCollideStore<kLeafKind, Fused>(omega, L, c, f, out, x, y, z);
+  // A wood node (the trunk: a few warps) takes the other branch, on the values already loaded.
+  // (A second kernel per iteration used to update the wood nodes from a list, loading their
+  // arrivals again, scattered: bench/lbsolve/NOTES.md, fifth round.)
+  pullCollideStoreEitherKind<Fused>(omega, L, c, f, out, x, y, z);
 }
 
 // The boundary nodes' post values (constant over a solve) into both buffers.

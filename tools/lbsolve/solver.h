@@ -94,7 +94,7 @@ std::unique_ptr<Solver> makeCudaSolver(const DenseLattice& lattice, int gpu, Cud
 
 // Bytes of device memory a CUDA solver needs for this lattice. Push: 2 x 19 floats + coded density
 // per node, the wood-node list, plus the stored-node index list and its values. Pull: the same with
-// x padded to a multiple of 32 and a total per node (residual). Shift (both): 19
+// x padded to a multiple of 32, a total per node (residual) and no wood-node list. Shift (both): 19
 // floats + coded density + a kept total per node, the occupied and boundary node lists, and the
 // stored nodes.
 int64_t cudaSolverBytes(const DenseLattice& lattice, CudaScheme scheme = CudaScheme::Shift);
