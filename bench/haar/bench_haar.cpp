@@ -24,6 +24,7 @@
 #include "canopy/errors.h"
 #include "haar.h"
 #include "../../tests/haar/synthetic_light.h"
+#include "../bench_usage.h"
 
 using namespace canopy::haar;
 
@@ -71,7 +72,13 @@ double rmsOf(const BaseCode& c, const LatticeGeom& g) { return std::sqrt(c.sumSq
 
 }  // namespace
 
+constexpr char kUsage[] =
+    "usage: bench_haar (IN.light.vdb | --synthetic N) [--precision fp32|fp16|quant] [--write-chaar OUT]\n"
+    "  Compressed size of a light field at 1 % volume RMS error, against dense fp32 and ZFP at the same\n"
+    "  max error; Markdown on stdout.\n";
+
 int main(int argc, char** argv) {
+  if (benchHelpRequested(argc, argv, kUsage)) return 0;
   std::string input, writeChaar;
   int synthetic = 0;
   Precision precision = Precision::Fp32;
@@ -82,8 +89,7 @@ int main(int argc, char** argv) {
     else if (a == "--write-chaar" && i + 1 < argc) writeChaar = argv[++i];
     else if (a[0] != '-') input = a;
     else {
-      std::fprintf(stderr, "usage: bench_haar (IN.light.vdb | --synthetic N) [--precision fp32|fp16|quant] [--write-chaar OUT]\n");
-      return 1;
+      return benchUsageError("bench_haar", ("bad argument " + a).c_str(), kUsage);
     }
   }
   if (input.empty() && synthetic <= 0) synthetic = 96;

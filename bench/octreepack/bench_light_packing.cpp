@@ -29,6 +29,7 @@
 #include "formats/canopy_file.h"
 #include "tests/octreepack/packed_sampler.h"
 #include "tools/octreepack/inputs.h"
+#include "../bench_usage.h"
 
 namespace op = canopy::octreepack;
 
@@ -89,21 +90,23 @@ std::string q(const std::string& s) { return "'" + s + "'"; }
 
 }  // namespace
 
+constexpr char kUsage[] =
+    "usage: bench-light-packing WORKDIR PLANT.density.vdb PLANT.light.vdb [--thresholds T,T,...] [--precision fp16|fp32]\n"
+    "  Bytes and error of a plant's packed light per Haar threshold; Markdown on stdout.\n";
+
 int main(int argc, char** argv) {
-  if (argc < 4) {
-    std::cerr << "usage: bench-light-packing WORKDIR PLANT.density.vdb PLANT.light.vdb [--thresholds T,T,...] [--precision fp16|fp32]\n";
-    return 1;
-  }
+  if (benchHelpRequested(argc, argv, kUsage)) return 0;
+  if (argc < 4) return benchUsageError("bench-light-packing", "expected WORKDIR PLANT.density.vdb PLANT.light.vdb", kUsage);
   canopy::setQuiet(true);
   const std::string work = argv[1], density = argv[2], lightVdb = argv[3];
   std::string thresholds = "0,0.003,0.01,0.03,0.1", precision = "fp16";
-  for (int i = 4; i + 1 < argc; i += 2) {
+  for (int i = 4; i < argc; i += 2) {
     const std::string a = argv[i];
+    if (i + 1 >= argc) return benchUsageError("bench-light-packing", ("no value after " + a).c_str(), kUsage);
     if (a == "--thresholds") thresholds = argv[i + 1];
     else if (a == "--precision") precision = argv[i + 1];
     else {
-      std::cerr << "bench-light-packing: unknown option " << a << "\n";
-      return 1;
+      return benchUsageError("bench-light-packing", ("unknown option " + a).c_str(), kUsage);
     }
   }
   std::string bin = argv[0];  // the tools beside this executable (also when it was found on PATH)

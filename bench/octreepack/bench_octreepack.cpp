@@ -13,6 +13,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <iostream>
 #include <sstream>
 #include <string>
@@ -27,6 +28,7 @@
 #include "formats/canopy_write.h"
 #include "tools/octreepack/inputs.h"
 #include "tools/octreepack/octreepack.h"
+#include "../bench_usage.h"
 
 namespace op = canopy::octreepack;
 
@@ -81,20 +83,31 @@ Row pack(const std::string& name, const op::OctreepackOptions& o, uint64_t vdbBy
 
 }  // namespace
 
+constexpr char kUsage[] =
+    "usage: bench-octreepack WORKDIR [PLANT.density.vdb ...] [--instances N]\n"
+    "  Pack time, file size and resident part of plants (synthetic ones without PLANT arguments) and of a\n"
+    "  scattered forest of N instances (default 400); Markdown on stdout.\n";
+
 int main(int argc, char** argv) {
-  if (argc < 2) {
-    std::cerr << "usage: bench-octreepack WORKDIR [PLANT.density.vdb ...] [--instances N]\n";
-    return 1;
-  }
+  if (benchHelpRequested(argc, argv, kUsage)) return 0;
+  if (argc < 2) return benchUsageError("bench-octreepack", "no WORKDIR", kUsage);
   canopy::setQuiet(true);
   const std::string work = argv[1];
   std::vector<std::string> plants;
   int instances = 400;
   for (int i = 2; i < argc; ++i) {
-    if (std::string(argv[i]) == "--instances" && i + 1 < argc) instances = std::atoi(argv[++i]);
-    else plants.push_back(argv[i]);
+    const std::string a = argv[i];
+    if (a == "--instances" && i + 1 < argc) instances = std::atoi(argv[++i]);
+    else if (a.size() > 1 && a[0] == '-') return benchUsageError("bench-octreepack", ("unknown option " + a).c_str(), kUsage);
+    else plants.push_back(a);
   }
-  if (std::system(("mkdir -p '" + work + "'").c_str()) != 0) return 2;
+  if (work.empty() || work[0] == '-') return benchUsageError("bench-octreepack", ("bad WORKDIR " + work).c_str(), kUsage);
+  std::error_code mkdirError;
+  std::filesystem::create_directories(work, mkdirError);
+  if (mkdirError) {
+    std::cerr << "bench-octreepack: " << work << ": cannot create (" << mkdirError.message() << ")\n";
+    return 2;
+  }
   try {
     if (plants.empty()) {
       for (int edge : {128, 192, 256}) {

@@ -20,6 +20,7 @@
 
 #include "canopy/cli.h"
 #include "voxelize.h"
+#include "../bench_usage.h"
 
 namespace {
 
@@ -61,7 +62,14 @@ void writeObj(const canopy::mesh::Mesh& m, const std::string& path) {
 
 }  // namespace
 
+constexpr char kUsage[] =
+    "usage: bench_voxelize [MESH] [--resolution 128] [--supersample 8] [--repeats 5] [--vdb-tool vdb_tool]\n"
+    "                      [--tool-repeats 1]\n"
+    "  Voxelisation time of MESH (default: the shared oak_medium.glb) against OpenVDB's vdb_tool -mesh2ls\n"
+    "  on the same triangles.\n";
+
 int main(int argc, char** argv) {
+  if (benchHelpRequested(argc, argv, kUsage)) return 0;
   std::string input = std::string(CANOPY_SHARED_DIR) + "/assets/plants/oak_medium.glb";
   std::string vdbTool = "vdb_tool";
   int resolution = 128, supersample = 8, repeats = 5, toolRepeats = 1;
@@ -73,6 +81,7 @@ int main(int argc, char** argv) {
     else if (a == "--repeats") repeats = std::max(1, std::stoi(next()));
     else if (a == "--vdb-tool") vdbTool = next();
     else if (a == "--tool-repeats") toolRepeats = std::max(1, std::stoi(next()));
+    else if (a.size() > 1 && a[0] == '-') return benchUsageError("bench_voxelize", ("unknown option " + a).c_str(), kUsage);
     else input = a;
   }
   canopy::setQuiet(true);
