@@ -128,6 +128,7 @@ CANOPY_HD inline void rayBox(V3 o, V3 d, V3 lo, V3 hi, float& t0, float& t1) {
 // The scene as the kernel sees it (plain pointers: host memory on the CPU, device memory on the GPU)
 // ------------------------------------------------------------------------------------------------
 constexpr int kHitCapacity = 16;        // instances pending or active along one ray at once
+static_assert(kHitCapacity <= 32, "hit bit masks (InstanceWalk::freeSlots, traceCone's evaluation mask) are 32 bits");
 constexpr uint32_t kFallbackLevels = 3;  // a missing brick may use a resident ancestor this much coarser
 constexpr float kMaxConstantCells = 4.0f;  // a uniform non-empty node is shaded at least every 4 cells
 constexpr float kStopT = 1e-3f;          // default early stop (ShadeParams::stopT): opacity above 0.999
@@ -1096,8 +1097,15 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
     bool active = false;
     const float footprint = t * pixelAngle;
     float minCell = 3.0e38f;
+    // Two passes over the hits. The first is cheap (pending hits and held empty segments only bound
+    // the step) and notes which hits must be evaluated; the second evaluates them, in the same
+    // ascending order, so the sums are the same bit for bit. On the GPU this is what lets a warp
+    // run instanceSegment() once for all its lanes: in one loop doing both, a lane that evaluates
+    // its first hit and a lane that evaluates its third ran the evaluation at different iterations,
+    // one after the other (bench/play/NOTES.md, sixth round).
+    uint32_t evaluate = 0;
     for (int h = 0; h < w.count; ++h) {
-      Hit& hit = w.hits[h];
+      const Hit& hit = w.hits[h];
       if (hit.tin > t) {
         next = hit.tin < next ? hit.tin : next;
         continue;
@@ -1111,6 +1119,13 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
         next = hit.hold.end < next ? hit.hold.end : next;
         continue;
       }
+      evaluate |= 1u << h;
+    }
+    while (evaluate != 0) {
+      const int h = int(lowestSetBit(evaluate));
+      evaluate &= evaluate - 1u;
+      Hit& hit = w.hits[h];
+      const InstanceView& inst = s.instances[hit.instance];
       const Segment g = instanceSegment(s, inst, o, d, t, hit.tout, footprint, true, w.caches[hit.slot],
                                         s.shade.holdEmpty ? &hit.hold : nullptr);
       next = g.tEnd < next ? g.tEnd : next;
