@@ -592,7 +592,10 @@ CANOPY_HD inline void segmentIndirect(const SceneView& s, const InstanceView& in
 // level) and returns k = 0 with the same end, bit for bit: `until` stops 3 epsilons (instanceSegment's
 // eps at the segment's end, which bounds the eps at t') short of the end, far more than the float
 // rounding of the point (a few ulps of unit coordinates, < 1e-3 cell) and of the exit. Everything
-// else (bricks, uniform nodes, misses, shadow cones) is evaluated at every step as before.
+// else (bricks, uniform nodes, misses, shadow cones) is evaluated at every step as before. The
+// primary march then folds the level condition into `until` (levelHoldsUntil: the footprint only
+// grows along the ray, so the level condition holds below some t), and a held hit costs one
+// comparison per step.
 struct EmptyHold {
   float until;     // -inf: nothing held
   float end;       // the held segment's end (its tEnd)
@@ -638,6 +641,21 @@ CANOPY_HD inline bool emptyRunEnd(const uint64_t* mask, V3 uo, V3 ud, V3 u, cons
 // The octree level instanceSegment() picks for footprint (world) at instance `inst`.
 CANOPY_HD CANOPY_FORCEINLINE uint32_t segmentLevel(const SceneView& s, const InstanceView& inst, uint32_t depth, float footprint) {
   return levelForFootprint(depth, footprint / inst.cellWorld, s.shade.lodBias);
+}
+
+// A ray parameter T such that the level of a primary cone (segmentLevel at footprint t *
+// pixelAngle) is >= `level` at every t < T, so that a held segment's level condition (EmptyHold)
+// can be folded into its `until` once, instead of being evaluated at every step. levelForFootprint
+// gives depth - floor(log2 fp) + lodBias (fp = max(footprint / cellWorld, 1), clamped, truncated),
+// which is >= level (level >= 1) exactly where floor(log2 fp) <= depth + lodBias - level, i.e.
+// fp < 2^k with k = floor(depth + lodBias - level) + 1. T stops 1e-5 short of that relatively: far
+// more than the rounding of t * pixelAngle / cellWorld and of log2f near 2^k (a few 1e-7), so
+// every t < T has fp < 2^k in floats too. (k >= 1 wherever the hold was made: its level is at most
+// the level at that t.) Level 0 holds everywhere.
+CANOPY_HD inline float levelHoldsUntil(const SceneView& s, const InstanceView& inst, uint32_t depth, float pixelAngle, uint32_t level) {
+  if (level == 0) return 3.0e38f;
+  const float k = floorf(float(depth) + s.shade.lodBias - float(level)) + 1.0f;
+  return ldexpf(inst.cellWorld / pixelAngle, int(k)) * 0.99999f;
 }
 
 // The segment of instance `inst` at ray position t (world), the cone footprint there being
@@ -1111,10 +1129,13 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
         continue;
       }
       active = true;
-      const InstanceView& inst = s.instances[hit.instance];
-      minCell = inst.cellWorld < minCell ? inst.cellWorld : minCell;
-      if (t < hit.hold.until && segmentLevel(s, inst, s.models[inst.model].depth, footprint) >= hit.hold.level) {
-        // the same empty segment as at the previous step (EmptyHold): k = 0 up to its end
+      if (kWithCones) {  // the shadow interval's length (below)
+        const float cell = s.instances[hit.instance].cellWorld;
+        minCell = cell < minCell ? cell : minCell;
+      }
+      if (t < hit.hold.until) {
+        // the same empty segment as at the previous step (EmptyHold; `until` includes the level
+        // condition, levelHoldsUntil): k = 0 up to its end
         CANOPY_PLAY_COUNT(s, heldSegments, 1);
         next = hit.hold.end < next ? hit.hold.end : next;
         continue;
@@ -1128,6 +1149,10 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
       const InstanceView& inst = s.instances[hit.instance];
       const Segment g = instanceSegment(s, inst, o, d, t, hit.tout, footprint, true, w.caches[hit.slot],
                                         s.shade.holdEmpty ? &hit.hold : nullptr);
+      if (hit.hold.until > t) {  // a new hold: its level condition becomes a bound on t
+        const float limit = levelHoldsUntil(s, inst, s.models[inst.model].depth, pixelAngle, hit.hold.level);
+        hit.hold.until = limit < hit.hold.until ? limit : hit.hold.until;
+      }
       next = g.tEnd < next ? g.tEnd : next;
       if (g.k <= 0.0f) continue;
       k += g.k;

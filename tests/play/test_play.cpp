@@ -113,6 +113,46 @@ TEST(Cone, LevelFromFootprintIsTheCoarsestLevelNoLargerThanTheFootprint) {
   EXPECT_EQ(pl::levelForFootprint(5, 8.0f, -1), 1u);  // bias: coarser
 }
 
+TEST(Cone, LevelHoldsUntilIsTheLastRayParameterWhereTheFootprintLevelStaysAtLeastTheHeldOne) {
+  // levelHoldsUntil (the held empty segments' level condition folded into a bound on t) must be
+  // safe: below it the level is >= the held level at every float t; and tight: a little above it
+  // the level is below (else held segments would be evaluated again for nothing).
+  pl::SceneView s{};
+  pl::InstanceView inst{};
+  uint32_t lcg = 12345u;
+  auto uniform = [&lcg] { return float((lcg = lcg * 1664525u + 1013904223u) >> 8) / 16777216.0f; };
+  int checked = 0;
+  for (int trial = 0; trial < 2000; ++trial) {
+    const uint32_t depth = 1 + uint32_t(uniform() * 7.0f);
+    s.shade.lodBias = trial % 3 == 0 ? 0.0f : (trial % 3 == 1 ? -1.0f : -0.5f * uniform());
+    inst.cellWorld = 0.001f + uniform();
+    const float pixelAngle = 1e-4f + 1e-2f * uniform();
+    const float t0 = 100.0f * uniform();
+    const uint32_t atT0 = pl::segmentLevel(s, inst, depth, t0 * pixelAngle);
+    const uint32_t level = uint32_t(uniform() * float(atT0 + 1));  // a held leaf is at most this fine
+    const float until = pl::levelHoldsUntil(s, inst, depth, pixelAngle, level);
+    if (level == 0) {
+      EXPECT_GE(until, 1e38f);
+      continue;
+    }
+    ASSERT_GT(until, t0) << "trial " << trial;
+    // safe: the largest floats below `until`, and points between t0 and it
+    float t = until;
+    for (int i = 0; i < 64; ++i) {
+      t = std::nextafter(t, 0.0f);
+      ASSERT_GE(pl::segmentLevel(s, inst, depth, t * pixelAngle), level) << "trial " << trial << " t " << t;
+    }
+    for (int i = 0; i < 64; ++i) {
+      const float u = t0 + (until - t0) * (float(i) / 64.0f);
+      ASSERT_GE(pl::segmentLevel(s, inst, depth, u * pixelAngle), level) << "trial " << trial << " t " << u;
+    }
+    // tight: 1e-4 above it the level has dropped
+    EXPECT_LT(pl::segmentLevel(s, inst, depth, until * 1.0001f * pixelAngle), level) << "trial " << trial;
+    ++checked;
+  }
+  EXPECT_GT(checked, 1000);
+}
+
 TEST(Cone, RayBoxAndNodeExit) {
   float t0, t1;
   pl::rayBox(pl::v3(-1, 0.5f, 0.5f), pl::v3(1, 0, 0), pl::v3(0, 0, 0), pl::v3(1, 1, 1), t0, t1);
