@@ -196,7 +196,7 @@ constexpr char kUsage[] =
     "                     [--schemes shift,shift-split,push,push-fused,pull,pull-fused] [--fill plant,full]\n"
     "                     [--lattices a.vdb,...] [--in-flight 1,2,3]\n"
     "  Dense-update throughput (node updates/s, fraction of the copy bandwidth) and the wall time of\n"
-    "  the 57 solves per lattice; Markdown on stdout. Exit 0 ok, 1 usage, 5 no such device.\n";
+    "  the 57 solves per lattice; Markdown on stdout. Exit 0 ok, 1 usage, 4 failure, 5 no such device.\n";
 
 int main(int argc, char** argv) try {
   if (benchHelpRequested(argc, argv, kUsage)) return 0;

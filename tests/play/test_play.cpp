@@ -124,7 +124,7 @@ TEST(Cone, LevelHoldsUntilIsTheLastRayParameterWhereTheFootprintLevelStaysAtLeas
   int checked = 0;
   for (int trial = 0; trial < 2000; ++trial) {
     const uint32_t depth = 1 + uint32_t(uniform() * 7.0f);
-    s.shade.lodBias = trial % 3 == 0 ? 0.0f : (trial % 3 == 1 ? -1.0f : -0.5f * uniform());
+    s.shade.lodBias = trial % 4 == 0 ? 0.0f : (trial % 4 == 1 ? -1.0f : (trial % 4 == 2 ? -0.5f * uniform() : 1.5f * uniform()));
     inst.cellWorld = 0.001f + uniform();
     const float pixelAngle = 1e-4f + 1e-2f * uniform();
     const float t0 = 100.0f * uniform();
