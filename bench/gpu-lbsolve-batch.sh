@@ -28,7 +28,7 @@ if has dense; then
     step "dense ($b)"
     args=(--device cuda --sizes "${DENSE_SIZES:-128,256}" --fill plant --schemes "${DENSE_SCHEMES:-pull,pull-fused}"
           --iterations "${DENSE_ITERATIONS:-400}" --solves-sizes "")
-    [[ $b = bench_lbsolve ]] && args+=(--per-launch "${DENSE_PER_LAUNCH:-1,3,19}")
+    args+=(--per-launch "${DENSE_PER_LAUNCH:-1,3,19}")  # PREV_BIN: a build that has --per-launch (12c0f90 on)
     timeout 400 "$b" "${args[@]}" > "$O/bench_dense_$b.md" 2>&1 || status=1
     grep -E "copy|^\| plant" "$O/bench_dense_$b.md"
   done

@@ -204,7 +204,7 @@ TEST(LbsolveCuda, cuda_SolvesPerLaunchKeepTheCpuBits) {
   if (cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA GPU";
   const fixtures::Plant plant = fixtures::makePlant(48, 7);
   const DenseLattice L = fixtures::denseOf(48, 48, 48, plant.density, plant.wood);
-  const auto specs = allSpecs(96, 1e-4f);
+  const auto specs = allSpecs(96, 3e-3f);  // stops after 64..96 iterations (1e-4: all at the cap)
   const auto cpu = runSolves(L, specs, kCpu);
   int lo = 1 << 30, hi = 0;
   for (const auto& r : cpu) lo = std::min(lo, r.iterations), hi = std::max(hi, r.iterations);
