@@ -4,24 +4,21 @@
 # and how busy DRAM and the SMs are, at 128^3 and 256^3 on the synthetic plant.
 #   Here: ../shared/scripts/bundle-libs .gpu/canopy.tar.xz build/bin/bench_lbsolve -- ../shared
 #   There: bash bench/gpu-lbsolve-ncu.sh  (.gpu carried)
-#   CASES="128:1 128:19 256:1" (size:solves per launch; default "128:1 256:1"); NCU_EXTRA (more ncu
-#   arguments, e.g. "--section WarpStateStats --clock-control none").
 set -u
 source "$(dirname "$0")/gpu-common.sh"
 NCU=$(command -v ncu || ls /usr/local/cuda/bin/ncu 2>/dev/null || true)
 [[ -n $NCU ]] || { echo "no ncu on this host"; exit 1; }
-for case in ${CASES:-128:1 256:1}; do
-  n=${case%%:*} k=${case##*:}
-  step "pull $n^3, $k per launch"
-  timeout 250 "$NCU" --kernel-name regex:pullLeafKernel --launch-skip 50 --launch-count 1 ${NCU_EXTRA:-} \
+for n in ${SIZES:-128 256}; do
+  step "pull $n^3"
+  timeout 250 "$NCU" --kernel-name regex:pullLeafKernel --launch-skip 50 --launch-count 1 \
     --section SpeedOfLight --section MemoryWorkloadAnalysis --section Occupancy --section LaunchStats \
-    --metrics dram__bytes_read.sum,dram__bytes_write.sum,lts__t_bytes.sum,l1tex__t_bytes.sum,gpu__time_duration.sum,lts__t_sector_hit_rate.pct \
-    bench_lbsolve --device cuda --sizes "$n" --fill plant --schemes pull --in-flight 1 --per-launch "$k" \
-    --iterations 100 --solves-sizes "" > "$O/ncu-pull-$n-$k.txt" 2>&1 || { echo "ncu failed"; status=1; }
-  grep -E "dram__bytes|lts__t_bytes|l1tex__t_bytes|lts__t_sector_hit|gpu__time_duration|DRAM Throughput|Memory Throughput|Compute \(SM\)|Achieved Occupancy|Registers Per|Grid Size|Block Size|Stall|stall" "$O/ncu-pull-$n-$k.txt" | head -40
-  python3 - "$O/ncu-pull-$n-$k.txt" "$n" "$k" <<'PY'
+    --metrics dram__bytes_read.sum,dram__bytes_write.sum,lts__t_bytes.sum,l1tex__t_bytes.sum,gpu__time_duration.sum \
+    bench_lbsolve --device cuda --sizes "$n" --fill plant --schemes pull --in-flight 1 --iterations 100 --solves-sizes "" \
+    > "$O/ncu-pull-$n.txt" 2>&1 || { echo "ncu failed"; status=1; }
+  grep -E "dram__bytes|lts__t_bytes|l1tex__t_bytes|gpu__time_duration|DRAM Throughput|Memory Throughput|Compute \(SM\)|Achieved Occupancy|Registers Per|Grid Size|Block Size" "$O/ncu-pull-$n.txt" | head -20
+  python3 - "$O/ncu-pull-$n.txt" "$n" <<'PY'
 import re, sys
-text = open(sys.argv[1]).read(); n = int(sys.argv[2]); k = int(sys.argv[3])
+text = open(sys.argv[1]).read(); n = int(sys.argv[2])
 def metric(name):
     m = re.search(name + r"\s+(\S+)\s+([\d,\.]+)", text)
     if not m: return None
@@ -30,7 +27,7 @@ def metric(name):
     return v * scale
 r, w = metric("dram__bytes_read.sum"), metric("dram__bytes_write.sum")
 t = metric("gpu__time_duration.sum")
-for label, nodes in (("lattice node", k * n ** 3), ("interior node", k * (n - 2) ** 3)):
+for label, nodes in (("lattice node", n ** 3), ("interior node", (n - 2) ** 3)):
     if r is not None and w is not None:
         print(f"pull {n}^3: DRAM read {r/nodes:.1f} B + write {w/nodes:.1f} B = {(r+w)/nodes:.1f} B per {label} (model: 80 + 76 = 156)")
 if r is not None and w is not None and t:

@@ -3,13 +3,11 @@
 //
 //   bench_lbsolve [--device cpu|cuda|cuda:N] [--sizes 128,256] [--solves-sizes 128]
 //                 [--iterations 64] [--schemes shift,shift-split,push,push-fused,pull,pull-fused] [--fill plant|full|plant,full]
-//                 [--lattices a.density.vdb,b.density.vdb] [--in-flight 1,2,3] [--per-launch 1,19]
+//                 [--lattices a.density.vdb,b.density.vdb] [--in-flight 1,2,3]
 //
 // Throughput: K solves in flight on one GPU (--in-flight, CudaRun::solvesPerGpu; 1 by default),
-// each advancing P solves per launch (--per-launch, CudaRun::solvesPerLaunch, pull schemes; 1 by
-// default), so K x P solves (bases 4.. of one channel), each run for I/4 and for I iterations
-// (tolerance 0); the difference divided by K x P x 3I/4 x nodes removes fixed costs
-// (initialisation, gathering the result). "Node updates/s" counts
+// each run for I/4 and for I iterations (tolerance 0); the difference divided by K x 3I/4 x nodes
+// removes fixed costs (initialisation, gathering the result). "Node updates/s" counts
 // lattice nodes advanced by one iteration, whatever the scheme does at each node. Bytes per update:
 // - push and pull: the nominal traffic of collide.h's push update: 19 floats read + 19 floats
 //   written + 4 bytes of coded density = 156 B per node (pull moves the same values, pull_stream.h);
@@ -171,31 +169,24 @@ double copyBandwidth(const Device& dev) {
   return 2.0 * bytes / best;
 }
 
-// Solves at once on one GPU: in flight x per launch.
-int solvesAtOnce(const CudaRun& run) { return run.solvesPerGpu * run.solvesPerLaunch; }
-
-// solvesAtOnce solves of `iterations` each (bases 4.., green: one Omega), all at once on one GPU.
+// K solves of `iterations` each (bases 4.., green), all in flight at once on one GPU.
 double solveSeconds(const DenseLattice& L, const Device& dev, const CudaRun& run, int iterations) {
   std::vector<SolveSpec> specs;
-  for (int k = 0; k < solvesAtOnce(run); ++k) specs.push_back(baseSpec(4 + k % 15, 1, iterations, 0.f));
+  for (int k = 0; k < run.solvesPerGpu; ++k) specs.push_back(baseSpec(4 + k % 15, 1, iterations, 0.f));
   const auto t0 = Clock::now();
   runSolves(L, specs, dev, {}, run);
   return since(t0);
 }
 
-// The runs to measure: every scheme x in-flight count x solves per launch (the last for pull only).
-std::vector<CudaRun> runsOf(const std::vector<CudaScheme>& schemes, const std::vector<int>& inFlight,
-                            const std::vector<int>& perLaunch) {
+// The runs to measure: every scheme x in-flight count.
+std::vector<CudaRun> runsOf(const std::vector<CudaScheme>& schemes, const std::vector<int>& inFlight) {
   std::vector<CudaRun> runs;
   for (CudaScheme c : schemes)
-    for (int k : inFlight)
-      for (int p : perLaunch) {
-        if (p > 1 && c != CudaScheme::Pull && c != CudaScheme::PullFused) continue;
-        CudaRun r(c);
-        r.solvesPerGpu = k;
-        r.solvesPerLaunch = p;
-        runs.push_back(r);
-      }
+    for (int k : inFlight) {
+      CudaRun r(c);
+      r.solvesPerGpu = k;
+      runs.push_back(r);
+    }
   return runs;
 }
 }  // namespace
@@ -203,7 +194,7 @@ std::vector<CudaRun> runsOf(const std::vector<CudaScheme>& schemes, const std::v
 constexpr char kUsage[] =
     "usage: bench_lbsolve [--device D] [--sizes 128,256] [--solves-sizes 128] [--iterations 64]\n"
     "                     [--schemes shift,shift-split,push,push-fused,pull,pull-fused] [--fill plant,full]\n"
-    "                     [--lattices a.vdb,...] [--in-flight 1,2,3] [--per-launch 1,19]\n"
+    "                     [--lattices a.vdb,...] [--in-flight 1,2,3]\n"
     "  Dense-update throughput (node updates/s, fraction of the copy bandwidth) and the wall time of\n"
     "  the 57 solves per lattice; Markdown on stdout. Exit 0 ok, 1 usage, 4 failure, 5 no such device.\n";
 
@@ -212,7 +203,7 @@ int main(int argc, char** argv) try {
   std::string deviceSpec = "auto";
   std::vector<int> sizes{128, 256}, solveSizes{128};
   std::vector<std::string> schemeNames{"shift"}, fills{"plant"}, lattices;
-  std::vector<int> inFlight{1}, perLaunch{1};
+  std::vector<int> inFlight{1};
   int iterations = 64;
   for (int i = 1; i < argc; i += 2) {
     const std::string k = argv[i];
@@ -226,7 +217,6 @@ int main(int argc, char** argv) try {
     else if (k == "--fill") fills = parseWords(v);
     else if (k == "--lattices") lattices = parseWords(v);
     else if (k == "--in-flight") inFlight = parseList(v);
-    else if (k == "--per-launch") perLaunch = parseList(v);
     else return benchUsageError("bench_lbsolve", ("unknown option " + k).c_str(), kUsage);
   }
   Device dev;
@@ -241,16 +231,12 @@ int main(int argc, char** argv) try {
   if (!dev.isCuda()) schemes = {CudaScheme::Shift};  // the CPU has one scheme (the reference)
   for (int k : inFlight)
     if (k < 1) throw std::runtime_error("--in-flight counts must be >= 1");
-  for (int p : perLaunch)
-    if (p < 1 || p > kMaxSolvesPerLaunch)
-      throw std::runtime_error("--per-launch counts must lie in [1, " + std::to_string(kMaxSolvesPerLaunch) + "]");
-  if (!dev.isCuda()) inFlight = {1}, perLaunch = {1};
-  const std::vector<CudaRun> runs = runsOf(schemes, inFlight, perLaunch);
+  if (!dev.isCuda()) inFlight = {1};
+  const std::vector<CudaRun> runs = runsOf(schemes, inFlight);
   auto schemeLabel = [&](const CudaRun& r) {
     if (!dev.isCuda()) return std::string("cpu");
     std::string label = cudaSchemeName(r.scheme);
     if (inFlight.size() > 1 || r.solvesPerGpu > 1) label += " x" + std::to_string(r.solvesPerGpu) + " in flight";
-    if (r.solvesPerLaunch > 1) label += ", " + std::to_string(r.solvesPerLaunch) + " per launch";
     return label;
   };
   std::string devName = dev.str();
@@ -275,7 +261,7 @@ int main(int argc, char** argv) try {
         solveSeconds(L, one, run, 2);  // warm-up (allocation, first launch)
         const int i1 = std::max(1, iterations / 4), i2 = std::max(i1 + 1, iterations);
         const double t1 = solveSeconds(L, one, run, i1), t2 = solveSeconds(L, one, run, i2);
-        const double rate = double(L.dims.count()) * solvesAtOnce(run) * (i2 - i1) / std::max(t2 - t1, 1e-9);
+        const double rate = double(L.dims.count()) * run.solvesPerGpu * (i2 - i1) / std::max(t2 - t1, 1e-9);
         const double bytes = bytesPerUpdate(L, one, run.scheme);
         std::printf("| %s %d^3 | %s | %lld | %.1f%% | %.3g | %.1f | %.1f | %.1f%% |\n", fill.c_str(), n,
                     schemeLabel(run).c_str(), (long long)L.dims.count(), 100.0 * occupied, rate, bytes,

@@ -394,108 +394,6 @@ TEST(Solver, ToleranceZeroRunsExactlyNIterations) {
   EXPECT_GT(r.residual, 0.f);  // not converged after 7 steps on a 10^3 lattice
 }
 
-// planBatches: batches of at most P solves sharing Omega, every spec exactly once, each batch in
-// spec order, the Omegas in order of first appearance (the tool's specs come base by base, the
-// three channels interleaved).
-TEST(Solver, PlanBatchesCutsTheSpecsByOmegaAndSize) {
-  std::vector<SolveSpec> specs;
-  for (int b = 0; b < kQ; ++b)
-    for (int c = 0; c < 3; ++c) {
-      SolveSpec s;
-      s.omega = makeOmegaSet(0.1 * (c + 1), 0.9, 0.2 * c);
-      s.boundary[b] = 1.f;
-      specs.push_back(s);
-    }
-  for (int per : {1, 2, 8, 19, 32}) {
-    const auto batches = planBatches(specs, per);
-    std::vector<int> seen(specs.size(), 0);
-    size_t expected = 0;
-    for (int c = 0; c < 3; ++c) expected += (kQ + size_t(per) - 1) / size_t(per);
-    EXPECT_EQ(batches.size(), expected) << per;
-    for (size_t i = 0; i < batches.size(); ++i) {
-      const auto& batch = batches[i];
-      ASSERT_FALSE(batch.empty());
-      EXPECT_LE(batch.size(), size_t(per));
-      for (size_t j = 0; j < batch.size(); ++j) {
-        ++seen[batch[j]];
-        EXPECT_EQ(batch[j] % 3, batch[0] % 3) << "one channel (Omega) per batch";
-        if (j > 0) EXPECT_LT(batch[j - 1], batch[j]);
-      }
-      if (i > 0) EXPECT_LE(batches[i - 1][0] % 3, batch[0] % 3) << "channel 0's batches first";
-    }
-    for (int n : seen) EXPECT_EQ(n, 1);
-  }
-}
-
-namespace {
-// A backend of 4 slots whose "state" is the iteration count and whose residual falls as
-// 1 / (iterations x rate of its solve): each solve's stop is known in advance. Records the
-// slots each step advanced and the slots checked.
-class ScriptedSolver final : public Solver {
- public:
-  std::string name() const override { return "scripted"; }
-  int slots() const override { return 4; }
-  std::vector<std::vector<int>> steps;
-  std::vector<int> checked;
-
- protected:
-  void init(int slot, const float boundary[kQ]) override { t_[slot] = 0, rate_[slot] = boundary[0]; }
-  void beforeCheckedStep(int slot) override { checked.push_back(slot); }
-  void step(const OmegaSet&, const std::vector<int>& slots) override {
-    steps.push_back(slots);
-    for (int s : slots) ++t_[s];
-  }
-  float residual(int slot) override { return 1.f / (float(t_[slot]) * rate_[slot]); }
-  std::vector<float> gather(int slot) override { return {float(t_[slot])}; }
-
- private:
-  int t_[4] = {};
-  float rate_[4] = {};
-};
-}  // namespace
-
-// Solver::solveBatch runs each solve on its own schedule: checks every checkEvery iterations and at
-// the cap, stops at the first check at or under the tolerance or at the cap, and drops a stopped
-// solve from the following steps; the results are those of solve() one at a time.
-TEST(Solver, SolveBatchStopsEachSolveOnItsOwnSchedule) {
-  std::vector<SolveSpec> specs(4);
-  // residual 1 / (t x rate) <= 0.01  <=>  t >= 100 / rate; checked every 4.
-  specs[0].boundary[0] = 10.f, specs[0].tolerance = 0.01f, specs[0].checkEvery = 4, specs[0].maxIterations = 100;  // t 12
-  specs[1].boundary[0] = 4.f, specs[1].tolerance = 0.01f, specs[1].checkEvery = 4, specs[1].maxIterations = 100;   // t 28
-  specs[2].boundary[0] = 1.f, specs[2].tolerance = 0.01f, specs[2].checkEvery = 4, specs[2].maxIterations = 30;    // cap 30
-  specs[3].boundary[0] = 1.f, specs[3].tolerance = 0.f, specs[3].maxIterations = 5;                                // exactly 5
-  ScriptedSolver batch;
-  const auto r = batch.solveBatch({&specs[0], &specs[1], &specs[2], &specs[3]});
-  ASSERT_EQ(r.size(), 4u);
-  const int iterations[4] = {12, 28, 30, 5};
-  for (int k = 0; k < 4; ++k) {
-    EXPECT_EQ(r[k].iterations, iterations[k]) << k;
-    EXPECT_EQ(r[k].values, std::vector<float>{float(iterations[k])}) << k;
-    ScriptedSolver single;
-    const SolveResult s = single.solve(specs[k]);
-    EXPECT_EQ(s.iterations, r[k].iterations) << k;
-    EXPECT_EQ(s.residual, r[k].residual) << k;
-  }
-  EXPECT_FLOAT_EQ(r[2].residual, 1.f / 30.f);  // checked at the cap, not converged
-  ASSERT_EQ(batch.steps.size(), 30u);
-  for (size_t i = 0; i < batch.steps.size(); ++i) {
-    std::vector<int> want;
-    for (int k = 0; k < 4; ++k)
-      if (int(i) < iterations[k]) want.push_back(k);
-    EXPECT_EQ(batch.steps[i], want) << "step " << i + 1;
-  }
-  // Solve 3 (tolerance 0) is checked once, before its last step; solve 0 at 4, 8, 12.
-  EXPECT_EQ(std::count(batch.checked.begin(), batch.checked.end(), 3), 1);
-  EXPECT_EQ(std::count(batch.checked.begin(), batch.checked.end(), 0), 3);
-  // More solves than slots, or two Omegas in one batch, are refused.
-  std::vector<SolveSpec> five(5);
-  std::vector<const SolveSpec*> p;
-  for (auto& s : five) p.push_back(&s);
-  EXPECT_THROW(batch.solveBatch(p), std::exception);
-  five[1].omega.col[0][0][0] = 1.f;
-  EXPECT_THROW(batch.solveBatch({&five[0], &five[1]}), std::exception);
-}
-
 // Light entering a plant from above is absorbed and scattered: below the crown it is darker than
 // above it. Values never go negative.
 TEST(Solver, APlantCastsIndirectShadow) {
@@ -647,10 +545,14 @@ TEST(PullStreaming, MatchesThePushUpdateBitForBitAtEveryIteration) {
   for (int t = 0; t < 30; ++t) {
     stepLattice(om, d, coded, a, b);
     std::swap(a, b);
-    for (int z = 0; z < d.nz; ++z)
-      for (int y = 0; y < d.ny; ++y)
-        for (int x = 0; x < L.nxp; ++x)  // every lane of the CUDA pull kernel's rows
-          pullNode(om, L, coded.data(), in.data(), out.data(), x, y, z);
+    for (int z = 1; z < d.nz - 1; ++z)
+      for (int y = 1; y < d.ny - 1; ++y)
+        for (int x = 1; x < d.nx - 1; ++x) {
+          // as the CUDA pull kernel: the arrivals, then the collision of either kind
+          float f[kQ];
+          pullLoad(L, in.data(), x, y, z, f);
+          pullCollideStoreEitherKind(om, L, coded[size_t(d.index(x, y, z))], f, out.data(), x, y, z);
+        }
     std::swap(in, out);  // in: the post values of iteration t; out: of t - 1 (the arrivals of t)
     for (int z = 0; z < d.nz; ++z)
       for (int y = 0; y < d.ny; ++y)

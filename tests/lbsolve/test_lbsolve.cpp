@@ -364,9 +364,6 @@ TEST(Cli, ExitCodesAndNoOutputOnErrors) {
   EXPECT_EQ(code(dir + "/p.vdb -o " + out + " --cuda-scheme push-fused"), int(ExitCode::Usage));  // bench only
   EXPECT_EQ(code(dir + "/p.vdb -o " + out + " --solves-per-gpu 0"), int(ExitCode::Usage));
   EXPECT_EQ(code(dir + "/p.vdb -o " + out + " --solves-per-gpu 65"), int(ExitCode::Usage));
-  EXPECT_EQ(code(dir + "/p.vdb -o " + out + " --cuda-scheme pull --solves-per-launch 0"), int(ExitCode::Usage));
-  EXPECT_EQ(code(dir + "/p.vdb -o " + out + " --cuda-scheme pull --solves-per-launch 33"), int(ExitCode::Usage));
-  EXPECT_EQ(code(dir + "/p.vdb -o " + out + " --solves-per-launch 2"), int(ExitCode::Usage));  // shift: one per launch
   EXPECT_EQ(code(dir + "/p.vdb -o " + out + " --wood-threshold 2"), int(ExitCode::InvalidInput));
   EXPECT_EQ(code(dir + "/none.vdb -o " + out), int(ExitCode::Io));
   EXPECT_EQ(code(dir + "/p.vdb -o " + dir + "/missing-dir/o.vdb"), int(ExitCode::Io));

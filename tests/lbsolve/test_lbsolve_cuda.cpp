@@ -7,7 +7,6 @@
 // The benchmark-only push-fused and pull-fused variants round differently: they are held to a looser, stated bound.
 #include <gtest/gtest.h>
 
-#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -15,7 +14,6 @@
 #include <string>
 
 #include "canopy/device.h"
-#include "canopy/errors.h"
 #include "fixtures.h"
 #include "lattice_io.h"
 #include "params.h"
@@ -192,40 +190,4 @@ TEST(LbsolveCuda, cuda_SolvesInFlightKeepTheCpuBits) {
       compare(cpu, runSolves(L, specs, kGpu0, {}, run),
               std::string("plant 48^3, ") + cudaSchemeName(scheme) + ", " + std::to_string(inFlight) + " in flight");
     }
-}
-
-// Several solves per launch (CudaRun::solvesPerLaunch, pull schemes: one kernel advances every
-// solve of a batch, each in its own buffers) change no bit: against the CPU with 2, 19 and 32 per
-// launch (32 > the 19 solves of one Omega: the batches are cut by Omega, planBatches), also with 2
-// such solvers in flight. With a tolerance the solves of a batch stop at different iterations, so
-// the launch's list of solves shrinks while the others go on; the test prints the spread.
-// pull-fused batched gives the bits of pull-fused one at a time (the same kernel).
-TEST(LbsolveCuda, cuda_SolvesPerLaunchKeepTheCpuBits) {
-  if (cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA GPU";
-  const fixtures::Plant plant = fixtures::makePlant(48, 7);
-  const DenseLattice L = fixtures::denseOf(48, 48, 48, plant.density, plant.wood);
-  const auto specs = allSpecs(96, 3e-3f);  // stops after 64..96 iterations (1e-4: all at the cap)
-  const auto cpu = runSolves(L, specs, kCpu);
-  int lo = 1 << 30, hi = 0;
-  for (const auto& r : cpu) lo = std::min(lo, r.iterations), hi = std::max(hi, r.iterations);
-  std::printf("plant 48^3: the CPU's solves stop after %d..%d iterations\n", lo, hi);
-  EXPECT_LT(lo, hi) << "the batches should hold solves that stop at different iterations";
-  for (int perLaunch : {2, 19, 32})
-    for (int inFlight : {1, 2}) {
-      CudaRun run(CudaScheme::Pull);
-      run.solvesPerLaunch = perLaunch;
-      run.solvesPerGpu = inFlight;
-      compare(cpu, runSolves(L, specs, kGpu0, {}, run),
-              "plant 48^3, pull, " + std::to_string(perLaunch) + " per launch, " + std::to_string(inFlight) + " in flight");
-    }
-  const auto fixed = allSpecs(40, 0.f);
-  CudaRun one(CudaScheme::PullFused), batched(CudaScheme::PullFused);
-  batched.solvesPerLaunch = 19;
-  const auto a = runSolves(L, fixed, kGpu0, {}, one), b = runSolves(L, fixed, kGpu0, {}, batched);
-  ASSERT_EQ(a.size(), b.size());
-  for (size_t k = 0; k < a.size(); ++k) EXPECT_EQ(a[k].values, b[k].values) << "pull-fused solve " << k;
-  // Only the pull schemes batch.
-  CudaRun shift(CudaScheme::Shift);
-  shift.solvesPerLaunch = 2;
-  EXPECT_THROW(runSolves(L, specs, kGpu0, {}, shift), Error);
 }

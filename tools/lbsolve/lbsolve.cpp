@@ -31,10 +31,6 @@ void validateOptions(const LbsolveOptions& o) {
   if (o.iterations < 0) throw usageError("--iterations must be >= 0");
   parseCudaRun(o);  // an unknown scheme fails before any work
   if (o.solvesPerGpu < 1 || o.solvesPerGpu > 64) throw usageError("--solves-per-gpu must lie in [1, 64]");
-  if (o.solvesPerLaunch < 1 || o.solvesPerLaunch > kMaxSolvesPerLaunch)
-    throw usageError("--solves-per-launch must lie in [1, " + std::to_string(kMaxSolvesPerLaunch) + "]");
-  if (o.solvesPerLaunch > 1 && o.cudaScheme != cudaSchemeName(CudaScheme::Pull))
-    throw usageError("--solves-per-launch needs --cuda-scheme pull");
   if (!(o.tolerance >= 0.f) || !std::isfinite(o.tolerance)) throw usageError("--tolerance must be >= 0");
   if (o.tolerance == 0.f && o.iterations == 0)
     throw usageError("--tolerance 0 needs --iterations N (the number of iterations to run)");
@@ -85,7 +81,6 @@ CudaRun parseCudaRun(const LbsolveOptions& o) {
     if (o.cudaScheme == cudaSchemeName(c)) {
       CudaRun run(c);
       run.solvesPerGpu = o.solvesPerGpu;
-      run.solvesPerLaunch = o.solvesPerLaunch;
       return run;
     }
   throw usageError("--cuda-scheme must be shift, shift-split, push or pull, not '" + o.cudaScheme + "'");

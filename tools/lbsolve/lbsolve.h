@@ -46,9 +46,6 @@ struct LbsolveOptions {
   std::string cudaScheme = "shift";
   // CUDA: solves in flight on each GPU (solver.h, CudaRun::solvesPerGpu); results do not depend on it.
   int solvesPerGpu = 1;
-  // CUDA pull scheme: solves advanced by one launch (solver.h, CudaRun::solvesPerLaunch); results do
-  // not depend on it.
-  int solvesPerLaunch = 1;
   // Bases mode: store the sun bases B01..B18 without their unscattered beam (beam.h), the light
   // scattered at least once, which the player adds to its own shadowed direct sun. false
   // (--sun-bases total): the total site density, beam included (the dissertation's B_j).

@@ -60,10 +60,6 @@ int main(int argc, char** argv) {
                  "CUDA: solves in flight on each GPU (own stream and buffers; fewer where memory is short); "
                  "the results do not depend on it")
       ->capture_default_str();
-  app.add_option("--solves-per-launch", o.solvesPerLaunch,
-                 "CUDA, --cuda-scheme pull: solves of one colour channel advanced by one launch per iteration "
-                 "(own buffers each; fewer where memory is short); the results do not depend on it")
-      ->capture_default_str();
   std::string sunBases = "scattered";
   app.add_option("--sun-bases", sunBases,
                  "Sun bases B01..B18: scattered (the direct beam removed; the player adds its own shadowed direct sun) "

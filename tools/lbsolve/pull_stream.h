@@ -79,31 +79,6 @@ CANOPY_HD CANOPY_FORCEINLINE void pullCollideStoreEitherKind(const OmegaSet& om,
     pullCollideStore<kLeafKind, Fused>(om, L, coded, f, out, x, y, z);
 }
 
-// Lane x (< L.nxp) of the pull kernel's row (y, z), one iteration, from the post values `in` to
-// `out`. An interior node: its arrivals, then the density (read after the 19 loads, so that it does
-// not delay them), then the collision of its kind and the store. A boundary node or padding slot of
-// an interior row stores what its slot holds (a boundary node's fixed post values, the same in both
-// buffers; padding: 0, never read), so that every warp of the row writes whole 32-byte sectors: a
-// sector written in part is read from DRAM before it is written back (bench/lbsolve/NOTES.md,
-// seventh round). Boundary rows and planes are not written at all.
-template <bool Fused = false>
-CANOPY_HD CANOPY_FORCEINLINE void pullNode(const OmegaSet& om, const PullLayout& L, const float* coded, const float* in,
-                                           float* out, int x, int y, int z) {
-  if (L.d.interior(x, y, z)) {
-    float f[kQ];
-    pullLoad(L, in, x, y, z, f);
-    pullCollideStoreEitherKind<Fused>(om, L, coded[L.d.index(x, y, z)], f, out, x, y, z);
-    return;
-  }
-  if (y < 1 || z < 1 || y >= L.d.ny - 1 || z >= L.d.nz - 1 || x >= L.nxp) return;
-  const bool node = x < L.d.nx;
-  CANOPY_UNROLL
-  for (int m = 0; m < kQ; ++m) {
-    const int64_t slot = pullSlot(L, m, x, y, z);
-    out[slot] = node ? in[slot] : 0.f;
-  }
-}
-
 // Boundary node (x, y, z): its post values, the collision of the fixed boundary values (what the
 // push update sends from it at every iteration), into `state`.
 CANOPY_HD CANOPY_FORCEINLINE void pullBoundaryNode(const OmegaSet& om, const PullLayout& L, const float boundary[kQ],

@@ -24,7 +24,7 @@ class CpuSolver final : public Solver {
   std::string name() const override { return "cpu"; }
 
  protected:
-  void init(int /*slot*/, const float boundary[kQ]) override {
+  void init(const float boundary[kQ]) override {
     const Dims d = lat_.dims;
     forRows([&](int y, int z) {
       for (int x = 0; x < d.nx; ++x) {
@@ -34,7 +34,7 @@ class CpuSolver final : public Solver {
     });
   }
 
-  void step(const OmegaSet& omega, const std::vector<int>& /*slots*/) override {
+  void step(const OmegaSet& omega) override {
     const Dims d = lat_.dims;
     const float* coded = lat_.coded.data();
     const float* in = cur_.data();
@@ -58,7 +58,7 @@ class CpuSolver final : public Solver {
     std::swap(cur_, prev_);
   }
 
-  float residual(int /*slot*/) override {
+  float residual() override {
     const int64_t n = lat_.dims.count();
     using Pair = std::pair<float, float>;  // (max |delta rho|, max rho)
     const Pair r = tbb::parallel_reduce(
@@ -75,7 +75,7 @@ class CpuSolver final : public Solver {
     return r.second > 0.f ? r.first / r.second : 0.f;
   }
 
-  std::vector<float> gather(int /*slot*/) override {
+  std::vector<float> gather() override {
     std::vector<float> v(lat_.stored.size());
     const int64_t n = lat_.dims.count();
     parallelFor(int64_t(v.size()), [&](int64_t k) { v[k] = nodeTotal(cur_.data(), n, lat_.stored[k]); });
@@ -99,7 +99,7 @@ std::unique_ptr<Solver> makeCpuSolver(const DenseLattice& lattice) {
   return std::make_unique<CpuSolver>(lattice);
 }
 
-int64_t cudaSolverBytes(const DenseLattice& l, CudaScheme scheme, int slots) {
+int64_t cudaSolverBytes(const DenseLattice& l, CudaScheme scheme) {
   const Dims d = l.dims;
   const int64_t n = d.count(), k = int64_t(l.stored.size());
   const int64_t stored = k * int64_t(sizeof(int64_t) + sizeof(float));
@@ -110,18 +110,15 @@ int64_t cudaSolverBytes(const DenseLattice& l, CudaScheme scheme, int slots) {
   }
   if (scheme == CudaScheme::Push || scheme == CudaScheme::PushFused)
     return n * (2 * kQ + 1) * int64_t(sizeof(float)) + wood * int64_t(sizeof(int64_t)) + stored;
-  if (scheme == CudaScheme::Pull || scheme == CudaScheme::PullFused) {
-    // Per solve: both buffers and the totals; shared: the coded density and the stored nodes.
-    const int64_t perSolve = (2 * pullStateFloats(pullLayout(d)) + n) * int64_t(sizeof(float));
-    return n * int64_t(sizeof(float)) + stored + std::max(1, slots) * perSolve;
-  }
+  if (scheme == CudaScheme::Pull || scheme == CudaScheme::PullFused)
+    return 2 * pullStateFloats(pullLayout(d)) * int64_t(sizeof(float)) + 2 * n * int64_t(sizeof(float)) + stored;
   const int64_t boundary = n - int64_t(std::max(d.nx - 2, 0)) * std::max(d.ny - 2, 0) * std::max(d.nz - 2, 0);
   return n * (kQ + 2) * int64_t(sizeof(float)) + occupied * int64_t(sizeof(int64_t) + sizeof(float)) +
          boundary * int64_t(sizeof(int64_t)) + stored;
 }
 
 #ifndef CANOPY_HAS_CUDA
-std::unique_ptr<Solver> makeCudaSolver(const DenseLattice&, int, CudaScheme, int) {
+std::unique_ptr<Solver> makeCudaSolver(const DenseLattice&, int, CudaScheme) {
   throw unsupported("--device cuda: this build of Canopy has no CUDA backend");
 }
 int64_t cudaFreeBytes(int) { return 0; }

@@ -126,33 +126,28 @@ __global__ void pushGatherKernel(const float* __restrict__ cur, int64_t n, const
 
 // ---- Pull scheme (pull_stream.h) -------------------------------------------------------------
 
-// The states of the solves one pull launch advances (CudaRun::solvesPerLaunch): slot j reads
-// in[j] and writes out[j]. A kernel parameter (constant memory): with Omega, the layout and these
-// 2 x 32 pointers the parameters stay under 4 KiB.
-struct PullSlots {
-  const float* in[kMaxSolvesPerLaunch];
-  float* out[kMaxSolvesPerLaunch];
-};
-
-// Every interior node (leaf, empty and wood) of every listed solve; grid (ceil(nx / 128), ny,
-// nz x solves), so a warp covers one tile of 32 nodes: every load of a direction reads 128
-// contiguous bytes (shifted by at most one node, i.e. two tiles), every store writes 128 aligned
-// bytes. The blocks run in z-major order within a solve, then solve after solve, so a launch's
-// resident blocks read and write a few neighbouring z-slices of one solve; blocks scattered over
-// the lattice (to mix the plant's colliding warps with the air's streaming ones) were slower by
-// 7-13 points of the copy bandwidth (bench/lbsolve/NOTES.md, fourth round).
+// Every interior node (leaf, empty and wood); grid (ceil(nx / 128), ny, nz), so a
+// warp covers one tile of 32 nodes: every load of a direction reads 128 contiguous bytes (shifted by
+// at most one node, i.e. two tiles), every store writes 128 aligned bytes. The blocks run in z-major
+// order, so a launch's resident blocks read and write a few neighbouring z-slices; blocks scattered
+// over the lattice (to mix the plant's colliding warps with the air's streaming ones) were slower
+// by 7-13 points of the copy bandwidth (bench/lbsolve/NOTES.md, fourth round).
 template <bool Fused>
 __global__ void __launch_bounds__(kBlockX) pullLeafKernel(const OmegaSet omega, const PullLayout L,
-                                                          const float* __restrict__ coded, const PullSlots s) {
+                                                          const float* __restrict__ coded,
+                                                          const float* __restrict__ in, float* __restrict__ out) {
   const int x = int(blockIdx.x) * kBlockX + int(threadIdx.x);
-  const int y = int(blockIdx.y), slot = int(blockIdx.z) / L.d.nz, z = int(blockIdx.z) - slot * L.d.nz;
-  // Interior nodes: the 19 arrival loads first, the density after them (branching on the density
-  // before issuing them would put a second memory round trip in front of every node); a wood node
-  // (the trunk: a few warps) takes the other branch, on the values already loaded. (A second kernel
-  // per iteration used to update the wood nodes from a list, loading their arrivals again,
-  // scattered: bench/lbsolve/NOTES.md, fifth round.) Boundary lanes of interior rows rewrite their
-  // fixed values, so that the row's stores cover whole sectors (pull_stream.h).
-  pullNode<Fused>(omega, L, coded, s.in[slot], s.out[slot], x, y, z);
+  const int y = int(blockIdx.y), z = int(blockIdx.z);
+  if (!L.d.interior(x, y, z)) return;  // boundary: its post values are fixed
+  // The 19 arrival loads first, the density after them: branching on the density before issuing
+  // them would put a second memory round trip in front of every node.
+  float f[kQ];
+  pullLoad(L, in, x, y, z, f);
+  const float c = coded[L.d.index(x, y, z)];
+  // A wood node (the trunk: a few warps) takes the other branch, on the values already loaded.
+  // (A second kernel per iteration used to update the wood nodes from a list, loading their
+  // arrivals again, scattered: bench/lbsolve/NOTES.md, fifth round.)
+  pullCollideStoreEitherKind<Fused>(omega, L, c, f, out, x, y, z);
 }
 
 // The boundary nodes' post values (constant over a solve) into both buffers.
@@ -364,15 +359,10 @@ bool isPull(CudaScheme scheme) { return scheme == CudaScheme::Pull || scheme == 
 
 class CudaSolver final : public Solver {
  public:
-  CudaSolver(const DenseLattice& l, int gpu, CudaScheme scheme, int slots)
+  CudaSolver(const DenseLattice& l, int gpu, CudaScheme scheme)
       : lat_(l), gpu_(gpu), scheme_(scheme), pull_(pullLayout(l.dims)) {
-    if (slots < 1 || slots > kMaxSolvesPerLaunch)
-      throw usageError("solves per launch must lie in [1, " + std::to_string(kMaxSolvesPerLaunch) + "]");
-    if (slots > 1 && !isPull(scheme))
-      throw usageError(std::string("several solves per launch need a pull scheme, not ") + cudaSchemeName(scheme));
-    slots = std::max(1, std::min(slots, 65535 / std::max(1, l.dims.nz)));  // grid.z = nz x slots
     const int64_t freeBytes = cudaFreeBytes(gpu);  // also makes `gpu` this thread's device
-    const int64_t need = cudaSolverBytes(l, scheme, slots);
+    const int64_t need = cudaSolverBytes(l, scheme);
     if (need > freeBytes)
       throw runtimeError("GPU " + std::to_string(gpu) + " has " + std::to_string(freeBytes >> 20) +
                          " MiB free, the lattice needs " + std::to_string(need >> 20) + " MiB");
@@ -383,10 +373,9 @@ class CudaSolver final : public Solver {
     uploadVector(stored_, l.stored);
     values_.resize(l.stored.size());
     result_.resize(2);
-    slots_.resize(size_t(slots));
     if (isShift(scheme)) {
       state_.resize(size_t(kQ) * n);
-      slots_[0].totals.resize(size_t(n));
+      totals_.resize(size_t(n));
       std::vector<int64_t> leaf, wood;
       std::vector<float> leafCoded, woodCoded, boundaryCoded;
       std::vector<uint64_t> edge, boundary;
@@ -421,13 +410,11 @@ class CudaSolver final : public Solver {
                           edge_.data(), int64_t(edge.size()), blocksFor(int64_t(edge.size()))};
     } else {
       const size_t floats = isPull(scheme) ? size_t(pullStateFloats(pull_)) : size_t(kQ) * n;
-      for (Slot& sl : slots_) {
-        sl.bufA.resize(floats);
-        sl.bufB.resize(floats);
-        sl.cur = sl.bufA.data();
-        sl.prev = sl.bufB.data();
-        if (isPull(scheme)) sl.totals.resize(size_t(n));
-      }
+      bufA_.resize(floats);
+      bufB_.resize(floats);
+      cur_ = bufA_.data();
+      prev_ = bufB_.data();
+      if (isPull(scheme)) totals_.resize(size_t(n));
       // Wood nodes, for push's second kernel: every one (boundary nodes are sources there). Pull's
       // one kernel updates them with the others.
       std::vector<int64_t> wood;
@@ -444,7 +431,6 @@ class CudaSolver final : public Solver {
   }
   ~CudaSolver() override { cudaStreamDestroy(stream_); }
   std::string name() const override { return "cuda:" + std::to_string(gpu_); }
-  int slots() const override { return int(slots_.size()); }
 
  protected:
   dim3 grid() const {
@@ -452,64 +438,40 @@ class CudaSolver final : public Solver {
     return dim3(unsigned((d.nx + kBlockX - 1) / kBlockX), unsigned(d.ny), unsigned(d.nz));
   }
 
-  void init(int slot, const float boundary[kQ]) override {
+  void init(const float boundary[kQ]) override {
     CANOPY_CUDA_CHECK(cudaSetDevice(gpu_));
-    Slot& sl = slots_[size_t(slot)];
-    std::memcpy(sl.boundary.f, boundary, sizeof sl.boundary.f);
-    sl.fixedTotal = boundaryTotal(boundary);
-    sl.t = 0;
+    std::memcpy(boundary_values_.f, boundary, sizeof boundary_values_.f);
+    fixedTotal_ = boundaryTotal(boundary);
+    t_ = 0;
     if (isShift(scheme_)) {
       // Interior nodes start at 0; boundary slots are never read (shift_stream.h).
       CANOPY_CUDA_CHECK(cudaMemsetAsync(state_.data(), 0, state_.size() * sizeof(float), stream_));
     } else if (isPull(scheme_)) {
       // Interior post values start at 0; the boundary's are written by the first step, which has
       // Omega (pull_stream.h).
-      CANOPY_CUDA_CHECK(cudaMemsetAsync(sl.bufA.data(), 0, sl.bufA.size() * sizeof(float), stream_));
-      CANOPY_CUDA_CHECK(cudaMemsetAsync(sl.bufB.data(), 0, sl.bufB.size() * sizeof(float), stream_));
+      CANOPY_CUDA_CHECK(cudaMemsetAsync(bufA_.data(), 0, bufA_.size() * sizeof(float), stream_));
+      CANOPY_CUDA_CHECK(cudaMemsetAsync(bufB_.data(), 0, bufB_.size() * sizeof(float), stream_));
     } else {
-      pushInitKernel<<<grid(), kBlockX, 0, stream_>>>(sl.boundary, lat_.dims, sl.cur, sl.prev);
+      pushInitKernel<<<grid(), kBlockX, 0, stream_>>>(boundary_values_, lat_.dims, cur_, prev_);
       CANOPY_CUDA_CHECK(cudaGetLastError());
     }
   }
 
-  void beforeCheckedStep(int slot) override {
+  void beforeCheckedStep() override {
     keepTotals_ = isShift(scheme_);
-    Slot& sl = slots_[size_t(slot)];
     // Pull: the totals of the current state, from the post values before it (before the first step:
     // zeros, the boundary's post values not written yet, so 0 inside, the initial state's).
     if (isPull(scheme_)) {
-      pullTotalsKernel<<<grid(), kBlockX, 0, stream_>>>(pull_, sl.prev, sl.fixedTotal, sl.totals.data());
+      pullTotalsKernel<<<grid(), kBlockX, 0, stream_>>>(pull_, prev_, fixedTotal_, totals_.data());
       CANOPY_CUDA_CHECK(cudaGetLastError());
     }
   }
 
-  void step(const OmegaSet& omega, const std::vector<int>& slots) override {
+  void step(const OmegaSet& omega) override {
     const Dims d = lat_.dims;
-    if (isPull(scheme_)) {
-      // One launch for every listed solve (a solve's first step also writes its boundary's post values).
-      PullSlots ps{};
-      for (size_t j = 0; j < slots.size(); ++j) {
-        Slot& sl = slots_[size_t(slots[j])];
-        if (sl.t == 0) {
-          pullBoundaryKernel<<<grid(), kBlockX, 0, stream_>>>(omega, sl.boundary, pull_, coded_.data(), sl.cur, sl.prev);
-          CANOPY_CUDA_CHECK(cudaGetLastError());
-        }
-        ps.in[j] = sl.cur;
-        ps.out[j] = sl.prev;
-        std::swap(sl.cur, sl.prev);
-        ++sl.t;
-      }
-      dim3 g = grid();
-      g.z *= unsigned(slots.size());
-      const bool fused = scheme_ == CudaScheme::PullFused;
-      (fused ? pullLeafKernel<true> : pullLeafKernel<false>)<<<g, kBlockX, 0, stream_>>>(omega, pull_, coded_.data(), ps);
-      CANOPY_CUDA_CHECK(cudaGetLastError());
-      return;
-    }
-    Slot& sl = slots_[0];
     if (isShift(scheme_)) {
-      const ShiftOffsets offsets = shiftOffsets(d, sl.t);
-      float* totals = keepTotals_ ? sl.totals.data() : nullptr;
+      const ShiftOffsets offsets = shiftOffsets(d, t_);
+      float* totals = keepTotals_ ? totals_.data() : nullptr;
       const ShiftLists& L = lists_;
       if (scheme_ == CudaScheme::ShiftSplit) {
         if (L.leafCount > 0)
@@ -519,52 +481,61 @@ class CudaSolver final : public Solver {
           shiftCollideKernel<kWoodKind><<<unsigned(L.woodBlocks), kBlockX, 0, stream_>>>(
               omega, offsets, d.count(), L.wood, L.woodCoded, L.woodCount, state_.data(), totals);
         if (L.edgeCount > 0)
-          shiftEdgeKernel<<<unsigned(L.edgeBlocks), kBlockX, 0, stream_>>>(omega, sl.boundary, offsets, d, L.edge,
+          shiftEdgeKernel<<<unsigned(L.edgeBlocks), kBlockX, 0, stream_>>>(omega, boundary_values_, offsets, d, L.edge,
                                                                            L.edgeCount, state_.data());
         CANOPY_CUDA_CHECK(cudaGetLastError());
       } else if (const int64_t blocks = L.leafBlocks + L.woodBlocks + L.edgeBlocks; blocks > 0) {
-        shiftStepKernel<<<unsigned(blocks), kBlockX, 0, stream_>>>(omega, sl.boundary, offsets, d, L,
+        shiftStepKernel<<<unsigned(blocks), kBlockX, 0, stream_>>>(omega, boundary_values_, offsets, d, L,
                                                                    state_.data(), totals);
         CANOPY_CUDA_CHECK(cudaGetLastError());
       }
-      totalsAt_ = keepTotals_ ? sl.t : -1;
+      totalsAt_ = keepTotals_ ? t_ : -1;
       keepTotals_ = false;
       const int64_t occupiedBoundary = int64_t(boundary_.size());
       if (occupiedBoundary > 0) {
         shiftOccupiedBoundaryKernel<<<unsigned(blocksFor(occupiedBoundary)), kBlockX, 0, stream_>>>(
-            omega, sl.boundary, offsets, d, boundary_.data(), boundaryCoded_.data(), occupiedBoundary,
+            omega, boundary_values_, offsets, d, boundary_.data(), boundaryCoded_.data(), occupiedBoundary,
             state_.data());
         CANOPY_CUDA_CHECK(cudaGetLastError());
       }
+    } else if (isPull(scheme_)) {
+      if (t_ == 0) {
+        pullBoundaryKernel<<<grid(), kBlockX, 0, stream_>>>(omega, boundary_values_, pull_, coded_.data(), cur_, prev_);
+        CANOPY_CUDA_CHECK(cudaGetLastError());
+      }
+      const bool fused = scheme_ == CudaScheme::PullFused;
+      (fused ? pullLeafKernel<true> : pullLeafKernel<false>)<<<grid(), kBlockX, 0, stream_>>>(omega, pull_, coded_.data(),
+                                                                                           cur_, prev_);
+      CANOPY_CUDA_CHECK(cudaGetLastError());
+      std::swap(cur_, prev_);
     } else {
       const bool fused = scheme_ == CudaScheme::PushFused;
       (fused ? pushLeafKernel<true> : pushLeafKernel<false>)<<<grid(), kBlockX, 0, stream_>>>(
-          omega, d, coded_.data(), sl.cur, sl.prev);
+          omega, d, coded_.data(), cur_, prev_);
       CANOPY_CUDA_CHECK(cudaGetLastError());
       const int64_t woodCount = int64_t(wood_.size());
       if (woodCount > 0) {
         (fused ? pushWoodKernel<true> : pushWoodKernel<false>)<<<unsigned(blocksFor(woodCount)), kBlockX, 0, stream_>>>(
-            omega, d, coded_.data(), sl.cur, sl.prev, wood_.data(), woodCount);
+            omega, d, coded_.data(), cur_, prev_, wood_.data(), woodCount);
         CANOPY_CUDA_CHECK(cudaGetLastError());
       }
-      std::swap(sl.cur, sl.prev);
+      std::swap(cur_, prev_);
     }
-    ++sl.t;
+    ++t_;
   }
 
-  float residual(int slot) override {
-    const Slot& sl = slots_[size_t(slot)];
+  float residual() override {
     CANOPY_CUDA_CHECK(cudaMemsetAsync(result_.data(), 0, 2 * sizeof(unsigned), stream_));
     if (isShift(scheme_)) {
-      if (sl.t < 1 || totalsAt_ != sl.t - 1) throw runtimeError("internal: shift residual without the kept totals");
+      if (t_ < 1 || totalsAt_ != t_ - 1) throw runtimeError("internal: shift residual without the kept totals");
       shiftResidualKernel<<<kRowBlocks, kRowThreads, 0, stream_>>>(
-          shiftOffsets(lat_.dims, sl.t), shiftOffsets(lat_.dims, sl.t - 1), lat_.dims, sl.fixedTotal, state_.data(),
-          coded_.data(), sl.totals.data(), result_.data());
+          shiftOffsets(lat_.dims, t_), shiftOffsets(lat_.dims, t_ - 1), lat_.dims, fixedTotal_, state_.data(),
+          coded_.data(), totals_.data(), result_.data());
     } else if (isPull(scheme_)) {
-      pullResidualKernel<<<kReduceBlocks, kReduceThreads, 0, stream_>>>(pull_, sl.prev, sl.fixedTotal,
-                                                                       sl.totals.data(), result_.data());
+      pullResidualKernel<<<kReduceBlocks, kReduceThreads, 0, stream_>>>(pull_, prev_, fixedTotal_, totals_.data(),
+                                                                       result_.data());
     } else {
-      pushResidualKernel<<<kReduceBlocks, kReduceThreads, 0, stream_>>>(sl.cur, sl.prev, lat_.dims.count(),
+      pushResidualKernel<<<kReduceBlocks, kReduceThreads, 0, stream_>>>(cur_, prev_, lat_.dims.count(),
                                                                        result_.data());
     }
     CANOPY_CUDA_CHECK(cudaGetLastError());
@@ -576,19 +547,18 @@ class CudaSolver final : public Solver {
     return v[1] > 0.f ? v[0] / v[1] : 0.f;
   }
 
-  std::vector<float> gather(int slot) override {
-    const Slot& sl = slots_[size_t(slot)];
+  std::vector<float> gather() override {
     const int64_t k = int64_t(lat_.stored.size());
     std::vector<float> out(size_t(k), 0.f);
     if (k > 0) {
       if (isShift(scheme_)) {
         shiftGatherKernel<<<kReduceBlocks, kReduceThreads, 0, stream_>>>(
-            shiftOffsets(lat_.dims, sl.t), lat_.dims, sl.fixedTotal, state_.data(), stored_.data(), k, values_.data());
+            shiftOffsets(lat_.dims, t_), lat_.dims, fixedTotal_, state_.data(), stored_.data(), k, values_.data());
       } else if (isPull(scheme_)) {
-        pullGatherKernel<<<kReduceBlocks, kReduceThreads, 0, stream_>>>(pull_, sl.prev, sl.fixedTotal, stored_.data(),
-                                                                       k, values_.data());
+        pullGatherKernel<<<kReduceBlocks, kReduceThreads, 0, stream_>>>(pull_, prev_, fixedTotal_, stored_.data(), k,
+                                                                       values_.data());
       } else {
-        pushGatherKernel<<<kReduceBlocks, kReduceThreads, 0, stream_>>>(sl.cur, lat_.dims.count(), stored_.data(), k,
+        pushGatherKernel<<<kReduceBlocks, kReduceThreads, 0, stream_>>>(cur_, lat_.dims.count(), stored_.data(), k,
                                                                        values_.data());
       }
       CANOPY_CUDA_CHECK(cudaGetLastError());
@@ -603,27 +573,22 @@ class CudaSolver final : public Solver {
   const DenseLattice& lat_;
   int gpu_;
   CudaScheme scheme_;
-  PullLayout pull_;  // pull: the tiled layout of the slots' buffers
+  PullLayout pull_;  // pull: the tiled layout of bufA_/bufB_
   cudaStream_t stream_ = nullptr;
-  // One solve's state. Push and pull: ping-pong buffers (pull: post values in pull_'s layout;
-  // totals before a checked step). Shift (one slot): the totals of the occupied nodes before a
-  // checked step; the state is state_.
-  struct Slot {
-    Boundary boundary{};
-    float fixedTotal = 0.f;  // total of a boundary node
-    int64_t t = 0;           // iterations done in this solve
-    cuda::DeviceBuffer<float> bufA, bufB, totals;
-    float* cur = nullptr;   // the current state (one of bufA/bufB)
-    float* prev = nullptr;  // the previous state; the next step writes here
-  };
-  std::vector<Slot> slots_;
+  Boundary boundary_values_{};
+  float fixedTotal_ = 0.f;   // total of a boundary node
+  int64_t t_ = 0;            // iterations done in this solve
   bool keepTotals_ = false;  // shift: the next step keeps the occupied nodes' totals
   int64_t totalsAt_ = -1;    // shift: the iteration whose occupied-node totals totals_ holds
   cuda::DeviceBuffer<float> coded_, values_;
   cuda::DeviceBuffer<int64_t> stored_, wood_;
   cuda::DeviceBuffer<unsigned> result_;
-  // Shift: one state, the node lists.
-  cuda::DeviceBuffer<float> state_, leafCoded_, woodCoded_, boundaryCoded_;
+  // Push and pull: ping-pong state (pull: post values in pull_'s layout; totals_ before a checked step).
+  cuda::DeviceBuffer<float> bufA_, bufB_;
+  float* cur_ = nullptr;   // the current state (one of bufA_/bufB_)
+  float* prev_ = nullptr;  // the previous state; the next step writes here
+  // Shift: one state, occupied nodes' totals before a checked step, the node lists.
+  cuda::DeviceBuffer<float> state_, totals_, leafCoded_, woodCoded_, boundaryCoded_;
   cuda::DeviceBuffer<int64_t> leaf_;
   cuda::DeviceBuffer<uint64_t> edge_, boundary_;  // empty / occupied boundary nodes, packed coordinates
   ShiftLists lists_{};
@@ -631,8 +596,8 @@ class CudaSolver final : public Solver {
 
 }  // namespace
 
-std::unique_ptr<Solver> makeCudaSolver(const DenseLattice& lattice, int gpu, CudaScheme scheme, int slots) {
-  return std::make_unique<CudaSolver>(lattice, gpu, scheme, slots);
+std::unique_ptr<Solver> makeCudaSolver(const DenseLattice& lattice, int gpu, CudaScheme scheme) {
+  return std::make_unique<CudaSolver>(lattice, gpu, scheme);
 }
 
 }  // namespace canopy::lb

@@ -47,24 +47,16 @@ class Solver {
  public:
   virtual ~Solver() = default;
   SolveResult solve(const SolveSpec& spec);
-  // Several solves advanced together (one launch per iteration where the backend batches them):
-  // specs.size() <= slots(), all with the same omega. Each solve follows its own schedule (cap,
-  // tolerance, checks) and leaves the batch when it stops; results[k] belongs to specs[k] and has
-  // the bits solve(specs[k]) would give.
-  std::vector<SolveResult> solveBatch(const std::vector<const SolveSpec*>& specs);
-  // How many solves solveBatch advances at once (1 unless the backend batches).
-  virtual int slots() const { return 1; }
   virtual std::string name() const = 0;
 
  protected:
-  // Each hook concerns one slot (0 .. slots() - 1); step advances the listed slots by one iteration.
-  virtual void init(int slot, const float boundary[kQ]) = 0;  // state := boundary on the outer layer, 0 inside
+  virtual void init(const float boundary[kQ]) = 0;  // state := boundary on the outer layer, 0 inside
   // Called before a step whose result residual() will check: a backend that overwrites the state
   // in place keeps what residual() needs of the current state here (ping-pong backends: nothing).
-  virtual void beforeCheckedStep(int /*slot*/) {}
-  virtual void step(const OmegaSet& omega, const std::vector<int>& slots) = 0;  // afterwards current = new state
-  virtual float residual(int slot) = 0;                 // between the current and the previous state
-  virtual std::vector<float> gather(int slot) = 0;      // rho of the current state at stored nodes
+  virtual void beforeCheckedStep() {}
+  virtual void step(const OmegaSet& omega) = 0;     // one update; afterwards current = new state
+  virtual float residual() = 0;                     // between the current and the previous state
+  virtual std::vector<float> gather() = 0;          // rho of the current state at stored nodes
 };
 
 // How the CUDA backend advances the lattice (bench/lbsolve/NOTES.md has the measurements):
@@ -94,37 +86,23 @@ struct CudaRun {
   // residual check). Fewer run where the GPU's free memory does not hold them all (never fewer
   // than one).
   int solvesPerGpu = 1;
-  // Pull schemes: solves advanced by one launch per iteration, each in its own buffers (at most
-  // kMaxSolvesPerLaunch; fewer where memory is short). A lattice of n nodes then updates as one
-  // launch over K x n nodes: at 128^3 a single solve's launch is too short to reach the memory
-  // system's steady state (bench/lbsolve/NOTES.md, seventh round). Solves share a launch only
-  // if their Omega is the same (one colour channel). Nothing here changes a result either.
-  int solvesPerLaunch = 1;
 };
-
-constexpr int kMaxSolvesPerLaunch = 32;
-
-// The hand-out of runSolves: specs cut into batches of at most perLaunch solves with equal Omega,
-// in the order of each Omega's first spec, each batch in spec order. Every spec appears once.
-std::vector<std::vector<size_t>> planBatches(const std::vector<SolveSpec>& specs, int perLaunch);
 
 std::unique_ptr<Solver> makeCpuSolver(const DenseLattice& lattice);
 // Throws canopy::Error(Unsupported) in a build without CUDA.
-// slots > 1 (pull schemes only; otherwise Usage): one launch per iteration advances that many solves.
-std::unique_ptr<Solver> makeCudaSolver(const DenseLattice& lattice, int gpu, CudaScheme scheme = CudaScheme::Shift,
-                                       int slots = 1);
+std::unique_ptr<Solver> makeCudaSolver(const DenseLattice& lattice, int gpu, CudaScheme scheme = CudaScheme::Shift);
 
 // Bytes of device memory a CUDA solver needs for this lattice. Push: 2 x 19 floats + coded density
 // per node, the wood-node list, plus the stored-node index list and its values. Pull: the same with
 // x padded to a multiple of 32, a total per node (residual) and no wood-node list. Shift (both): 19
 // floats + coded density + a kept total per node, the occupied and boundary node lists, and the
-// stored nodes. slots > 1 (pull): the per-solve part (both buffers, the totals, the values) that many times.
-int64_t cudaSolverBytes(const DenseLattice& lattice, CudaScheme scheme = CudaScheme::Shift, int slots = 1);
+// stored nodes.
+int64_t cudaSolverBytes(const DenseLattice& lattice, CudaScheme scheme = CudaScheme::Shift);
 
 // Runs every spec; results[k] belongs to specs[k]. CPU: one solver, specs in order. CUDA:
 // run.solvesPerGpu solvers per GPU (device.index >= 0: that GPU only; -1: every GPU), each on its
-// own host thread taking the next batch (planBatches, run.solvesPerLaunch) from a shared queue, so
-// several GPUs, and several streams of one GPU, share the 57 solves. onDone(k, result) is called (serialised) as each solve finishes.
+// own host thread taking the next spec from a shared queue, so several GPUs, and several streams
+// of one GPU, share the 57 solves. onDone(k, result) is called (serialised) as each solve finishes.
 std::vector<SolveResult> runSolves(const DenseLattice& lattice, const std::vector<SolveSpec>& specs,
                                    const Device& device,
                                    const std::function<void(size_t, const SolveResult&)>& onDone = {},
