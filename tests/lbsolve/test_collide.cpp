@@ -545,14 +545,10 @@ TEST(PullStreaming, MatchesThePushUpdateBitForBitAtEveryIteration) {
   for (int t = 0; t < 30; ++t) {
     stepLattice(om, d, coded, a, b);
     std::swap(a, b);
-    for (int z = 1; z < d.nz - 1; ++z)
-      for (int y = 1; y < d.ny - 1; ++y)
-        for (int x = 1; x < d.nx - 1; ++x) {
-          // as the CUDA pull kernel: the arrivals, then the collision of either kind
-          float f[kQ];
-          pullLoad(L, in.data(), x, y, z, f);
-          pullCollideStoreEitherKind(om, L, coded[size_t(d.index(x, y, z))], f, out.data(), x, y, z);
-        }
+    for (int z = 0; z < d.nz; ++z)
+      for (int y = 0; y < d.ny; ++y)
+        for (int x = 0; x < L.nxp; ++x)  // every lane of the CUDA pull kernel's rows
+          pullNode(om, L, coded.data(), in.data(), out.data(), x, y, z);
     std::swap(in, out);  // in: the post values of iteration t; out: of t - 1 (the arrivals of t)
     for (int z = 0; z < d.nz; ++z)
       for (int y = 0; y < d.ny; ++y)

@@ -46,11 +46,13 @@ CANOPY_HD CANOPY_FORCEINLINE int64_t pullSlot(const PullLayout& L, int m, int x,
   return ((p / kPullTile) * kQ + m) * kPullTile + p % kPullTile;
 }
 
-// The arrivals f at interior node (x, y, z): the neighbours' post values in `in`.
-CANOPY_HD CANOPY_FORCEINLINE void pullLoad(const PullLayout& L, const float* in, int x, int y, int z, float f[kQ]) {
+// The arrivals f at interior node (x, y, z): the neighbours' post values in `in`. reach 0: the
+// node's own post values instead (one load per direction either way: the address is selected).
+CANOPY_HD CANOPY_FORCEINLINE void pullLoad(const PullLayout& L, const float* in, int x, int y, int z, float f[kQ],
+                                           int reach = 1) {
   CANOPY_UNROLL
   for (int m = 0; m < kQ; ++m)
-    f[m] = in[pullSlot(L, m, x - lattice::dir(m, 0), y - lattice::dir(m, 1), z - lattice::dir(m, 2))];
+    f[m] = in[pullSlot(L, m, x - reach * lattice::dir(m, 0), y - reach * lattice::dir(m, 1), z - reach * lattice::dir(m, 2))];
 }
 
 // Collide the arrivals f of interior node (x, y, z), coded density `coded` (of kind Kind, or any),
@@ -65,18 +67,26 @@ CANOPY_HD CANOPY_FORCEINLINE void pullCollideStore(const OmegaSet& om, const Pul
   for (int m = 0; m < kQ; ++m) out[pullSlot(L, m, x, y, z)] = post[m];
 }
 
-// The same for a node of either kind, told by the sign of its coded density: each kind in its own
-// branch with its compile-time Omega offsets (not kAnyKind's run-time select of the matrix). The
-// CUDA pull kernel's per-node collision, after pullLoad and the read of the node's density (read
-// after the 19 arrival loads, so that it does not delay them); on the CPU,
-// tests/lbsolve/test_collide.cpp runs the same two calls.
+// Lane x (< L.nxp) of the pull kernel's row (y, z), one iteration, from the post values `in` to
+// `out`. An interior node: its arrivals from the neighbours, then its density (read after the 19
+// loads, so that it does not delay them), the collision of its kind and the store at the node. A
+// boundary node or padding slot of an interior row runs the same loads and stores on its own slots,
+// through the wood branch with density 0 (the identity: no f_0 zeroing, post = f bit for bit), so
+// that every warp of the row writes whole 32-byte sectors without a second memory round trip (a
+// sector written in part is read from DRAM first: bench/lbsolve/NOTES.md, seventh round). Boundary
+// rows and planes are not written at all.
 template <bool Fused = false>
-CANOPY_HD CANOPY_FORCEINLINE void pullCollideStoreEitherKind(const OmegaSet& om, const PullLayout& L, float coded, float f[kQ],
-                                                             float* out, int x, int y, int z) {
-  if (coded < 0.f)
-    pullCollideStore<kWoodKind, Fused>(om, L, coded, f, out, x, y, z);
+CANOPY_HD CANOPY_FORCEINLINE void pullNode(const OmegaSet& om, const PullLayout& L, const float* coded, const float* in,
+                                           float* out, int x, int y, int z) {
+  const bool inside = L.d.interior(x, y, z);
+  if (!inside && (y < 1 || z < 1 || y >= L.d.ny - 1 || z >= L.d.nz - 1 || x >= L.nxp)) return;
+  float f[kQ];
+  pullLoad(L, in, x, y, z, f, inside ? 1 : 0);
+  const float c = inside ? coded[L.d.index(x, y, z)] : -0.f;
+  if (inside && c >= 0.f)
+    pullCollideStore<kLeafKind, Fused>(om, L, c, f, out, x, y, z);
   else
-    pullCollideStore<kLeafKind, Fused>(om, L, coded, f, out, x, y, z);
+    pullCollideStore<kWoodKind, Fused>(om, L, c, f, out, x, y, z);
 }
 
 // Boundary node (x, y, z): its post values, the collision of the fixed boundary values (what the

@@ -138,16 +138,10 @@ __global__ void __launch_bounds__(kBlockX) pullLeafKernel(const OmegaSet omega, 
                                                           const float* __restrict__ in, float* __restrict__ out) {
   const int x = int(blockIdx.x) * kBlockX + int(threadIdx.x);
   const int y = int(blockIdx.y), z = int(blockIdx.z);
-  if (!L.d.interior(x, y, z)) return;  // boundary: its post values are fixed
-  // The 19 arrival loads first, the density after them: branching on the density before issuing
-  // them would put a second memory round trip in front of every node.
-  float f[kQ];
-  pullLoad(L, in, x, y, z, f);
-  const float c = coded[L.d.index(x, y, z)];
-  // A wood node (the trunk: a few warps) takes the other branch, on the values already loaded.
-  // (A second kernel per iteration used to update the wood nodes from a list, loading their
-  // arrivals again, scattered: bench/lbsolve/NOTES.md, fifth round.)
-  pullCollideStoreEitherKind<Fused>(omega, L, c, f, out, x, y, z);
+  // A wood node (the trunk: a few warps) takes the other branch, on the values already loaded. (A
+  // second kernel per iteration used to update the wood nodes from a list, loading their arrivals
+  // again, scattered: bench/lbsolve/NOTES.md, fifth round.)
+  pullNode<Fused>(omega, L, coded, in, out, x, y, z);
 }
 
 // The boundary nodes' post values (constant over a solve) into both buffers.
