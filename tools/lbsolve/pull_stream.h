@@ -17,7 +17,8 @@
 // steps the arrivals a pull step reads are exactly the push state after t steps.
 // - Interior nodes start at 0 (collide(0) = 0, so post = 0 too); boundary nodes hold the post values
 //   of their fixed boundary values, the same at every iteration (written once per solve into both
-//   buffers, pullBoundaryNode) and never updated.
+//   buffers, pullBoundaryNode) and never changed (pullNode rewrites those at the ends of interior
+//   rows with the values they hold, for whole-sector stores).
 // - The totals of iteration t (gather, residual) are sums of the arrivals: pullArrivalTotal() over
 //   the state before the last step (the push state's nodeTotal order of additions); a boundary
 //   node's total is boundaryTotal().

@@ -138,9 +138,10 @@ __global__ void __launch_bounds__(kBlockX) pullLeafKernel(const OmegaSet omega, 
                                                           const float* __restrict__ in, float* __restrict__ out) {
   const int x = int(blockIdx.x) * kBlockX + int(threadIdx.x);
   const int y = int(blockIdx.y), z = int(blockIdx.z);
-  // A wood node (the trunk: a few warps) takes the other branch, on the values already loaded. (A
+  // A wood node (the trunk: a few warps) takes the other branch, on the values already loaded (a
   // second kernel per iteration used to update the wood nodes from a list, loading their arrivals
-  // again, scattered: bench/lbsolve/NOTES.md, fifth round.)
+  // again, scattered: bench/lbsolve/NOTES.md, fifth round). The boundary and padding lanes of an
+  // interior row store the values they hold, so that every store covers whole sectors (seventh round).
   pullNode<Fused>(omega, L, coded, in, out, x, y, z);
 }
 
