@@ -136,6 +136,12 @@ template <bool Fused>
 __global__ void __launch_bounds__(kBlockX) pullLeafKernel(const OmegaSet omega, const PullLayout L,
                                                           const float* __restrict__ coded,
                                                           const float* __restrict__ in, float* __restrict__ out) {
+  // Launched with programmatic dependent launch (launchPull): the blocks may be resident before the
+  // previous iteration's launch has finished; nothing is read or written before it has, and its
+  // stores are visible after this wait.
+#if defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 900
+  cudaGridDependencySynchronize();
+#endif
   const int x = int(blockIdx.x) * kBlockX + int(threadIdx.x);
   const int y = int(blockIdx.y), z = int(blockIdx.z);
   // A wood node (the trunk: a few warps) takes the other branch, on the values already loaded (a
@@ -498,10 +504,7 @@ class CudaSolver final : public Solver {
         pullBoundaryKernel<<<grid(), kBlockX, 0, stream_>>>(omega, boundary_values_, pull_, coded_.data(), cur_, prev_);
         CANOPY_CUDA_CHECK(cudaGetLastError());
       }
-      const bool fused = scheme_ == CudaScheme::PullFused;
-      (fused ? pullLeafKernel<true> : pullLeafKernel<false>)<<<grid(), kBlockX, 0, stream_>>>(omega, pull_, coded_.data(),
-                                                                                           cur_, prev_);
-      CANOPY_CUDA_CHECK(cudaGetLastError());
+      launchPull(omega);
       std::swap(cur_, prev_);
     } else {
       const bool fused = scheme_ == CudaScheme::PushFused;
@@ -517,6 +520,30 @@ class CudaSolver final : public Solver {
       std::swap(cur_, prev_);
     }
     ++t_;
+  }
+
+  // One pull iteration, cur_ -> prev_, as a programmatic dependent launch: the launch (block
+  // scheduling) overlaps the end of the launch before it, whose results the kernel waits for first
+  // (cudaGridDependencySynchronize). Between two pull launches of a solve this removes most of the
+  // few microseconds a dependent launch otherwise waits (bench/lbsolve/NOTES.md, seventh round).
+  void launchPull(const OmegaSet& omega) {
+    cudaLaunchConfig_t config = {};
+    config.gridDim = grid();
+    config.blockDim = dim3(kBlockX);
+    config.stream = stream_;
+    cudaLaunchAttribute attribute[1];
+    attribute[0].id = cudaLaunchAttributeProgrammaticStreamSerialization;
+    attribute[0].val.programmaticStreamSerializationAllowed = 1;
+    config.attrs = attribute;
+    config.numAttrs = 1;
+    const float* in = cur_;
+    float* out = prev_;
+    const float* coded = coded_.data();
+    if (scheme_ == CudaScheme::PullFused) {
+      CANOPY_CUDA_CHECK(cudaLaunchKernelEx(&config, pullLeafKernel<true>, omega, pull_, coded, in, out));
+    } else {
+      CANOPY_CUDA_CHECK(cudaLaunchKernelEx(&config, pullLeafKernel<false>, omega, pull_, coded, in, out));
+    }
   }
 
   float residual() override {
