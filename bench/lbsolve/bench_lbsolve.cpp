@@ -3,7 +3,7 @@
 //
 //   bench_lbsolve [--device cpu|cuda|cuda:N] [--sizes 128,256] [--solves-sizes 128]
 //                 [--iterations 64] [--schemes shift,shift-split,push,push-fused,pull,pull-fused] [--fill plant|full|plant,full]
-//                 [--lattices a.density.vdb,b.density.vdb] [--in-flight 1,2,3]
+//                 [--lattices a.density.vdb,b.density.vdb] [--in-flight 1,2,3] [--boxes 256x128x64,...]
 //
 // Throughput: K solves in flight on one GPU (--in-flight, CudaRun::solvesPerGpu; 1 by default),
 // each run for I/4 and for I iterations (tolerance 0); the difference divided by K x 3I/4 x nodes
@@ -20,9 +20,11 @@
 // the same way). The 57-solve wall time uses the tool's defaults (tolerance 1e-4 checked every 16
 // iterations, cap 2 x the longest edge) on the chosen device: "cuda" = every GPU. Lattices:
 // "plant" is tests/lbsolve/fixtures.h's synthetic plant, "full" the same box with every interior
-// node occupied (random density, 10% wood: the most arithmetic per node), and --lattices reads
+// node occupied (random density, 10% wood: the most arithmetic per node), "air" nothing occupied,
+// --boxes adds non-cubic boxes (NXxNYxNZ: the row length, nx, apart from the node count), and --lattices reads
 // canopy-voxelize outputs (e.g. oak_medium at 128^3).
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -101,22 +103,46 @@ double bytesPerUpdate(const DenseLattice& L, const Device& dev, CudaScheme schem
 }
 
 // The synthetic plant, or ("full") every interior node occupied.
-DenseLattice makeLattice(int n, const std::string& fill) {
-  fixtures::Plant plant = fixtures::makePlant(n);
-  if (fill == "full") {
-    for (int z = 1; z < n - 1; ++z)
-      for (int y = 1; y < n - 1; ++y)
-        for (int x = 1; x < n - 1; ++x) {
-          const size_t i = (size_t(z) * n + y) * n + x;
-          plant.density[i] = 0.05f + 0.95f * fixtures::hashUnit(i, 21);
-          plant.wood[i] = fixtures::hashUnit(i, 22) < 0.1f ? 1.f : 0.f;
+// A box of nx x ny x nz nodes: "plant" is the synthetic plant of the longest edge cut to the box
+// about its centre, "full" every interior node occupied (random density, 10 % wood), "air" nothing
+// occupied (the update is then its memory traffic and the collision's empty path).
+DenseLattice makeLattice(int nx, int ny, int nz, const std::string& fill) {
+  if (fill != "plant" && fill != "full" && fill != "air")
+    throw std::runtime_error("unknown fill '" + fill + "' (plant, full, air)");
+  const int n = std::max({nx, ny, nz});
+  const fixtures::Plant plant = fixtures::makePlant(n);
+  const size_t count = size_t(nx) * ny * nz;
+  std::vector<float> density(count, 0.f), wood(count, 0.f);
+  const int ox = (n - nx) / 2, oy = (n - ny) / 2, oz = (n - nz) / 2;
+  for (int z = 0; z < nz; ++z)
+    for (int y = 0; y < ny; ++y)
+      for (int x = 0; x < nx; ++x) {
+        const size_t i = (size_t(z) * ny + y) * nx + x;
+        const bool interior = x > 0 && y > 0 && z > 0 && x < nx - 1 && y < ny - 1 && z < nz - 1;
+        if (fill == "plant") {
+          const size_t j = (size_t(z + oz) * n + size_t(y + oy)) * n + size_t(x + ox);
+          density[i] = plant.density[j], wood[i] = plant.wood[j];
+        } else if (fill == "full" && interior) {
+          density[i] = 0.05f + 0.95f * fixtures::hashUnit(i, 21);
+          wood[i] = fixtures::hashUnit(i, 22) < 0.1f ? 1.f : 0.f;
         }
-  } else if (fill != "plant") {
-    throw std::runtime_error("unknown fill '" + fill + "' (plant, full)");
-  }
-  DenseLattice L = fixtures::denseOf(n, n, n, plant.density, plant.wood);
-  L.stored = storedNodes(L.dims, plant.density);
+      }
+  DenseLattice L = fixtures::denseOf(nx, ny, nz, density, wood);
+  L.stored = storedNodes(L.dims, density);
   return L;
+}
+DenseLattice makeLattice(int n, const std::string& fill) { return makeLattice(n, n, n, fill); }
+
+// "NXxNYxNZ" -> {nx, ny, nz}, each in [3, 4096].
+std::array<int, 3> parseBox(const std::string& s) {
+  std::array<int, 3> b{};
+  char x1 = 0, x2 = 0;
+  std::istringstream in(s);
+  if (!(in >> b[0] >> x1 >> b[1] >> x2 >> b[2]) || x1 != 'x' || x2 != 'x' || !in.eof())
+    throw std::runtime_error("--boxes: '" + s + "' is not NXxNYxNZ");
+  for (int v : b)
+    if (v < 3 || v > 4096) throw std::runtime_error("--boxes: edges must lie in [3, 4096]");
+  return b;
 }
 
 SolveSpec baseSpec(int b, int c, int iterations, float tolerance) {
@@ -194,7 +220,7 @@ std::vector<CudaRun> runsOf(const std::vector<CudaScheme>& schemes, const std::v
 constexpr char kUsage[] =
     "usage: bench_lbsolve [--device D] [--sizes 128,256] [--solves-sizes 128] [--iterations 64]\n"
     "                     [--schemes shift,shift-split,push,push-fused,pull,pull-fused] [--fill plant,full]\n"
-    "                     [--lattices a.vdb,...] [--in-flight 1,2,3]\n"
+    "                     [--lattices a.vdb,...] [--in-flight 1,2,3] [--boxes 256x128x64,...]\n"
     "  Dense-update throughput (node updates/s, fraction of the copy bandwidth) and the wall time of\n"
     "  the 57 solves per lattice; Markdown on stdout. Exit 0 ok, 1 usage, 4 failure, 5 no such device.\n";
 
@@ -202,7 +228,7 @@ int main(int argc, char** argv) try {
   if (benchHelpRequested(argc, argv, kUsage)) return 0;
   std::string deviceSpec = "auto";
   std::vector<int> sizes{128, 256}, solveSizes{128};
-  std::vector<std::string> schemeNames{"shift"}, fills{"plant"}, lattices;
+  std::vector<std::string> schemeNames{"shift"}, fills{"plant"}, lattices, boxes;
   std::vector<int> inFlight{1};
   int iterations = 64;
   for (int i = 1; i < argc; i += 2) {
@@ -216,6 +242,7 @@ int main(int argc, char** argv) try {
     else if (k == "--schemes") schemeNames = parseWords(v);
     else if (k == "--fill") fills = parseWords(v);
     else if (k == "--lattices") lattices = parseWords(v);
+    else if (k == "--boxes") boxes = parseWords(v);
     else if (k == "--in-flight") inFlight = parseList(v);
     else return benchUsageError("bench_lbsolve", ("unknown option " + k).c_str(), kUsage);
   }
@@ -253,17 +280,24 @@ int main(int argc, char** argv) try {
   std::printf("copy bandwidth (one device, read+write): %.1f GB/s\n\n", bw / 1e9);
   std::printf("| lattice | scheme | nodes | occupied | node updates/s | bytes/update | GB/s | fraction of copy bandwidth |\n");
   std::printf("|---|---|---|---|---|---|---|---|\n");
+  std::vector<std::array<int, 3>> shapes;
+  for (int n : sizes) shapes.push_back({n, n, n});
+  for (const auto& b : boxes) shapes.push_back(parseBox(b));
   for (const auto& fill : fills)
-    for (int n : sizes) {
-      const DenseLattice L = makeLattice(n, fill);
+    for (const auto& shape : shapes) {
+      const DenseLattice L = makeLattice(shape[0], shape[1], shape[2], fill);
+      const std::string name = shape[0] == shape[1] && shape[1] == shape[2]
+                                   ? std::to_string(shape[0]) + "^3"
+                                   : std::to_string(shape[0]) + "x" + std::to_string(shape[1]) + "x" + std::to_string(shape[2]);
       const double occupied = double(occupiedNodes(L)) / double(L.dims.count());
       for (const CudaRun& run : runs) {
         solveSeconds(L, one, run, 2);  // warm-up (allocation, first launch)
         const int i1 = std::max(1, iterations / 4), i2 = std::max(i1 + 1, iterations);
         const double t1 = solveSeconds(L, one, run, i1), t2 = solveSeconds(L, one, run, i2);
-        const double rate = double(L.dims.count()) * run.solvesPerGpu * (i2 - i1) / std::max(t2 - t1, 1e-9);
+        // (a run too short to time gives no figure: nan)
+        const double rate = t2 > t1 ? double(L.dims.count()) * run.solvesPerGpu * (i2 - i1) / (t2 - t1) : std::nan("");
         const double bytes = bytesPerUpdate(L, one, run.scheme);
-        std::printf("| %s %d^3 | %s | %lld | %.1f%% | %.3g | %.1f | %.1f | %.1f%% |\n", fill.c_str(), n,
+        std::printf("| %s %s | %s | %lld | %.1f%% | %.3g | %.1f | %.1f | %.1f%% |\n", fill.c_str(), name.c_str(),
                     schemeLabel(run).c_str(), (long long)L.dims.count(), 100.0 * occupied, rate, bytes,
                     rate * bytes / 1e9, 100.0 * rate * bytes / bw);
         std::fflush(stdout);
