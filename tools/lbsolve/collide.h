@@ -12,13 +12,16 @@
 // density is rho for leaf/empty nodes and -rho for wood nodes (the dissertation's encoding).
 //
 // Invariants (tests/lbsolve/test_collide.cpp): every column of Omega sums to 0 (a step conserves
-// energy where sigma_a = 0); rho = 0 is a pure pass-through; sigma_a = 0 with g = 1 is a pass-through.
+// energy where sigma_a = 0); rho = 0 is a pure pass-through; sigma_a = 0 with g = 1 is a pass-through;
+// in every row the entries of one class of directions (axial or diagonal c_j, and c_i . c_j) are
+// equal (omegaIsClassStructured), which the grouped product relies on.
 #pragma once
 #include <cmath>
 #include <cstdint>
 
 #include "canopy/hd.h"
 #include "canopy/lattice_dirs.h"
+#include "omega_product.h"
 
 namespace canopy::lb {
 
@@ -41,15 +44,18 @@ struct Dims {
 };
 
 // The collision of L nodes of one kind known at compile time (Wood: all wood, else all leaf/empty),
-// one per lane:   out_i = max(0, f_i + rho * sum_j Omega_ij f_j),  f_0 zeroed first at leaf nodes.
-// f is modified (f_0 zeroing). Every lane computes the same IEEE operations in the same order
-// (j ascending) whatever L is: L = 1 on the GPU (one thread per node), L = 8 on the CPU (the
-// compiler vectorises across lanes), so both backends produce the same bits (solve_cuda.cu is
-// built without FMA contraction). When every lane has rho == 0 the product is skipped; that is
-// bit-identical to the general path (f + 0 * x == f for finite x and f >= 0).
+// one per lane:   out_i = max(0, f_i + rho * (Omega f)_i),  f_0 zeroed first at leaf nodes.
+// f is modified (f_0 zeroing). (Omega f) is formed with grouped sums (omega_product.h, generated):
+// Omega's entries take one value per class of directions in each row (omegaIsClassStructured),
+// so each row multiplies sums of f over its classes: ~360 operations instead of the full
+// product's 722. Every lane computes the same IEEE operations in the same order whatever L is:
+// L = 1 on the GPU (one thread per node), L = 8 on the CPU (the compiler vectorises across lanes),
+// so both backends produce the same bits (solve_cuda.cu is built without FMA contraction). When
+// every lane has rho == 0 the product is skipped; that is bit-identical to the general path
+// (f + 0 * x == f for finite x and f >= 0).
 // The kind is a template parameter so that every Omega entry is read at a compile-time offset: on
 // the GPU the matrix is a kernel parameter (constant memory) and a run-time kind would turn its
-// 361 uniform operands into per-thread indexed constant loads (measured: bench/lbsolve/NOTES.md).
+// uniform operands into per-thread indexed constant loads (measured: bench/lbsolve/NOTES.md).
 // Fused = true uses fmaf (one rounding per term instead of two): a benchmark variant only; the
 // reference (CPU) and the default CUDA path use Fused = false.
 template <int L, bool Wood, bool Fused = false>
@@ -66,24 +72,12 @@ CANOPY_HD CANOPY_FORCEINLINE void collideKind(const OmegaSet& om, const float rh
       for (int l = 0; l < L; ++l) out[i][l] = f[i][l];
     return;
   }
-  const float(*col)[kQ] = om.col[Wood ? 1 : 0];
+  float acc[kQ][L];
+  omegaProduct<L, Wood, Fused>(om.col[Wood ? 1 : 0], f, acc);
   CANOPY_UNROLL
   for (int i = 0; i < kQ; ++i) {
-    float acc[L];
-    for (int l = 0; l < L; ++l) acc[l] = 0.f;
-    CANOPY_UNROLL
-    for (int j = 0; j < kQ; ++j) {
-      const float c = col[j][i];
-      for (int l = 0; l < L; ++l) {
-        if constexpr (Fused) {
-          acc[l] = fmaf(c, f[j][l], acc[l]);
-        } else {
-          acc[l] += c * f[j][l];
-        }
-      }
-    }
     for (int l = 0; l < L; ++l) {
-      const float v = Fused ? fmaf(rho[l], acc[l], f[i][l]) : f[i][l] + rho[l] * acc[l];
+      const float v = Fused ? fmaf(rho[l], acc[i][l], f[i][l]) : f[i][l] + rho[l] * acc[i][l];
       out[i][l] = v > 0.f ? v : 0.f;
     }
   }
@@ -204,5 +198,10 @@ void buildOmega(double sigmaA, double sigmaS, double g, float col[kQ][kQ]);
 
 // The leaf (g) and wood (gWood, -1 by default) matrices of one channel.
 OmegaSet makeOmegaSet(double sigmaA, double sigmaS, double g, double gWood = -1.0);
+
+// True when in every row i of col (col[j][i] = Omega_ij) the entries of each class of directions
+// j >= 1 (c_j axial or diagonal, and c_i . c_j) are bitwise equal: what omegaProduct assumes.
+// buildOmega's matrices are (tested); the solvers refuse any other (runSolves).
+bool omegaIsClassStructured(const float col[kQ][kQ]);
 
 }  // namespace canopy::lb

@@ -2,6 +2,7 @@
 // phase (eq. 4.1-4.2). See collide.h.
 #include <cassert>
 #include <cmath>
+#include <cstring>
 
 #include "collide.h"
 
@@ -29,8 +30,12 @@ double normalisedPhase(double g, int i, int j) {
     const int target = g > 0 ? j : lattice::opposite(j);
     return i == target ? 24.0 / rowMultiplicity(i) : 0.0;
   }
+  // The normalisation of column j depends on j's class only (axial or diagonal); it is summed for
+  // that class's first column, so that the entries of a class in a row are bitwise equal
+  // (omegaIsClassStructured) rather than equal up to the order of this sum's terms.
+  const int jr = lattice::isAxial(j) ? 1 : 7;
   double norm = 0;
-  for (int k = 1; k < kQ; ++k) norm += rowMultiplicity(k) * hgKernel(g, cosAngle(k, j));
+  for (int k = 1; k < kQ; ++k) norm += rowMultiplicity(k) * hgKernel(g, cosAngle(k, jr));
   return hgKernel(g, cosAngle(i, j)) / (norm / 24.0);
 }
 
@@ -48,6 +53,24 @@ void buildOmega(double sigmaA, double sigmaS, double g, float col[kQ][kQ]) {
       col[j][i] = float(v);
     }
   }
+}
+
+bool omegaIsClassStructured(const float col[kQ][kQ]) {
+  auto dot = [](int i, int j) {
+    int d = 0;
+    for (int a = 0; a < 3; ++a) d += lattice::dir(i, a) * lattice::dir(j, a);
+    return d;
+  };
+  auto same = [](float a, float b) { return std::memcmp(&a, &b, sizeof a) == 0; };
+  for (int i = 0; i < kQ; ++i)
+    for (int j = 1; j < kQ; ++j) {
+      // the class's first member: the smallest j' >= 1 of the same kind and the same c_i . c_j'
+      int rep = 1;
+      while (!(lattice::isAxial(rep) == lattice::isAxial(j) && (i == 0 || dot(i, rep) == dot(i, j)))) ++rep;
+      if (i == 0) rep = 1;  // row 0: one class, every j >= 1
+      if (!same(col[j][i], col[rep][i])) return false;
+    }
+  return true;
 }
 
 OmegaSet makeOmegaSet(double sigmaA, double sigmaS, double g, double gWood) {

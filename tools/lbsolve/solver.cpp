@@ -26,6 +26,10 @@ const char* cudaSchemeName(CudaScheme scheme) {
 }
 
 SolveResult Solver::solve(const SolveSpec& spec) {
+  for (int kind = 0; kind < 2; ++kind)
+    if (!omegaIsClassStructured(spec.omega.col[kind]))
+      throw runtimeError("internal: an Omega whose rows are not constant over the direction classes "
+                         "(collide.h, omegaIsClassStructured)");
   const auto t0 = std::chrono::steady_clock::now();
   SolveResult r;
   r.residual = std::numeric_limits<float>::infinity();
