@@ -23,9 +23,10 @@ namespace canopy::lb {
 // `iterations` iterations of the push update from the initial state of collide.h's initNode
 // (interior 0, boundary f_j = boundary), with the channel's Omega. A node d steps downstream of the
 // boundary along c_j receives the beam at iteration d, so after fewer iterations it holds 0. The
-// values are bit for bit those of a Solver run with every entry of Omega but Omega_jj, Omega_0j and
-// Omega_00 set to 0 (the same IEEE operations in the same order; tests/lbsolve/test_collide.cpp,
-// DirectBeam). O(nodes) on all cores, plus (iterations - depth) steps at each wood node.
+// values are bit for bit those of the push update restricted to Omega_jj, Omega_0j and Omega_00,
+// iterated node by node (tests/lbsolve/test_collide.cpp, DirectBeam; on a node holding only beam
+// light the full collision's rows j and 0 compute the same bits). O(nodes) on all cores, plus
+// (iterations - depth) steps at each wood node.
 // Precondition: 1 <= base <= 18.
 std::vector<float> directBeam(const DenseLattice& lattice, const OmegaSet& omega, int base, int iterations,
                               float boundary = 1.0f);
