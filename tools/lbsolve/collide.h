@@ -201,7 +201,7 @@ OmegaSet makeOmegaSet(double sigmaA, double sigmaS, double g, double gWood = -1.
 
 // True when in every row i of col (col[j][i] = Omega_ij) the entries of each class of directions
 // j >= 1 (c_j axial or diagonal, and c_i . c_j) are bitwise equal: what omegaProduct assumes.
-// buildOmega's matrices are (tested); the solvers refuse any other (runSolves).
+// buildOmega's matrices are (tested); Solver::solve refuses any other.
 bool omegaIsClassStructured(const float col[kQ][kQ]);
 
 }  // namespace canopy::lb
