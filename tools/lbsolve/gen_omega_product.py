@@ -11,9 +11,15 @@ class order below; so CPU lanes and CUDA threads perform the same IEEE operation
 
 Usage: gen_omega_product.py > tools/lbsolve/omega_product.h
 """
+import os
+import re
 import sys
 
-PACKS = [0x1548889549, 0x895609495, 0x20a0954955]
+# The direction table, from the packed constants of lattice::dir (core/include/canopy/lattice_dirs.h).
+_HEADER = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "core", "include", "canopy",
+                       "lattice_dirs.h")
+PACKS = [int(v, 16) for v in re.findall(r"0x([0-9a-fA-F]+)ull", open(_HEADER).read())[:3]]
+assert len(PACKS) == 3, "lattice_dirs.h: the three packed direction constants of dir() not found"
 Q = 19
 D = [[((PACKS[a] >> (2 * m)) & 3) - 1 for a in range(3)] for m in range(Q)]
 
@@ -59,7 +65,7 @@ def main():
     w("// the sums of f over each class of equal entries formed once (see the generator's docstring):\n")
     w("// %d shared sums (%d additions), %d products and %d additions into the rows, against 361 + 361\n" %
       (len(sets), adds, muls, muls - Q))
-    w("// for the full product (+ 18 and 18 more at wood nodes, whose f_0 is not zero).\n")
+    w("// for the full product (+ %d and %d more at wood nodes, whose f_0 is not zero).\n" % (Q, Q))
     w("// Precondition: omegaIsClassStructured(col) (omega.cpp). Leaf nodes have zeroed f_0, so its\n")
     w("// column enters wood rows only (after the first class's product; the order is fixed either way).\n")
     w("#pragma once\n")

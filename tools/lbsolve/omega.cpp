@@ -10,13 +10,7 @@ namespace canopy::lb {
 namespace {
 // n_i . n_j for directions i, j >= 1 (|c|^2 = number of non-zero components).
 double cosAngle(int i, int j) {
-  int dot = 0, ni = 0, nj = 0;
-  for (int a = 0; a < 3; ++a) {
-    dot += lattice::dir(i, a) * lattice::dir(j, a);
-    ni += lattice::dir(i, a) * lattice::dir(i, a);
-    nj += lattice::dir(j, a) * lattice::dir(j, a);
-  }
-  return dot / std::sqrt(double(ni * nj));
+  return lattice::dot(i, j) / std::sqrt(double(lattice::dot(i, i) * lattice::dot(j, j)));
 }
 // Row multiplicity in the normalisation of eq. 4.1: 2 for axial rows, 1 for diagonal rows.
 double rowMultiplicity(int i) { return lattice::isAxial(i) ? 2.0 : 1.0; }
@@ -56,18 +50,14 @@ void buildOmega(double sigmaA, double sigmaS, double g, float col[kQ][kQ]) {
 }
 
 bool omegaIsClassStructured(const float col[kQ][kQ]) {
-  auto dot = [](int i, int j) {
-    int d = 0;
-    for (int a = 0; a < 3; ++a) d += lattice::dir(i, a) * lattice::dir(j, a);
-    return d;
-  };
   auto same = [](float a, float b) { return std::memcmp(&a, &b, sizeof a) == 0; };
   for (int i = 0; i < kQ; ++i)
     for (int j = 1; j < kQ; ++j) {
-      // the class's first member: the smallest j' >= 1 of the same kind and the same c_i . c_j'
+      // the class's first member: row 0 has one class (every j >= 1); row i > 0 the smallest
+      // j' >= 1 of the same kind (axial or diagonal) with the same c_i . c_j'
       int rep = 1;
-      while (!(lattice::isAxial(rep) == lattice::isAxial(j) && (i == 0 || dot(i, rep) == dot(i, j)))) ++rep;
-      if (i == 0) rep = 1;  // row 0: one class, every j >= 1
+      if (i > 0)
+        while (lattice::isAxial(rep) != lattice::isAxial(j) || lattice::dot(i, rep) != lattice::dot(i, j)) ++rep;
       if (!same(col[j][i], col[rep][i])) return false;
     }
   return true;

@@ -4,7 +4,7 @@
 // acc = Omega f for one colour channel's Omega of one kind (col[j][i] = Omega_ij), L lanes, with
 // the sums of f over each class of equal entries formed once (see the generator's docstring):
 // 46 shared sums (110 additions), 133 products and 114 additions into the rows, against 361 + 361
-// for the full product (+ 18 and 18 more at wood nodes, whose f_0 is not zero).
+// for the full product (+ 19 and 19 more at wood nodes, whose f_0 is not zero).
 // Precondition: omegaIsClassStructured(col) (omega.cpp). Leaf nodes have zeroed f_0, so its
 // column enters wood rows only (after the first class's product; the order is fixed either way).
 #pragma once

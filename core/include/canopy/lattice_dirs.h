@@ -42,6 +42,9 @@ CANOPY_HD constexpr int dir(int m, int axis) {
 
 CANOPY_HD constexpr bool isAxial(int m) { return m >= 1 && m <= 6; }
 
+// c_i . c_j (integer: |c|^2 is 1 for axial, 2 for diagonal directions).
+CANOPY_HD constexpr int dot(int i, int j) { return dir(i, 0) * dir(j, 0) + dir(i, 1) * dir(j, 1) + dir(i, 2) * dir(j, 2); }
+
 // Index of -c_m (0 for the rest direction).
 CANOPY_HD constexpr int opposite(int m) { return m == 0 ? 0 : ((m & 1) ? m + 1 : m - 1); }
 
