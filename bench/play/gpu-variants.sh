@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# gpu-variants.sh: bench-play builds side by side on one GPU (A/B in one device call), optionally
+# Nsight Compute on one forest-orbit frame of a canopy-play build, and its SASS.
+#
+# Here: bench/play/variant.sh NAME "NVCC FLAGS" for each variant (render_cuda.cu rebuilt with the
+# flags), then
+#   ../shared/scripts/bundle-libs .gpu/canopy.tar.xz build/bin/{bench-play,canopy-play,test_play_cuda}* 
+# There (.gpu carried):
+#   VARIANTS="'' -fast" [FRAMES=60] [PROFILE_BIN=canopy-play-NAME] [TESTS="test_play_cuda ..."] bash bench/play/gpu-variants.sh
+# The tables come back as files and on stdout, everything else in $OUT/logs.tar.xz.
+set -u
+source "$(dirname "$0")/../gpu-common.sh"
+for t in ${TESTS:-}; do step "$t"; gtest "$t" "$BIN/$t"; done
+run=0
+for v in ${VARIANTS:-''}; do
+  v=${v//\'/}
+  run=$((run + 1)) r="$run$v"  # a variant may run twice (before and after the others)
+  step "bench-play$v (run $run)"
+  timeout 300 "bench-play$v" "$O/bench$r" --device cuda --size 1920x1080 --frames "${FRAMES:-60}" --cache-mb 1024 \
+    ${PLAY_VARIANTS:---shadows map} 2> "$O/bench_play$r.err" | tee "$O/bench_play$r.md" || status=1
+  [[ ${PNGS:-0} = 1 && $run = 1 ]] && for n in plant forest-orbit forest-walk; do cp "$O/bench$r/$n.png" "$O/play-$n.png"; done
+  [[ -n ${KEEP_SCENE:-} ]] || { mkdir -p "$O/scene" && cp "$O/bench$r/forest.canopy" "$O/scene/" && KEEP_SCENE=$O/scene/forest.canopy; }
+done
+if [[ -n ${PROFILE_BIN:-} ]]; then
+  step "profile $PROFILE_BIN"
+  NCU=$(command -v ncu || ls /usr/local/cuda/bin/ncu 2>/dev/null || true)
+  timeout 300 "$NCU" --kernel-name regex:'[Pp]ixel' --launch-skip 9 --launch-count 1 --import-source yes \
+    --section SpeedOfLight --section Occupancy --section WarpStateStats --section LaunchStats --section MemoryWorkloadAnalysis \
+    --section MemoryWorkloadAnalysis_Tables --section ComputeWorkloadAnalysis --section InstructionStats --section SourceCounters \
+    -o "$O/prof" "$PROFILE_BIN" "$KEEP_SCENE" --device cuda --size 1920x1080 --frames 10 \
+    --camera orbit:elevation=30,distance=55 -o "$O/f_%04d.exr" > "$O/ncu-run.txt" 2>&1 || echo "ncu failed"
+  rm -f "$O"/f_*.exr
+  "$NCU" -i "$O/prof.ncu-rep" --page details > "$O/ncu.txt" 2>&1
+  "$NCU" -i "$O/prof.ncu-rep" --page source --csv --print-source cuda,sass > "$O/source-both.csv" 2>&1
+  "$NCU" -i "$O/prof.ncu-rep" --page source --csv --print-source sass > "$O/source-sass.csv" 2>&1
+  grep -E "Duration|Active Threads|Warp Cycles Per Issued|Issued Instructions  |Registers Per|L1/TEX Hit|L2 Hit|Achieved Occ" "$O/ncu.txt"
+  CUOBJDUMP=$(command -v cuobjdump || ls /usr/local/cuda/bin/cuobjdump 2>/dev/null || true)
+  [[ -n $CUOBJDUMP ]] && "$CUOBJDUMP" -sass "$BIN/$PROFILE_BIN" > "$O/sass.txt" 2>&1
+fi
+rm -rf "$O"/bench*/ "$O/scene"
+date -u
+# back: the tables, the PNGs (PNGS=1: the first run's), one archive of the rest (the device tool
+# returns at most 8 files of 16 MiB)
+(cd "$O" && tar cJf logs.tar.xz --exclude='*.png' --exclude='bench_play*.md' * && find . -maxdepth 1 -type f ! -name logs.tar.xz ! -name '*.png' ! -name 'bench_play*.md' -delete)
+exit $status
