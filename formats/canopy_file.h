@@ -286,7 +286,17 @@ struct CanopySample {
   float albedo[3];
 };
 
-CANOPY_HD CANOPY_FORCEINLINE float canopyUnorm8(uint32_t v) { return float(v & 0xFFu) * (1.0f / 255.0f); }
+// The low byte of v as a float in [0, 1]. On the device the byte becomes a float through the
+// mantissa of 2^23 (exactly the value of float(v & 0xFF), so the same bits as the host's
+// conversion): the integer-to-float instruction runs on a slow pipe, and a trilinear brick sample
+// converts 24 bytes (canopySampleBrick).
+CANOPY_HD CANOPY_FORCEINLINE float canopyUnorm8(uint32_t v) {
+#if defined(__CUDA_ARCH__)
+  return (__uint_as_float(0x4B000000u | (v & 0xFFu)) - 8388608.0f) * (1.0f / 255.0f);
+#else
+  return float(v & 0xFFu) * (1.0f / 255.0f);
+#endif
+}
 
 CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyToUnorm8(float v) {
   v = v < 0.0f ? 0.0f : (v > 1.0f ? 1.0f : v);

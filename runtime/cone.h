@@ -413,26 +413,59 @@ CANOPY_HD inline float nodeExit(V3 uo, V3 ud, const float lo[3], float size) {
 
 // Descends instance `inst` at unit point u to `maxLevel`, noting the deepest resident brick on the
 // way (within kFallbackLevels of maxLevel). Returns the node reached.
+//
+// Compact (56 bytes): a ray keeps one per pending instance in local memory (DescentCache), where
+// the GPU's L1 holds a warp's words of it beside the bricks and nodes it samples; a box on the
+// descent path is stored as its level alone (levelBox: the box of that level that holds the node,
+// exact since boxes are dyadic). Against the 120 bytes of pointers, boxes and sizes before it, it
+// is the same descent, field for field.
+constexpr uint8_t kNoLevel = 0xFF;
 struct Descent {
-  CanopyNode node;
-  uint32_t level;
-  float lo[3];
-  float size;
-  // the brick to sample: the node's own if resident, else a resident ancestor's (fallbackLevel)
-  const unsigned char* brickPage;  // nullptr: none resident
-  uint32_t brickSlotInPage;
-  float brickLo[3];
-  float brickSize;
-  int32_t brickPoolSlot;
-  uint32_t missingPage;           // the node's own page when it was missing, else kCanopyNone
-  // LB light (wantLight only): the deepest brick on the path whose light page is resident
-  const uint16_t* lightItem;      // nullptr: none resident
-  float lightLo[3];
-  float lightSize;
-  int32_t lightPoolSlot;
-  uint32_t missingLightPage;      // the deepest brick's light page when it was missing, else kCanopyNone
-  uint32_t coarsestLightPage;     // the shallowest brick's light page (asked for on a cold start)
+  CanopyNode node;             // the node reached
+  float lo[3];                 // its box: [lo, lo + levelSize(level))
+  uint8_t level;               // its level
+  uint8_t maxLevel;            // the level asked for (kNoLevel: an empty DescentCache)
+  uint8_t brickLevel;          // the brick to sample: the node's own if resident, else a resident ancestor's (level)
+  uint8_t lightLevel;          // LB light (wantLight only): the deepest brick on the path whose light page is resident
+  int32_t brickPoolSlot;       // its page's pool slot; -1: no brick resident
+  uint32_t missingPage;        // the node's own page when it was missing, else kCanopyNone
+  int32_t lightPoolSlot;       // -1: no light page resident on the path
+  uint32_t missingLightPage;   // the deepest brick's light page when it was missing, else kCanopyNone
+  uint32_t coarsestLightPage;  // the shallowest brick's light page (asked for on a cold start)
+  uint16_t brickSlotInPage;    // the brick's slot in its page (< bricksPerPage)
+  uint16_t lightSlotInPage;    // the light item's slot in its page (< lightItemsPerPage)
 };
+// The reader admits pages of at most 64 MiB (canopy_file.cpp), so slots in a page fit 16 bits.
+static_assert((1u << 26) / kCanopyBrickBytes <= 0xFFFFu && (1u << 26) / kCanopyLightItemBytes <= 0xFFFFu,
+              "Descent's slots in a page are 16 bits");
+
+// 2^e for |e| < 127 (exact; by its exponent bits on the device).
+CANOPY_HD CANOPY_FORCEINLINE float pow2i(int e) {
+#if defined(__CUDA_ARCH__)
+  return __int_as_float((127 + e) << 23);
+#else
+  return ldexpf(1.0f, e);
+#endif
+}
+
+// The edge of a node of `level` (unit space): 2^-level, as the descent's halvings make it.
+CANOPY_HD CANOPY_FORCEINLINE float levelSize(uint32_t level) { return pow2i(-int(level)); }
+
+// The box of `level` (<= d.level) on d's descent path: [lo, lo + size). Every box is dyadic, so
+// this is exact: the same bits as the descent's own lo at that level.
+CANOPY_HD CANOPY_FORCEINLINE float levelBox(const Descent& d, uint32_t level, float lo[3]) {
+  const float size = levelSize(level), scale = pow2i(int(level));
+  for (int a = 0; a < 3; ++a) lo[a] = floorf(d.lo[a] * scale) * size;
+  return size;
+}
+
+// The brick page of d (nullptr: no brick resident), and its light item (nullptr: none resident).
+CANOPY_HD CANOPY_FORCEINLINE const unsigned char* descentBrickPage(const SceneView& s, const Descent& d) {
+  return d.brickPoolSlot >= 0 ? s.pool + size_t(d.brickPoolSlot) * s.pageBytes : nullptr;
+}
+CANOPY_HD CANOPY_FORCEINLINE const uint16_t* descentLightItem(const SceneView& s, const Descent& d) {
+  return d.lightPoolSlot >= 0 ? canopyLightInPage(s.pool + size_t(d.lightPoolSlot) * s.pageBytes, d.lightSlotInPage) : nullptr;
+}
 
 CANOPY_HD inline int32_t residentSlot(const SceneView& s, const ModelView& m, uint32_t brick, uint32_t& page) {
   page = m.firstBrickPage + brick / s.bricksPerPage;
@@ -444,55 +477,52 @@ CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m,
   for (int a = 0; a < 3; ++a) x[a] = x[a] < 0.0f ? 0.0f : (x[a] >= 1.0f ? 0.99999994f : x[a]);
   Descent d;
   d.node = m.root;
-  d.level = 0;
-  d.size = 1.0f;
   d.lo[0] = d.lo[1] = d.lo[2] = 0.0f;
-  d.brickPage = nullptr;
-  d.brickSlotInPage = 0;
+  d.maxLevel = uint8_t(maxLevel);
+  d.brickLevel = d.lightLevel = 0;
   d.brickPoolSlot = -1;
+  d.brickSlotInPage = 0;
   d.missingPage = kCanopyNone;
-  d.lightItem = nullptr;
-  d.lightSize = 0.0f;
-  d.lightLo[0] = d.lightLo[1] = d.lightLo[2] = 0.0f;
   d.lightPoolSlot = -1;
+  d.lightSlotInPage = 0;
   d.missingLightPage = kCanopyNone;
   d.coarsestLightPage = kCanopyNone;
   wantLight = wantLight && m.hasLight;
   const uint32_t firstFallback = maxLevel > kFallbackLevels ? maxLevel - kFallbackLevels : 0;
+  float size = 1.0f;
+  uint32_t level = 0;
   for (;;) {
-    const bool last = !(d.level < maxLevel && d.node.child != kCanopyNone && d.node.child < m.tileCount);
+    const bool last = !(level < maxLevel && d.node.child != kCanopyNone && d.node.child < m.tileCount);
     if (wantLight && d.node.brick != kCanopyNone) {
       const uint32_t lpage = m.firstLightPage + d.node.brick / s.lightItemsPerPage;
       const int32_t lslot = s.pageSlot[lpage];
       if (d.coarsestLightPage == kCanopyNone) d.coarsestLightPage = lpage;
       if (lslot >= 0) {
-        d.lightItem = canopyLightInPage(s.pool + size_t(lslot) * s.pageBytes, d.node.brick % s.lightItemsPerPage);
         d.lightPoolSlot = lslot;
-        d.lightSize = d.size;
-        for (int a = 0; a < 3; ++a) d.lightLo[a] = d.lo[a];
+        d.lightSlotInPage = uint16_t(d.node.brick % s.lightItemsPerPage);
+        d.lightLevel = uint8_t(level);
         d.missingLightPage = kCanopyNone;
       } else {
         d.missingLightPage = lpage;
       }
     }
-    if (d.node.brick != kCanopyNone && (d.level >= firstFallback || last)) {
+    if (d.node.brick != kCanopyNone && (level >= firstFallback || last)) {
       uint32_t page;
       const int32_t slot = residentSlot(s, m, d.node.brick, page);
       if (slot >= 0) {
-        d.brickPage = s.pool + size_t(slot) * s.pageBytes;
-        d.brickSlotInPage = d.node.brick % s.bricksPerPage;
         d.brickPoolSlot = slot;
-        d.brickSize = d.size;
-        for (int a = 0; a < 3; ++a) d.brickLo[a] = d.lo[a];
+        d.brickSlotInPage = uint16_t(d.node.brick % s.bricksPerPage);
+        d.brickLevel = uint8_t(level);
       } else if (last) {
         d.missingPage = page;
       }
     }
     if (last) break;
-    const uint32_t c = canopyStepDown(x, d.lo, d.size);
+    const uint32_t c = canopyStepDown(x, d.lo, size);
     d.node = m.tiles[size_t(d.node.child) * 8 + c];
-    ++d.level;
+    ++level;
   }
+  d.level = uint8_t(level);
   return d;
 }
 
@@ -502,19 +532,18 @@ CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m,
 // again: a brick node is crossed in about 2 x 8 steps of half a voxel, one descent instead of ~16.
 // The result is exactly that of a fresh descent (same node, same brick, same light item).
 struct DescentCache {
-  Descent d;
-  uint32_t maxLevel;
-  uint32_t valid;  // 0: empty (a new hit)
+  Descent d;  // d.maxLevel == kNoLevel: empty (a new hit)
 };
 
 // The point u (unit space, clamped as descendResident clamps it) is inside the cached node.
 CANOPY_HD CANOPY_FORCEINLINE bool descentCovers(const DescentCache& c, V3 u, uint32_t maxLevel) {
-  if (!c.valid || c.maxLevel != maxLevel) return false;
+  if (c.d.maxLevel != maxLevel) return false;  // also where empty: maxLevel <= a model's depth < kNoLevel
+  const float size = levelSize(c.d.level);
   float x[3] = {u.x, u.y, u.z};
   bool in = true;
   for (int a = 0; a < 3; ++a) {
     x[a] = x[a] < 0.0f ? 0.0f : (x[a] >= 1.0f ? 0.99999994f : x[a]);
-    in = in && x[a] >= c.d.lo[a] && x[a] < c.d.lo[a] + c.d.size;
+    in = in && x[a] >= c.d.lo[a] && x[a] < c.d.lo[a] + size;
   }
   return in;
 }
@@ -546,17 +575,19 @@ CANOPY_HD inline void segmentLight(const SceneView& s, const ModelView& m, const
     writeStamp(s.pageWanted + at.page, s.stamp);
   }
   if (d.missingLightPage != kCanopyNone) writeStamp(s.pageWanted + d.missingLightPage, s.stamp);
-  if (d.lightItem) {
-    writeStamp(s.slotUsed + d.lightPoolSlot, s.stamp);
-  } else if (d.coarsestLightPage != kCanopyNone) {
-    writeStamp(s.pageWanted + d.coarsestLightPage, s.stamp);
-  }
-  g.lightItem = d.lightItem;
+  g.lightItem = descentLightItem(s, d);
   g.tSample = tm;
-  const float inv = d.lightItem ? 1.0f / d.lightSize : 0.0f;
-  g.light[0] = (um.x - d.lightLo[0]) * inv;
-  g.light[1] = (um.y - d.lightLo[1]) * inv;
-  g.light[2] = (um.z - d.lightLo[2]) * inv;
+  if (g.lightItem) {
+    writeStamp(s.slotUsed + d.lightPoolSlot, s.stamp);
+    float lo[3];
+    const float inv = 1.0f / levelBox(d, d.lightLevel, lo);
+    g.light[0] = (um.x - lo[0]) * inv;
+    g.light[1] = (um.y - lo[1]) * inv;
+    g.light[2] = (um.z - lo[2]) * inv;
+  } else {
+    if (d.coarsestLightPage != kCanopyNone) writeStamp(s.pageWanted + d.coarsestLightPage, s.stamp);
+    g.light[0] = g.light[1] = g.light[2] = 0.0f;
+  }
 }
 
 // The indirect light of a shading segment of instance `inst` on the ray o + t dir: the LB light of
@@ -676,16 +707,15 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
   CANOPY_PLAY_COUNT(s, segments, 1);
   if (!s.shade.descentCache || !descentCovers(cache, up, level)) {
     cache.d = descendResident(s, m, up, level, shading);
-    cache.maxLevel = level;
-    cache.valid = 1;
     CANOPY_PLAY_COUNT(s, descents, 1);
   }
   const Descent& d = cache.d;
   Segment g;
-  float tExit = nodeExit(uo, ud, d.lo, d.size);
+  float tExit = nodeExit(uo, ud, d.lo, levelSize(d.level));
   if (tExit < t + eps) tExit = t + eps;
   if (d.missingPage != kCanopyNone) writeStamp(s.pageWanted + d.missingPage, s.stamp);
-  const bool useBrick = d.node.brick != kCanopyNone && d.brickPage != nullptr;
+  const unsigned char* brickPage = descentBrickPage(s, d);
+  const bool useBrick = d.node.brick != kCanopyNone && brickPage != nullptr;
   if (!useBrick) {
     // constant node, or a missing brick without a close resident ancestor: the node's mean
     const CanopySample c = canopyUnpack(d.node.density, d.node.material);
@@ -707,11 +737,13 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
     return g;
   }
   writeStamp(s.slotUsed + d.brickPoolSlot, s.stamp);
-  const float inv = 1.0f / d.brickSize;
+  float brickLo[3];
+  const float brickSize = levelBox(d, d.brickLevel, brickLo);
+  const float inv = 1.0f / brickSize;
   if (s.shade.skipEmptyBlocks && s.brickMaskOffset != 0) {
-    const uint64_t* mask = reinterpret_cast<const uint64_t*>(d.brickPage + s.brickMaskOffset) + kCanopyEmptyWords * d.brickSlotInPage;
+    const uint64_t* mask = reinterpret_cast<const uint64_t*>(brickPage + s.brickMaskOffset) + kCanopyEmptyWords * d.brickSlotInPage;
     float tEnd;
-    if (emptyRunEnd(mask, uo, ud, up, d.brickLo, d.brickSize, inv, tEnd)) {
+    if (emptyRunEnd(mask, uo, ud, up, brickLo, brickSize, inv, tEnd)) {
       // k = 0 up to the empty run's end: the samples a march would take there all read 0
       CANOPY_PLAY_COUNT(s, emptyBlockSkips, 1);
       tEnd = tEnd > t + eps ? tEnd : t + eps;
@@ -735,13 +767,13 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
     }
   }
   CANOPY_PLAY_COUNT(s, brickSamples, 1);
-  const float voxelCells = float(m.rootCells >> 3) * d.size;  // this level's voxel, in cells
+  const float voxelCells = float(m.rootCells >> 3) * levelSize(d.level);  // this level's voxel, in cells
   float tEnd = t + s.shade.stepFactor * voxelCells / cellsPerWorld;
   tEnd = tEnd < tExit ? tEnd : tExit;
   tEnd = tEnd < tout ? tEnd : tout;
   const V3 um = uo + ud * (0.5f * (t + tEnd));
-  const CanopySample c = canopySampleBrick(canopyBrickInPage(d.brickPage, d.brickSlotInPage), (um.x - d.brickLo[0]) * inv,
-                                           (um.y - d.brickLo[1]) * inv, (um.z - d.brickLo[2]) * inv);
+  const CanopySample c = canopySampleBrick(canopyBrickInPage(brickPage, d.brickSlotInPage), (um.x - brickLo[0]) * inv,
+                                           (um.y - brickLo[1]) * inv, (um.z - brickLo[2]) * inv);
   g.k = s.shade.sigma * c.density * cellsPerWorld;
   if (c.density == 0.0f) CANOPY_PLAY_COUNT(s, zeroBrickSamples, 1);
   g.albedo[0] = c.albedo[0], g.albedo[1] = c.albedo[1], g.albedo[2] = c.albedo[2];
@@ -763,7 +795,7 @@ struct Hit {
 // 3D-DDA over the instance grid plus the hit list.
 struct InstanceWalk {
   Hit hits[kHitCapacity];             // small: the membership checks scan it, retiring shifts it
-  DescentCache caches[kHitCapacity];  // by slot: a hit's last descent along the ray (valid = 0 when added)
+  DescentCache caches[kHitCapacity];  // by slot: a hit's last descent along the ray (empty when added)
   uint32_t freeSlots;                 // bit i: caches[i] belongs to no hit
   int count;
   int cell[3];
@@ -803,11 +835,11 @@ CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 
       for (int h = 1; h < w.count; ++h) far = w.hits[h].tin > w.hits[far].tin ? h : far;
       if (w.hits[far].tin <= t0) continue;  // dropped; found again from a later cell it overlaps
       w.hits[far] = Hit{id, t0, t1, w.hits[far].slot, EmptyHold{-3.0e38f, 0.0f, 0u}};
-      w.caches[w.hits[far].slot].valid = 0;
+      w.caches[w.hits[far].slot].d.maxLevel = kNoLevel;
     } else {
       const uint32_t slot = lowestSetBit(w.freeSlots);
       w.freeSlots &= ~(1u << slot);
-      w.caches[slot].valid = 0;
+      w.caches[slot].d.maxLevel = kNoLevel;
       w.hits[w.count++] = Hit{id, t0, t1, slot, EmptyHold{-3.0e38f, 0.0f, 0u}};
     }
   }

@@ -12,13 +12,15 @@ set -u
 source "$(dirname "$0")/../gpu-common.sh"
 for t in ${TESTS:-}; do step "$t"; gtest "$t" "$BIN/$t"; done
 run=0
+extra=()  # the grove, where bundled (see bench/gpu-play-skip.sh for how it is made)
+[[ -e $B/share/grove-in/grove.canopy ]] && extra=(--extra grove="$B/share/grove-in/grove.canopy")
 for v in ${VARIANTS:-''}; do
   v=${v//\'/}
   run=$((run + 1)) r="$run$v"  # a variant may run twice (before and after the others)
   step "bench-play$v (run $run)"
   timeout 300 "bench-play$v" "$O/bench$r" --device cuda --size 1920x1080 --frames "${FRAMES:-60}" --cache-mb 1024 \
-    ${PLAY_VARIANTS:---shadows map} 2> "$O/bench_play$r.err" | tee "$O/bench_play$r.md" || status=1
-  [[ ${PNGS:-0} = 1 && $run = 1 ]] && for n in plant forest-orbit forest-walk; do cp "$O/bench$r/$n.png" "$O/play-$n.png"; done
+    ${PLAY_VARIANTS:---shadows map} "${extra[@]}" 2> "$O/bench_play$r.err" | tee "$O/bench_play$r.md" || status=1
+  [[ ${PNGS:-0} = 1 && $run = 1 ]] && for n in plant forest-orbit forest-walk grove; do [[ -e $O/bench$r/$n.png ]] && cp "$O/bench$r/$n.png" "$O/play-$n.png"; done
   [[ -n ${KEEP_SCENE:-} ]] || { mkdir -p "$O/scene" && cp "$O/bench$r/forest.canopy" "$O/scene/" && KEEP_SCENE=$O/scene/forest.canopy; }
 done
 if [[ -n ${PROFILE_BIN:-} ]]; then

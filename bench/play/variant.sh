@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
-# variant.sh NAME "EXTRA NVCC FLAGS": builds canopy-play and bench-play with runtime/render_cuda.cu
+# variant.sh NAME "EXTRA NVCC FLAGS" [DROP]: builds canopy-play and bench-play with runtime/render_cuda.cu
 # compiled with extra nvcc flags (e.g. -lineinfo for Nsight Compute's source page, or
 # --use_fast_math for an A/B), as build/bin/{canopy-play,bench-play,test_play_cuda}-NAME, from
 # the objects of an up-to-date Ninja build in build/ (the build's own binaries are not touched).
+# DROP: a flag of the build's command line to leave out (e.g. --use_fast_math, for the IEEE build).
 set -euo pipefail
-name=$1 flags=$2
+name=$1 flags=$2 drop=${3:-}
 cd "$(dirname "$0")/../../build"
 ninja canopy-play bench-play test_play_cuda > /dev/null
 w=$(mktemp -d)
@@ -12,6 +13,7 @@ obj=runtime/CMakeFiles/canopy_runtime.dir/render_cuda.cu.o
 compile=$(ninja -t commands bin/canopy-play | grep -F -- "-o $obj" | tail -1)
 compile=${compile/-o $obj/-o $w/render_cuda.cu.o $flags}
 compile=$(sed 's| -MD -MT [^ ]* -MF [^ ]*||' <<< "$compile")
+[[ -z $drop ]] || compile=${compile// $drop / }
 eval "$compile"
 cp runtime/libcanopy_runtime.a "$w/"
 (cd "$w" && ar r libcanopy_runtime.a render_cuda.cu.o)
