@@ -286,16 +286,18 @@ struct CanopySample {
   float albedo[3];
 };
 
-// The low byte of v as a float in [0, 1]. On the device the byte becomes a float through the
-// mantissa of 2^23 (exactly the value of float(v & 0xFF), so the same bits as the host's
-// conversion): the integer-to-float instruction runs on a slow pipe, and a trilinear brick sample
-// converts 24 bytes (canopySampleBrick).
+// The float with bits b (host and device alike: the same code runs in CPU tests and kernels).
+CANOPY_HD CANOPY_FORCEINLINE float canopyFloatFromBits(uint32_t b) {
+  float f;
+  memcpy(&f, &b, sizeof f);
+  return f;
+}
+
+// The low byte of v as a float in [0, 1]. The byte becomes a float through the mantissa of 2^23
+// (exactly the value of float(v & 0xFF)): on the device the integer-to-float instruction runs on a
+// slow pipe, and a trilinear brick sample converts 24 bytes (canopySampleBrick).
 CANOPY_HD CANOPY_FORCEINLINE float canopyUnorm8(uint32_t v) {
-#if defined(__CUDA_ARCH__)
-  return (__uint_as_float(0x4B000000u | (v & 0xFFu)) - 8388608.0f) * (1.0f / 255.0f);
-#else
-  return float(v & 0xFFu) * (1.0f / 255.0f);
-#endif
+  return (canopyFloatFromBits(0x4B000000u | (v & 0xFFu)) - 8388608.0f) * (1.0f / 255.0f);
 }
 
 CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyToUnorm8(float v) {

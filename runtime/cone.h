@@ -439,14 +439,8 @@ struct Descent {
 static_assert((1u << 26) / kCanopyBrickBytes <= 0xFFFFu && (1u << 26) / kCanopyLightItemBytes <= 0xFFFFu,
               "Descent's slots in a page are 16 bits");
 
-// 2^e for |e| < 127 (exact; by its exponent bits on the device).
-CANOPY_HD CANOPY_FORCEINLINE float pow2i(int e) {
-#if defined(__CUDA_ARCH__)
-  return __int_as_float((127 + e) << 23);
-#else
-  return ldexpf(1.0f, e);
-#endif
-}
+// 2^e for |e| < 127, exact, from its exponent bits.
+CANOPY_HD CANOPY_FORCEINLINE float pow2i(int e) { return canopyFloatFromBits(uint32_t(127 + e) << 23); }
 
 // The edge of a node of `level` (unit space): 2^-level, as the descent's halvings make it.
 CANOPY_HD CANOPY_FORCEINLINE float levelSize(uint32_t level) { return pow2i(-int(level)); }
