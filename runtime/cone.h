@@ -128,7 +128,7 @@ CANOPY_HD inline void rayBox(V3 o, V3 d, V3 lo, V3 hi, float& t0, float& t1) {
 // The scene as the kernel sees it (plain pointers: host memory on the CPU, device memory on the GPU)
 // ------------------------------------------------------------------------------------------------
 constexpr int kHitCapacity = 16;        // instances pending or active along one ray at once
-static_assert(kHitCapacity <= 32, "hit bit masks (InstanceWalk::freeSlots, traceCone's evaluation mask) are 32 bits");
+static_assert(kHitCapacity <= 32, "hit bit masks (InstanceWalk::live, traceCone's evaluation mask) are 32 bits");
 constexpr uint32_t kFallbackLevels = 3;  // a missing brick may use a resident ancestor this much coarser
 constexpr float kMaxConstantCells = 4.0f;  // a uniform non-empty node is shaded at least every 4 cells
 constexpr float kStopT = 1e-3f;          // default early stop (ShadeParams::stopT): opacity above 0.999
@@ -782,16 +782,20 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
 struct Hit {
   uint32_t instance;
   float tin, tout;
-  uint32_t slot;    // its descent cache: InstanceWalk::caches[slot] (stays put while hits move)
-  EmptyHold hold;   // primary march: its current empty leaf segment (until = -inf: none)
+  EmptyHold hold;  // primary march: its current empty leaf segment (until = -inf: none)
 };
 
-// 3D-DDA over the instance grid plus the hit list.
+// 3D-DDA over the instance grid plus the hit list. The hits live in fixed slots (a bit of `live`
+// each, visited in ascending slot order): a hit never moves, its descent cache sits beside it at
+// the same index, and retiring one clears a bit instead of shifting the hits after it (local
+// memory on the GPU). Retiring runs only once the march reaches the nearest exit (`minTout`), not
+// at every step; `idBits` lets most instances of a grid cell skip the membership scan.
 struct InstanceWalk {
-  Hit hits[kHitCapacity];             // small: the membership checks scan it, retiring shifts it
-  DescentCache caches[kHitCapacity];  // by slot: a hit's last descent along the ray (empty when added)
-  uint32_t freeSlots;                 // bit i: caches[i] belongs to no hit
-  int count;
+  Hit hits[kHitCapacity];
+  DescentCache caches[kHitCapacity];  // caches[i]: hits[i]'s last descent along the ray (empty when added)
+  uint32_t live;                      // bit i: hits[i] is pending or active
+  uint32_t idBits;                    // bit (instance % 32) of every live hit (and perhaps of retired ones)
+  float minTout;                      // <= every live hit's tout
   int cell[3];
   int stepDir[3];
   float tNext[3], tDelta[3];
@@ -799,6 +803,7 @@ struct InstanceWalk {
   float tGridExit;
   bool done;
 };
+constexpr uint32_t kAllHitSlots = kHitCapacity >= 32 ? 0xFFFFFFFFu : (1u << kHitCapacity) - 1u;
 
 // Index of the lowest set bit of a non-zero mask.
 CANOPY_HD CANOPY_FORCEINLINE uint32_t lowestSetBit(uint32_t m) {
@@ -813,9 +818,12 @@ CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 
   const int c = w.cell[0] + s.gridDim[0] * (w.cell[1] + s.gridDim[1] * w.cell[2]);
   for (uint32_t k = s.gridStart[c]; k < s.gridStart[c + 1]; ++k) {
     const uint32_t id = s.gridItems[k];
-    bool present = false;
-    for (int h = 0; h < w.count; ++h) present |= w.hits[h].instance == id;
-    if (present) continue;
+    const uint32_t idBit = 1u << (id % 32u);
+    if (w.idBits & idBit) {
+      bool present = false;
+      for (uint32_t m = w.live; m != 0; m &= m - 1u) present |= w.hits[lowestSetBit(m)].instance == id;
+      if (present) continue;
+    }
     const InstanceView& inst = s.instances[id];
     // the exact interval: the ray against the lattice box in the instance's unit space (an
     // oriented box in world space; t is the same parameter in both spaces)
@@ -824,25 +832,30 @@ CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 
            v3(inst.unitHi[0], inst.unitHi[1], inst.unitHi[2]), t0, t1);
     if (t0 < tNow) t0 = tNow;
     if (!(t1 > t0)) continue;
-    if (w.count == kHitCapacity) {  // full: replace the farthest pending hit if this one is nearer
-      int far = 0;
-      for (int h = 1; h < w.count; ++h) far = w.hits[h].tin > w.hits[far].tin ? h : far;
-      if (w.hits[far].tin <= t0) continue;  // dropped; found again from a later cell it overlaps
-      w.hits[far] = Hit{id, t0, t1, w.hits[far].slot, EmptyHold{-3.0e38f, 0.0f, 0u}};
-      w.caches[w.hits[far].slot].d.maxLevel = kNoLevel;
+    uint32_t slot;
+    if (w.live == kAllHitSlots) {  // full: replace the farthest pending hit if this one is nearer
+      slot = 0;
+      for (uint32_t m = w.live & (w.live - 1u); m != 0; m &= m - 1u) {
+        const uint32_t h = lowestSetBit(m);
+        slot = w.hits[h].tin > w.hits[slot].tin ? h : slot;
+      }
+      if (w.hits[slot].tin <= t0) continue;  // dropped; found again from a later cell it overlaps
     } else {
-      const uint32_t slot = lowestSetBit(w.freeSlots);
-      w.freeSlots &= ~(1u << slot);
-      w.caches[slot].d.maxLevel = kNoLevel;
-      w.hits[w.count++] = Hit{id, t0, t1, slot, EmptyHold{-3.0e38f, 0.0f, 0u}};
+      slot = lowestSetBit(~w.live & kAllHitSlots);
+      w.live |= 1u << slot;
     }
+    w.hits[slot] = Hit{id, t0, t1, EmptyHold{-3.0e38f, 0.0f, 0u}};
+    w.caches[slot].d.maxLevel = kNoLevel;
+    w.idBits |= idBit;
+    w.minTout = t1 < w.minTout ? t1 : w.minTout;
   }
 }
 
 // Starts the walk for the ray o + t d, t in [tStart, tEnd].
 CANOPY_HD inline void walkBegin(const SceneView& s, InstanceWalk& w, V3 o, V3 d, float tStart, float tEnd) {
-  w.count = 0;
-  w.freeSlots = kHitCapacity >= 32 ? 0xFFFFFFFFu : (1u << kHitCapacity) - 1u;
+  w.live = 0;
+  w.idBits = 0;
+  w.minTout = 3.0e38f;
   w.done = true;
   w.tCellExit = tEnd;
   if (s.instanceCount == 0) return;
@@ -906,18 +919,21 @@ CANOPY_HD inline void walkAdvance(const SceneView& s, InstanceWalk& w, V3 o, V3 
   w.tCellExit = tx < w.tGridExit ? tx : w.tGridExit;
 }
 
-// Drops hits that ended before t.
+// Drops hits that ended before t (tout <= t); nothing to do before the nearest exit.
 CANOPY_HD inline void walkRetire(InstanceWalk& w, float t) {
-  int n = 0;
-  for (int h = 0; h < w.count; ++h) {
-    if (!(w.hits[h].tout > t)) {
-      w.freeSlots |= 1u << w.hits[h].slot;
+  if (t < w.minTout) return;
+  w.idBits = 0;
+  w.minTout = 3.0e38f;
+  for (uint32_t m = w.live; m != 0; m &= m - 1u) {
+    const uint32_t h = lowestSetBit(m);
+    const float tout = w.hits[h].tout;
+    if (!(tout > t)) {
+      w.live &= ~(1u << h);
       continue;
     }
-    if (n != h) w.hits[n] = w.hits[h];
-    ++n;
+    w.idBits |= 1u << (w.hits[h].instance % 32u);
+    w.minTout = tout < w.minTout ? tout : w.minTout;
   }
-  w.count = n;
 }
 
 // ------------------------------------------------------------------------------------------------
@@ -1082,11 +1098,12 @@ CANOPY_HD inline float shadowTransmittance(const SceneView& s, V3 p, float footp
   float t = 0.0f;
   while (true) {
     walkRetire(w, t);
-    if (w.count == 0 && w.done) break;
+    if (w.live == 0 && w.done) break;
     float next = w.done ? 3.0e38f : w.tCellExit;
     float k = 0.0f;
     bool active = false;
-    for (int h = 0; h < w.count; ++h) {
+    for (uint32_t m = w.live; m != 0; m &= m - 1u) {
+      const uint32_t h = lowestSetBit(m);
       const Hit& hit = w.hits[h];
       if (hit.tin > t) {
         next = hit.tin < next ? hit.tin : next;
@@ -1094,11 +1111,11 @@ CANOPY_HD inline float shadowTransmittance(const SceneView& s, V3 p, float footp
       }
       active = true;
       const Segment g =
-          instanceSegment(s, s.instances[hit.instance], p, d, t, hit.tout, footprint0 + t * s.shade.shadowAperture, false, w.caches[hit.slot]);
+          instanceSegment(s, s.instances[hit.instance], p, d, t, hit.tout, footprint0 + t * s.shade.shadowAperture, false, w.caches[h]);
       k += g.k;
       next = g.tEnd < next ? g.tEnd : next;
     }
-    if (!active && w.count == 0 && !w.done) {  // nothing here: skip to the next grid cell
+    if (!active && w.live == 0 && !w.done) {  // nothing here: skip to the next grid cell
       t = w.tCellExit;
       walkAdvance(s, w, p, d, t);
       continue;
@@ -1130,7 +1147,7 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
   float sunT = 1.0f, shadowT = -3.0e38f, shadowSpacing = 0.0f;
   while (true) {
     walkRetire(w, t);
-    if (w.count == 0 && w.done) break;
+    if (w.live == 0 && w.done) break;
     float next = w.done ? tMax : w.tCellExit;
     // Each segment with matter is shaded as it is found, into two sums over the segments: its
     // extinction x albedo (which the step's sun transmittance will scale) and that times its
@@ -1148,7 +1165,8 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
     // its first hit and a lane that evaluates its third ran the evaluation at different iterations,
     // one after the other (bench/play/NOTES.md, sixth round).
     uint32_t evaluate = 0;
-    for (int h = 0; h < w.count; ++h) {
+    for (uint32_t m = w.live; m != 0; m &= m - 1u) {
+      const uint32_t h = lowestSetBit(m);
       const Hit& hit = w.hits[h];
       if (hit.tin > t) {
         next = hit.tin < next ? hit.tin : next;
@@ -1169,11 +1187,11 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
       evaluate |= 1u << h;
     }
     while (evaluate != 0) {
-      const int h = int(lowestSetBit(evaluate));
+      const uint32_t h = lowestSetBit(evaluate);
       evaluate &= evaluate - 1u;
       Hit& hit = w.hits[h];
       const InstanceView& inst = s.instances[hit.instance];
-      const Segment g = instanceSegment(s, inst, o, d, t, hit.tout, footprint, true, w.caches[hit.slot],
+      const Segment g = instanceSegment(s, inst, o, d, t, hit.tout, footprint, true, w.caches[h],
                                         s.shade.holdEmpty ? &hit.hold : nullptr);
       if (hit.hold.until > t) {  // a new hold: its level condition becomes a bound on t
         const float limit = levelHoldsUntil(s, inst, s.models[inst.model].depth, pixelAngle, hit.hold.level);
@@ -1190,7 +1208,7 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
         kIndirect[c] += ka * ind[c];
       }
     }
-    if (!active && w.count == 0) {
+    if (!active && w.live == 0) {
       if (w.done) break;
       t = w.tCellExit;
       walkAdvance(s, w, o, d, t);

@@ -4,6 +4,8 @@
 # --use_fast_math for an A/B), as build/bin/{canopy-play,bench-play,test_play_cuda}-NAME, from
 # the objects of an up-to-date Ninja build in build/ (the build's own binaries are not touched).
 # DROP: a flag of the build's command line to leave out (e.g. --use_fast_math, for the IEEE build).
+# PREINC=DIR (environment): DIR is searched for includes before the project's own directories, e.g.
+# an earlier commit's runtime/cone.h for an A/B of the kernel (`git show REV:runtime/cone.h`).
 set -euo pipefail
 name=$1 flags=$2 drop=${3:-}
 cd "$(dirname "$0")/../../build"
@@ -14,6 +16,7 @@ compile=$(ninja -t commands bin/canopy-play | grep -F -- "-o $obj" | tail -1)
 compile=${compile/-o $obj/-o $w/render_cuda.cu.o $flags}
 compile=$(sed 's| -MD -MT [^ ]* -MF [^ ]*||' <<< "$compile")
 [[ -z $drop ]] || compile=${compile// $drop / }
+[[ -z ${PREINC:-} ]] || compile=$(sed "s|^\([^ ]*nvcc\) |\1 -I$PREINC |" <<< "$compile")
 eval "$compile"
 cp runtime/libcanopy_runtime.a "$w/"
 (cd "$w" && ar r libcanopy_runtime.a render_cuda.cu.o)
