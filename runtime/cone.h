@@ -124,6 +124,27 @@ CANOPY_HD inline void rayBox(V3 o, V3 d, V3 lo, V3 hi, float& t0, float& t1) {
   }
 }
 
+// Division by a run-time constant without a division instruction (the GPU has none: its integer
+// division is a ~20-instruction sequence): q = n / d = the high 64 bits of c * n with c = ceil(2^64 / d),
+// exact for every 32-bit n and 2 <= d < 2^32 (Lemire, Kaser and Kurz 2019, "Faster remainder by
+// direct computation", theorem 1 with F = 64, N = 32: c * d - 2^64 < d, so the error term stays
+// below 1/d). c = 0 stands for d = 1.
+struct IndexDivisor {
+  uint64_t c;
+  uint32_t d;
+};
+inline IndexDivisor indexDivisor(uint32_t d) { return IndexDivisor{d > 1 ? ~uint64_t(0) / d + 1 : 0, d > 0 ? d : 1}; }
+// n / d, and n % d in rem.
+CANOPY_HD CANOPY_FORCEINLINE uint32_t divide(const IndexDivisor& v, uint32_t n, uint32_t& rem) {
+#if defined(__CUDA_ARCH__)
+  const uint32_t q = v.c != 0 ? uint32_t(__umul64hi(v.c, uint64_t(n))) : n;
+#else
+  const uint32_t q = v.c != 0 ? uint32_t((unsigned __int128)v.c * n >> 64) : n;
+#endif
+  rem = n - q * v.d;
+  return q;
+}
+
 // ------------------------------------------------------------------------------------------------
 // The scene as the kernel sees it (plain pointers: host memory on the CPU, device memory on the GPU)
 // ------------------------------------------------------------------------------------------------
@@ -226,9 +247,9 @@ struct SceneView {
   uint32_t* pageWanted;          // page -> stamp of the last frame that missed it
   uint32_t stamp;
   uint32_t pageBytes;
-  uint32_t bricksPerPage;
+  IndexDivisor bricksPerPage;
   uint32_t brickMaskOffset;      // where a brick page image keeps its empty-cell masks (0: no masks, no skip)
-  uint32_t lightItemsPerPage;
+  IndexDivisor lightItemsPerPage;
   uint32_t litModels;            // models with LB light (0: renderPixel takes the path without light code)
   SceneLightView light;
   ShadeParams shade;
@@ -461,8 +482,9 @@ CANOPY_HD CANOPY_FORCEINLINE const uint16_t* descentLightItem(const SceneView& s
   return d.lightPoolSlot >= 0 ? canopyLightInPage(s.pool + size_t(d.lightPoolSlot) * s.pageBytes, d.lightSlotInPage) : nullptr;
 }
 
-CANOPY_HD inline int32_t residentSlot(const SceneView& s, const ModelView& m, uint32_t brick, uint32_t& page) {
-  page = m.firstBrickPage + brick / s.bricksPerPage;
+// The pool slot of brick `brick`'s page (-1: not resident); its page and slot in the page.
+CANOPY_HD inline int32_t residentSlot(const SceneView& s, const ModelView& m, uint32_t brick, uint32_t& page, uint32_t& inPage) {
+  page = m.firstBrickPage + divide(s.bricksPerPage, brick, inPage);
   return s.pageSlot[page];
 }
 
@@ -488,12 +510,13 @@ CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m,
   for (;;) {
     const bool last = !(level < maxLevel && d.node.child != kCanopyNone && d.node.child < m.tileCount);
     if (wantLight && d.node.brick != kCanopyNone) {
-      const uint32_t lpage = m.firstLightPage + d.node.brick / s.lightItemsPerPage;
+      uint32_t inPage;
+      const uint32_t lpage = m.firstLightPage + divide(s.lightItemsPerPage, d.node.brick, inPage);
       const int32_t lslot = s.pageSlot[lpage];
       if (d.coarsestLightPage == kCanopyNone) d.coarsestLightPage = lpage;
       if (lslot >= 0) {
         d.lightPoolSlot = lslot;
-        d.lightSlotInPage = uint16_t(d.node.brick % s.lightItemsPerPage);
+        d.lightSlotInPage = uint16_t(inPage);
         d.lightLevel = uint8_t(level);
         d.missingLightPage = kCanopyNone;
       } else {
@@ -501,11 +524,11 @@ CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m,
       }
     }
     if (d.node.brick != kCanopyNone && (level >= firstFallback || last)) {
-      uint32_t page;
-      const int32_t slot = residentSlot(s, m, d.node.brick, page);
+      uint32_t page, inPage;
+      const int32_t slot = residentSlot(s, m, d.node.brick, page, inPage);
       if (slot >= 0) {
         d.brickPoolSlot = slot;
-        d.brickSlotInPage = uint16_t(d.node.brick % s.bricksPerPage);
+        d.brickSlotInPage = uint16_t(inPage);
         d.brickLevel = uint8_t(level);
       } else if (last) {
         d.missingPage = page;

@@ -289,9 +289,9 @@ SceneView hostSceneView(const HostScene& s) {
     v.gridCell[a] = s.gridCell[a];
   }
   v.pageBytes = s.pageBytes;
-  v.bricksPerPage = s.bricksPerPage;
+  v.bricksPerPage = indexDivisor(s.bricksPerPage);
   v.brickMaskOffset = canopyBrickMaskOffset(s.pageBytes, s.bricksPerPage);
-  v.lightItemsPerPage = s.lightItemsPerPage > 0 ? s.lightItemsPerPage : 1;
+  v.lightItemsPerPage = indexDivisor(s.lightItemsPerPage > 0 ? s.lightItemsPerPage : 1);
   v.litModels = s.litModels;
   v.light = s.light;
   v.light.values = s.hasSceneLight ? s.lightValues.data() : nullptr;

@@ -14,6 +14,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -162,6 +163,25 @@ TEST(Cone, RayBoxAndNodeExit) {
   EXPECT_GT(t0, t1);  // parallel and outside: miss
   const float lo[3] = {0.25f, 0.5f, 0.0f};
   EXPECT_FLOAT_EQ(pl::nodeExit(pl::v3(0.3f, 0.6f, 0.1f), pl::v3(0, 0, 2), lo, 0.25f), (0.25f - 0.1f) / 2.0f);
+}
+
+// The page of a brick (and its slot in the page) is a division by bricksPerPage done with a
+// multiply (IndexDivisor): exact for every 32-bit index, with divisors of every kind (1, powers of
+// two, odd, the largest), at the extremes and at random.
+TEST(Cone, IndexDivisorIsExactDivision) {
+  std::mt19937 rng(7);
+  const uint32_t divisors[] = {1u, 2u, 3u, 7u, 8u, 10u, 64u, 641u, 4096u, 65535u, 1000003u, 0x7FFFFFFFu, 0x80000000u, 0xFFFFFFFEu, 0xFFFFFFFFu};
+  for (const uint32_t d : divisors) {
+    const pl::IndexDivisor v = pl::indexDivisor(d);
+    uint32_t n = 0;
+    for (int i = 0; i < 200000; ++i) {
+      n = i < 1000 ? uint32_t(i) : (i < 2000 ? 0xFFFFFFFFu - uint32_t(i - 1000) : (i < 3000 ? uint32_t(i - 2000) * d - 1u : uint32_t(rng())));
+      uint32_t rem;
+      const uint32_t q = pl::divide(v, n, rem);
+      ASSERT_EQ(q, n / d) << n << " / " << d;
+      ASSERT_EQ(rem, n % d) << n << " % " << d;
+    }
+  }
 }
 
 // B_0 enters in open-sky units (divided by 18, see kAmbientB0Scale); the sun bases, solved for a
