@@ -49,6 +49,7 @@
 //      (segmentLight, sampleHaarLbLight), its Haar page used or asked for through the same cache.
 #pragma once
 #include <math.h>
+#include <stddef.h>
 #include <stdint.h>
 
 #include "canopy/half.h"
@@ -441,13 +442,13 @@ CANOPY_HD inline float nodeExit(V3 uo, V3 ud, const float lo[3], float size) {
 // exact since boxes are dyadic). Against the 120 bytes of pointers, boxes and sizes before it, it
 // is the same descent, field for field.
 constexpr uint8_t kNoLevel = 0xFF;
-struct Descent {
-  CanopyNode node;             // the node reached
-  float lo[3];                 // its box: [lo, lo + levelSize(level))
+struct alignas(16) Descent {
+  float lo[3];                 // its box: [lo, lo + levelSize(level))   (descentCovers reads these 16 bytes at once)
   uint8_t level;               // its level
   uint8_t maxLevel;            // the level asked for (kNoLevel: an empty DescentCache)
   uint8_t brickLevel;          // the brick to sample: the node's own if resident, else a resident ancestor's (level)
   uint8_t lightLevel;          // LB light (wantLight only): the deepest brick on the path whose light page is resident
+  CanopyNode node;             // the node reached
   int32_t brickPoolSlot;       // its page's pool slot; -1: no brick resident
   uint32_t missingPage;        // the node's own page when it was missing, else kCanopyNone
   int32_t lightPoolSlot;       // -1: no light page resident on the path
@@ -457,6 +458,7 @@ struct Descent {
   uint16_t lightSlotInPage;    // the light item's slot in its page (< lightItemsPerPage)
 };
 // The reader admits pages of at most 64 MiB (canopy_file.cpp), so slots in a page fit 16 bits.
+static_assert(offsetof(Descent, level) == 12 && offsetof(Descent, maxLevel) == 13, "descentCovers' layout");
 static_assert((1u << 26) / kCanopyBrickBytes <= 0xFFFFu && (1u << 26) / kCanopyLightItemBytes <= 0xFFFFu,
               "Descent's slots in a page are 16 bits");
 
@@ -554,13 +556,24 @@ struct DescentCache {
 
 // The point u (unit space, clamped as descendResident clamps it) is inside the cached node.
 CANOPY_HD CANOPY_FORCEINLINE bool descentCovers(const DescentCache& c, V3 u, uint32_t maxLevel) {
-  if (c.d.maxLevel != maxLevel) return false;  // also where empty: maxLevel <= a model's depth < kNoLevel
-  const float size = levelSize(c.d.level);
+  float lo[3];
+  uint32_t level, cachedMax;
+#if defined(__CUDA_ARCH__)
+  const float4 v = *reinterpret_cast<const float4*>(&c.d);  // lo, level, maxLevel (little-endian bytes)
+  lo[0] = v.x, lo[1] = v.y, lo[2] = v.z;
+  const uint32_t levels = __float_as_uint(v.w);
+  level = levels & 0xFFu, cachedMax = (levels >> 8) & 0xFFu;
+#else
+  lo[0] = c.d.lo[0], lo[1] = c.d.lo[1], lo[2] = c.d.lo[2];
+  level = c.d.level, cachedMax = c.d.maxLevel;
+#endif
+  if (cachedMax != maxLevel) return false;  // also where empty: maxLevel <= a model's depth < kNoLevel
+  const float size = levelSize(level);
   float x[3] = {u.x, u.y, u.z};
   bool in = true;
   for (int a = 0; a < 3; ++a) {
     x[a] = x[a] < 0.0f ? 0.0f : (x[a] >= 1.0f ? 0.99999994f : x[a]);
-    in = in && x[a] >= c.d.lo[a] && x[a] < c.d.lo[a] + size;
+    in = in && x[a] >= lo[a] && x[a] < lo[a] + size;
   }
   return in;
 }
@@ -802,11 +815,25 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
 // ------------------------------------------------------------------------------------------------
 // The lock-step march over every instance along a ray
 // ------------------------------------------------------------------------------------------------
-struct Hit {
-  uint32_t instance;
-  float tin, tout;
+// The first 16 bytes are what every step reads of every hit (tin, hold.until, hold.end): one
+// 16-byte load on the GPU (hitHead).
+struct alignas(16) Hit {
+  float tin;
   EmptyHold hold;  // primary march: its current empty leaf segment (until = -inf: none)
+  uint32_t instance;
+  float tout;
 };
+static_assert(offsetof(Hit, hold) == 4 && offsetof(EmptyHold, until) == 0 && offsetof(EmptyHold, end) == 4, "hitHead's layout");
+
+// tin, hold.until and hold.end of a hit.
+CANOPY_HD CANOPY_FORCEINLINE void hitHead(const Hit& h, float& tin, float& until, float& end) {
+#if defined(__CUDA_ARCH__)
+  const float4 v = *reinterpret_cast<const float4*>(&h);
+  tin = v.x, until = v.y, end = v.z;
+#else
+  tin = h.tin, until = h.hold.until, end = h.hold.end;
+#endif
+}
 
 // 3D-DDA over the instance grid plus the hit list. The hits live in fixed slots (a bit of `live`
 // each, visited in ascending slot order): a hit never moves, its descent cache sits beside it at
@@ -867,7 +894,7 @@ CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 
       slot = lowestSetBit(~w.live & kAllHitSlots);
       w.live |= 1u << slot;
     }
-    w.hits[slot] = Hit{id, t0, t1, EmptyHold{-3.0e38f, 0.0f, 0u}};
+    w.hits[slot] = Hit{t0, EmptyHold{-3.0e38f, 0.0f, 0u}, id, t1};
     w.caches[slot].d.maxLevel = kNoLevel;
     w.idBits |= idBit;
     w.minTout = t1 < w.minTout ? t1 : w.minTout;
@@ -1190,24 +1217,22 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
     uint32_t evaluate = 0;
     for (uint32_t m = w.live; m != 0; m &= m - 1u) {
       const uint32_t h = lowestSetBit(m);
-      const Hit& hit = w.hits[h];
-      if (hit.tin > t) {
-        next = hit.tin < next ? hit.tin : next;
-        continue;
-      }
-      active = true;
-      if (kWithCones) {  // the shadow interval's length (below)
-        const float cell = s.instances[hit.instance].cellWorld;
+      float tin, until, end;
+      hitHead(w.hits[h], tin, until, end);
+      // pending (tin > t): bounds the step by tin; held (the same empty segment as at the previous
+      // step, EmptyHold; `until` includes the level condition, levelHoldsUntil): k = 0 up to its
+      // end; else evaluated below. Without branches: a warp's lanes stay together here.
+      const bool pending = tin > t;
+      const bool held = !pending && t < until;
+      const float bound = pending ? tin : end;
+      next = (pending || held) && bound < next ? bound : next;
+      active = active || !pending;
+      evaluate |= uint32_t(!pending && !held) << h;
+      CANOPY_PLAY_COUNT(s, heldSegments, held ? 1 : 0);
+      if (kWithCones && !pending) {  // the shadow interval's length (below)
+        const float cell = s.instances[w.hits[h].instance].cellWorld;
         minCell = cell < minCell ? cell : minCell;
       }
-      if (t < hit.hold.until) {
-        // the same empty segment as at the previous step (EmptyHold; `until` includes the level
-        // condition, levelHoldsUntil): k = 0 up to its end
-        CANOPY_PLAY_COUNT(s, heldSegments, 1);
-        next = hit.hold.end < next ? hit.hold.end : next;
-        continue;
-      }
-      evaluate |= 1u << h;
     }
     while (evaluate != 0) {
       const uint32_t h = lowestSetBit(evaluate);
