@@ -88,8 +88,8 @@ CANOPY_HD CANOPY_FORCEINLINE V3 normalize(V3 a) {
 }
 CANOPY_HD CANOPY_FORCEINLINE float comp(V3 a, int i) { return i == 0 ? a.x : (i == 1 ? a.y : a.z); }
 
-// A 3x4 row-major affine map.
-struct Affine {
+// A 3x4 row-major affine map. Rows 16-byte aligned: one 16-byte load each on the GPU.
+struct alignas(16) Affine {
   float m[12];
 };
 CANOPY_HD CANOPY_FORCEINLINE V3 applyPoint(const Affine& a, V3 p) {
@@ -490,6 +490,19 @@ CANOPY_HD inline int32_t residentSlot(const SceneView& s, const ModelView& m, ui
   return s.pageSlot[page];
 }
 
+// A node of a tile array: one 16-byte load on the GPU (the backend's tile arrays are device
+// allocations, so every node is 16-byte aligned).
+CANOPY_HD CANOPY_FORCEINLINE CanopyNode loadNode(const CanopyNode* p) {
+#if defined(__CUDA_ARCH__)
+  const uint4 v = *reinterpret_cast<const uint4*>(p);
+  CanopyNode n;
+  n.child = v.x, n.brick = v.y, n.density = __uint_as_float(v.z), n.material = v.w;
+  return n;
+#else
+  return *p;
+#endif
+}
+
 CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m, V3 u, uint32_t maxLevel, bool wantLight) {
   float x[3] = {u.x, u.y, u.z};
   for (int a = 0; a < 3; ++a) x[a] = x[a] < 0.0f ? 0.0f : (x[a] >= 1.0f ? 0.99999994f : x[a]);
@@ -538,7 +551,7 @@ CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m,
     }
     if (last) break;
     const uint32_t c = canopyStepDown(x, d.lo, size);
-    d.node = m.tiles[size_t(d.node.child) * 8 + c];
+    d.node = loadNode(m.tiles + size_t(d.node.child) * 8 + c);
     ++level;
   }
   d.level = uint8_t(level);
