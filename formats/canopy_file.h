@@ -409,14 +409,23 @@ CANOPY_HD inline CanopySample canopySampleBrick(CanopyBrickView b, float lx, flo
     i0[a] = int(fl);
     f[a] = t - fl;
   }
+  // The 16 loads first, unconditionally (every corner is inside the brick: i0 <= kCanopyBrickVoxels
+  // - 2), so that the GPU has them all in flight at once; corners of weight 0 are then skipped
+  // as before.
+  float cd[8];
+  uint32_t cm[8];
+  for (int c = 0; c < 8; ++c) {
+    const uint32_t idx = canopyVoxelIndex(uint32_t(i0[0] + (c & 1)), uint32_t(i0[1] + ((c >> 1) & 1)), uint32_t(i0[2] + ((c >> 2) & 1)));
+    cd[c] = b.density[idx];
+    cm[c] = b.material[idx];
+  }
   float dens = 0.0f, w = 0.0f, r = 0.0f, g = 0.0f, bl = 0.0f, wsum = 0.0f;
   for (int c = 0; c < 8; ++c) {
     const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
     const float wt = (dx ? f[0] : 1.0f - f[0]) * (dy ? f[1] : 1.0f - f[1]) * (dz ? f[2] : 1.0f - f[2]);
     if (wt == 0.0f) continue;
-    const uint32_t idx = canopyVoxelIndex(uint32_t(i0[0] + dx), uint32_t(i0[1] + dy), uint32_t(i0[2] + dz));
-    const float d = b.density[idx];
-    const CanopySample m = canopyUnpack(d, b.material[idx]);
+    const float d = cd[c];
+    const CanopySample m = canopyUnpack(d, cm[c]);
     dens += wt * d;
     const float wd = wt * d;
     wsum += wd;
