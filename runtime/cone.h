@@ -239,6 +239,11 @@ struct SceneView {
   // Uniform grid of instance boxes: cell c holds gridItems[gridStart[c] .. gridStart[c + 1]).
   const uint32_t* gridStart;
   const uint32_t* gridItems;
+  // The same per entry face: list 6 c + 2 a (+ 1) of gridFaceItems, [gridFaceStart[i] ..
+  // gridFaceStart[i + 1]), holds the items of cell c whose cells start at c along +a (end at c
+  // along -a): those that the cell behind that face does not list (InstanceWalk).
+  const uint32_t* gridFaceStart;
+  const uint32_t* gridFaceItems;
   int32_t gridDim[3];
   float gridLo[3], gridCell[3];
   // Streaming cache.
@@ -852,7 +857,15 @@ CANOPY_HD CANOPY_FORCEINLINE void hitHead(const Hit& h, float& tin, float& until
 // each, visited in ascending slot order): a hit never moves, its descent cache sits beside it at
 // the same index, and retiring one clears a bit instead of shifting the hits after it (local
 // memory on the GPU). Retiring runs only once the march reaches the nearest exit (`minTout`), not
-// at every step; `idBits` lets most instances of a grid cell skip the membership scan.
+// at every step.
+// A cell entered through a face adds only the instances that the cell behind the face does not
+// list (SceneView::gridFaceItems): every other one was met in an earlier cell of the walk, and its
+// interval along the ray, tested there, was added then or rejected for good (a rejection at an
+// earlier, smaller tNow holds at a later one). An instance's cells form a box of cells and the
+// walk's cells move monotonically along each axis, so an instance met in any earlier cell is
+// listed by the cell just behind. So no membership scan is needed, except after a hit was dropped
+// from a full list (`dropped`): from then on each cell's whole list is scanned against the hits,
+// as a dropped instance is found again from a later cell it overlaps. (`idBits` filters that scan.)
 struct InstanceWalk {
   Hit hits[kHitCapacity];
   DescentCache caches[kHitCapacity];  // caches[i]: hits[i]'s last descent along the ray (empty when added)
@@ -865,6 +878,7 @@ struct InstanceWalk {
   float tCellExit;  // the march may advance up to here with the current list
   float tGridExit;
   bool done;
+  bool dropped;  // a hit was dropped from a full list: cells add their whole lists with a membership scan
 };
 constexpr uint32_t kAllHitSlots = kHitCapacity >= 32 ? 0xFFFFFFFFu : (1u << kHitCapacity) - 1u;
 
@@ -877,12 +891,19 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t lowestSetBit(uint32_t m) {
 #endif
 }
 
-CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 d, float tNow) {
+// Adds the instances of the current cell, entered through `face` (2 a for a step along +a, 2 a + 1
+// along -a; -1: the walk's first cell).
+CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 d, float tNow, int face) {
   const int c = w.cell[0] + s.gridDim[0] * (w.cell[1] + s.gridDim[1] * w.cell[2]);
-  for (uint32_t k = s.gridStart[c]; k < s.gridStart[c + 1]; ++k) {
-    const uint32_t id = s.gridItems[k];
+  const bool scan = face < 0 || w.dropped;
+  const uint32_t* items = scan ? s.gridItems : s.gridFaceItems;
+  const uint32_t list = scan ? uint32_t(c) : uint32_t(6 * c + face);
+  const uint32_t* start = scan ? s.gridStart : s.gridFaceStart;
+  const uint32_t kEnd = start[list + 1];
+  for (uint32_t k = start[list]; k < kEnd; ++k) {
+    const uint32_t id = items[k];
     const uint32_t idBit = 1u << (id % 32u);
-    if (w.idBits & idBit) {
+    if (scan && (w.idBits & idBit)) {
       bool present = false;
       for (uint32_t m = w.live; m != 0; m &= m - 1u) present |= w.hits[lowestSetBit(m)].instance == id;
       if (present) continue;
@@ -902,7 +923,8 @@ CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 
         const uint32_t h = lowestSetBit(m);
         slot = w.hits[h].tin > w.hits[slot].tin ? h : slot;
       }
-      if (w.hits[slot].tin <= t0) continue;  // dropped; found again from a later cell it overlaps
+      w.dropped = true;  // this one or the farthest: found again from a later cell it overlaps
+      if (w.hits[slot].tin <= t0) continue;
     } else {
       slot = lowestSetBit(~w.live & kAllHitSlots);
       w.live |= 1u << slot;
@@ -920,6 +942,7 @@ CANOPY_HD inline void walkBegin(const SceneView& s, InstanceWalk& w, V3 o, V3 d,
   w.idBits = 0;
   w.minTout = 3.0e38f;
   w.done = true;
+  w.dropped = false;
   w.tCellExit = tEnd;
   if (s.instanceCount == 0) return;
   const V3 lo = v3(s.gridLo[0], s.gridLo[1], s.gridLo[2]);
@@ -953,7 +976,7 @@ CANOPY_HD inline void walkBegin(const SceneView& s, InstanceWalk& w, V3 o, V3 d,
       w.tDelta[a] = 3.0e38f;
     }
   }
-  walkAddCell(s, w, o, d, t0);
+  walkAddCell(s, w, o, d, t0, -1);
   float tx = w.tNext[0] < w.tNext[1] ? w.tNext[0] : w.tNext[1];
   tx = tx < w.tNext[2] ? tx : w.tNext[2];
   w.tCellExit = tx < t1 ? tx : t1;
@@ -976,7 +999,7 @@ CANOPY_HD inline void walkAdvance(const SceneView& s, InstanceWalk& w, V3 o, V3 
     w.tCellExit = w.tGridExit;
     return;
   }
-  walkAddCell(s, w, o, d, tNow);
+  walkAddCell(s, w, o, d, tNow, 2 * a + (w.stepDir[a] > 0 ? 0 : 1));
   float tx = w.tNext[0] < w.tNext[1] ? w.tNext[0] : w.tNext[1];
   tx = tx < w.tNext[2] ? tx : w.tNext[2];
   w.tCellExit = tx < w.tGridExit ? tx : w.tGridExit;

@@ -100,6 +100,8 @@ class CudaBackend final : public Backend {
     uploadVector(models_, models);
     uploadVector(gridStart_, scene.gridStart);
     uploadVector(gridItems_, scene.gridItems);
+    uploadVector(gridFaceStart_, scene.gridFaceStart);
+    uploadVector(gridFaceItems_, scene.gridFaceItems);
     uploadVector(light_, scene.lightValues);
     instances_.resize(std::max<size_t>(scene.instances.size(), 1));
     pool_.resize(std::max<size_t>(size_t(slots) * pageBytes_, 1));
@@ -159,6 +161,8 @@ class CudaBackend final : public Backend {
     v.instances = instances_.data();
     v.gridStart = gridStart_.data();
     v.gridItems = gridItems_.data();
+    v.gridFaceStart = gridFaceStart_.data();
+    v.gridFaceItems = gridFaceItems_.data();
     v.light.values = scene.hasSceneLight ? light_.data() : nullptr;
     v.pageSlot = table_.data();
     v.pool = pool_.data();
@@ -236,7 +240,7 @@ class CudaBackend final : public Backend {
   cuda::DeviceBuffer<uint32_t> haarIndex_;  // CanopyFile::haarIndex(): the Haar-lit models' group tables and locations
   cuda::DeviceBuffer<ModelView> models_;
   cuda::DeviceBuffer<InstanceView> instances_;
-  cuda::DeviceBuffer<uint32_t> gridStart_, gridItems_;
+  cuda::DeviceBuffer<uint32_t> gridStart_, gridItems_, gridFaceStart_, gridFaceItems_;
   cuda::DeviceBuffer<float> light_;
   cuda::DeviceBuffer<unsigned char> pool_;
   cuda::DeviceBuffer<int32_t> table_;

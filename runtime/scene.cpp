@@ -59,6 +59,14 @@ M34 apply(const M34& m, double x, double y, double z, std::array<double, 3>& out
   return m;
 }
 
+// The cells of the instance grid that instance i's world box overlaps: [c0, c1] on each axis.
+void gridRange(const HostScene& s, uint32_t i, int c0[3], int c1[3]) {
+  for (int a = 0; a < 3; ++a) {
+    c0[a] = std::clamp(int(std::floor((s.instances[i].boundsLo[a] - s.gridLo[a]) / s.gridCell[a])), 0, s.gridDim[a] - 1);
+    c1[a] = std::clamp(int(std::floor((s.instances[i].boundsHi[a] - s.gridLo[a]) / s.gridCell[a])), 0, s.gridDim[a] - 1);
+  }
+}
+
 }  // namespace
 
 HostScene buildScene(const CanopyFile& f) {
@@ -170,10 +178,7 @@ HostScene buildScene(const CanopyFile& f) {
     std::vector<std::vector<uint32_t>> lists(cells);
     for (uint32_t i = 0; i < s.instances.size(); ++i) {
       int c0[3], c1[3];
-      for (int a = 0; a < 3; ++a) {
-        c0[a] = std::clamp(int(std::floor((s.instances[i].boundsLo[a] - s.gridLo[a]) / s.gridCell[a])), 0, s.gridDim[a] - 1);
-        c1[a] = std::clamp(int(std::floor((s.instances[i].boundsHi[a] - s.gridLo[a]) / s.gridCell[a])), 0, s.gridDim[a] - 1);
-      }
+      gridRange(s, i, c0, c1);
       for (int z = c0[2]; z <= c1[2]; ++z)
         for (int y = c0[1]; y <= c1[1]; ++y)
           for (int x = c0[0]; x <= c1[0]; ++x) lists[size_t(x + s.gridDim[0] * (y + s.gridDim[1] * z))].push_back(i);
@@ -183,8 +188,32 @@ HostScene buildScene(const CanopyFile& f) {
       s.gridStart[c + 1] = s.gridStart[c] + uint32_t(lists[c].size());
       s.gridItems.insert(s.gridItems.end(), lists[c].begin(), lists[c].end());
     }
+    // The items a walk meets first in a cell it enters through a face (cone.h walkAddCell): those
+    // whose cell range starts there along the walk's direction, i.e. that the cell behind the
+    // face does not list (an item's cells are a box of cells).
+    std::vector<std::vector<uint32_t>> faceLists(cells * 6);
+    for (uint32_t i = 0; i < s.instances.size(); ++i) {
+      int c0[3], c1[3];
+      gridRange(s, i, c0, c1);
+      for (int z = c0[2]; z <= c1[2]; ++z)
+        for (int y = c0[1]; y <= c1[1]; ++y)
+          for (int x = c0[0]; x <= c1[0]; ++x) {
+            const int at[3] = {x, y, z};
+            const size_t c = size_t(x + s.gridDim[0] * (y + s.gridDim[1] * z));
+            for (int a = 0; a < 3; ++a) {
+              if (at[a] == c0[a]) faceLists[c * 6 + size_t(2 * a)].push_back(i);      // entered moving +a
+              if (at[a] == c1[a]) faceLists[c * 6 + size_t(2 * a + 1)].push_back(i);  // entered moving -a
+            }
+          }
+    }
+    s.gridFaceStart.assign(cells * 6 + 1, 0);
+    for (size_t k = 0; k < cells * 6; ++k) {
+      s.gridFaceStart[k + 1] = s.gridFaceStart[k] + uint32_t(faceLists[k].size());
+      s.gridFaceItems.insert(s.gridFaceItems.end(), faceLists[k].begin(), faceLists[k].end());
+    }
   } else {
     s.gridStart.assign(2, 0);
+    s.gridFaceStart.assign(7, 0);
   }
   if (f.hasSceneLight()) {
     const CanopySceneLight& L = f.sceneLight();
@@ -283,6 +312,8 @@ SceneView hostSceneView(const HostScene& s) {
   v.instanceCount = uint32_t(s.instances.size());
   v.gridStart = s.gridStart.data();
   v.gridItems = s.gridItems.data();
+  v.gridFaceStart = s.gridFaceStart.data();
+  v.gridFaceItems = s.gridFaceItems.data();
   for (int a = 0; a < 3; ++a) {
     v.gridDim[a] = s.gridDim[a];
     v.gridLo[a] = s.gridLo[a];

@@ -23,6 +23,7 @@ struct HostScene {
   std::vector<InstanceView> instances;
   std::vector<Affine> worldToLatticeLinear;  // per instance: world vectors -> lattice index axes
   std::vector<uint32_t> gridStart, gridItems;
+  std::vector<uint32_t> gridFaceStart, gridFaceItems;  // per cell and entry face (SceneView::gridFaceStart)
   int32_t gridDim[3] = {1, 1, 1};
   float gridLo[3] = {0, 0, 0}, gridCell[3] = {1, 1, 1};
   float boundsLo[3] = {0, 0, 0}, boundsHi[3] = {0, 0, 0};  // world bounds of every instance

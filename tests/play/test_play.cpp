@@ -751,6 +751,63 @@ TEST(PlayBench, ScatterIsDeterministicAndPlacesEveryInstanceOnTheDisk) {
   for (int n : perModel) EXPECT_GT(n, 100);  // every model used, roughly uniformly
 }
 
+// The instance walk adds, in a cell entered through a face, only the instances the cell behind
+// does not list (cone.h InstanceWalk). Against the walk that scans every cell's whole list against
+// the hit list (what `dropped` switches to), over many rays through a 400-instance forest whose
+// boxes overlap, with hits retired as the march would: the same hits, added in the same order to the
+// same slots, cell after cell. Rays where the hit list overflows (more than kHitCapacity pending)
+// must occur too, so that the switch itself is exercised.
+TEST(InstanceWalk, FaceListsAddTheSameHitsAsWholeListsWithAMembershipScan) {
+  pl::bench::ScatterOptions so;
+  so.count = 400;
+  so.models = 2;
+  so.radius = 25;  // crowns overlap, so rays meet several boxes at once
+  const std::string p = pt::tmpDir("scenes") + "/forest400-walk.canopy";
+  pt::writeScene(p, {pt::sphereModel(16, 6, 0.5f, 0.25f), pt::sphereModel(12, 4, 0.8f, 0.25f)}, pl::bench::scatterInstances(so));
+  const canopy::CanopyFile f = canopy::CanopyFile::open(p);
+  const pl::HostScene scene = pl::buildScene(f);
+  const pl::SceneView s = pl::hostSceneView(scene);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  int rays = 0, overflowed = 0;
+  size_t added = 0;
+  for (int r = 0; r < 3000; ++r) {
+    const pl::V3 o = pl::v3(40.0f * u(rng), 2.0f + 8.0f * (u(rng) + 1.0f), 40.0f * u(rng));
+    const pl::V3 d = pl::normalize(pl::v3(-o.x + 10.0f * u(rng), -o.y + 2.0f * u(rng), -o.z + 10.0f * u(rng)));
+    pl::InstanceWalk a, b;
+    pl::walkBegin(s, a, o, d, 0.0f, 3.0e38f);
+    pl::walkBegin(s, b, o, d, 0.0f, 3.0e38f);
+    b.dropped = true;  // the whole lists with the membership scan from the second cell on
+    std::vector<uint32_t> seen;
+    for (int step = 0; step < 1000; ++step) {
+      ASSERT_EQ(a.live, b.live) << "ray " << r << " cell " << step;
+      for (uint32_t m = a.live; m != 0; m &= m - 1u) {
+        const uint32_t h = pl::lowestSetBit(m);
+        ASSERT_EQ(a.hits[h].instance, b.hits[h].instance);
+        ASSERT_EQ(a.hits[h].tin, b.hits[h].tin);
+        ASSERT_EQ(a.hits[h].tout, b.hits[h].tout);
+        seen.push_back(a.hits[h].instance);
+      }
+      if (a.done) break;
+      const float t = a.tCellExit;
+      pl::walkRetire(a, t);
+      pl::walkRetire(b, t);
+      pl::walkAdvance(s, a, o, d, t);
+      pl::walkAdvance(s, b, o, d, t);
+      ASSERT_EQ(a.done, b.done);
+    }
+    std::sort(seen.begin(), seen.end());
+    added += size_t(std::unique(seen.begin(), seen.end()) - seen.begin());
+    overflowed += a.dropped ? 1 : 0;
+    ++rays;
+  }
+  EXPECT_EQ(rays, 3000);
+  EXPECT_GT(added, size_t(3000));   // instances met: several per ray on average
+  EXPECT_GT(overflowed, 0);         // some rays overflowed the hit list (the switch ran)
+  EXPECT_LT(overflowed, rays / 2);  // and most did not (the face lists ran)
+  std::printf("walk: %zu instances met over %d rays, %d rays overflowed the hit list\n", added, rays, overflowed);
+}
+
 TEST(PlayBench, A400InstanceForestRendersWithEveryInstanceInTheGrid) {
   pl::bench::ScatterOptions so;
   so.count = 400;
