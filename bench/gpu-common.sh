@@ -29,3 +29,23 @@ sampler_checks() {  # sampler_checks LIGHT.vdb: the Haar sampler's users on the 
   gtest test_play_cuda "$BIN/test_play_cuda"
   gtest test_octreepack_cuda "$BIN/test_octreepack" --gtest_filter='*cuda*'
 }
+profile_play_orbit() {  # profile_play_orbit CANOPY-PLAY SCENE.canopy: Nsight Compute on one forest-orbit frame's
+  # pixel kernel (the 10th launch) into $O: ncu.txt (details), source-both.csv and source-sass.csv
+  # (per-line tables need a -lineinfo build: bench/play/variant.sh li -lineinfo), prof.ncu-rep; prints
+  # the headline metrics and the hottest source lines (bench/play/ncu_lines.py)
+  local ncu
+  ncu=$(command -v ncu || ls /usr/local/cuda/bin/ncu 2>/dev/null || true)
+  [[ -n $ncu ]] || { echo "no ncu on this host"; return; }
+  mkdir -p "$O/ncu-frames"
+  timeout 300 "$ncu" --kernel-name regex:'[Pp]ixel' --launch-skip 9 --launch-count 1 --import-source yes \
+    --section SpeedOfLight --section Occupancy --section WarpStateStats --section LaunchStats --section MemoryWorkloadAnalysis \
+    --section MemoryWorkloadAnalysis_Tables --section ComputeWorkloadAnalysis --section InstructionStats --section SourceCounters \
+    -o "$O/prof" "$1" "$2" --device cuda --size 1920x1080 --frames 10 \
+    --camera orbit:elevation=30,distance=55 -o "$O/ncu-frames/f_%04d.exr" > "$O/ncu-run.txt" 2>&1 || echo "ncu failed (see ncu-run.txt)"
+  rm -rf "$O/ncu-frames"
+  "$ncu" -i "$O/prof.ncu-rep" --page details > "$O/ncu.txt" 2>&1
+  "$ncu" -i "$O/prof.ncu-rep" --page source --csv --print-source cuda,sass > "$O/source-both.csv" 2>&1 || echo "no cuda,sass page"
+  "$ncu" -i "$O/prof.ncu-rep" --page source --csv --print-source sass > "$O/source-sass.csv" 2>&1 || echo "no sass page"
+  grep -E "Duration|Active Threads|Warp Cycles Per Issued|Issued Instructions  |Registers Per|L1/TEX Hit|L2 Hit|Achieved Occ|Local Memory" "$O/ncu.txt"
+  python3 bench/play/ncu_lines.py "$O/source-both.csv" 30 2>&1 | head -40
+}

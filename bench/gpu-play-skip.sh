@@ -41,28 +41,10 @@ if has play || [[ ${PROFILE:-0} = 1 ]]; then
 fi
 if [[ ${PROFILE:-0} = 1 ]]; then
   step profile
-  NCU=$(command -v ncu || ls /usr/local/cuda/bin/ncu 2>/dev/null || true)
-  if [[ -n $NCU ]]; then
-    mkdir -p "$O/ncu"
-    timeout 300 "$NCU" --kernel-name regex:'[Pp]ixel' --launch-skip 9 --launch-count 1 --import-source yes \
-      --section SpeedOfLight --section Occupancy --section WarpStateStats --section LaunchStats --section MemoryWorkloadAnalysis \
-      --section ComputeWorkloadAnalysis --section InstructionStats --section SourceCounters -o "$O/prof" \
-      "${PROFILE_BIN:-canopy-play}" "$O/bench/forest.canopy" --device cuda --size 1920x1080 --frames 10 \
-      --camera orbit:elevation=30,distance=55 -o "$O/ncu/f_%04d.exr" > "$O/ncu-run.txt" 2>&1 || echo "ncu failed (see ncu-run.txt)"
-    "$NCU" -i "$O/prof.ncu-rep" --page details > "$O/ncu.txt" 2>&1
-    "$NCU" -i "$O/prof.ncu-rep" --page source --csv --print-source cuda > "$O/source-cuda.csv" 2>&1 || echo "no cuda source page"
-    "$NCU" -i "$O/prof.ncu-rep" --page source --csv --print-source sass > "$O/source-sass.csv" 2>&1 || echo "no sass source page"
-    "$NCU" -i "$O/prof.ncu-rep" --page source --csv --print-source cuda,sass > "$O/source-both.csv" 2>&1 || echo "no cuda,sass page"
-    for v in cuda sass both; do
-      echo "--- source page: $v"; python3 bench/play/ncu_lines.py "$O/source-$v.csv" 45 2>&1 | head -90
-    done
-    tar cJf "$O/profile.tar.xz" -C "$O" prof.ncu-rep source-cuda.csv source-sass.csv source-both.csv && rm -f "$O"/prof.ncu-rep "$O"/source-*.csv
-    grep -E "Duration|Active Threads|Warp Cycles Per Issued|Issued Instructions  |Registers|Local Memory" "$O/ncu.txt"
-  else
-    echo "no ncu on this host"
-  fi
+  profile_play_orbit "${PROFILE_BIN:-canopy-play}" "$O/bench/forest.canopy"
+  [[ -e $O/prof.ncu-rep ]] && tar cJf "$O/profile.tar.xz" -C "$O" prof.ncu-rep source-sass.csv source-both.csv && rm -f "$O"/prof.ncu-rep "$O"/source-*.csv
 fi
-rm -rf "$O/bench" "$O/ncu"
+rm -rf "$O/bench"
 date -u
 [[ $status = 0 ]] && rm -f "$O"/test_*.log
 exit $status

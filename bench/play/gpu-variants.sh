@@ -25,17 +25,7 @@ for v in ${VARIANTS:-''}; do
 done
 if [[ -n ${PROFILE_BIN:-} ]]; then
   step "profile $PROFILE_BIN"
-  NCU=$(command -v ncu || ls /usr/local/cuda/bin/ncu 2>/dev/null || true)
-  timeout 300 "$NCU" --kernel-name regex:'[Pp]ixel' --launch-skip 9 --launch-count 1 --import-source yes \
-    --section SpeedOfLight --section Occupancy --section WarpStateStats --section LaunchStats --section MemoryWorkloadAnalysis \
-    --section MemoryWorkloadAnalysis_Tables --section ComputeWorkloadAnalysis --section InstructionStats --section SourceCounters \
-    -o "$O/prof" "$PROFILE_BIN" "$KEEP_SCENE" --device cuda --size 1920x1080 --frames 10 \
-    --camera orbit:elevation=30,distance=55 -o "$O/f_%04d.exr" > "$O/ncu-run.txt" 2>&1 || echo "ncu failed"
-  rm -f "$O"/f_*.exr
-  "$NCU" -i "$O/prof.ncu-rep" --page details > "$O/ncu.txt" 2>&1
-  "$NCU" -i "$O/prof.ncu-rep" --page source --csv --print-source cuda,sass > "$O/source-both.csv" 2>&1
-  "$NCU" -i "$O/prof.ncu-rep" --page source --csv --print-source sass > "$O/source-sass.csv" 2>&1
-  grep -E "Duration|Active Threads|Warp Cycles Per Issued|Issued Instructions  |Registers Per|L1/TEX Hit|L2 Hit|Achieved Occ" "$O/ncu.txt"
+  profile_play_orbit "$PROFILE_BIN" "$KEEP_SCENE"
   CUOBJDUMP=$(command -v cuobjdump || ls /usr/local/cuda/bin/cuobjdump 2>/dev/null || true)
   [[ -n $CUOBJDUMP ]] && "$CUOBJDUMP" -sass "$BIN/$PROFILE_BIN" > "$O/sass.txt" 2>&1
 fi
