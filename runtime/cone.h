@@ -51,6 +51,7 @@
 #include <math.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <string.h>
 
 #include "canopy/half.h"
 #include "canopy/hd.h"
@@ -87,6 +88,23 @@ CANOPY_HD CANOPY_FORCEINLINE V3 normalize(V3 a) {
   return l > 0.0f ? a * (1.0f / l) : a;
 }
 CANOPY_HD CANOPY_FORCEINLINE float comp(V3 a, int i) { return i == 0 ? a.x : (i == 1 ? a.y : a.z); }
+
+// The four 32-bit words at p (16-byte aligned): one 16-byte load on the GPU (the compiler does not
+// merge a struct's scalar loads across branches, nor where it cannot see the alignment), a copy on
+// the host. Callers decode the words alike on both, so the CPU tests run their decoding.
+struct Words4 {
+  uint32_t w[4];
+};
+CANOPY_HD CANOPY_FORCEINLINE Words4 load16(const void* p) {
+  Words4 r;
+#if defined(__CUDA_ARCH__)
+  const uint4 v = *static_cast<const uint4*>(p);
+  r.w[0] = v.x, r.w[1] = v.y, r.w[2] = v.z, r.w[3] = v.w;
+#else
+  memcpy(&r, p, sizeof r);
+#endif
+  return r;
+}
 
 // A 3x4 row-major affine map. Rows 16-byte aligned: one 16-byte load each on the GPU.
 struct alignas(16) Affine {
@@ -495,17 +513,13 @@ CANOPY_HD inline int32_t residentSlot(const SceneView& s, const ModelView& m, ui
   return s.pageSlot[page];
 }
 
-// A node of a tile array: one 16-byte load on the GPU (the backend's tile arrays are device
-// allocations, so every node is 16-byte aligned).
+// A node of a tile array, by load16 (on the device every node is 16-byte aligned: the backend's
+// tile arrays are device allocations of 16-byte nodes; the host's copy needs no alignment).
 CANOPY_HD CANOPY_FORCEINLINE CanopyNode loadNode(const CanopyNode* p) {
-#if defined(__CUDA_ARCH__)
-  const uint4 v = *reinterpret_cast<const uint4*>(p);
+  const Words4 v = load16(p);
   CanopyNode n;
-  n.child = v.x, n.brick = v.y, n.density = __uint_as_float(v.z), n.material = v.w;
+  n.child = v.w[0], n.brick = v.w[1], n.density = canopyFloatFromBits(v.w[2]), n.material = v.w[3];
   return n;
-#else
-  return *p;
-#endif
 }
 
 CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m, V3 u, uint32_t maxLevel, bool wantLight) {
@@ -574,17 +588,9 @@ struct DescentCache {
 
 // The point u (unit space, clamped as descendResident clamps it) is inside the cached node.
 CANOPY_HD CANOPY_FORCEINLINE bool descentCovers(const DescentCache& c, V3 u, uint32_t maxLevel) {
-  float lo[3];
-  uint32_t level, cachedMax;
-#if defined(__CUDA_ARCH__)
-  const float4 v = *reinterpret_cast<const float4*>(&c.d);  // lo, level, maxLevel (little-endian bytes)
-  lo[0] = v.x, lo[1] = v.y, lo[2] = v.z;
-  const uint32_t levels = __float_as_uint(v.w);
-  level = levels & 0xFFu, cachedMax = (levels >> 8) & 0xFFu;
-#else
-  lo[0] = c.d.lo[0], lo[1] = c.d.lo[1], lo[2] = c.d.lo[2];
-  level = c.d.level, cachedMax = c.d.maxLevel;
-#endif
+  const Words4 v = load16(&c.d);  // lo, then level and maxLevel (little-endian bytes)
+  const float lo[3] = {canopyFloatFromBits(v.w[0]), canopyFloatFromBits(v.w[1]), canopyFloatFromBits(v.w[2])};
+  const uint32_t level = v.w[3] & 0xFFu, cachedMax = (v.w[3] >> 8) & 0xFFu;
   if (cachedMax != maxLevel) return false;  // also where empty: maxLevel <= a model's depth < kNoLevel
   const float size = levelSize(level);
   float x[3] = {u.x, u.y, u.z};
@@ -845,12 +851,8 @@ static_assert(offsetof(Hit, hold) == 4 && offsetof(EmptyHold, until) == 0 && off
 
 // tin, hold.until and hold.end of a hit.
 CANOPY_HD CANOPY_FORCEINLINE void hitHead(const Hit& h, float& tin, float& until, float& end) {
-#if defined(__CUDA_ARCH__)
-  const float4 v = *reinterpret_cast<const float4*>(&h);
-  tin = v.x, until = v.y, end = v.z;
-#else
-  tin = h.tin, until = h.hold.until, end = h.hold.end;
-#endif
+  const Words4 v = load16(&h);
+  tin = canopyFloatFromBits(v.w[0]), until = canopyFloatFromBits(v.w[1]), end = canopyFloatFromBits(v.w[2]);
 }
 
 // 3D-DDA over the instance grid plus the hit list. The hits live in fixed slots (a bit of `live`
@@ -865,12 +867,11 @@ CANOPY_HD CANOPY_FORCEINLINE void hitHead(const Hit& h, float& tin, float& until
 // walk's cells move monotonically along each axis, so an instance met in any earlier cell is
 // listed by the cell just behind. So no membership scan is needed, except after a hit was dropped
 // from a full list (`dropped`): from then on each cell's whole list is scanned against the hits,
-// as a dropped instance is found again from a later cell it overlaps. (`idBits` filters that scan.)
+// as a dropped instance is found again from a later cell it overlaps.
 struct InstanceWalk {
   Hit hits[kHitCapacity];
   DescentCache caches[kHitCapacity];  // caches[i]: hits[i]'s last descent along the ray (empty when added)
   uint32_t live;                      // bit i: hits[i] is pending or active
-  uint32_t idBits;                    // bit (instance % 32) of every live hit (and perhaps of retired ones)
   float minTout;                      // <= every live hit's tout
   int cell[3];
   int stepDir[3];
@@ -902,8 +903,7 @@ CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 
   const uint32_t kEnd = start[list + 1];
   for (uint32_t k = start[list]; k < kEnd; ++k) {
     const uint32_t id = items[k];
-    const uint32_t idBit = 1u << (id % 32u);
-    if (scan && (w.idBits & idBit)) {
+    if (scan) {
       bool present = false;
       for (uint32_t m = w.live; m != 0; m &= m - 1u) present |= w.hits[lowestSetBit(m)].instance == id;
       if (present) continue;
@@ -931,7 +931,6 @@ CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 
     }
     w.hits[slot] = Hit{t0, EmptyHold{-3.0e38f, 0.0f, 0u}, id, t1};
     w.caches[slot].d.maxLevel = kNoLevel;
-    w.idBits |= idBit;
     w.minTout = t1 < w.minTout ? t1 : w.minTout;
   }
 }
@@ -939,7 +938,6 @@ CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 
 // Starts the walk for the ray o + t d, t in [tStart, tEnd].
 CANOPY_HD inline void walkBegin(const SceneView& s, InstanceWalk& w, V3 o, V3 d, float tStart, float tEnd) {
   w.live = 0;
-  w.idBits = 0;
   w.minTout = 3.0e38f;
   w.done = true;
   w.dropped = false;
@@ -1008,7 +1006,6 @@ CANOPY_HD inline void walkAdvance(const SceneView& s, InstanceWalk& w, V3 o, V3 
 // Drops hits that ended before t (tout <= t); nothing to do before the nearest exit.
 CANOPY_HD inline void walkRetire(InstanceWalk& w, float t) {
   if (t < w.minTout) return;
-  w.idBits = 0;
   w.minTout = 3.0e38f;
   for (uint32_t m = w.live; m != 0; m &= m - 1u) {
     const uint32_t h = lowestSetBit(m);
@@ -1017,7 +1014,6 @@ CANOPY_HD inline void walkRetire(InstanceWalk& w, float t) {
       w.live &= ~(1u << h);
       continue;
     }
-    w.idBits |= 1u << (w.hits[h].instance % 32u);
     w.minTout = tout < w.minTout ? tout : w.minTout;
   }
 }

@@ -175,41 +175,43 @@ HostScene buildScene(const CanopyFile& f) {
       s.gridCell[a] = float((ext[a] + 2 * pad) / s.gridDim[a]);
     }
     const size_t cells = size_t(s.gridDim[0]) * s.gridDim[1] * s.gridDim[2];
-    std::vector<std::vector<uint32_t>> lists(cells);
-    for (uint32_t i = 0; i < s.instances.size(); ++i) {
-      int c0[3], c1[3];
-      gridRange(s, i, c0, c1);
-      for (int z = c0[2]; z <= c1[2]; ++z)
-        for (int y = c0[1]; y <= c1[1]; ++y)
-          for (int x = c0[0]; x <= c1[0]; ++x) lists[size_t(x + s.gridDim[0] * (y + s.gridDim[1] * z))].push_back(i);
-    }
+    // Each cell's instances (gridStart/gridItems) and, per entry face, those a walk meets first
+    // when it enters the cell through that face (gridFaceStart/gridFaceItems, cone.h walkAddCell):
+    // the instances whose cell range starts there along the walk's direction, i.e. that the cell
+    // behind the face does not list (an instance's cells are a box of cells). Lists in CSR form,
+    // instances ascending in each: counted in a first pass over every (cell, instance) pair,
+    // filled in a second.
     s.gridStart.assign(cells + 1, 0);
-    for (size_t c = 0; c < cells; ++c) {
-      s.gridStart[c + 1] = s.gridStart[c] + uint32_t(lists[c].size());
-      s.gridItems.insert(s.gridItems.end(), lists[c].begin(), lists[c].end());
-    }
-    // The items a walk meets first in a cell it enters through a face (cone.h walkAddCell): those
-    // whose cell range starts there along the walk's direction, i.e. that the cell behind the
-    // face does not list (an item's cells are a box of cells).
-    std::vector<std::vector<uint32_t>> faceLists(cells * 6);
-    for (uint32_t i = 0; i < s.instances.size(); ++i) {
-      int c0[3], c1[3];
-      gridRange(s, i, c0, c1);
-      for (int z = c0[2]; z <= c1[2]; ++z)
-        for (int y = c0[1]; y <= c1[1]; ++y)
-          for (int x = c0[0]; x <= c1[0]; ++x) {
-            const int at[3] = {x, y, z};
-            const size_t c = size_t(x + s.gridDim[0] * (y + s.gridDim[1] * z));
-            for (int a = 0; a < 3; ++a) {
-              if (at[a] == c0[a]) faceLists[c * 6 + size_t(2 * a)].push_back(i);      // entered moving +a
-              if (at[a] == c1[a]) faceLists[c * 6 + size_t(2 * a + 1)].push_back(i);  // entered moving -a
-            }
-          }
-    }
     s.gridFaceStart.assign(cells * 6 + 1, 0);
-    for (size_t k = 0; k < cells * 6; ++k) {
-      s.gridFaceStart[k + 1] = s.gridFaceStart[k] + uint32_t(faceLists[k].size());
-      s.gridFaceItems.insert(s.gridFaceItems.end(), faceLists[k].begin(), faceLists[k].end());
+    std::vector<uint32_t> cellAt, faceAt;
+    for (int pass = 0; pass < 2; ++pass) {
+      for (uint32_t i = 0; i < s.instances.size(); ++i) {
+        int c0[3], c1[3];
+        gridRange(s, i, c0, c1);
+        for (int z = c0[2]; z <= c1[2]; ++z)
+          for (int y = c0[1]; y <= c1[1]; ++y)
+            for (int x = c0[0]; x <= c1[0]; ++x) {
+              const int at[3] = {x, y, z};
+              const size_t c = size_t(x + s.gridDim[0] * (y + s.gridDim[1] * z));
+              if (pass == 0) ++s.gridStart[c + 1];
+              else s.gridItems[cellAt[c]++] = i;
+              for (int a = 0; a < 3; ++a)
+                for (int side = 0; side < 2; ++side) {  // side 0: entered moving +a (range starts here), 1: moving -a
+                  if (at[a] != (side == 0 ? c0[a] : c1[a])) continue;
+                  const size_t k = c * 6 + size_t(2 * a + side);
+                  if (pass == 0) ++s.gridFaceStart[k + 1];
+                  else s.gridFaceItems[faceAt[k]++] = i;
+                }
+            }
+      }
+      if (pass == 0) {
+        for (size_t c = 0; c < cells; ++c) s.gridStart[c + 1] += s.gridStart[c];
+        for (size_t k = 0; k < cells * 6; ++k) s.gridFaceStart[k + 1] += s.gridFaceStart[k];
+        s.gridItems.resize(s.gridStart[cells]);
+        s.gridFaceItems.resize(s.gridFaceStart[cells * 6]);
+        cellAt.assign(s.gridStart.begin(), s.gridStart.end() - 1);
+        faceAt.assign(s.gridFaceStart.begin(), s.gridFaceStart.end() - 1);
+      }
     }
   } else {
     s.gridStart.assign(2, 0);

@@ -766,6 +766,36 @@ TEST(InstanceWalk, FaceListsAddTheSameHitsAsWholeListsWithAMembershipScan) {
   pt::writeScene(p, {pt::sphereModel(16, 6, 0.5f, 0.25f), pt::sphereModel(12, 4, 0.8f, 0.25f)}, pl::bench::scatterInstances(so));
   const canopy::CanopyFile f = canopy::CanopyFile::open(p);
   const pl::HostScene scene = pl::buildScene(f);
+  // The lists themselves: face list (c, 2a + side) = the instances of cell c that the cell behind
+  // that face (c - e_a for side 0, c + e_a for side 1; none outside the grid) does not list, in
+  // the same (ascending) order.
+  const auto cellList = [&](int x, int y, int z) {
+    std::vector<uint32_t> v;
+    if (x < 0 || y < 0 || z < 0 || x >= scene.gridDim[0] || y >= scene.gridDim[1] || z >= scene.gridDim[2]) return v;
+    const size_t c = size_t(x + scene.gridDim[0] * (y + scene.gridDim[1] * z));
+    v.assign(scene.gridItems.begin() + scene.gridStart[c], scene.gridItems.begin() + scene.gridStart[c + 1]);
+    return v;
+  };
+  ASSERT_EQ(scene.gridFaceStart.size(), size_t(scene.gridDim[0]) * scene.gridDim[1] * scene.gridDim[2] * 6 + 1);
+  size_t faceItems = 0;
+  for (int z = 0; z < scene.gridDim[2]; ++z)
+    for (int y = 0; y < scene.gridDim[1]; ++y)
+      for (int x = 0; x < scene.gridDim[0]; ++x)
+        for (int k = 0; k < 6; ++k) {
+          int behind[3] = {x, y, z};
+          behind[k / 2] += k % 2 == 0 ? -1 : 1;
+          const std::vector<uint32_t> here = cellList(x, y, z), back = cellList(behind[0], behind[1], behind[2]);
+          std::vector<uint32_t> expected;
+          for (uint32_t id : here)
+            if (std::find(back.begin(), back.end(), id) == back.end()) expected.push_back(id);
+          const size_t f = size_t(x + scene.gridDim[0] * (y + scene.gridDim[1] * z)) * 6 + size_t(k);
+          const std::vector<uint32_t> got(scene.gridFaceItems.begin() + scene.gridFaceStart[f], scene.gridFaceItems.begin() + scene.gridFaceStart[f + 1]);
+          ASSERT_EQ(got, expected) << "cell " << x << "," << y << "," << z << " face " << k;
+          faceItems += got.size();
+        }
+  EXPECT_LT(faceItems, 6 * scene.gridItems.size());  // the face lists are shorter than the cells'
+  EXPECT_GT(faceItems, size_t(400));
+
   const pl::SceneView s = pl::hostSceneView(scene);
   std::mt19937 rng(11);
   std::uniform_real_distribution<float> u(-1.0f, 1.0f);
