@@ -247,7 +247,8 @@ struct ShadowMapView {
 // Work done by the CPU reference (bench-play --count-work; never counted on the GPU).
 struct WorkCounters {
   uint64_t cones, primarySteps, shadedSamples, segments, descents, brickSamples, shadowCones, shadowSteps, shadowMapLookups,
-      shadowMapSteps, heldSegments, emptySteps, zeroBrickSamples, emptyBlockSkips;
+      shadowMapSteps, heldSegments, emptySteps, zeroBrickSamples, emptyBlockSkips,
+      hitDrops;  // hits dropped from a full hit list (InstanceWalk)
 };
 
 struct SceneView {
@@ -924,6 +925,7 @@ CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 
         slot = w.hits[h].tin > w.hits[slot].tin ? h : slot;
       }
       w.dropped = true;  // this one or the farthest: found again from a later cell it overlaps
+      CANOPY_PLAY_COUNT(s, hitDrops, 1);
       if (w.hits[slot].tin <= t0) continue;
     } else {
       slot = lowestSetBit(~w.live & kAllHitSlots);

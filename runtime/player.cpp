@@ -362,7 +362,8 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
                  {"held_segments", work.heldSegments},
                  {"empty_steps", work.emptySteps},
                  {"zero_brick_samples", work.zeroBrickSamples},
-                 {"empty_block_skips", work.emptyBlockSkips}};
+                 {"empty_block_skips", work.emptyBlockSkips},
+                 {"hit_drops", work.hitDrops}};
   char line[512];
   std::snprintf(line, sizeof(line),
                 "canopy-play: %d frame(s) %dx%d on %s: median %.2f ms, p95 %.2f ms; cache hit rate %.1f%%; streamed %llu pages "

@@ -797,6 +797,9 @@ TEST(InstanceWalk, FaceListsAddTheSameHitsAsWholeListsWithAMembershipScan) {
   EXPECT_GT(faceItems, size_t(400));
 
   const pl::SceneView s = pl::hostSceneView(scene);
+  pl::WorkCounters work{};
+  pl::SceneView counted = s;  // walk a counts its drops (WorkCounters::hitDrops)
+  counted.work = &work;
   std::mt19937 rng(11);
   std::uniform_real_distribution<float> u(-1.0f, 1.0f);
   int rays = 0, overflowed = 0;
@@ -805,7 +808,7 @@ TEST(InstanceWalk, FaceListsAddTheSameHitsAsWholeListsWithAMembershipScan) {
     const pl::V3 o = pl::v3(40.0f * u(rng), 2.0f + 8.0f * (u(rng) + 1.0f), 40.0f * u(rng));
     const pl::V3 d = pl::normalize(pl::v3(-o.x + 10.0f * u(rng), -o.y + 2.0f * u(rng), -o.z + 10.0f * u(rng)));
     pl::InstanceWalk a, b;
-    pl::walkBegin(s, a, o, d, 0.0f, 3.0e38f);
+    pl::walkBegin(counted, a, o, d, 0.0f, 3.0e38f);
     pl::walkBegin(s, b, o, d, 0.0f, 3.0e38f);
     b.dropped = true;  // the whole lists with the membership scan from the second cell on
     std::vector<uint32_t> seen;
@@ -822,7 +825,7 @@ TEST(InstanceWalk, FaceListsAddTheSameHitsAsWholeListsWithAMembershipScan) {
       const float t = a.tCellExit;
       pl::walkRetire(a, t);
       pl::walkRetire(b, t);
-      pl::walkAdvance(s, a, o, d, t);
+      pl::walkAdvance(counted, a, o, d, t);
       pl::walkAdvance(s, b, o, d, t);
       ASSERT_EQ(a.done, b.done);
     }
@@ -835,7 +838,10 @@ TEST(InstanceWalk, FaceListsAddTheSameHitsAsWholeListsWithAMembershipScan) {
   EXPECT_GT(added, size_t(3000));   // instances met: several per ray on average
   EXPECT_GT(overflowed, 0);         // some rays overflowed the hit list (the switch ran)
   EXPECT_LT(overflowed, rays / 2);  // and most did not (the face lists ran)
-  std::printf("walk: %zu instances met over %d rays, %d rays overflowed the hit list\n", added, rays, overflowed);
+  EXPECT_GE(work.hitDrops, uint64_t(overflowed));  // every overflowed ray dropped at least one hit
+  EXPECT_LE(work.hitDrops, uint64_t(overflowed) * 64);
+  std::printf("walk: %zu instances met over %d rays, %d rays overflowed the hit list, %llu hits dropped\n", added, rays, overflowed,
+              (unsigned long long)work.hitDrops);
 }
 
 TEST(PlayBench, A400InstanceForestRendersWithEveryInstanceInTheGrid) {
