@@ -13,6 +13,7 @@
 #include <cstring>
 #include <utility>
 
+#include "canopy/atomic_file.h"
 #include "canopy/errors.h"
 #include "canopy/hash.h"
 
@@ -164,6 +165,7 @@ CanopyFile CanopyFile::open(const std::string& path) {
   struct stat st {};
   if (::fstat(f.fd_, &st) != 0) throw ioError(path + ": cannot stat: " + std::strerror(errno));
   if (!S_ISREG(st.st_mode)) throw ioError(path + ": not a regular file");
+  noteInput(path);  // an output of the same run must not replace it (atomic_file.h)
   f.parseResident(uint64_t(st.st_size));
   return f;
 }

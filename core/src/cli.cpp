@@ -1,6 +1,8 @@
 // cli.cpp: the shared command-line layer (see cli.h).
 #include "canopy/cli.h"
 
+#include "canopy/atomic_file.h"
+
 #include <unistd.h>
 
 #include <cmath>
@@ -57,16 +59,16 @@ int Tool::run(int argc, char** argv, const std::function<void()>& body) {
   } catch (const CLI::CallForVersion& e) {
     return app_.exit(e);
   } catch (const CLI::ParseError& e) {
-    std::cerr << name_ << ": error: " << e.what() << "\nSee '" << name_ << " --help'.\n";
+    std::cerr << name_ << ": error: " << e.what() << " (see " << name_ << " --help)\n";
     return int(ExitCode::Usage);
   }
   setQuiet(common_.quiet);
   int code = 0;
   try {
+    InputTracking tracking;  // an output may not replace a file this run reads (atomic_file.h)
     body();
   } catch (const Error& e) {
-    std::cerr << name_ << ": error: " << e.what() << '\n';
-    if (e.code() == ExitCode::Usage) std::cerr << "See '" << name_ << " --help'.\n";
+    std::cerr << name_ << ": error: " << e.what() << (e.code() == ExitCode::Usage ? " (see " + name_ + " --help)" : std::string()) << '\n';
     code = int(e.code());
   } catch (const std::bad_alloc&) {
     std::cerr << name_ << ": error: out of memory\n";

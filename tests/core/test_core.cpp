@@ -1,10 +1,15 @@
 // Core utilities: hashes, atomic outputs, --device parsing, deterministic VDB bytes.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
+#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <thread>
 
 #include "canopy/atomic_file.h"
 #include "canopy/device.h"
@@ -63,6 +68,105 @@ TEST(AtomicOutput, UnwritableDirectoryFailsEarlyWithIoError) {
     EXPECT_EQ(e.code(), canopy::ExitCode::Io);
     EXPECT_NE(std::string(e.what()).find("/nonexistent-dir/x.vdb"), std::string::npos);
   }
+}
+
+namespace {
+canopy::ExitCode errorCode(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const canopy::Error& e) {
+    return e.code();
+  }
+  return canopy::ExitCode::Ok;
+}
+size_t entries(const fs::path& d) {
+  size_t n = 0;
+  for (auto it = fs::directory_iterator(d); it != fs::directory_iterator(); ++it) ++n;
+  return n;
+}
+}  // namespace
+
+TEST(AtomicOutput, FollowsSymbolicLinksAndKeepsThem) {
+  fs::path d = tempDir() / "links";
+  fs::create_directories(d / "real");
+  fs::create_symlink("real/target.bin", d / "link.bin");  // dangling until written
+  canopy::writeFileAtomic((d / "link.bin").string(), std::string("one"));
+  EXPECT_TRUE(fs::is_symlink(d / "link.bin"));
+  EXPECT_EQ(slurp(d / "real" / "target.bin"), "one");
+  canopy::writeFileAtomic((d / "link.bin").string(), std::string("two"));  // existing target replaced
+  EXPECT_TRUE(fs::is_symlink(d / "link.bin"));
+  EXPECT_EQ(slurp(d / "real" / "target.bin"), "two");
+  EXPECT_EQ(entries(d / "real"), 1u);
+  fs::remove_all(d);
+}
+
+TEST(AtomicOutput, WritesThroughAFifoInsteadOfReplacingIt) {
+  fs::path d = tempDir() / "fifo";
+  fs::create_directories(d);
+  const fs::path fifo = d / "pipe";
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  std::string got;
+  std::thread reader([&] { got = slurp(fifo); });  // opening blocks until the writer opens
+  canopy::writeFileAtomic(fifo.string(), std::string(3 << 20, 'x'));  // more than a pipe buffer
+  reader.join();
+  EXPECT_EQ(got.size(), size_t(3 << 20));
+  EXPECT_TRUE(fs::is_fifo(fifo));
+  EXPECT_EQ(entries(d), 1u);
+  fs::remove_all(d);
+}
+
+TEST(AtomicOutput, InsideAToolRunAnInputIsNeverReplaced) {
+  fs::path d = tempDir() / "inputs";
+  fs::create_directories(d);
+  const fs::path in = d / "in.vdb";
+  canopy::writeFileAtomic(in.string(), std::string("input"));
+  {
+    canopy::InputTracking run;
+    // reserved before the input is read, committed after: refused at commit
+    EXPECT_EQ(errorCode([&] {
+                canopy::AtomicOutput out(in.string());
+                std::ofstream(out.tempPath()) << "output";
+                (void)canopy::readFile(in.string());
+                out.commit();
+              }),
+              canopy::ExitCode::Usage);
+    EXPECT_EQ(slurp(in), "input");
+    // read first: refused at once, also through another spelling of the path and a link
+    EXPECT_EQ(errorCode([&] { canopy::writeFileAtomic(in.string(), std::string("x")); }), canopy::ExitCode::Usage);
+    EXPECT_EQ(errorCode([&] { canopy::writeFileAtomic((d / "." / "in.vdb").string(), std::string("x")); }), canopy::ExitCode::Usage);
+    fs::create_symlink("in.vdb", d / "alias.vdb");
+    EXPECT_EQ(errorCode([&] { canopy::writeFileAtomic((d / "alias.vdb").string(), std::string("x")); }), canopy::ExitCode::Usage);
+    EXPECT_EQ(slurp(in), "input");
+    // one output file given twice in a run
+    canopy::writeFileAtomic((d / "a.out").string(), std::string("a"));
+    EXPECT_EQ(errorCode([&] { canopy::writeFileAtomic((d / "." / "a.out").string(), std::string("b")); }), canopy::ExitCode::Usage);
+    EXPECT_EQ(slurp(d / "a.out"), "a");
+  }
+  // outside a tool's run (library use, tests) nothing is tracked
+  canopy::writeFileAtomic(in.string(), std::string("rewritten"));
+  EXPECT_EQ(slurp(in), "rewritten");
+  EXPECT_EQ(entries(d), 3u);  // in.vdb, alias.vdb, a.out: no temporary left
+  fs::remove_all(d);
+}
+
+TEST(AtomicOutput, ATerminatingSignalRemovesTheTemporary) {
+  fs::path d = tempDir() / "signal";
+  fs::create_directories(d);
+  for (int sig : {SIGTERM, SIGINT, SIGHUP}) {
+    const pid_t child = fork();
+    ASSERT_GE(child, 0);
+    if (child == 0) {
+      canopy::AtomicOutput out((d / "out.bin").string());
+      std::ofstream(out.tempPath()) << "partial";
+      raise(sig);
+      _exit(0);  // not reached
+    }
+    int status = 0;
+    ASSERT_EQ(waitpid(child, &status, 0), child);
+    EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == sig) << "signal " << sig << ", status " << status;
+    EXPECT_EQ(entries(d), 0u) << "signal " << sig;
+  }
+  fs::remove_all(d);
 }
 
 TEST(Device, Parsing) {

@@ -3,7 +3,7 @@
 // A tool's main builds a canopy::Tool, adds its own options to tool.app() (CLI11), and calls
 // tool.run(argc, argv, body). Tool provides --help, --version, --quiet, --json, --device; maps
 // canopy::Error to the exit-code table of errors.h; prints "canopy-x: error: <message>" on stderr
-// (plus "See 'canopy-x --help'." for usage errors); and prints the JSON report (one object) on
+// (usage errors end with "(see canopy-x --help)", still one line); and prints the JSON report (one object) on
 // stdout when --json is given. stdout carries data only; logs and progress go to stderr.
 #pragma once
 #include <atomic>
