@@ -43,9 +43,9 @@ LatticeMeta readLatticeMeta(const openvdb::GridBase& g, const std::string& path)
   if (m.max.x() < m.min.x() || m.max.y() < m.min.y() || m.max.z() < m.min.z())
     throw invalidInput(path + ": grid '" + g.getName() + "' has an empty lattice (max < min)");
   const openvdb::Coord d = m.dim();
-  if (int64_t(d.x()) * d.y() * d.z() > (int64_t(1) << 33))
+  if (int64_t(d.x()) * d.y() * d.z() > kMaxLatticeCells)
     throw invalidInput(path + ": lattice " + std::to_string(d.x()) + "x" + std::to_string(d.y()) +
-                       "x" + std::to_string(d.z()) + " is absurdly large");
+                       "x" + std::to_string(d.z()) + " has more than 2^33 cells (2048^3), the most Canopy reads");
   if (auto s = g.getMetadata<openvdb::StringMetadata>("canopy_source")) m.source = s->value();
   return m;
 }

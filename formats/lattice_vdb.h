@@ -8,6 +8,7 @@
 // header; we replace it with one derived from the rest of the file's bytes, so the same inputs
 // give the same bytes. readVdb() turns every OpenVDB/Boost failure into a one-line canopy::Error.
 #pragma once
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -19,6 +20,9 @@
 namespace canopy::vdbio {
 
 void initialize();  // openvdb::initialize(), once, thread-safe
+
+// The largest lattice readLatticeMeta accepts: 2^33 cells (2048^3). Writers must stay within it.
+constexpr int64_t kMaxLatticeCells = int64_t(1) << 33;
 
 struct LatticeMeta {
   openvdb::Coord min{0}, max{0};  // inclusive lattice bounds (whole lattice, boundary included)

@@ -1,11 +1,16 @@
-// test_gltf_reader.cpp: the glTF loader never trusts its input (run under ASan/UBSan: the loader,
-// tinygltf and stb are compiled into this test with the sanitizers).
+// test_gltf_reader.cpp: the glTF and PLY loaders never trust their input (run under ASan/UBSan:
+// the loaders, tinygltf and stb are compiled into this test with the sanitizers).
 //
 // Every prefix of a valid .glb (the sample plant, with an alpha-masked PNG texture), thousands of
 // single-byte corruptions, a wrong GLB version and bad Draco indices must each either load or
 // throw canopy::Error; never crash, hang or read out of bounds.
 #include <gtest/gtest.h>
 
+#include <chrono>
+#include <cstdlib>
+#include <cstring>
+#include <future>
+#include <iostream>
 #include <random>
 
 #include "canopy/errors.h"
@@ -93,4 +98,172 @@ TEST(GltfReader, RealDracoAssetMatchesPlain) {
   ASSERT_EQ(a.triangles.size(), b.triangles.size());
   ASSERT_EQ(a.textures.size(), 2u);
   EXPECT_EQ(a.textures[1].width, 1024);
+}
+
+// ---- PLY (ply_loader.cpp) --------------------------------------------------------------------
+namespace {
+
+const float kCubeV[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}};
+const int kCubeF[6][4] = {{0, 3, 2, 1}, {4, 5, 6, 7}, {0, 1, 5, 4}, {2, 3, 7, 6}, {1, 2, 6, 5}, {0, 4, 7, 3}};
+
+// The unit cube as 6 quads with red faces (ASCII).
+std::string asciiCubePly() {
+  std::string s = "ply\nformat ascii 1.0\ncomment a cube\nelement vertex 8\nproperty float x\nproperty float y\n"
+                  "property float z\nelement face 6\nproperty list uchar int vertex_indices\n"
+                  "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n";
+  for (auto& v : kCubeV) s += std::to_string(v[0]) + " " + std::to_string(v[1]) + " " + std::to_string(v[2]) + "\n";
+  for (auto& f : kCubeF)
+    s += "4 " + std::to_string(f[0]) + " " + std::to_string(f[1]) + " " + std::to_string(f[2]) + " " +
+         std::to_string(f[3]) + " 255 0 0\n";
+  return s;
+}
+
+// The same cube in binary (little or big endian) with green vertex colours and double x.
+std::vector<uint8_t> binaryCubePly(bool bigEndian) {
+  const std::string h = std::string("ply\nformat ") + (bigEndian ? "binary_big_endian" : "binary_little_endian") +
+                        " 1.0\nelement vertex 8\nproperty double x\nproperty float y\nproperty float z\n"
+                        "property uchar red\nproperty uchar green\nproperty uchar blue\n"
+                        "element face 6\nproperty list uchar uint vertex_indices\nend_header\n";
+  std::vector<uint8_t> b(h.begin(), h.end());
+  auto put = [&](const void* p, size_t n) {
+    const uint8_t* c = static_cast<const uint8_t*>(p);
+    for (size_t i = 0; i < n; ++i) b.push_back(c[bigEndian ? n - 1 - i : i]);
+  };
+  for (auto& v : kCubeV) {
+    const double x = v[0];
+    put(&x, 8);
+    put(&v[1], 4);
+    put(&v[2], 4);
+    const uint8_t rgb[3] = {0, 255, 0};
+    b.insert(b.end(), rgb, rgb + 3);
+  }
+  for (auto& f : kCubeF) {
+    b.push_back(4);
+    for (int k = 0; k < 4; ++k) {
+      const uint32_t i = uint32_t(f[k]);
+      put(&i, 4);
+    }
+  }
+  return b;
+}
+
+std::vector<uint8_t> bytesOf(const std::string& s) { return std::vector<uint8_t>(s.begin(), s.end()); }
+
+// Loads from memory: 0 on success, else the error's exit code; `what` gets the message.
+int tryPly(const std::vector<uint8_t>& b, std::string* what = nullptr) {
+  try {
+    const mesh::Mesh m = mesh::loadPlyFromMemory(b.data(), b.size(), "mem.ply");
+    mesh::requireFinite(m, "mem.ply");
+    return 0;
+  } catch (const Error& e) {
+    EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos) << "one-line errors";
+    if (what) *what = e.what();
+    return int(e.code());
+  }
+}
+
+// Runs f under a watchdog: OpenMesh's PLY reader used to loop forever on truncated files, and
+// such a hang must fail this test rather than stall the suite.
+void withinSeconds(int seconds, const std::function<void()>& f) {
+  auto done = std::async(std::launch::async, f);
+  if (done.wait_for(std::chrono::seconds(seconds)) != std::future_status::ready) {
+    std::cerr << "the PLY reader did not finish within " << seconds << " s (hang)\n";
+    std::_Exit(1);
+  }
+  done.get();
+}
+
+}  // namespace
+
+TEST(PlyReader, AsciiAndBinaryCubesLoad) {
+  std::string what;
+  const auto a = bytesOf(asciiCubePly());
+  const mesh::Mesh ma = mesh::loadPlyFromMemory(a.data(), a.size(), "a.ply");
+  ASSERT_EQ(ma.triangles.size(), 12u);  // 6 quads fanned
+  ASSERT_TRUE(ma.hasTriangleColors);
+  EXPECT_FLOAT_EQ(ma.triangles[0].color[0], 1.f);
+  EXPECT_FLOAT_EQ(ma.triangles[0].color[1], 0.f);
+  for (bool be : {false, true}) {
+    SCOPED_TRACE(be ? "big endian" : "little endian");
+    const auto b = binaryCubePly(be);
+    const mesh::Mesh mb = mesh::loadPlyFromMemory(b.data(), b.size(), "b.ply");
+    ASSERT_EQ(mb.triangles.size(), 12u);
+    for (size_t t = 0; t < 12; ++t)
+      for (int v = 0; v < 3; ++v)
+        for (int k = 0; k < 3; ++k) EXPECT_EQ(mb.triangles[t].p[size_t(v)][size_t(k)], ma.triangles[t].p[size_t(v)][size_t(k)]);
+    EXPECT_FLOAT_EQ(mb.triangles[0].color[1], 1.f);  // green vertices
+    EXPECT_FLOAT_EQ(mb.triangles[0].color[0], 0.f);
+  }
+}
+
+// Every prefix of a small ASCII and a small binary PLY finishes at once with exit 3 or a valid
+// mesh (an ASCII prefix cut inside the last number is still a valid file).
+TEST(PlyReader, EveryTruncatedPrefixFinishes) {
+  withinSeconds(120, [] {
+    for (const auto& whole : {bytesOf(asciiCubePly()), binaryCubePly(false), binaryCubePly(true)}) {
+      int failed = 0;
+      for (size_t n = 0; n < whole.size(); ++n) {
+        const std::vector<uint8_t> cut(whole.begin(), whole.begin() + long(n));
+        const int code = tryPly(cut);
+        EXPECT_TRUE(code == 0 || code == int(ExitCode::InvalidInput)) << n << " bytes: code " << code;
+        failed += code != 0;
+      }
+      EXPECT_GE(failed, int(whole.size()) - 4);
+      EXPECT_EQ(tryPly(whole), 0);
+    }
+  });
+}
+
+TEST(PlyReader, FlippedBytesNeverCrashOrHang) {
+  withinSeconds(120, [] {
+    std::mt19937 rng(4321);
+    for (const auto& whole : {bytesOf(asciiCubePly()), binaryCubePly(false)})
+      for (int trial = 0; trial < 2000; ++trial) {
+        auto b = whole;
+        for (int f = 0; f < 1 + trial % 3; ++f) {
+          const size_t at = rng() % b.size();
+          b[at] = uint8_t(b[at] ^ (1u << (rng() % 8)));
+        }
+        const int code = tryPly(b);
+        EXPECT_TRUE(code == 0 || code == int(ExitCode::InvalidInput)) << "code " << code;
+      }
+  });
+}
+
+TEST(PlyReader, PreciseReasons) {
+  struct Case {
+    std::string ply, reason;
+  };
+  const std::string v3 = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n";
+  const std::vector<Case> cases = {
+      {"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n", "mem.ply: truncated PLY header"},
+      {"plx\n", "not a PLY file"},
+      {"ply\nelement vertex 3\nproperty float x\nend_header\n", "no format line"},
+      {"ply\nformat binary_middle_endian 1.0\nend_header\n", "unknown PLY format"},
+      {v3 + "property quad w\nend_header\n", "unknown property type 'quad'"},
+      {v3 + "end_header\n0 0 0\n1 0 0\n0 1 0\n", "no face element"},
+      {v3 + "element face 1\nproperty int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3\n",
+       "no list property vertex_indices"},
+      {v3 + "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n",
+       "PLY face 0 references vertex 7 (the file has 3)"},
+      {v3 + "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1\n",
+       "truncated PLY body (element 'face' 0 of 1 ends early)"},
+      {v3 + "element face 1000\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+       "truncated PLY body"},
+      {v3 + "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n9\n",
+       "unexpected data after the last PLY element"},
+      {v3 + "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 x 0\n3 0 1 2\n",
+       "bad number 'x'"},
+      {v3 + "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 nan 0\n3 0 1 2\n",
+       "triangle 0 has a NaN or infinite vertex coordinate"},
+      {"ply\nformat binary_little_endian 1.0\nelement vertex 1000000\nproperty float x\nproperty float y\n"
+       "property float z\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n\1\2\3",
+       "truncated PLY body (3 bytes; the header's elements need at least 12000000)"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.ply);
+    std::string what;
+    EXPECT_EQ(tryPly(bytesOf(c.ply), &what), int(ExitCode::InvalidInput));
+    EXPECT_NE(what.find(c.reason), std::string::npos) << what;
+  }
 }

@@ -14,6 +14,7 @@
 
 #include "canopy/atomic_file.h"
 #include "canopy/errors.h"
+#include "gltf_scene.h"
 #include "mesh_io.h"
 
 namespace canopy::mesh {
@@ -453,7 +454,9 @@ Mesh buildMesh(const tinygltf::Model& model, const std::string& name, const Load
     for (const auto& p : model.meshes[size_t(o.meshIndex)].primitives)
       appendPrimitive(model, p, identity(), defaultMaterial, out, name);
   } else {
-    for (const Instance& inst : collectInstances(model, name))
+    const std::vector<Instance> instances = collectInstances(model, name);
+    checkInstanceMatrices(instances, name);
+    for (const Instance& inst : instances)
       for (const auto& p : model.meshes[size_t(inst.mesh)].primitives)
         appendPrimitive(model, p, inst.matrix, defaultMaterial, out, name);
   }

@@ -57,6 +57,18 @@ Scene sceneFromGltf(const std::string& path) {
   return scene;
 }
 
+void checkInstanceMatrices(const std::vector<Instance>& instances, const std::string& path) {
+  if (instances.empty()) return;
+  Scene scene;
+  scene.models.resize(1);
+  for (const Instance& inst : instances) {
+    SceneInstance si;
+    si.matrix = inst.matrix;
+    scene.instances.push_back(si);
+  }
+  checkScene(scene, path);
+}
+
 void applyModelPattern(Scene& scene, const std::string& gltfPath, const std::string& pattern) {
   for (SceneModel& m : scene.models) {
     std::string p = replaceAll(pattern, "{stem}", stemOf(gltfPath));

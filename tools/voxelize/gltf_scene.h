@@ -6,6 +6,7 @@
 #include <string>
 
 #include "formats/scene_json.h"
+#include "mesh_io.h"
 
 namespace canopy::mesh {
 
@@ -16,6 +17,11 @@ namespace canopy::mesh {
 // lattices it writes). Throws canopy::Error naming the file (unreadable, corrupt, no node with a
 // mesh, an instance matrix that checkScene rejects).
 Scene sceneFromGltf(const std::string& path);
+
+// The scene list's matrix rule (checkScene: finite, affine, invertible) applied to glTF instances,
+// so whole-scene voxelisation refuses the node matrices that --instances refuses, with the same
+// message ("<path>: instances[i].matrix is singular"). No instances: nothing to check.
+void checkInstanceMatrices(const std::vector<Instance>& instances, const std::string& path);
 
 // Fills every model's density path from `pattern`: {stem} = the glTF file name without its
 // extension, {N} = the mesh index, {name} = the mesh name with characters other than [A-Za-z0-9_-]

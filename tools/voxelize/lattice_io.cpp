@@ -9,6 +9,8 @@
 #include "voxelize.h"
 
 namespace canopy {
+static_assert(int64_t(kMaxResolution) * kMaxResolution * kMaxResolution <= vdbio::kMaxLatticeCells,
+              "canopy-voxelize must not write a lattice the lattice reader refuses");
 namespace {
 
 openvdb::math::Transform::Ptr latticeTransform(const LatticeFrame& f) {

@@ -71,7 +71,14 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--mesh", o.meshIndex,
                  "glTF: voxelise mesh N alone in its own model space (default: the whole scene "
-                 "with node transforms)");
+                 "with node transforms)")
+      ->check(CLI::Validator(
+          [](std::string& v) {
+            // -1 is the library's "whole scene", not a value a user may give.
+            return v.find_first_not_of("0123456789") == std::string::npos ? std::string()
+                                                                           : "must be a mesh index >= 0, got " + v;
+          },
+          "N >= 0"));
   app.add_option("--instances", o.instancesOutput,
                  "glTF: also write the scene instance list (docs/scene-json.md) to this file");
   app.add_option("--model-pattern", o.modelPattern,

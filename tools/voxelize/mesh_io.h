@@ -1,7 +1,8 @@
 // mesh_io.h: loads plant meshes into one flat, world-space triangle soup with materials.
 //
 // Formats: glTF 2.0 (.gltf/.glb, KHR_draco_mesh_compression, embedded and external images) via
-// tinygltf compiled with Draco (gltf_loader.cpp); OBJ, PLY, STL, OFF via OpenMesh (obj_loader.cpp).
+// tinygltf compiled with Draco (gltf_loader.cpp); OBJ, STL, OFF via OpenMesh (openmesh_loader.cpp);
+// PLY by Canopy's own reader (ply_loader.cpp: OpenMesh's hangs on truncated files).
 // Every loader validates its input and throws canopy::Error naming the file; nothing here trusts
 // the file. Positions are doubles in the file's units (metres for glTF), glTF node transforms
 // already applied. Reusable by other tools: gltf_scene.h turns listGltfScene() into the Canopy
@@ -11,6 +12,8 @@
 #include <cstdint>
 #include <string>
 #include <vector>
+
+#include "canopy/errors.h"
 
 namespace canopy::mesh {
 
@@ -88,10 +91,16 @@ SceneInfo listGltfScene(const std::string& path);
 Mesh loadGltfFromMemory(const uint8_t* data, size_t size, bool binary, const std::string& baseDir,
                         const std::string& name, const LoadOptions& options = {});
 Mesh loadGltfFile(const std::string& path, const LoadOptions& options = {});
+// OBJ, STL, OFF (and PLY, which it hands to loadPly).
 Mesh loadWithOpenMesh(const std::string& path);
+// PLY (ascii, binary little/big endian): every header field, length and index is checked.
+Mesh loadPly(const std::string& path);
+Mesh loadPlyFromMemory(const uint8_t* data, size_t size, const std::string& name);
 
 // Throws invalidInput naming `name` if any coordinate is NaN or infinite.
 void requireFinite(const Mesh& mesh, const std::string& name);
+// The error requireFinite throws for triangle `index` (0-based), for loaders that find it first.
+Error nonFiniteTriangle(const std::string& name, size_t index);
 
 // Lower-case extension without the dot ("glb"), or "".
 std::string extensionOf(const std::string& path);

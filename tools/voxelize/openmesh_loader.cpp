@@ -1,15 +1,19 @@
-// openmesh_loader.cpp: OBJ, PLY, STL and OFF through OpenMesh, and loadMesh()'s format dispatch.
+// openmesh_loader.cpp: OBJ, STL and OFF through OpenMesh, and loadMesh()'s format dispatch (PLY
+// goes to Canopy's own reader, ply_loader.cpp).
 //
 // OpenMesh reads the geometry (polygons are triangulated as fans) and face or vertex colours where
 // the format has them. It does not keep OBJ material names, which Canopy needs to tell wood from
 // leaves, so scanObjMaterials() reads the `usemtl` runs and, when OpenMesh produced exactly the
 // triangles those runs predict (the usual case), assigns each triangle its material by order.
+// OpenMesh silently drops vertices or facets with NaN coordinates (OBJ, OFF, binary and ASCII
+// STL), so those files are scanned for non-finite coordinates before OpenMesh reads them.
 #include <OpenMesh/Core/IO/MeshIO.hh>
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 
 #include <algorithm>
 #include <cstdlib>
 #include <cmath>
+#include <cstring>
 #include <fstream>
 #include <map>
 #include <sstream>
@@ -18,6 +22,7 @@
 #include "canopy/cli.h"
 #include "canopy/errors.h"
 #include "mesh_io.h"
+#include "texture_sample.h"
 
 namespace canopy::mesh {
 namespace {
@@ -76,8 +81,68 @@ ObjMaterials scanObjMaterials(const std::string& path) {
   return m;
 }
 
-float srgbToLinear(float c) {
-  return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
+// A binary STL (84 + 50 n bytes): the 0-based facet with a non-finite corner, or -1.
+long nonFiniteBinaryStlFacet(const std::vector<unsigned char>& b) {
+  if (b.size() < 84) return -1;
+  uint32_t n;
+  std::memcpy(&n, b.data() + 80, 4);
+  if (b.size() != 84 + 50 * uint64_t(n)) return -1;
+  for (uint32_t i = 0; i < n; ++i)
+    for (int k = 0; k < 9; ++k) {
+      float v;
+      std::memcpy(&v, b.data() + 84 + 50 * size_t(i) + 12 + 4 * size_t(k), 4);
+      if (!std::isfinite(v)) return long(i);
+    }
+  return -1;
+}
+
+// An ASCII STL: the 0-based facet whose `vertex` line has a non-finite number, or -1.
+long nonFiniteAsciiStlFacet(const std::vector<unsigned char>& b) {
+  std::istringstream in(std::string(b.begin(), b.end()));
+  long facet = -1;
+  for (std::string tok; in >> tok;) {
+    if (tok == "facet") ++facet;
+    if (tok != "vertex") continue;
+    for (int k = 0; k < 3 && in >> tok; ++k) {
+      char* end = nullptr;
+      const double v = std::strtod(tok.c_str(), &end);
+      if (end != tok.c_str() && !std::isfinite(v)) return std::max(facet, 0L);
+    }
+  }
+  return -1;
+}
+
+// An ASCII OFF (any of the [ST][C][N]OFF headers): the 0-based vertex with a non-finite
+// coordinate, or -1. Binary and 4-D OFF are left to OpenMesh.
+long nonFiniteOffVertex(const std::string& path) {
+  std::ifstream in(path);
+  std::string line;
+  auto next = [&](std::vector<std::string>& t) {
+    while (std::getline(in, line)) {
+      if (const auto hash = line.find('#'); hash != std::string::npos) line.erase(hash);
+      std::istringstream ss(line);
+      t.clear();
+      for (std::string s; ss >> s;) t.push_back(s);
+      if (!t.empty()) return true;
+    }
+    return false;
+  };
+  std::vector<std::string> t;
+  if (!next(t)) return -1;
+  const std::string& key = t[0];
+  if (key.size() < 3 || key.compare(key.size() - 3, 3, "OFF") != 0 || key.find_first_of("4n") != std::string::npos)
+    return -1;
+  if (t.size() > 1 && t[1] == "BINARY") return -1;
+  std::vector<std::string> counts(t.begin() + 1, t.end());
+  if (counts.empty() && !next(counts)) return -1;
+  char* end = nullptr;
+  const long nv = std::strtol(counts[0].c_str(), &end, 10);
+  for (long v = 0; v < nv && next(t); ++v)
+    for (size_t k = 0; k < 3 && k < t.size(); ++k) {
+      const double x = std::strtod(t[k].c_str(), &end);
+      if (end != t[k].c_str() && !std::isfinite(x)) return v;
+    }
+  return -1;
 }
 
 }  // namespace
@@ -91,20 +156,33 @@ std::string extensionOf(const std::string& path) {
   return e;
 }
 
+Error nonFiniteTriangle(const std::string& name, size_t index) {
+  return invalidInput(name + ": triangle " + std::to_string(index) + " has a NaN or infinite vertex coordinate");
+}
+
 void requireFinite(const Mesh& mesh, const std::string& name) {
   for (size_t i = 0; i < mesh.triangles.size(); ++i)
     for (const Vec3& p : mesh.triangles[i].p)
       for (double c : p)
-        if (!std::isfinite(c))
-          throw invalidInput(name + ": triangle " + std::to_string(i) +
-                             " has a NaN or infinite vertex coordinate");
+        if (!std::isfinite(c)) throw nonFiniteTriangle(name, i);
 }
 
 Mesh loadWithOpenMesh(const std::string& path) {
+  const std::string ext = extensionOf(path);
+  if (ext == "ply") return loadPly(path);  // never OpenMesh's PLY reader (it hangs on truncation)
   requireReadableFile(path);
   {
     std::ifstream probe(path, std::ios::binary | std::ios::ate);
     if (probe.tellg() == 0) throw invalidInput(path + ": empty file");
+  }
+  if (ext == "stl") {
+    const std::vector<unsigned char> bytes = readFile(path);
+    long facet = nonFiniteBinaryStlFacet(bytes);
+    if (facet < 0) facet = nonFiniteAsciiStlFacet(bytes);
+    if (facet >= 0) throw nonFiniteTriangle(path, size_t(facet));
+  } else if (ext == "off") {
+    if (const long v = nonFiniteOffVertex(path); v >= 0)
+      throw invalidInput(path + ": vertex " + std::to_string(v) + " (counting from 0) has a NaN or infinite coordinate");
   }
   omerr().disable();
   omlog().disable();
@@ -117,7 +195,6 @@ Mesh loadWithOpenMesh(const std::string& path) {
     throw invalidInput(path + ": OpenMesh could not parse the file (malformed or truncated)");
 
   Mesh out;
-  const std::string ext = extensionOf(path);
   ObjMaterials objMat;
   bool byOrder = false;
   if (ext == "obj") {
@@ -157,14 +234,14 @@ Mesh loadWithOpenMesh(const std::string& path) {
       t.p[size_t(k)] = {p[0], p[1], p[2]};
       if (vertexColor) {
         const auto c = om.color(v);
-        for (int ch = 0; ch < 3; ++ch) vc[size_t(ch)] += srgbToLinear(c[ch] / 255.f) / 3.f;
+        for (int ch = 0; ch < 3; ++ch) vc[size_t(ch)] += vox::srgbToLinear8(c[ch]) / 3.f;
       }
       ++k;
     }
     if (k != 3) continue;
     if (faceColor) {
       const auto c = om.color(f);
-      for (int ch = 0; ch < 3; ++ch) t.color[size_t(ch)] = srgbToLinear(c[ch] / 255.f);
+      for (int ch = 0; ch < 3; ++ch) t.color[size_t(ch)] = vox::srgbToLinear8(c[ch]);
     } else if (vertexColor) {
       t.color = vc;
     }

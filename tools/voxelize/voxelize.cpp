@@ -94,6 +94,7 @@ void validateOptions(const VoxelizeOptions& o) {
     throw usageError("--resolution x --supersample = " +
                      std::to_string(int64_t(o.resolution) * o.supersample) +
                      " fine cells per axis exceeds " + std::to_string(kMaxFineResolution));
+  if (o.meshIndex < -1) throw usageError("--mesh " + std::to_string(o.meshIndex) + " must be a mesh index >= 0");
   try {
     std::regex re(o.woodPattern, std::regex::ECMAScript | std::regex::icase);
   } catch (const std::regex_error& e) {
@@ -393,6 +394,14 @@ VoxelizeResult voxelizeMesh(mesh::Mesh mesh, const VoxelizeOptions& opt, const s
   st.fineTouches = fineTouches;
   st.alphaRejected = alphaRejected;
   st.exactTests = exactTests;
+  if (result.cells.empty()) {
+    // An empty lattice is no model: refuse it here rather than two tools later.
+    const std::string n = std::to_string(st.triangles);
+    throw invalidInput(name + ": no cell is occupied (" +
+                       (st.fineTouches > 0 && st.alphaRejected == st.fineTouches
+                            ? "all " + n + " triangles were removed by the alpha test)"
+                            : "none of the " + n + " triangles touches a sub-cell)"));
+  }
   double sumD = 0, sumW = 0;
   for (const auto& c : result.cells) {
     sumD += c.density;

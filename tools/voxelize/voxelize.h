@@ -38,7 +38,7 @@ struct VoxelizeOptions {
 
 // The limits checked by validateOptions (usage errors outside them).
 constexpr int kMinResolution = 8;
-constexpr int kMaxResolution = 4096;
+constexpr int kMaxResolution = 2048;  // the lattice reader's limit: 2048^3 = 2^33 cells (lattice_io.cpp checks)
 constexpr int kMaxSupersample = 16;
 constexpr int64_t kMaxFineResolution = int64_t(1) << 16;  // resolution * supersample
 
@@ -81,7 +81,8 @@ std::vector<bool> classifyWood(const std::vector<mesh::Material>& materials,
                                const std::string& pattern);
 
 // The core on an already-loaded mesh (tests call this with analytic meshes). Throws
-// invalidInput(name + ...) for zero triangles.
+// invalidInput(name + ...) for zero triangles, only degenerate ones, or no occupied cell (e.g.
+// every triangle removed by the alpha test).
 VoxelizeResult voxelizeMesh(mesh::Mesh mesh, const VoxelizeOptions& options,
                             const std::string& name);
 
