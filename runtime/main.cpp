@@ -14,7 +14,7 @@ int main(int argc, char** argv) {
   canopy::play::PlayOptions o;
   std::string size = "640x360";
   app.add_option("input", o.input, "FILE.canopy")->required();
-  app.add_option("-o,--output", o.output, "out.png | out.exr | frames/f_%04d.exr (printf pattern for several frames)");
+  app.add_option("-o,--output", o.output, "out.png | out.exr | frames/f_%04d.exr (several frames: one %d, %Nd or %0Nd; %% for a literal %)");
   app.add_option("--size", size, "Frame size WxH")->capture_default_str();
   app.add_option("--frames", o.frames, "Number of frames")->capture_default_str();
   app.add_option("--camera", o.camera, "orbit[:azimuth=,elevation=,distance=,height=,fov=,turns=] or a keyframe path.json")

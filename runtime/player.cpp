@@ -2,6 +2,7 @@
 #include "runtime/player.h"
 
 #include <algorithm>
+#include <cassert>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -141,6 +142,68 @@ double percentile(std::vector<double> v, double q) {
   return i + 1 < v.size() ? v[i] * (1 - f) + v[i + 1] * f : v[i];
 }
 
+// The frames a run has written; unless the run reaches the end (keep()), they are removed, so a
+// failed run leaves no partial sequence behind.
+class WrittenFrames {
+ public:
+  WrittenFrames() = default;
+  WrittenFrames(const WrittenFrames&) = delete;
+  WrittenFrames& operator=(const WrittenFrames&) = delete;
+  ~WrittenFrames() {
+    if (!kept_)
+      for (const std::string& p : paths_) std::remove(p.c_str());
+  }
+  void add(const std::string& path) { paths_.push_back(path); }
+  void keep() { kept_ = true; }
+
+ private:
+  std::vector<std::string> paths_;
+  bool kept_ = false;
+};
+
+// The parts of a frame pattern: prefix, one %d / %Nd / %0Nd, suffix ("%%" already made '%').
+struct FramePattern {
+  std::string prefix, suffix;
+  char pad = ' ';
+  int width = 0;
+};
+
+constexpr int kMaxFrameWidth = 32;  // widest %Nd accepted (frames are < 10^6, so more is only padding)
+
+// Parses `pattern` (it contains a '%'); throws Usage naming it unless it holds exactly one integer
+// conversion %d, %Nd or %0Nd and otherwise only "%%".
+FramePattern parseFramePattern(const std::string& pattern) {
+  const std::string bad = "-o " + pattern + ": a frame pattern takes one integer conversion such as %04d (and %% for a literal %)";
+  FramePattern fp;
+  bool seen = false;
+  for (size_t i = 0; i < pattern.size(); ++i) {
+    std::string& part = seen ? fp.suffix : fp.prefix;
+    if (pattern[i] != '%') {
+      part += pattern[i];
+      continue;
+    }
+    if (i + 1 < pattern.size() && pattern[i + 1] == '%') {
+      part += '%';
+      ++i;
+      continue;
+    }
+    if (seen) throw usageError(bad);
+    size_t j = i + 1;
+    if (j < pattern.size() && pattern[j] == '0') {
+      fp.pad = '0';
+      ++j;
+    }
+    int width = 0;
+    while (j < pattern.size() && pattern[j] >= '0' && pattern[j] <= '9' && width <= kMaxFrameWidth) width = width * 10 + (pattern[j++] - '0');
+    if (j >= pattern.size() || pattern[j] != 'd' || width > kMaxFrameWidth) throw usageError(bad);
+    fp.width = width;
+    seen = true;
+    i = j;
+  }
+  if (!seen) throw usageError(bad);
+  return fp;
+}
+
 }  // namespace
 
 std::string frameFileName(const std::string& pattern, int frame, int frames) {
@@ -148,10 +211,11 @@ std::string frameFileName(const std::string& pattern, int frame, int frames) {
     if (frames > 1) throw usageError("-o " + pattern + ": " + std::to_string(frames) + " frames need a pattern such as frames/f_%04d.exr");
     return pattern;
   }
-  char buf[4096];
-  const int n = std::snprintf(buf, sizeof(buf), pattern.c_str(), frame);
-  if (n <= 0 || size_t(n) >= sizeof(buf)) throw usageError("-o " + pattern + ": bad frame pattern");
-  return buf;
+  const FramePattern fp = parseFramePattern(pattern);
+  assert(frame >= 0);
+  std::string number = std::to_string(frame);
+  if (number.size() < size_t(fp.width)) number.insert(0, size_t(fp.width) - number.size(), fp.pad);
+  return fp.prefix + number + fp.suffix;
 }
 
 std::vector<FrameSetup> framePlan(const PlayOptions& o, const HostScene& scene) {
@@ -273,6 +337,7 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   uint64_t coldStartBytes = 0;  // streamed by the first complete frame
   uint64_t passes = 0;
   Progress progress("canopy-play", o.frames);
+  WrittenFrames written;
   for (int f = 0; f < o.frames; ++f) {
     const FrameSetup& fs = plan[size_t(f)];
     shade.toSun = fs.toSun;
@@ -299,9 +364,14 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
       coldStartBytes = streamer.stats().bytesLoaded;
     }
     if (!o.output.empty() || lastImage) backend->readImage(image);
-    if (!o.output.empty()) writeImage(frameFileName(o.output, f, o.frames), image, o.width, o.height, o.background);
+    if (!o.output.empty()) {
+      const std::string path = frameFileName(o.output, f, o.frames);
+      writeImage(path, image, o.width, o.height, o.background);
+      written.add(path);
+    }
     progress.add();
   }
+  written.keep();
   progress.done();
 
   const StreamStats& st = streamer.stats();

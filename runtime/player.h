@@ -65,10 +65,14 @@ struct FrameSetup {
 // for a bad spelling, (Io/InvalidInput) for a bad path file.
 std::vector<FrameSetup> framePlan(const PlayOptions& o, const HostScene& scene);
 
-// The file name of frame f (printf pattern with one integer, or the plain name for one frame).
+// The file name of frame f >= 0. A name without '%' is used as it is (one frame only); otherwise it is
+// a pattern with exactly one integer conversion %d, %Nd or %0Nd (N <= 32) and "%%" for a literal '%',
+// which this function formats itself (the pattern never reaches printf). Throws Usage naming the
+// pattern for anything else (%s, %n, two conversions, ...) and for several frames without a pattern.
 std::string frameFileName(const std::string& pattern, int frame, int frames);
 
-// Runs everything; `lastImage` (optional) receives the last frame's RGBA.
+// Runs everything; `lastImage` (optional) receives the last frame's RGBA. A run that fails removes
+// the frames it has written, so a failed run leaves no output (each frame is written atomically).
 nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<float>* lastImage = nullptr);
 
 }  // namespace canopy::play

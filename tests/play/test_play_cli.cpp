@@ -4,10 +4,12 @@
 
 #include <sys/stat.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -17,6 +19,8 @@
 
 #include "canopy/atomic_file.h"
 #include "canopy/device.h"
+#include "canopy/errors.h"
+#include "runtime/player.h"
 #include "runtime/image_io.h"
 #include "tests/play/scenes.h"
 
@@ -33,7 +37,9 @@ struct CliRun {
 
 CliRun run(const std::string& args) {
   const std::string dir = pt::tmpDir("cli");
-  const std::string o = dir + "/stdout.txt", e = dir + "/stderr.txt";
+  // per process: ctest runs the cases of this file as parallel processes
+  const std::string tag = std::to_string(::getpid());
+  const std::string o = dir + "/stdout." + tag + ".txt", e = dir + "/stderr." + tag + ".txt";
   const std::string cmd = "'" + kBin + "' " + args + " > '" + o + "' 2> '" + e + "'";
   const int status = std::system(cmd.c_str());
   CliRun r{WIFEXITED(status) ? WEXITSTATUS(status) : -1, {}, {}};
@@ -182,4 +188,59 @@ TEST(PlayCli, ErrorsHaveDocumentedExitCodesAndLeaveNoOutput) {
     EXPECT_NE(r.err.find(c.message), std::string::npos) << c.args << "\n" << r.err;
     EXPECT_FALSE(exists(out)) << c.args;
   }
+}
+
+// -o is a pattern the tool formats itself: exactly one %d / %Nd / %0Nd, "%%" for a literal '%'.
+TEST(PlayCli, FrameFileNameFormatsTheOneIntegerConversion) {
+  using canopy::play::frameFileName;
+  EXPECT_EQ(frameFileName("f/f_%04d.exr", 7, 10), "f/f_0007.exr");
+  EXPECT_EQ(frameFileName("f_%d.png", 123, 200), "f_123.png");
+  EXPECT_EQ(frameFileName("f_%3d.png", 7, 10), "f_  7.png");
+  EXPECT_EQ(frameFileName("f_%02d.png", 1234, 2000), "f_1234.png");  // the width is a minimum
+  EXPECT_EQ(frameFileName("100%%_%02d.png", 5, 10), "100%_05.png");
+  EXPECT_EQ(frameFileName("plain.png", 0, 1), "plain.png");
+  for (const char* bad : {"f_%s.png", "f_%n.png", "g_%d_%d.png", "f_%i.png", "f_%ld.png", "f_%-4d.png", "f_%.2d.png",
+                          "f_%x.png", "f_%040d.png", "f_%", "f_%04", "only%%.png", "%%%d%.png"}) {
+    try {
+      frameFileName(bad, 0, 2);
+      ADD_FAILURE() << bad << " was accepted";
+    } catch (const canopy::Error& e) {
+      EXPECT_EQ(e.code(), canopy::ExitCode::Usage) << bad;
+      EXPECT_NE(std::string(e.what()).find(bad), std::string::npos) << e.what();
+    }
+  }
+}
+
+namespace {
+std::vector<std::string> filesIn(const std::string& dir) {
+  std::vector<std::string> names;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) names.push_back(e.path().filename().string());
+  std::sort(names.begin(), names.end());
+  return names;
+}
+}  // namespace
+
+// Before the fix %s and %n reached printf (a crash after writing f_(null).png) and %d_%d read stack
+// garbage into the names; now they are usage errors found before any work, leaving nothing.
+TEST(PlayCli, BadFramePatternIsAUsageErrorAndWritesNothing) {
+  const std::string dir = pt::tmpDir("cli/bad-pattern");
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  for (const char* pattern : {"f_%s.png", "f_%n.png", "g_%d_%d.png", "f_%p.exr"}) {
+    const CliRun r = run("'" + sceneFile() + "' -o '" + dir + "/" + pattern + "' --size 16x16 --frames 2 --device cpu");
+    EXPECT_EQ(r.code, 1) << pattern << "\n" << r.err;
+    EXPECT_NE(r.err.find("one integer conversion such as %04d"), std::string::npos) << r.err;
+    EXPECT_EQ(filesIn(dir), std::vector<std::string>{}) << pattern;
+  }
+}
+
+// A sequence that fails midway (frame 1's path is a directory) removes the frames it wrote.
+TEST(PlayCli, FailedSequenceRemovesTheFramesItWrote) {
+  const std::string dir = pt::tmpDir("cli/failed-seq");
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir + "/f_01.png");
+  const CliRun r = run("'" + sceneFile() + "' -o '" + dir + "/f_%02d.png' --size 16x16 --frames 3 --device cpu -q");
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_NE(r.err.find("f_01.png"), std::string::npos) << r.err;
+  EXPECT_EQ(filesIn(dir), std::vector<std::string>{"f_01.png"});  // only the directory that was there
 }
