@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -205,6 +206,27 @@ TEST(HaarTool, CliCommandsReportsAndDeterministicBytes) {
   // --max-error from the command line.
   ASSERT_EQ(run(smoothFile() + " -o " + b + " --max-error 0.02 --json", &out), 0) << lastStderr();
   EXPECT_LE(nlohmann::json::parse(out)["overall"]["max_error"].get<double>(), 0.02);
+}
+
+// info and verify print their report on stdout (redirectable), also under -q; logs stay on stderr.
+// Before the fix both reports went to stderr through the log, so -q printed nothing at all.
+TEST(HaarTool, InfoAndVerifyPrintTheirReportOnStdoutAlsoWhenQuiet) {
+  const std::string a = (tempDir() / "report.chaar").string();
+  ASSERT_EQ(run(smoothFile() + " -o " + a + " --threshold 0.005 -q"), 0) << lastStderr();
+  for (const char* quiet : {"", " -q"}) {
+    std::string out;
+    ASSERT_EQ(run("info " + a + quiet, &out), 0) << lastStderr();
+    EXPECT_EQ(out.rfind(a + ": .chaar 1.", 0), 0u) << out;
+    EXPECT_NE(out.find("\n  B18 dir ("), std::string::npos) << out;  // one line per base
+    EXPECT_EQ(std::count(out.begin(), out.end(), '\n'), 20) << out;
+    EXPECT_EQ(lastStderr(), "");
+    ASSERT_EQ(run("verify " + a + quiet, &out), 0) << lastStderr();
+    EXPECT_EQ(out, a + ": OK (checksums, indices and 19 decoded bases)\n");
+    EXPECT_EQ(lastStderr(), "");
+  }
+  std::string out;
+  ASSERT_EQ(run("info " + a + " --json", &out), 0);
+  EXPECT_EQ(nlohmann::json::parse(out)["bases"].size(), 19u);  // --json: only the object on stdout
 }
 
 // lbsolve's scattered-only sun bases keep their mark through canopy-haar: the .chaar's base flags

@@ -190,7 +190,7 @@ nlohmann::json compressLight(const CompressOptions& o) {
   AtomicOutput out(o.output);  // fail early on an unwritable destination
   LightFieldPtr f = openLightField(o.input);
   const LatticeGeom& g = f->geom;
-  logInfo(o.input + ": lattice " + std::to_string(g.dims[0]) + "x" + std::to_string(g.dims[1]) + "x" +
+  logInfo("canopy-haar: " + o.input + ": lattice " + std::to_string(g.dims[0]) + "x" + std::to_string(g.dims[1]) + "x" +
           std::to_string(g.dims[2]) + ", " + std::to_string(f->grids.size()) + " bases, " +
           std::to_string(g.bricks) + " bricks");
 
@@ -285,7 +285,7 @@ nlohmann::json decodeToVdb(const std::string& input, const std::string& output) 
     grids.push_back(g);
   }
   vdbio::writeVdb(output, grids);
-  logInfo(output + ": " + std::to_string(grids.size()) + " decoded bases, " + std::to_string(activeTotal) +
+  logInfo("canopy-haar: " + output + ": " + std::to_string(grids.size()) + " decoded bases, " + std::to_string(activeTotal) +
           " active voxels");
   return {{"input", input}, {"output", output}, {"bases", d.baseCount()}, {"active_voxels", activeTotal},
           {"seconds", secondsSince(t0)}};
@@ -311,11 +311,6 @@ nlohmann::json chaarInfo(const std::string& input) {
       {"index_to_model", std::vector<double>(h.indexToModel, h.indexToModel + 16)},
       {"meta", meta.is_discarded() ? nlohmann::json(d.meta) : meta},
       {"bases", nlohmann::json::array()}};
-  logInfo(input + ": .chaar " + rep["format_version"].get<std::string>() + ", " + precisionName(d.precision()) + ", " +
-          std::to_string(h.baseCount) + " bases, lattice " + std::to_string(h.latticeMax[0] - h.latticeMin[0] + 1) +
-          "x" + std::to_string(h.latticeMax[1] - h.latticeMin[1] + 1) + "x" +
-          std::to_string(h.latticeMax[2] - h.latticeMin[2] + 1) + ", " + std::to_string(h.slotCount) +
-          " stored bricks of " + std::to_string(d.brickCount()) + ", " + fmtBytes(h.fileSize));
   for (uint32_t b = 0; b < d.baseCount(); ++b) {
     const ChaarBaseEntry& e = d.bases[b];
     rep["bases"].push_back({{"base", baseName(b)},
@@ -329,14 +324,31 @@ nlohmann::json chaarInfo(const std::string& input) {
                             {"rms_error", e.rmsError},
                             {"value_max", e.valueMax},
                             {"direct_beam", (e.flags & kChaarBaseScattered) == 0}});
-    char line[220];
-    std::snprintf(line, sizeof line, "  %s dir (%2d,%2d,%2d) threshold %-10.4g %9llu coefs %7u bricks  max err %.4g  RMS %.4g%s",
-                  baseName(b).c_str(), e.direction[0], e.direction[1], e.direction[2], e.threshold,
-                  (unsigned long long)e.coefCount, e.brickCount, e.maxError, e.rmsError,
-                  (e.flags & kChaarBaseScattered) ? "  scattered only" : "");
-    logInfo(line);
   }
   return rep;
+}
+
+std::string formatChaarInfo(const nlohmann::json& info) {
+  const auto& lo = info["lattice_min"];
+  const auto& hi = info["lattice_max"];
+  const auto& bg = info["brick_grid"];
+  const uint64_t bricks = bg[0].get<uint64_t>() * bg[1].get<uint64_t>() * bg[2].get<uint64_t>();
+  std::string text = info["file"].get<std::string>() + ": .chaar " + info["format_version"].get<std::string>() + ", " +
+                     info["precision"].get<std::string>() + ", " + std::to_string(info["bases"].size()) + " bases, lattice ";
+  for (int a = 0; a < 3; ++a) text += std::to_string(hi[a].get<int64_t>() - lo[a].get<int64_t>() + 1) + (a < 2 ? "x" : "");
+  text += ", " + std::to_string(info["stored_bricks"].get<uint64_t>()) + " stored bricks of " + std::to_string(bricks) + ", " +
+          fmtBytes(info["bytes"].get<uint64_t>()) + "\n";
+  for (const auto& e : info["bases"]) {
+    const auto& dir = e["direction"];
+    char line[220];
+    std::snprintf(line, sizeof line, "  %s dir (%2d,%2d,%2d) threshold %-10.4g %9llu coefs %7u bricks  max err %.4g  RMS %.4g%s\n",
+                  e["base"].get<std::string>().c_str(), dir[0].get<int>(), dir[1].get<int>(), dir[2].get<int>(),
+                  e["threshold"].get<double>(), (unsigned long long)e["coefficients"].get<uint64_t>(),
+                  e["bricks"].get<unsigned>(), e["max_error"].get<double>(), e["rms_error"].get<double>(),
+                  e["direct_beam"].get<bool>() ? "" : "  scattered only");
+    text += line;
+  }
+  return text;
 }
 
 nlohmann::json verifyChaar(const std::string& input) {
@@ -349,8 +361,12 @@ nlohmann::json verifyChaar(const std::string& input) {
     for (float v : dense)
       if (!std::isfinite(v)) throw invalidInput(input + ": base " + baseName(b) + " decodes to a non-finite value");
   }
-  logInfo(input + ": OK (checksums, indices and " + std::to_string(d.baseCount()) + " decoded bases)");
   return {{"file", input}, {"ok", true}, {"bases", d.baseCount()}, {"bytes", d.header.fileSize}};
+}
+
+std::string formatVerify(const nlohmann::json& report) {
+  return report["file"].get<std::string>() + ": OK (checksums, indices and " + std::to_string(report["bases"].get<uint32_t>()) +
+         " decoded bases)\n";
 }
 
 // ---- sweep --------------------------------------------------------------------------------
@@ -469,7 +485,7 @@ nlohmann::json sweepThresholds(const SweepOptions& o) {
                     o.thresholds[t], double(dense * nb) / file);
       plot.notes.push_back(note);
     }
-    logInfo("threshold " + std::string(lbl + 2) + ": file " + fmtBytes(file) + ", ratio " +
+    logInfo("canopy-haar: threshold " + std::string(lbl + 2) + ": file " + fmtBytes(file) + ", ratio " +
             std::to_string(double(dense * nb) / file) + "x, RMS " + std::to_string(rms) + ", max " +
             std::to_string(maxErr));
   }

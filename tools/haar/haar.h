@@ -27,6 +27,9 @@ nlohmann::json compressLight(const CompressOptions& o);
 nlohmann::json decodeToVdb(const std::string& input, const std::string& output);
 nlohmann::json chaarInfo(const std::string& input);
 nlohmann::json verifyChaar(const std::string& input);  // throws InvalidInput on any problem
+// The human-readable reports of info and verify (printed on stdout by main unless --json).
+std::string formatChaarInfo(const nlohmann::json& info);
+std::string formatVerify(const nlohmann::json& report);
 
 struct SweepOptions {
   std::string input, prefix;  // writes prefix.csv, prefix.json, prefix.png

@@ -5,6 +5,7 @@
 //   canopy-haar verify IN.chaar
 //   canopy-haar sweep IN.light.vdb --thresholds 0,0.001,0.01 -o PREFIX
 #include <cmath>
+#include <iostream>
 #include <sstream>
 
 #include "canopy/cli.h"
@@ -79,10 +80,12 @@ int main(int argc, char** argv) {
   return tool.run(argc, argv, [&] {
     if (*dec) {
       tool.report() = decodeToVdb(decIn, decOut);
-    } else if (*info) {
+    } else if (*info) {  // the report is the requested output: stdout, also under --quiet
       tool.report() = chaarInfo(infoIn);
+      if (!tool.common().json) std::cout << formatChaarInfo(tool.report());
     } else if (*ver) {
       tool.report() = verifyChaar(verIn);
+      if (!tool.common().json) std::cout << formatVerify(tool.report());
     } else if (*sw) {
       so.thresholds = parseList(sweepList);
       so.precision = parsePrecision(sweepPrecision);
