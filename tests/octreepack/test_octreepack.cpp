@@ -290,9 +290,10 @@ TEST(Octreepack, SceneJsonPacksModelsInstancesAndSceneLight) {
   const std::string dir = tmpDir();
   writeSourceVdb(dir + "/a.density.vdb", syntheticPlant(24, 0, "a", 0));
   writeSourceVdb(dir + "/b.density.vdb", syntheticPlant(20, 5, "b", 0));
-  // A coarse scene lighting lattice: a float grid named "light".
+  // A coarse scene lighting lattice: a float grid named B00, as canopy-lbsolve --scene names its
+  // ambient factor (the default --scene-light-grid; before it was "light", which lbsolve never writes).
   auto light = openvdb::FloatGrid::create(0.0f);
-  light->setName("light");
+  light->setName("B00");
   for (int k = 0; k < 3; ++k)
     for (int j = 0; j < 4; ++j)
       for (int i = 0; i < 5; ++i) light->tree().setValue(openvdb::Coord(i, j, k), 1.0f + float(i + 10 * j + 100 * k));
@@ -582,6 +583,27 @@ TEST(OctreepackCli, SceneListErrorsAreTheSameAsLbsolves) {
     EXPECT_FALSE(exists(dir + "/same.canopy"));
     EXPECT_FALSE(exists(dir + "/same.light.vdb"));
   }
+}
+
+// What canopy-lbsolve --scene writes packs with the default --scene-light-grid (B00): before, the
+// default was "light", a grid lbsolve never writes, so this failed with exit 3.
+TEST(OctreepackCli, LbsolveSceneLightPacksWithTheDefaultGrid) {
+  const std::string lbsolve = std::string(CANOPY_BINARY_DIR) + "/bin/canopy-lbsolve";
+  if (!exists(lbsolve)) GTEST_SKIP() << "canopy-lbsolve is not built";
+  const std::string dir = tmpDir();
+  writeSourceVdb(dir + "/lit.density.vdb", syntheticPlant(16, 0, "lit", 0));
+  canopy::writeFileAtomic(dir + "/lit.scene.json", std::string(R"({"canopy_scene": 1, "models": [{"density": "lit.density.vdb"}],
+    "instances": [{"model": 0, "matrix": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1]},
+                  {"model": 0, "matrix": [1,0,0,2, 0,1,0,0, 0,0,1,0, 0,0,0,1]}]})"));
+  const std::string sceneLight = dir + "/lit.scenelight.vdb", out = dir + "/lit.canopy";
+  std::remove(out.c_str());
+  ASSERT_EQ(std::system((lbsolve + " --scene '" + dir + "/lit.scene.json' -o '" + sceneLight +
+                         "' --scene-resolution 8 --device cpu -q").c_str()), 0);
+  ASSERT_EQ(run("--scene '" + dir + "/lit.scene.json' --scene-light '" + sceneLight + "' -o '" + out + "'"), 0);
+  EXPECT_TRUE(CanopyFile::open(out).hasSceneLight());
+  const std::string named = dir + "/lit-b00.canopy";
+  ASSERT_EQ(run("--scene '" + dir + "/lit.scene.json' --scene-light '" + sceneLight + "' --scene-light-grid B00 -o '" + named + "'"), 0);
+  EXPECT_EQ(canopy::readFile(out), canopy::readFile(named));  // the default is B00
 }
 
 TEST(OctreepackCli, NonFiniteDensityIsRejected) {

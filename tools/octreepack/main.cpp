@@ -13,7 +13,7 @@ int main(int argc, char** argv) {
                     "    (one lattice per mesh the scene uses, from canopy-voxelize SCENE.glb --mesh N; matched to\n"
                     "     its mesh by the lattice's metadata, in any order; lighting follows its lattice)\n"
                     "  canopy-octreepack info FILE.canopy [--json]\n"
-                    "  canopy-octreepack verify FILE.canopy",
+                    "  canopy-octreepack verify FILE.canopy [--json]",
                     /*withDevice=*/false);
   CLI::App& app = tool.app();
   canopy::octreepack::OctreepackOptions o;
@@ -25,7 +25,7 @@ int main(int argc, char** argv) {
                  "Scene: an instance list (SCENE.json, docs/scene-json.md) or a glTF scene whose nodes share "
                  "meshes (SCENE.glb/.gltf, with the meshes' lattices as inputs)");
   app.add_option("--scene-light", o.sceneLight, "Coarse scene lighting lattice (VDB, lbsolve --scene)");
-  app.add_option("--scene-light-grid", o.sceneLightGrid, "Float grid name in --scene-light")->capture_default_str();
+  app.add_option("--scene-light-grid", o.sceneLightGrid, "Float grid of --scene-light packed as the indirect-light factor (canopy-lbsolve --scene writes B00..B18; B00 is the ambient one)")->capture_default_str();
   app.add_flag("--ignore-light", o.ignoreLight, "Pack density only, even where a .chaar is given");
   app.add_flag("--no-haar-light", o.noHaarLight,
                "Pack a .chaar's lighting as float16 light items only, without its Haar bricks (the finest level's exact light: "

@@ -153,7 +153,7 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
   Progress progress("octreepack models", int64_t(scene.models.size()));
   for (size_t i = 0; i < scene.models.size(); ++i) {
     const SceneModel& m = scene.models[i];
-    logInfo("octreepack: model " + std::to_string(i) + " '" + m.name + "' from " + m.density);
+    logInfo("canopy-octreepack: model " + std::to_string(i) + " '" + m.name + "' from " + m.density);
     ModelSource src = readDensityVdb(m.density, m.name);
     nlohmann::json source = {{"name", m.name}, {"density", src.sourceLabel}};
     LightFn light;
@@ -195,7 +195,7 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
   uint64_t cells = 0;
   for (const auto& b : built) cells += b.occupiedCells;
   report["occupied_cells"] = cells;
-  logInfo("octreepack: wrote " + o.output + " (" + std::to_string(stats.fileBytes) + " bytes, resident " +
+  logInfo("canopy-octreepack: wrote " + o.output + " (" + std::to_string(stats.fileBytes) + " bytes, resident " +
           std::to_string(stats.residentBytes) + ", " + std::to_string(stats.pageCount) + " pages)");
   return report;
 }
