@@ -364,7 +364,18 @@ TEST(Cli, ExitCodesAndNoOutputOnErrors) {
   EXPECT_EQ(code(dir + "/p.vdb -o " + out + " --cuda-scheme push-fused"), int(ExitCode::Usage));  // bench only
   EXPECT_EQ(code(dir + "/p.vdb -o " + out + " --solves-per-gpu 0"), int(ExitCode::Usage));
   EXPECT_EQ(code(dir + "/p.vdb -o " + out + " --solves-per-gpu 65"), int(ExitCode::Usage));
-  EXPECT_EQ(code(dir + "/p.vdb -o " + out + " --wood-threshold 2"), int(ExitCode::InvalidInput));
+  // An out-of-range --wood-threshold is a usage error like every other bad option value (it was
+  // 3 for 2 and 1 for nan); the same value in a --params file is invalid input.
+  std::ofstream(dir + "/good.json") << R"({"wood_threshold": 0.4})";
+  std::ofstream(dir + "/wood2.json") << R"({"wood_threshold": 2})";
+  for (const std::string& bad : std::vector<std::string>{"2", "nan", "-0.5", "2 --params " + dir + "/good.json"}) {
+    const RunResult r = run(kTool + " " + dir + "/p.vdb -o " + out + " --device cpu --wood-threshold " + bad + " 2>&1");
+    EXPECT_EQ(r.code, int(ExitCode::Usage)) << bad << "\n" << r.out;
+    EXPECT_NE(r.out.find("--wood-threshold must lie in [0, 1]"), std::string::npos) << r.out;
+  }
+  const RunResult wood = run(kTool + " " + dir + "/p.vdb -o " + out + " --device cpu --params " + dir + "/wood2.json 2>&1");
+  EXPECT_EQ(wood.code, int(ExitCode::InvalidInput)) << wood.out;
+  EXPECT_NE(wood.out.find("wood2.json: wood_threshold must lie in [0, 1]"), std::string::npos) << wood.out;
   EXPECT_EQ(code(dir + "/none.vdb -o " + out), int(ExitCode::Io));
   EXPECT_EQ(code(dir + "/p.vdb -o " + dir + "/missing-dir/o.vdb"), int(ExitCode::Io));
   if (cudaDeviceCount() == 0) {

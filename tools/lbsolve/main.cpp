@@ -75,8 +75,10 @@ int main(int argc, char** argv) {
     if (app.count("--sun-bases") && (!sun.empty() || !o.scene.empty()))
       throw canopy::usageError("--sun-bases applies to the 19 bases, not to --sun or --scene");
     if (!sun.empty()) o.sun = std::array<float, 3>{sun[0], sun[1], sun[2]};
-    if (woodThreshold >= 0) o.woodThreshold = woodThreshold;
-    else if (app.count("--wood-threshold")) throw canopy::usageError("--wood-threshold must lie in [0, 1]");
+    if (app.count("--wood-threshold")) {  // a command-line value: usage (1); a --params file's: invalid input (3)
+      if (!canopy::lb::woodThresholdInRange(woodThreshold)) throw canopy::usageError("--wood-threshold must lie in [0, 1]");
+      o.woodThreshold = woodThreshold;
+    }
     if (!o.scene.empty() && !o.input.empty()) throw canopy::usageError("give either an input lattice or --scene, not both");
     o.device = tool.device();
     const canopy::LbsolveReport r = canopy::lbsolve(o);

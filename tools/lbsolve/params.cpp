@@ -72,7 +72,7 @@ void LightParams::validate(const std::string& what) const {
     if (!(g[c] >= -1 && g[c] <= 1)) throw invalidInput(what + ": g must lie in [-1, 1]");
   }
   if (!(gWood >= -1 && gWood <= 1)) throw invalidInput(what + ": wood_g must lie in [-1, 1]");
-  if (!(woodThreshold >= 0 && woodThreshold <= 1))
+  if (!woodThresholdInRange(woodThreshold))
     throw invalidInput(what + ": wood_threshold must lie in [0, 1]");
 }
 

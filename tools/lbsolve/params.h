@@ -21,6 +21,9 @@
 
 namespace canopy::lb {
 
+// The range of wood_threshold (and --wood-threshold): [0, 1]; false for NaN.
+inline bool woodThresholdInRange(double t) { return t >= 0 && t <= 1; }
+
 struct LightParams {
   std::array<double, 3> sigmaA{0.109, 0.091, 0.118};
   std::array<double, 3> sigmaS{0.891, 0.909, 0.882};
