@@ -72,6 +72,13 @@ bool isTrackedInput(const struct stat& st) {
   return gTrackDepth > 0 && gInputs.count({st.st_dev, st.st_ino}) != 0;
 }
 
+// An output that was reserved and not committed no longer counts as one of the run's.
+void releaseOutput(const std::string& key) {
+  if (key.empty()) return;
+  std::lock_guard<std::mutex> lock(gTrackMutex);
+  if (gTrackDepth > 0) gOutputs.erase(key);
+}
+
 void refuseInput(const std::string& finalPath, const std::string& target) {
   struct stat st;
   if (stat(finalPath.c_str(), &st) == 0 && isTrackedInput(st))
@@ -163,8 +170,10 @@ AtomicOutput::AtomicOutput(std::string target) : target_(std::move(target)) {
       const std::string key = std::string(real) + "/" + base;
       std::free(real);
       std::lock_guard<std::mutex> lock(gTrackMutex);
-      if (gTrackDepth > 0 && !gOutputs.insert(key).second)
-        throw usageError(target_ + ": the same file is given for two outputs");
+      if (gTrackDepth > 0) {
+        if (!gOutputs.insert(key).second) throw usageError(target_ + ": the same file is given for two outputs");
+        key_ = key;
+      }
     }
   }
   std::string templ;
@@ -177,7 +186,11 @@ AtomicOutput::AtomicOutput(std::string target) : target_(std::move(target)) {
   std::vector<char> buf(templ.begin(), templ.end());
   buf.push_back('\0');
   int fd = mkstemp(buf.data());
-  if (fd < 0) throw ioError(target_ + ": cannot write output (" + errnoText() + ")");
+  if (fd < 0) {
+    const std::string why = errnoText();
+    releaseOutput(key_);
+    throw ioError(target_ + ": cannot write output (" + why + ")");
+  }
   close(fd);
   temp_ = buf.data();
   registered_ = registerTemporary(temp_);
@@ -186,6 +199,7 @@ AtomicOutput::AtomicOutput(std::string target) : target_(std::move(target)) {
 AtomicOutput::~AtomicOutput() {
   if (!committed_ && !temp_.empty()) std::remove(temp_.c_str());
   unregisterTemporary(registered_);
+  if (!committed_) releaseOutput(key_);
 }
 
 void AtomicOutput::commit() {
