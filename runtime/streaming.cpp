@@ -92,7 +92,7 @@ void Streamer::beginPass(uint32_t frameStart) {
     if (!j.ok) {
       cache_.markBad(j.page);
       ++stats_.corruptPages;
-      logWarn("canopy-play: " + j.error + " (page " + std::to_string(j.page) +
+      logWarn(j.error + " (page " + std::to_string(j.page) +
               " is not cached; its bricks render from coarser data)");
       freeBuffers_.push_back(j.buffer);
       continue;

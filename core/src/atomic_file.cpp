@@ -60,7 +60,7 @@ std::string followLinks(const std::string& target) {
 std::mutex gTrackMutex;
 int gTrackDepth = 0;
 std::set<std::pair<dev_t, ino_t>> gInputs;
-std::set<std::string> gOutputs;  // outputs' directories (real paths) + names
+std::set<std::string> gOutputs;  // committed outputs: real directory + name
 
 void noteInputStat(const struct stat& st) {
   std::lock_guard<std::mutex> lock(gTrackMutex);
@@ -72,11 +72,12 @@ bool isTrackedInput(const struct stat& st) {
   return gTrackDepth > 0 && gInputs.count({st.st_dev, st.st_ino}) != 0;
 }
 
-// An output that was reserved and not committed no longer counts as one of the run's.
-void releaseOutput(const std::string& key) {
+// A committed output of the run: a second output to the same file is refused (a reservation
+// that is never committed, e.g. an early writability check, does not count).
+void claimOutput(const std::string& key, const std::string& target) {
   if (key.empty()) return;
   std::lock_guard<std::mutex> lock(gTrackMutex);
-  if (gTrackDepth > 0) gOutputs.erase(key);
+  if (gTrackDepth > 0 && !gOutputs.insert(key).second) throw usageError(target + ": the same file is given for two outputs");
 }
 
 void refuseInput(const std::string& finalPath, const std::string& target) {
@@ -171,7 +172,7 @@ AtomicOutput::AtomicOutput(std::string target) : target_(std::move(target)) {
       std::free(real);
       std::lock_guard<std::mutex> lock(gTrackMutex);
       if (gTrackDepth > 0) {
-        if (!gOutputs.insert(key).second) throw usageError(target_ + ": the same file is given for two outputs");
+        if (gOutputs.count(key) != 0) throw usageError(target_ + ": the same file is given for two outputs");
         key_ = key;
       }
     }
@@ -186,11 +187,7 @@ AtomicOutput::AtomicOutput(std::string target) : target_(std::move(target)) {
   std::vector<char> buf(templ.begin(), templ.end());
   buf.push_back('\0');
   int fd = mkstemp(buf.data());
-  if (fd < 0) {
-    const std::string why = errnoText();
-    releaseOutput(key_);
-    throw ioError(target_ + ": cannot write output (" + why + ")");
-  }
+  if (fd < 0) throw ioError(target_ + ": cannot write output (" + errnoText() + ")");
   close(fd);
   temp_ = buf.data();
   registered_ = registerTemporary(temp_);
@@ -199,11 +196,11 @@ AtomicOutput::AtomicOutput(std::string target) : target_(std::move(target)) {
 AtomicOutput::~AtomicOutput() {
   if (!committed_ && !temp_.empty()) std::remove(temp_.c_str());
   unregisterTemporary(registered_);
-  if (!committed_) releaseOutput(key_);
 }
 
 void AtomicOutput::commit() {
   refuseInput(final_, target_);  // an input read after the output was reserved
+  claimOutput(key_, target_);
   if (writeThrough_) {
     int in = open(temp_.c_str(), O_RDONLY | O_CLOEXEC);
     int out = in < 0 ? -1 : open(final_.c_str(), O_WRONLY | O_CLOEXEC);

@@ -15,6 +15,7 @@ namespace canopy {
 namespace {
 std::atomic<bool> gQuiet{false};
 std::mutex gStderrMutex;
+std::string gToolName;  // set by Tool: warnings read "canopy-x: warning: ..." like its errors
 
 const char* kExitCodes =
     "Exit codes: 0 ok, 1 usage, 2 I/O error, 3 invalid input, 4 runtime failure, 5 unsupported.";
@@ -31,7 +32,7 @@ void logInfo(const std::string& m) {
 
 void logWarn(const std::string& m) {
   std::lock_guard<std::mutex> lock(gStderrMutex);
-  std::cerr << "warning: " << m << '\n';
+  std::cerr << (gToolName.empty() ? "" : gToolName + ": ") << "warning: " << m << '\n';
 }
 
 double secondsSince(std::chrono::steady_clock::time_point t0) {
@@ -40,6 +41,7 @@ double secondsSince(std::chrono::steady_clock::time_point t0) {
 
 Tool::Tool(std::string name, std::string description, bool withDevice)
     : name_(std::move(name)), app_(std::move(description), name_) {
+  gToolName = name_;
   app_.set_version_flag("--version", name_ + " " + versionString());
   app_.add_flag("-q,--quiet", common_.quiet, "No progress or log output on stderr");
   app_.add_flag("--json", common_.json, "Print one JSON report object on stdout");

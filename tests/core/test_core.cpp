@@ -137,17 +137,28 @@ TEST(AtomicOutput, InsideAToolRunAnInputIsNeverReplaced) {
     fs::create_symlink("in.vdb", d / "alias.vdb");
     EXPECT_EQ(errorCode([&] { canopy::writeFileAtomic((d / "alias.vdb").string(), std::string("x")); }), canopy::ExitCode::Usage);
     EXPECT_EQ(slurp(in), "input");
-    // one output file given twice in a run; a reservation dropped without commit (an early
-    // writability check) does not count
-    { canopy::AtomicOutput probe((d / "a.out").string()); }
-    canopy::writeFileAtomic((d / "a.out").string(), std::string("a"));
+    // one output file given twice in a run; a reservation that is never committed (an early
+    // writability check, alive while the real output is written) does not count
+    {
+      canopy::AtomicOutput probe((d / "a.out").string());
+      canopy::writeFileAtomic((d / "a.out").string(), std::string("a"));
+    }
+    // reserved before another output to the same file commits: refused at its own commit
+    EXPECT_EQ(errorCode([&] {
+                canopy::AtomicOutput late((d / "c.out").string());
+                std::ofstream(late.tempPath()) << "late";
+                canopy::writeFileAtomic((d / "." / "c.out").string(), std::string("c"));
+                late.commit();
+              }),
+              canopy::ExitCode::Usage);
+    EXPECT_EQ(slurp(d / "c.out"), "c");
     EXPECT_EQ(errorCode([&] { canopy::writeFileAtomic((d / "." / "a.out").string(), std::string("b")); }), canopy::ExitCode::Usage);
     EXPECT_EQ(slurp(d / "a.out"), "a");
   }
   // outside a tool's run (library use, tests) nothing is tracked
   canopy::writeFileAtomic(in.string(), std::string("rewritten"));
   EXPECT_EQ(slurp(in), "rewritten");
-  EXPECT_EQ(entries(d), 3u);  // in.vdb, alias.vdb, a.out: no temporary left
+  EXPECT_EQ(entries(d), 4u);  // in.vdb, alias.vdb, a.out, c.out: no temporary left
   fs::remove_all(d);
 }
 

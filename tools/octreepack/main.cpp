@@ -51,7 +51,7 @@ int main(int argc, char** argv) {
         tool.report()["ok"] = false;
         throw;
       }
-      canopy::logInfo(verifyPath + ": ok (" + tool.report()["pages_checked"].dump() + " pages)");
+      if (!tool.common().json) std::cout << verifyPath << ": ok (" << tool.report()["pages_checked"].dump() << " pages)\n";
     } else {
       tool.report() = op::octreepack(o);
     }

@@ -14,8 +14,8 @@
 // Inside a tool's run (InputTracking, set by canopy::Tool), the files read through
 // requireReadableFile/readFile/noteInput are remembered, and an output whose target is one of them
 // is refused (usage error) instead of replacing the input; so is a second output to the same
-// file in the same run (while the first is reserved or once it is committed: an AtomicOutput
-// dropped without commit, e.g. an early writability check, releases its file).
+// file in the same run (once one of them is committed; an AtomicOutput that is never committed,
+// e.g. an early writability check, does not count).
 #pragma once
 #include <string>
 #include <vector>
@@ -41,7 +41,7 @@ class AtomicOutput {
   std::string target_;      // as given (messages)
   std::string final_;       // where the bytes go: the target with symbolic links followed
   std::string temp_;
-  std::string key_;            // final_'s real directory + name while it counts as this run's output
+  std::string key_;            // final_'s real directory + name (tool runs only), claimed at commit
   bool writeThrough_ = false;  // final_ is a character device or FIFO: copied into, not replaced
   int registered_ = -1;        // slot in the signal handler's list of temporaries
   bool committed_ = false;
