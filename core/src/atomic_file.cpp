@@ -80,10 +80,13 @@ void claimOutput(const std::string& key, const std::string& target) {
   if (gTrackDepth > 0 && !gOutputs.insert(key).second) throw usageError(target + ": the same file is given for two outputs");
 }
 
+Error sameFileAsInput(const std::string& target) {
+  return usageError(target + ": output path is the same file as an input (not overwritten)");
+}
+
 void refuseInput(const std::string& finalPath, const std::string& target) {
   struct stat st;
-  if (stat(finalPath.c_str(), &st) == 0 && isTrackedInput(st))
-    throw usageError(target + ": output path is the same file as an input (not overwritten)");
+  if (stat(finalPath.c_str(), &st) == 0 && isTrackedInput(st)) throw sameFileAsInput(target);
 }
 
 // Temporaries that SIGINT, SIGTERM and SIGHUP remove: fixed slots, so that the handler only reads
@@ -163,7 +166,7 @@ AtomicOutput::AtomicOutput(std::string target) : target_(std::move(target)) {
     writeThrough_ = S_ISCHR(st.st_mode) || S_ISFIFO(st.st_mode);
     if (!writeThrough_ && !S_ISREG(st.st_mode))
       throw ioError(target_ + ": output path is not a regular file, a character device or a FIFO");
-    if (isTrackedInput(st)) throw usageError(target_ + ": output path is the same file as an input (not overwritten)");
+    if (isTrackedInput(st)) throw sameFileAsInput(target_);
   }
   if (!writeThrough_) {
     char* real = realpath(dir.c_str(), nullptr);
