@@ -19,11 +19,22 @@
 namespace fs = std::filesystem;
 
 namespace {
+// One directory per test process (CTest runs each test in its own), removed when the process's
+// tests end, whatever each test left in it.
+fs::path tempDirPath() { return fs::temp_directory_path() / ("canopy_core_" + std::to_string(getpid())); }
 fs::path tempDir() {
-  fs::path d = fs::temp_directory_path() / ("canopy_core_" + std::to_string(getpid()));
+  fs::path d = tempDirPath();
   fs::create_directories(d);
   return d;
 }
+class RemoveTempDir : public ::testing::Environment {
+ public:
+  void TearDown() override {
+    std::error_code ec;
+    fs::remove_all(tempDirPath(), ec);
+  }
+};
+[[maybe_unused]] ::testing::Environment* const kRemoveTempDir = ::testing::AddGlobalTestEnvironment(new RemoveTempDir);
 std::string slurp(const fs::path& p) {
   std::ifstream f(p, std::ios::binary);
   return std::string(std::istreambuf_iterator<char>(f), {});
