@@ -60,6 +60,28 @@ done
 ((killed > 0)) || { echo "FAIL: no build was still running when killed"; exit 1; }
 echo "killed $killed build(s) mid-way; each recovered"
 
+echo "== an output path naming the run's own input is refused (exit 1) and the input is left as it was"
+refused() {  # refused INPUT TOOL ARGS...: the tool must exit 1, say so on one line, leave INPUT's bytes
+  local in=$1; shift
+  local before; before=$(sha256sum "$in")
+  local rc=0; "$@" -q 2> "$T/refused.err" || rc=$?
+  [[ $rc == 1 ]] || { echo "FAIL: '$*' exited $rc, expected 1"; cat "$T/refused.err"; exit 1; }
+  grep -q "output path is the same file as an input" "$T/refused.err" || { echo "FAIL: '$*' said:"; cat "$T/refused.err"; exit 1; }
+  [[ $(wc -l < "$T/refused.err") == 1 ]] || { echo "FAIL: '$*' printed more than one line"; cat "$T/refused.err"; exit 1; }
+  [[ $(sha256sum "$in") == "$before" ]] || { echo "FAIL: '$*' changed $in"; exit 1; }
+}
+refused "$D/sample.glb" "$BIN/canopy-voxelize" -r 24 "$D/sample.glb" -o "$D/sample.glb"
+refused "$D/sample.density.vdb" "$BIN/canopy-lbsolve" --device cpu "$D/sample.density.vdb" -o "$D/./sample.density.vdb"
+refused "$D/sample.light.vdb" "$BIN/canopy-haar" "$D/sample.light.vdb" -o "$D/sample.light.vdb"
+ln -sf sample.light.chaar "$D/alias.chaar"  # through a symbolic link too
+refused "$D/sample.light.chaar" "$BIN/canopy-octreepack" "$D/sample.density.vdb" "$D/sample.light.chaar" -o "$D/alias.chaar"
+rm "$D/alias.chaar"
+cp "$D/sample.canopy" "$T/packed.png"  # canopy-play writes only .png/.exr; the file, not its name, is read
+refused "$T/packed.png" "$BIN/canopy-play" --device cpu --size 16x16 "$T/packed.png" -o "$T/packed.png"
+rm "$T/packed.png"
+if ls -A "$D" | grep -q canopy-tmp; then echo "FAIL: temporaries left in $D"; ls -la "$D"; exit 1; fi
+check_all "$D" > /dev/null
+
 echo "== two clean builds give identical bytes"
 run_make "$T/b" demo > /dev/null
 for f in sample.glb sample.density.vdb sample.light.vdb sample.light.chaar sample.canopy sample.png; do

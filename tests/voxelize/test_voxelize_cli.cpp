@@ -320,6 +320,23 @@ TEST_F(VoxelizeCli, EmbeddedAndExternalImagesGiveTheSameLattice) {
   EXPECT_EQ(density[0], density[2]);
 }
 
+// A .gltf's external buffer and image are inputs of the run: an output path naming one of them
+// (or the .gltf) is refused with a usage error and the file keeps its bytes.
+TEST_F(VoxelizeCli, OutputNamingAnExternalBufferOrImageIsRefused) {
+  writeSampleGltf(dir, "external.gltf", false);
+  for (const char* name : {"external.gltf", "sample.bin", "leaf.png"}) {
+    SCOPED_TRACE(name);
+    const std::string path = dir + "/" + name;
+    const auto before = readBytes(path);
+    const RunResult r = run("'" + dir + "/external.gltf' -q -r 16 -o '" + path + "'", dir);
+    EXPECT_EQ(r.code, 1) << r.err;
+    EXPECT_NE(r.err.find(path + ": output path is the same file as an input"), std::string::npos) << r.err;
+    EXPECT_EQ(lines(r.err), 1) << r.err;
+    EXPECT_EQ(readBytes(path), before);
+    EXPECT_EQ(leftovers(dir), 0);
+  }
+}
+
 TEST_F(VoxelizeCli, JsonReportAndInfo) {
   const std::string glb = dir + "/rep.glb", vdb = dir + "/rep.vdb";
   ASSERT_EQ(run("--write-sample '" + glb + "'", dir).code, 0);

@@ -417,6 +417,14 @@ tinygltf::Model parseModel(const uint8_t* data, size_t size, bool binary, const 
   if (size > 0xFFFFFFFFu) throw unsupported(name + ": glTF files over 4 GiB are not supported");
   preflightDraco(data, size, binary, name);
   tinygltf::TinyGLTF loader;
+  // External buffers and images are inputs of the run too: an output path naming one of them is
+  // refused like one naming the glTF itself (canopy/atomic_file.h).
+  loader.SetFsCallbacks({&tinygltf::FileExists, &tinygltf::ExpandFilePath,
+                         [](std::vector<unsigned char>* out, std::string* err, const std::string& path, void* user) {
+                           noteInput(path);
+                           return tinygltf::ReadWholeFile(out, err, path, user);
+                         },
+                         &tinygltf::WriteWholeFile, nullptr});
   tinygltf::Model model;
   std::string err, warn;
   const bool ok = binary
