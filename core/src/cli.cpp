@@ -40,9 +40,9 @@ double secondsSince(std::chrono::steady_clock::time_point t0) {
 }
 
 Tool::Tool(std::string name, std::string description, bool withDevice)
-    : name_(std::move(name)), app_(std::move(description), name_) {
-  gToolName = name_;
-  app_.set_version_flag("--version", name_ + " " + versionString());
+    : name_(std::move(name)), program_(name_.substr(0, name_.find(' '))), app_(std::move(description), name_) {
+  gToolName = program_;
+  app_.set_version_flag("--version", program_ + " " + versionString());
   app_.add_flag("-q,--quiet", common_.quiet, "No progress or log output on stderr");
   app_.add_flag("--json", common_.json, "Print one JSON report object on stdout");
   if (withDevice)
@@ -61,7 +61,7 @@ int Tool::run(int argc, char** argv, const std::function<void()>& body) {
   } catch (const CLI::CallForVersion& e) {
     return app_.exit(e);
   } catch (const CLI::ParseError& e) {
-    std::cerr << name_ << ": error: " << e.what() << " (see " << name_ << " --help)\n";
+    std::cerr << program_ << ": error: " << e.what() << " (see " << name_ << " --help)\n";
     return int(ExitCode::Usage);
   }
   setQuiet(common_.quiet);
@@ -70,17 +70,17 @@ int Tool::run(int argc, char** argv, const std::function<void()>& body) {
     InputTracking tracking;  // an output may not replace a file this run reads (atomic_file.h)
     body();
   } catch (const Error& e) {
-    std::cerr << name_ << ": error: " << e.what() << (e.code() == ExitCode::Usage ? " (see " + name_ + " --help)" : std::string()) << '\n';
+    std::cerr << program_ << ": error: " << e.what() << (e.code() == ExitCode::Usage ? " (see " + name_ + " --help)" : std::string()) << '\n';
     code = int(e.code());
   } catch (const std::bad_alloc&) {
-    std::cerr << name_ << ": error: out of memory\n";
+    std::cerr << program_ << ": error: out of memory\n";
     code = int(ExitCode::Runtime);
   } catch (const std::exception& e) {
-    std::cerr << name_ << ": error: " << e.what() << '\n';
+    std::cerr << program_ << ": error: " << e.what() << '\n';
     code = int(ExitCode::Runtime);
   }
   if (common_.json) {
-    report_["tool"] = name_;
+    report_["tool"] = program_;
     report_["version"] = versionString();
     report_["exit_code"] = code;
     std::cout << report_.dump(2) << std::endl;

@@ -372,9 +372,14 @@ TEST_F(VoxelizeCli, InfoRejectsFilesThatAreNotLattices) {
   writeText(dir + "/text.vdb", "not a vdb at all");
   RunResult r = run("info '" + dir + "/text.vdb'", dir);
   EXPECT_EQ(r.code, 3);
-  EXPECT_NE(r.err.find("text.vdb"), std::string::npos);
+  // The prefix every canopy-voxelize error has (not "canopy-voxelize info: error:").
+  EXPECT_EQ(r.err.rfind("canopy-voxelize: error: " + dir + "/text.vdb: ", 0), 0u) << r.err;
   r = run("info '" + dir + "/missing.vdb'", dir);
   EXPECT_EQ(r.code, 2);
+  r = run("info", dir);  // a usage error points at the subcommand's help
+  EXPECT_EQ(r.code, 1);
+  EXPECT_EQ(r.err.rfind("canopy-voxelize: error: ", 0), 0u) << r.err;
+  EXPECT_NE(r.err.find("(see canopy-voxelize info --help)"), std::string::npos) << r.err;
   // A truncated lattice.
   const std::string glb = dir + "/t.glb", vdb = dir + "/t.vdb";
   ASSERT_EQ(run("--write-sample '" + glb + "'", dir).code, 0);

@@ -43,7 +43,8 @@ class Tool {
   int run(int argc, char** argv, const std::function<void()>& body);
 
  private:
-  std::string name_;
+  std::string name_;     // "canopy-x" or, for a subcommand with its own Tool, "canopy-x info"
+  std::string program_;  // "canopy-x": the prefix of errors and warnings, the report's "tool"
   CLI::App app_;
   CommonOptions common_;
   nlohmann::json report_ = nlohmann::json::object();
