@@ -149,11 +149,13 @@ std::vector<uint8_t> binaryCubePly(bool bigEndian) {
 
 std::vector<uint8_t> bytesOf(const std::string& s) { return std::vector<uint8_t>(s.begin(), s.end()); }
 
+using MemoryLoader = mesh::Mesh (*)(const uint8_t*, size_t, const std::string&);
+
 // Loads from memory: 0 on success, else the error's exit code; `what` gets the message.
-int tryPly(const std::vector<uint8_t>& b, std::string* what = nullptr) {
+int tryLoad(MemoryLoader load, const char* name, const std::vector<uint8_t>& b, std::string* what = nullptr) {
   try {
-    const mesh::Mesh m = mesh::loadPlyFromMemory(b.data(), b.size(), "mem.ply");
-    mesh::requireFinite(m, "mem.ply");
+    const mesh::Mesh m = load(b.data(), b.size(), name);
+    mesh::requireFinite(m, name);
     return 0;
   } catch (const Error& e) {
     EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos) << "one-line errors";
@@ -162,12 +164,16 @@ int tryPly(const std::vector<uint8_t>& b, std::string* what = nullptr) {
   }
 }
 
+int tryPly(const std::vector<uint8_t>& b, std::string* what = nullptr) {
+  return tryLoad(mesh::loadPlyFromMemory, "mem.ply", b, what);
+}
+
 // Runs f under a watchdog: OpenMesh's PLY reader used to loop forever on truncated files, and
 // such a hang must fail this test rather than stall the suite.
 void withinSeconds(int seconds, const std::function<void()>& f) {
   auto done = std::async(std::launch::async, f);
   if (done.wait_for(std::chrono::seconds(seconds)) != std::future_status::ready) {
-    std::cerr << "the PLY reader did not finish within " << seconds << " s (hang)\n";
+    std::cerr << "the reader did not finish within " << seconds << " s (hang)\n";
     std::_Exit(1);
   }
   done.get();
@@ -264,6 +270,122 @@ TEST(PlyReader, PreciseReasons) {
     SCOPED_TRACE(c.ply);
     std::string what;
     EXPECT_EQ(tryPly(bytesOf(c.ply), &what), int(ExitCode::InvalidInput));
+    EXPECT_NE(what.find(c.reason), std::string::npos) << what;
+  }
+}
+
+// ---- OFF (off_loader.cpp) --------------------------------------------------------------------
+namespace {
+
+// The unit cube as 6 quads: COFF with green vertices (integers, alpha included), comments and
+// blank lines in between, or plain OFF with red faces given as floats.
+std::string cubeOff(bool vertexColors) {
+  std::string s = vertexColors ? "# a cube\nCOFF\n\n8 6 0  # counts\n" : "OFF 8 6 12\n";
+  for (auto& v : kCubeV)
+    s += std::to_string(v[0]) + " " + std::to_string(v[1]) + " " + std::to_string(v[2]) +
+         (vertexColors ? " 0 255 0 255\n" : "\n");
+  for (auto& f : kCubeF)
+    s += "4 " + std::to_string(f[0]) + " " + std::to_string(f[1]) + " " + std::to_string(f[2]) + " " +
+         std::to_string(f[3]) + (vertexColors ? "\n" : " 1.0 0.0 0.0 1.0\n");
+  return s;
+}
+
+int tryOff(const std::vector<uint8_t>& b, std::string* what = nullptr) {
+  return tryLoad(mesh::loadOffFromMemory, "mem.off", b, what);
+}
+
+}  // namespace
+
+TEST(OffReader, CubesWithVertexAndFaceColoursLoad) {
+  const mesh::Mesh ply = [] {
+    const auto a = bytesOf(asciiCubePly());
+    return mesh::loadPlyFromMemory(a.data(), a.size(), "a.ply");
+  }();
+  for (bool vertexColors : {true, false}) {
+    SCOPED_TRACE(vertexColors ? "COFF" : "OFF with face colours");
+    const auto b = bytesOf(cubeOff(vertexColors));
+    const mesh::Mesh m = mesh::loadOffFromMemory(b.data(), b.size(), "cube.off");
+    ASSERT_EQ(m.triangles.size(), 12u);  // 6 quads fanned like the PLY reader's
+    for (size_t t = 0; t < 12; ++t)
+      for (int v = 0; v < 3; ++v)
+        for (int k = 0; k < 3; ++k) EXPECT_EQ(m.triangles[t].p[size_t(v)][size_t(k)], ply.triangles[t].p[size_t(v)][size_t(k)]);
+    ASSERT_TRUE(m.hasTriangleColors);
+    EXPECT_FLOAT_EQ(m.triangles[5].color[0], vertexColors ? 0.f : 1.f);
+    EXPECT_FLOAT_EQ(m.triangles[5].color[1], vertexColors ? 1.f : 0.f);
+    EXPECT_FLOAT_EQ(m.triangles[5].color[2], 0.f);
+  }
+  const auto plain = bytesOf("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+  EXPECT_FALSE(mesh::loadOffFromMemory(plain.data(), plain.size(), "p.off").hasTriangleColors);
+}
+
+TEST(OffReader, EveryTruncatedPrefixFinishes) {
+  withinSeconds(120, [] {
+    for (bool vertexColors : {true, false}) {
+      const auto whole = bytesOf(cubeOff(vertexColors));
+      int failed = 0;
+      for (size_t n = 0; n < whole.size(); ++n) {
+        const std::vector<uint8_t> cut(whole.begin(), whole.begin() + long(n));
+        const int code = tryOff(cut);
+        EXPECT_TRUE(code == 0 || code == int(ExitCode::InvalidInput)) << n << " bytes: code " << code;
+        failed += code != 0;
+      }
+      // Valid prefixes: the last face cut inside or after its last value (with face colours, a
+      // colour of fewer than 3 values is a colour-map index or nothing).
+      EXPECT_GE(failed, int(whole.size()) - (vertexColors ? 2 : 18));
+      EXPECT_EQ(tryOff(whole), 0);
+    }
+  });
+}
+
+TEST(OffReader, FlippedBytesNeverCrashOrHang) {
+  withinSeconds(120, [] {
+    std::mt19937 rng(8765);
+    for (bool vertexColors : {true, false})
+      for (int trial = 0; trial < 2000; ++trial) {
+        auto b = bytesOf(cubeOff(vertexColors));
+        for (int f = 0; f < 1 + trial % 3; ++f) {
+          const size_t at = rng() % b.size();
+          b[at] = uint8_t(b[at] ^ (1u << (rng() % 8)));
+        }
+        const int code = tryOff(b);
+        EXPECT_TRUE(code == 0 || code == int(ExitCode::InvalidInput) || code == int(ExitCode::Unsupported)) << "code " << code;
+      }
+  });
+}
+
+TEST(OffReader, PreciseReasons) {
+  struct Case {
+    std::string off, reason;
+    ExitCode code = ExitCode::InvalidInput;
+  };
+  const std::string v3 = "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n";
+  const std::vector<Case> cases = {
+      {"", "mem.off: empty OFF file"},
+      {"# only a comment\n", "mem.off: empty OFF file"},
+      {"PLY\n", "not an OFF file"},
+      {"OFF\n", "truncated OFF file (no vertex and face counts)"},
+      {"OFF\n-3 1 0\n", "mem.off: line 2: bad OFF counts"},
+      {"OFF\n3 x 0\n", "mem.off: line 2: bad OFF counts"},
+      {"OFF\n4000000000 2000000000 0\n0 0 0\n",
+       "mem.off: the OFF header declares 4000000000 vertices and 2000000000 faces, more than its 34 bytes can hold"},
+      {"OFF\n3 1 0\n0 0 0\n1 0 0\n", "truncated OFF file (2 of 3 vertices)"},
+      {v3, "truncated OFF file (0 of 1 faces)"},
+      {"OFF\n3 1 0\n0 0 0\n1 0\n0 1 0\n3 0 1 2\n", "mem.off: line 4: vertex 1 (counting from 0) has 2 values, 3 expected"},
+      {"OFF\n3 1 0\n0 0 0\n1 0 0\n0 nan 0\n3 0 1 2\n", "mem.off: line 5: vertex 2 (counting from 0) has a NaN or infinite coordinate"},
+      {"OFF\n3 1 0\n0 0 0\n1 0 0\n0 y 0\n3 0 1 2\n", "vertex 2 (counting from 0) has a coordinate 'y' that is not a number"},
+      {"COFF\n3 1 0\n0 0 0 1 1\n1 0 0 1 1 1\n0 1 0 1 1 1\n3 0 1 2\n", "vertex 0 (counting from 0) has 5 values, 6 expected"},
+      {v3 + "3 0 1 7\n", "mem.off: line 6: face 0 (counting from 0) refers to vertex '7', but the file has 3 vertices"},
+      {v3 + "3 0 1 -1\n", "refers to vertex '-1'"},
+      {v3 + "4 0 1 2\n", "face 0 (counting from 0) is not a corner count followed by that many vertex indices"},
+      {v3 + "3 0 1 2 x 0 0\n", "colour value 'x' is not a number"},
+      {v3 + "3 0 1 2\n3 0 1 2\n", "mem.off: line 7: data after the last of the 1 faces the header declares"},
+      {"OFF BINARY\n", "binary OFF files are not supported", ExitCode::Unsupported},
+      {"4OFF\n1 0 0\n0 0 0 0\n", "4-D and n-D OFF files are not supported", ExitCode::Unsupported},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.off);
+    std::string what;
+    EXPECT_EQ(tryOff(bytesOf(c.off), &what), int(c.code));
     EXPECT_NE(what.find(c.reason), std::string::npos) << what;
   }
 }

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <map>
 #include <random>
 #include <set>
@@ -452,5 +453,37 @@ TEST(VoxelizeFormats, OffStlPlyObjLoad) {
     if (std::string(ext) == "obj") {
       EXPECT_EQ(r.stats.woodTriangles, 4u);
     }
+    if (std::string(ext) != "ply") {  // no colour in the file: the default leaf/wood albedo
+      EXPECT_FALSE(m.hasTriangleColors);
+      EXPECT_GT(r.cells[0].albedo[1], 0.05);
+    }
   }
+  // OFF with '#' comments and blank lines between its elements (OpenMesh alone read no vertex past
+  // a comment) and with vertex colours; a binary STL whose 80-byte header starts with "solid".
+  std::string coff = "# a comment before the header\nCOFF\n# counts next\n8 12 0\n\n";
+  for (auto s : v) coff += std::string(s) + " 0 255 0 255  # green\n";
+  for (auto& t : f) coff += "3 " + std::to_string(t[0]) + " " + std::to_string(t[1]) + " " + std::to_string(t[2]) + "\n";
+  canopy::test::writeText(dir + "/comments.off", coff);
+  std::string bin = "solid but binary";
+  bin.resize(80, ' ');
+  const uint32_t n = 12;
+  bin.append(reinterpret_cast<const char*>(&n), 4);
+  for (auto& t : f) {
+    bin.append(12, '\0');
+    for (int k = 0; k < 3; ++k) {
+      float p[3];
+      std::sscanf(v[t[k]], "%f %f %f", &p[0], &p[1], &p[2]);
+      bin.append(reinterpret_cast<const char*>(p), 12);
+    }
+    bin.append(2, '\0');
+  }
+  canopy::test::writeText(dir + "/solid_header.stl", bin);
+  const mesh::Mesh c = mesh::loadMesh(dir + "/comments.off");
+  EXPECT_EQ(c.triangles.size(), 12u);
+  ASSERT_TRUE(c.hasTriangleColors);
+  EXPECT_NEAR(c.triangles[0].color[1], 1.0, 1e-6);
+  EXPECT_NEAR(c.triangles[0].color[0], 0.0, 1e-6);
+  const mesh::Mesh sh = mesh::loadMesh(dir + "/solid_header.stl");
+  EXPECT_EQ(sh.triangles.size(), 12u);
+  EXPECT_FALSE(sh.hasTriangleColors);
 }

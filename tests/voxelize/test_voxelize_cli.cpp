@@ -173,6 +173,14 @@ TEST_F(VoxelizeCli, BadInputsFailCleanly) {
          writeText(d + "/nobuf.gltf", g.doc.dump());
        },
        "nobuf.gltf", "", 2, "nobuf.gltf"},
+      {"gltf whose buffer is a FIFO (tinygltf would block reading it)",
+       [](const std::string& d) {
+         GltfParts g = triangleGltf(oneTriangle(), {0, 1, 2});
+         g.doc["buffers"][0]["uri"] = "pipe.bin";
+         writeText(d + "/fifo.gltf", g.doc.dump());
+         ::mkfifo((d + "/pipe.bin").c_str(), 0600);
+       },
+       "fifo.gltf", "", 2, "pipe.bin : not a regular file)"},
       {"gltf with missing image",
        [](const std::string& d) { writeSampleGltf(d, "noimg.gltf", false, "missing.png"); }, "noimg.gltf", "", 2,
        "noimg.gltf"},
@@ -237,7 +245,43 @@ TEST_F(VoxelizeCli, BadInputsFailCleanly) {
        "nan.ply", "", 3, "nan.ply: triangle 1 has a NaN or infinite vertex coordinate"},
       {"NaN vertex in OFF",
        [](const std::string& d) { writeText(d + "/nan2.off", "OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n0 nan 1\n3 0 1 2\n3 0 1 3\n"); },
-       "nan2.off", "", 3, "nan2.off: vertex 3 (counting from 0) has a NaN or infinite coordinate"},
+       "nan2.off", "", 3, "nan2.off: line 6: vertex 3 (counting from 0) has a NaN or infinite coordinate"},
+      // OpenMesh's OFF reader (replaced by off_loader.cpp) reserved what the header declares (out
+      // of memory, no file named), read truncated files as far as they went and dropped faces with
+      // bad indices silently; its OBJ and STL readers still read truncated files and drop bad faces.
+      {"OFF with absurd counts",
+       [](const std::string& d) { writeText(d + "/big.off", "OFF\n4000000000 2000000000 0\n0 0 0\n"); }, "big.off", "", 3,
+       "big.off: the OFF header declares 4000000000 vertices and 2000000000 faces, more than its 34 bytes can hold"},
+      {"OFF with a negative count", [](const std::string& d) { writeText(d + "/neg.off", "OFF\n-3 1 0\n"); }, "neg.off", "", 3,
+       "neg.off: line 2: bad OFF counts"},
+      {"OFF cut inside its faces",
+       [](const std::string& d) { writeText(d + "/cut.off", "OFF\n4 3 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n3 0 1 3\n"); },
+       "cut.off", "", 3, "cut.off: truncated OFF file (2 of 3 faces)"},
+      {"OFF face index out of range",
+       [](const std::string& d) { writeText(d + "/idx.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 99\n"); }, "idx.off", "",
+       3, "idx.off: line 6: face 0 (counting from 0) refers to vertex '99', but the file has 3 vertices"},
+      {"OBJ face index out of range",
+       [](const std::string& d) { writeText(d + "/idx.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 99\n"); }, "idx.obj",
+       "", 3, "idx.obj: line 5: face refers to vertex 99, but the file has 3 vertices"},
+      {"OBJ relative index before the first vertex",
+       [](const std::string& d) { writeText(d + "/rel.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -4\n"); }, "rel.obj", "", 3,
+       "rel.obj: line 4: face refers to vertex -4, but only 3 vertices precede it"},
+      {"OBJ vertex index 0",
+       [](const std::string& d) { writeText(d + "/zero.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n"); }, "zero.obj", "", 3,
+       "zero.obj: line 4: face refers to vertex 0"},
+      {"binary STL cut short",
+       [](const std::string& d) {
+         auto b = binaryStl({{0, 0, 0, 1, 0, 0, 0, 1, 0}, {0, 0, 0, 1, 0, 0, 0, 0, 1}});
+         b.resize(b.size() - 10);
+         writeBytes(d + "/cut.stl", b);
+       },
+       "cut.stl", "", 3, "cut.stl: truncated or corrupt binary STL (its header declares 2 triangles, 184 bytes; the file has 174)"},
+      {"ASCII STL cut short",
+       [](const std::string& d) {
+         writeText(d + "/cuta.stl", "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\n"
+                                    "endloop\nendfacet\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\n");
+       },
+       "cuta.stl", "", 3, "cuta.stl: truncated ASCII STL (no 'endsolid')"},
       // Whole-scene voxelisation applies the node matrix rule that --instances applies.
       {"non-affine node matrix",
        [](const std::string& d) { writeNodeMatrixGltf(d + "/proj.glb", {1, 0, 0, 0.5, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1}); },

@@ -5,6 +5,7 @@
 // file), so preflightDraco() checks those indices and decodes the Draco bitstreams once before
 // tinygltf sees them, and readAccessor() checks every accessor against its buffer before reading.
 #include <draco/compression/decode.h>
+#include <sys/stat.h>
 #include <tiny_gltf.h>
 
 #include <cmath>
@@ -418,9 +419,20 @@ tinygltf::Model parseModel(const uint8_t* data, size_t size, bool binary, const 
   preflightDraco(data, size, binary, name);
   tinygltf::TinyGLTF loader;
   // External buffers and images are inputs of the run too: an output path naming one of them is
-  // refused like one naming the glTF itself (canopy/atomic_file.h).
-  loader.SetFsCallbacks({&tinygltf::FileExists, &tinygltf::ExpandFilePath,
+  // refused like one naming the glTF itself (canopy/atomic_file.h). Only regular files are read
+  // (a URI naming a FIFO or a device would block or never end).
+  // (tinygltf's own FileExists opens the file, which blocks on a FIFO: stat instead).
+  loader.SetFsCallbacks({[](const std::string& path, void*) {
+                           struct stat st;
+                           return stat(path.c_str(), &st) == 0;
+                         },
+                         &tinygltf::ExpandFilePath,
                          [](std::vector<unsigned char>* out, std::string* err, const std::string& path, void* user) {
+                           struct stat st;
+                           if (stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode)) {
+                             if (err) *err += "not a regular file";  // tinygltf prefixes the path
+                             return false;
+                           }
                            noteInput(path);
                            return tinygltf::ReadWholeFile(out, err, path, user);
                          },
@@ -435,7 +447,8 @@ tinygltf::Model parseModel(const uint8_t* data, size_t size, bool binary, const 
     const std::string e = oneLine(err.empty() ? warn : err);
     // A missing external buffer or image is an I/O problem; anything else is malformed content.
     const bool io = e.find("ile not found") != std::string::npos ||
-                    e.find("Failed to load external") != std::string::npos;
+                    e.find("Failed to load external") != std::string::npos ||
+                    e.find("not a regular file") != std::string::npos;
     throw Error(io ? ExitCode::Io : ExitCode::InvalidInput,
                 name + ": invalid glTF (" + (e.empty() ? "unknown error" : e) + ")");
   }

@@ -1,8 +1,9 @@
 // mesh_io.h: loads plant meshes into one flat, world-space triangle soup with materials.
 //
 // Formats: glTF 2.0 (.gltf/.glb, KHR_draco_mesh_compression, embedded and external images) via
-// tinygltf compiled with Draco (gltf_loader.cpp); OBJ, STL, OFF via OpenMesh (openmesh_loader.cpp);
-// PLY by Canopy's own reader (ply_loader.cpp: OpenMesh's hangs on truncated files).
+// tinygltf compiled with Draco (gltf_loader.cpp); OBJ and STL via OpenMesh (openmesh_loader.cpp);
+// PLY and ASCII OFF by Canopy's own readers (ply_loader.cpp, off_loader.cpp: OpenMesh's hang on
+// truncated PLY, and run out of memory or drop data on bad OFF).
 // Every loader validates its input and throws canopy::Error naming the file; nothing here trusts
 // the file. Positions are doubles in the file's units (metres for glTF), glTF node transforms
 // already applied. Reusable by other tools: gltf_scene.h turns listGltfScene() into the Canopy
@@ -91,8 +92,11 @@ SceneInfo listGltfScene(const std::string& path);
 Mesh loadGltfFromMemory(const uint8_t* data, size_t size, bool binary, const std::string& baseDir,
                         const std::string& name, const LoadOptions& options = {});
 Mesh loadGltfFile(const std::string& path, const LoadOptions& options = {});
-// OBJ, STL, OFF (and PLY, which it hands to loadPly).
+// OBJ, STL (and PLY and OFF, which it hands to loadPly and loadOff).
 Mesh loadWithOpenMesh(const std::string& path);
+// ASCII OFF ([ST][C][N]OFF): every count, coordinate, index and colour is checked.
+Mesh loadOff(const std::string& path);
+Mesh loadOffFromMemory(const uint8_t* data, size_t size, const std::string& name);
 // PLY (ascii, binary little/big endian): every header field, length and index is checked.
 Mesh loadPly(const std::string& path);
 Mesh loadPlyFromMemory(const uint8_t* data, size_t size, const std::string& name);

@@ -1,12 +1,13 @@
-// openmesh_loader.cpp: OBJ, STL and OFF through OpenMesh, and loadMesh()'s format dispatch (PLY
-// goes to Canopy's own reader, ply_loader.cpp).
+// openmesh_loader.cpp: OBJ and STL through OpenMesh, and loadMesh()'s format dispatch (PLY and
+// OFF go to Canopy's own readers, ply_loader.cpp and off_loader.cpp).
 //
 // OpenMesh reads the geometry (polygons are triangulated as fans) and face or vertex colours where
 // the format has them. It does not keep OBJ material names, which Canopy needs to tell wood from
 // leaves, so scanObjMaterials() reads the `usemtl` runs and, when OpenMesh produced exactly the
 // triangles those runs predict (the usual case), assigns each triangle its material by order.
-// OpenMesh silently drops vertices or facets with NaN coordinates (OBJ, OFF, binary and ASCII
-// STL), so those files are scanned for non-finite coordinates before OpenMesh reads them.
+// OpenMesh silently drops what it cannot use (vertices or facets with NaN coordinates, OBJ faces
+// with bad indices) and reads a truncated STL as far as it goes, so OBJ and STL files are checked
+// here before OpenMesh reads them.
 #include <OpenMesh/Core/IO/MeshIO.hh>
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 
@@ -38,28 +39,35 @@ using OmMesh = OpenMesh::TriMesh_ArrayKernelT<OmTraits>;
 struct ObjMaterials {
   std::vector<std::string> names;        // in order of first use; [0] = "default"
   std::vector<int> triangleMaterial;     // one per predicted triangle
-  long nonFiniteVertex = -1;             // 1-based index of the first `v` with NaN/inf, or -1
 };
 
+// Reads an OBJ's `v`, `f` and `usemtl` lines before OpenMesh does, which silently drops what it
+// cannot use: vertices with NaN/inf coordinates (refused here) and faces whose vertex index is 0,
+// out of range or fewer than three (refused here, with the line).
 ObjMaterials scanObjMaterials(const std::string& path) {
   ObjMaterials m;
   m.names.push_back("default");
   std::map<std::string, int> index{{"default", 0}};
   int current = 0;
   long vertices = 0;
+  long lineNo = 0;
+  long long maxIndex = 0;
+  long maxIndexLine = 0;  // the largest positive index (checked at the end)
   std::ifstream in(path);
   std::string line;
+  auto at = [&] { return path + ": line " + std::to_string(lineNo) + ": "; };
   while (std::getline(in, line)) {
+    ++lineNo;
     if (line.size() < 2) continue;
     if (line[0] == 'v' && (line[1] == ' ' || line[1] == '\t')) {
-      // OpenMesh silently drops vertices it cannot parse ("nan", "inf"): catch them here.
       ++vertices;
       const char* p = line.c_str() + 2;
-      for (int k = 0; k < 3 && m.nonFiniteVertex < 0; ++k) {
+      for (int k = 0; k < 3; ++k) {
         char* end = nullptr;
         const double v = std::strtod(p, &end);
         if (end == p) break;
-        if (!std::isfinite(v)) m.nonFiniteVertex = vertices;
+        if (!std::isfinite(v))
+          throw invalidInput(path + ": vertex " + std::to_string(vertices) + " has a NaN or infinite coordinate");
         p = end;
       }
       continue;
@@ -74,75 +82,67 @@ ObjMaterials scanObjMaterials(const std::string& path) {
       std::istringstream ss(line.substr(2));
       std::string tok;
       int corners = 0;
-      while (ss >> tok) ++corners;
+      while (ss >> tok) {
+        ++corners;
+        char* end = nullptr;
+        const long long v = std::strtoll(tok.c_str(), &end, 10);  // "v", "v/vt", "v//vn", "v/vt/vn"
+        if (end == tok.c_str() || (*end != '\0' && *end != '/'))
+          throw invalidInput(at() + "face corner '" + tok + "' is not a vertex index");
+        if (v == 0) throw invalidInput(at() + "face refers to vertex 0 (OBJ counts from 1)");
+        if (v < 0 && -v > vertices)
+          throw invalidInput(at() + "face refers to vertex " + tok.substr(0, size_t(end - tok.c_str())) + ", but only " +
+                             std::to_string(vertices) + " vertices precede it");
+        if (v > maxIndex) maxIndex = v, maxIndexLine = lineNo;
+      }
+      if (corners < 3) throw invalidInput(at() + "face has " + std::to_string(corners) + " corners (at least 3 needed)");
       for (int t = 0; t + 2 < corners; ++t) m.triangleMaterial.push_back(current);
     }
   }
+  if (maxIndex > vertices)
+    throw invalidInput(path + ": line " + std::to_string(maxIndexLine) + ": face refers to vertex " +
+                       std::to_string(maxIndex) + ", but the file has " + std::to_string(vertices) + " vertices");
   return m;
 }
 
-// A binary STL (84 + 50 n bytes): the 0-based facet with a non-finite corner, or -1.
-long nonFiniteBinaryStlFacet(const std::vector<unsigned char>& b) {
-  if (b.size() < 84) return -1;
-  uint32_t n;
-  std::memcpy(&n, b.data() + 80, 4);
-  if (b.size() != 84 + 50 * uint64_t(n)) return -1;
-  for (uint32_t i = 0; i < n; ++i)
-    for (int k = 0; k < 9; ++k) {
-      float v;
-      std::memcpy(&v, b.data() + 84 + 50 * size_t(i) + 12 + 4 * size_t(k), 4);
-      if (!std::isfinite(v)) return long(i);
-    }
-  return -1;
-}
-
-// An ASCII STL: the 0-based facet whose `vertex` line has a non-finite number, or -1.
-long nonFiniteAsciiStlFacet(const std::vector<unsigned char>& b) {
-  std::istringstream in(std::string(b.begin(), b.end()));
+// An STL's structure, before OpenMesh reads it (OpenMesh reads a truncated file as far as it goes
+// and silently drops facets with NaN corners). A file of exactly 84 + 50 n bytes, n the count at
+// byte 80, is binary (even when its header starts with "solid", as some exporters write); any
+// other file must be ASCII: "solid" first, "endsolid" last, and finite `vertex` coordinates.
+void checkStl(const std::vector<unsigned char>& b, const std::string& path) {
+  uint32_t n = 0;
+  if (b.size() >= 84) std::memcpy(&n, b.data() + 80, 4);
+  if (b.size() >= 84 && b.size() == 84 + 50 * uint64_t(n)) {
+    for (uint32_t i = 0; i < n; ++i)
+      for (int k = 0; k < 9; ++k) {
+        float v;
+        std::memcpy(&v, b.data() + 84 + 50 * size_t(i) + 12 + 4 * size_t(k), 4);
+        if (!std::isfinite(v)) throw nonFiniteTriangle(path, i);
+      }
+    return;
+  }
+  const std::string text(b.begin(), b.end());
+  std::istringstream in(text);
+  std::string tok;
+  if (!(in >> tok) || tok != "solid") {
+    if (b.size() >= 84)
+      throw invalidInput(path + ": truncated or corrupt binary STL (its header declares " + std::to_string(n) +
+                         " triangles, " + std::to_string(84 + 50 * uint64_t(n)) + " bytes; the file has " +
+                         std::to_string(b.size()) + ")");
+    throw invalidInput(path + ": not an STL file (no 'solid' keyword, and shorter than a binary STL header)");
+  }
   long facet = -1;
-  for (std::string tok; in >> tok;) {
+  while (in >> tok) {
     if (tok == "facet") ++facet;
     if (tok != "vertex") continue;
     for (int k = 0; k < 3 && in >> tok; ++k) {
       char* end = nullptr;
       const double v = std::strtod(tok.c_str(), &end);
-      if (end != tok.c_str() && !std::isfinite(v)) return std::max(facet, 0L);
+      if (end != tok.c_str() && !std::isfinite(v)) throw nonFiniteTriangle(path, size_t(std::max(facet, 0L)));
     }
   }
-  return -1;
-}
-
-// An ASCII OFF (any of the [ST][C][N]OFF headers): the 0-based vertex with a non-finite
-// coordinate, or -1. Binary and 4-D OFF are left to OpenMesh.
-long nonFiniteOffVertex(const std::string& path) {
-  std::ifstream in(path);
-  std::string line;
-  auto next = [&](std::vector<std::string>& t) {
-    while (std::getline(in, line)) {
-      if (const auto hash = line.find('#'); hash != std::string::npos) line.erase(hash);
-      std::istringstream ss(line);
-      t.clear();
-      for (std::string s; ss >> s;) t.push_back(s);
-      if (!t.empty()) return true;
-    }
-    return false;
-  };
-  std::vector<std::string> t;
-  if (!next(t)) return -1;
-  const std::string& key = t[0];
-  if (key.size() < 3 || key.compare(key.size() - 3, 3, "OFF") != 0 || key.find_first_of("4n") != std::string::npos)
-    return -1;
-  if (t.size() > 1 && t[1] == "BINARY") return -1;
-  std::vector<std::string> counts(t.begin() + 1, t.end());
-  if (counts.empty() && !next(counts)) return -1;
-  char* end = nullptr;
-  const long nv = std::strtol(counts[0].c_str(), &end, 10);
-  for (long v = 0; v < nv && next(t); ++v)
-    for (size_t k = 0; k < 3 && k < t.size(); ++k) {
-      const double x = std::strtod(t[k].c_str(), &end);
-      if (end != t[k].c_str() && !std::isfinite(x)) return v;
-    }
-  return -1;
+  // "endsolid" may be followed by the solid's name.
+  if (text.rfind("endsolid") == std::string::npos)
+    throw invalidInput(path + ": truncated ASCII STL (no 'endsolid')");
 }
 
 }  // namespace
@@ -169,20 +169,19 @@ void requireFinite(const Mesh& mesh, const std::string& name) {
 
 Mesh loadWithOpenMesh(const std::string& path) {
   const std::string ext = extensionOf(path);
-  if (ext == "ply") return loadPly(path);  // never OpenMesh's PLY reader (it hangs on truncation)
+  // Never OpenMesh's PLY reader (it hangs on truncation) nor its OFF reader (off_loader.cpp).
+  if (ext == "ply") return loadPly(path);
+  if (ext == "off") return loadOff(path);
   requireReadableFile(path);
   {
     std::ifstream probe(path, std::ios::binary | std::ios::ate);
     if (probe.tellg() == 0) throw invalidInput(path + ": empty file");
   }
+  ObjMaterials objMat;
   if (ext == "stl") {
-    const std::vector<unsigned char> bytes = readFile(path);
-    long facet = nonFiniteBinaryStlFacet(bytes);
-    if (facet < 0) facet = nonFiniteAsciiStlFacet(bytes);
-    if (facet >= 0) throw nonFiniteTriangle(path, size_t(facet));
-  } else if (ext == "off") {
-    if (const long v = nonFiniteOffVertex(path); v >= 0)
-      throw invalidInput(path + ": vertex " + std::to_string(v) + " (counting from 0) has a NaN or infinite coordinate");
+    checkStl(readFile(path), path);
+  } else if (ext == "obj") {
+    objMat = scanObjMaterials(path);
   }
   omerr().disable();
   omlog().disable();
@@ -191,17 +190,17 @@ Mesh loadWithOpenMesh(const std::string& path) {
   om.request_vertex_colors();
   om.request_face_colors();
   OpenMesh::IO::Options opt = OpenMesh::IO::Options::VertexColor | OpenMesh::IO::Options::FaceColor;
-  if (!OpenMesh::IO::read_mesh(om, path, opt))
-    throw invalidInput(path + ": OpenMesh could not parse the file (malformed or truncated)");
+  bool read = false;
+  try {
+    read = OpenMesh::IO::read_mesh(om, path, opt);
+  } catch (const std::bad_alloc&) {
+    throw invalidInput(path + ": OpenMesh ran out of memory reading the file (corrupt?)");
+  }
+  if (!read) throw invalidInput(path + ": OpenMesh could not parse the file (malformed or truncated)");
 
   Mesh out;
-  ObjMaterials objMat;
   bool byOrder = false;
   if (ext == "obj") {
-    objMat = scanObjMaterials(path);
-    if (objMat.nonFiniteVertex > 0)
-      throw invalidInput(path + ": vertex " + std::to_string(objMat.nonFiniteVertex) +
-                         " has a NaN or infinite coordinate");
     byOrder = objMat.triangleMaterial.size() == om.n_faces();
     if (!byOrder && objMat.names.size() > 1)
       logWarn(path + ": OBJ material runs do not match the faces OpenMesh read; materials ignored");
@@ -219,8 +218,10 @@ Mesh loadWithOpenMesh(const std::string& path) {
     m.hasColor = false;
     out.materials.push_back(m);
   }
-  const bool faceColor = opt.face_has_color();
-  const bool vertexColor = opt.vertex_has_color();
+  // STL carries no colour (Canopy ignores the non-standard colour uses of its attribute bytes),
+  // but OpenMesh's STL reader reports the colours it was asked for: they are uninitialised.
+  const bool faceColor = ext != "stl" && opt.face_has_color();
+  const bool vertexColor = ext != "stl" && opt.vertex_has_color();
   out.hasTriangleColors = faceColor || vertexColor;
   out.triangles.reserve(om.n_faces());
   size_t fi = 0;

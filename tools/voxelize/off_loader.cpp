@@ -1,0 +1,191 @@
+// off_loader.cpp: Canopy's own reader of ASCII OFF ([ST][C][N]OFF, Geomview's layout).
+//
+// OpenMesh's OFF reader reserved what the header declares (an absurd count ran out of memory with
+// no file named), read a truncated file as far as it went, silently dropped vertices with NaN
+// coordinates and faces with bad indices, read no vertex past a '#' comment line, and took the
+// colour layout of a file it read from a stream from the previously opened file; for COFF it gave
+// every face an uninitialised colour. So OFF does not go through OpenMesh.
+//
+// Layout: the keyword ([ST][C][N]OFF; binary, 4-D and n-D OFF are refused as unsupported), then
+// "vertices faces [edges]" (on the keyword's line or the next), one vertex per line (x y z, then
+// nx ny nz with N, then r g b [a] with C, then s t with ST), one face per line (n i_1 .. i_n, then
+// an optional colour: r g b [a], or one colour-map index, which is ignored). '#' starts a comment;
+// blank lines are skipped. Colours are integers 0..255 or, where one has a '.', floats 0..1, as
+// 8-bit sRGB. The body must hold every declared element (the counts are checked against the size
+// first), every coordinate must be finite, every index must name a vertex, and nothing but
+// comments may follow the last face. Every failure is canopy::invalidInput naming the file.
+//
+// The result is what ply_loader.cpp gives: one "default" material without colour, polygons fanned
+// from their first corner, faces of fewer than 3 corners skipped, face colours (else the mean of
+// the vertex colours) as linear RGB.
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <string_view>
+
+#include "canopy/atomic_file.h"
+#include "canopy/errors.h"
+#include "mesh_io.h"
+#include "texture_sample.h"
+
+namespace canopy::mesh {
+namespace {
+
+// Non-empty lines of the file, comments removed, split into tokens.
+class Lines {
+ public:
+  Lines(const uint8_t* data, size_t size) : p_(reinterpret_cast<const char*>(data)), end_(p_ + size) {}
+  bool next(std::vector<std::string_view>& tok) {
+    while (p_ < end_) {
+      const char* eol = std::find(p_, end_, '\n');
+      const char* stop = std::find(p_, eol, '#');
+      ++line_;
+      tok.clear();
+      for (const char* q = p_; q < stop;) {
+        while (q < stop && isSpace(*q)) ++q;
+        const char* b = q;
+        while (q < stop && !isSpace(*q)) ++q;
+        if (q > b) tok.emplace_back(b, size_t(q - b));
+      }
+      p_ = eol < end_ ? eol + 1 : end_;
+      if (!tok.empty()) return true;
+    }
+    return false;
+  }
+  size_t line() const { return line_; }
+
+ private:
+  static bool isSpace(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v'; }
+  const char* p_;
+  const char* end_;
+  size_t line_ = 0;
+};
+
+bool toInt(std::string_view s, long long& v) {
+  const auto r = std::from_chars(s.data(), s.data() + s.size(), v);
+  return r.ec == std::errc() && r.ptr == s.data() + s.size();
+}
+
+bool toDouble(std::string_view s, double& v) {
+  // from_chars refuses a leading '+', which printf-style writers never emit but hand edits may.
+  if (!s.empty() && s[0] == '+') s.remove_prefix(1);
+  const auto r = std::from_chars(s.data(), s.data() + s.size(), v);
+  return r.ec == std::errc() && r.ptr == s.data() + s.size();
+}
+
+}  // namespace
+
+Mesh loadOffFromMemory(const uint8_t* data, size_t size, const std::string& name) {
+  Lines lines(data, size);
+  std::vector<std::string_view> t;
+  auto fail = [&](const std::string& what) { return invalidInput(name + ": line " + std::to_string(lines.line()) + ": " + what); };
+  if (!lines.next(t)) throw invalidInput(name + ": empty OFF file");
+
+  // The keyword: [ST][C][N][4][n]OFF.
+  std::string_view key = t[0];
+  const bool st = key.substr(0, 2) == "ST";
+  if (st) key.remove_prefix(2);
+  const bool color = !key.empty() && key[0] == 'C';
+  if (color) key.remove_prefix(1);
+  const bool normal = !key.empty() && key[0] == 'N';
+  if (normal) key.remove_prefix(1);
+  if (key == "4OFF" || key == "nOFF" || key == "4nOFF")
+    throw unsupported(name + ": 4-D and n-D OFF files are not supported");
+  if (key != "OFF") throw invalidInput(name + ": not an OFF file (its first word is not OFF, COFF, NOFF, STOFF ...)");
+  std::vector<std::string_view> counts(t.begin() + 1, t.end());
+  if (!counts.empty() && counts[0] == "BINARY") throw unsupported(name + ": binary OFF files are not supported");
+  if (counts.empty() && !lines.next(counts)) throw invalidInput(name + ": truncated OFF file (no vertex and face counts)");
+  long long nv = -1, nf = -1, ne = 0;
+  if (counts.size() < 2 || counts.size() > 3 || !toInt(counts[0], nv) || !toInt(counts[1], nf) ||
+      (counts.size() == 3 && !toInt(counts[2], ne)) || nv < 0 || nf < 0)
+    throw fail("bad OFF counts (expected: vertices faces [edges], non-negative integers)");
+  // Before anything is allocated: a vertex line holds at least "x y z\n" (6 bytes), a face line
+  // "n\n" (2 bytes; a face of 3 corners at least "3 a b c\n", 8).
+  if (double(nv) * 6 + double(nf) * 2 > double(size))
+    throw invalidInput(name + ": the OFF header declares " + std::to_string(nv) + " vertices and " + std::to_string(nf) +
+                       " faces, more than its " + std::to_string(size) + " bytes can hold (truncated or corrupt)");
+
+  const size_t colorAt = normal ? 6 : 3;  // where a vertex's colour starts
+  auto readColor = [&](size_t from, std::array<uint8_t, 3>& rgb) {
+    // Integers 0..255, or floats 0..1 where any of the three has a '.' or an exponent.
+    bool floats = false;
+    for (size_t k = 0; k < 3; ++k) floats |= t[from + k].find_first_of(".eE") != std::string_view::npos;
+    for (size_t k = 0; k < 3; ++k) {
+      double v = 0;
+      if (!toDouble(t[from + k], v) || !std::isfinite(v)) throw fail("colour value '" + std::string(t[from + k]) + "' is not a number");
+      if (floats) v *= 255.0;
+      rgb[k] = uint8_t(std::lround(std::clamp(v, 0.0, 255.0)));
+    }
+  };
+
+  std::vector<Vec3> points;
+  std::vector<std::array<uint8_t, 3>> vertexRgb;
+  points.reserve(size_t(nv));
+  if (color) vertexRgb.reserve(size_t(nv));
+  for (long long v = 0; v < nv; ++v) {
+    if (!lines.next(t))
+      throw invalidInput(name + ": truncated OFF file (" + std::to_string(v) + " of " + std::to_string(nv) + " vertices)");
+    const size_t need = colorAt + (color ? 3 : 0);
+    if (t.size() < need)
+      throw fail("vertex " + std::to_string(v) + " (counting from 0) has " + std::to_string(t.size()) + " values, " +
+                 std::to_string(need) + " expected");
+    Vec3 p;
+    for (size_t k = 0; k < 3; ++k) {
+      if (!toDouble(t[k], p[k])) throw fail("vertex " + std::to_string(v) + " (counting from 0) has a coordinate '" + std::string(t[k]) + "' that is not a number");
+      if (!std::isfinite(p[k])) throw fail("vertex " + std::to_string(v) + " (counting from 0) has a NaN or infinite coordinate");
+    }
+    points.push_back(p);
+    if (color) readColor(colorAt, vertexRgb.emplace_back());
+  }
+
+  Mesh out;
+  Material m;
+  m.name = "default";
+  m.hasColor = false;
+  out.materials.push_back(m);
+  bool anyFaceColor = false;
+  std::vector<uint32_t> corners;
+  for (long long f = 0; f < nf; ++f) {
+    if (!lines.next(t))
+      throw invalidInput(name + ": truncated OFF file (" + std::to_string(f) + " of " + std::to_string(nf) + " faces)");
+    const std::string face = "face " + std::to_string(f) + " (counting from 0) ";
+    long long n = -1;
+    if (!toInt(t[0], n) || n < 0 || uint64_t(n) + 1 > t.size())
+      throw fail(face + "is not a corner count followed by that many vertex indices");
+    corners.clear();
+    for (size_t k = 1; k <= size_t(n); ++k) {
+      long long i = -1;
+      if (!toInt(t[k], i) || i < 0 || i >= nv)
+        throw fail(face + "refers to vertex '" + std::string(t[k]) + "', but the file has " + std::to_string(nv) + " vertices");
+      corners.push_back(uint32_t(i));
+    }
+    const size_t rest = t.size() - 1 - size_t(n);  // 0, a colour-map index (1), or r g b [a]
+    std::array<uint8_t, 3> faceRgb{};
+    const bool faceColor = rest >= 3;
+    if (faceColor) readColor(1 + size_t(n), faceRgb);
+    anyFaceColor |= faceColor;
+    for (size_t k = 1; k + 1 < corners.size(); ++k) {  // fan from the first corner
+      Triangle tri;
+      const uint32_t c[3] = {corners[0], corners[k], corners[k + 1]};
+      for (int v = 0; v < 3; ++v) tri.p[size_t(v)] = points[c[v]];
+      if (faceColor) {
+        for (int ch = 0; ch < 3; ++ch) tri.color[size_t(ch)] = vox::srgbToLinear8(faceRgb[size_t(ch)]);
+      } else if (color) {
+        tri.color = {0, 0, 0};
+        for (int v = 0; v < 3; ++v)
+          for (int ch = 0; ch < 3; ++ch) tri.color[size_t(ch)] += vox::srgbToLinear8(vertexRgb[c[v]][size_t(ch)]) / 3.f;
+      }
+      out.triangles.push_back(tri);
+    }
+  }
+  if (lines.next(t)) throw fail("data after the last of the " + std::to_string(nf) + " faces the header declares");
+  out.hasTriangleColors = color || anyFaceColor;  // an uncoloured face among coloured ones is white
+  return out;
+}
+
+Mesh loadOff(const std::string& path) {
+  const std::vector<unsigned char> bytes = readFile(path);
+  return loadOffFromMemory(bytes.data(), bytes.size(), path);
+}
+
+}  // namespace canopy::mesh
