@@ -60,7 +60,7 @@ V3 jsonV3(const nlohmann::json& j, const std::string& what) {
   for (int a = 0; a < 3; ++a) {
     if (!j[size_t(a)].is_number()) throw invalidInput(what + ": expected numbers");
     const double x = j[size_t(a)].get<double>();
-    if (!std::isfinite(x)) throw invalidInput(what + ": not finite");
+    if (!std::isfinite(float(x))) throw invalidInput(what + ": not finite (in single precision)");
     (a == 0 ? v.x : a == 1 ? v.y : v.z) = float(x);
   }
   return v;
@@ -230,6 +230,15 @@ std::vector<FrameSetup> framePlan(const PlayOptions& o, const HostScene& scene) 
     centre = (lo + hi) * 0.5f;
     radius = std::max(0.5f * length(hi - lo), 1e-3f);
   }
+  // Further than this from the scene, single-precision ray positions lose the scene (squares of
+  // coordinates near 1e19 overflow; a NaN position crashed the descent); the scene is well under
+  // a pixel wide long before (1e-4 rad).
+  const float maxDistance = 1.0e4f * radius;
+  auto fmt = [](double v) {
+    char b[32];
+    std::snprintf(b, sizeof b, "%g", v);
+    return std::string(b);
+  };
   std::vector<FrameSetup> plan(size_t(o.frames));
   const double n = double(o.frames);
   // camera
@@ -244,13 +253,21 @@ std::vector<FrameSetup> framePlan(const PlayOptions& o, const HostScene& scene) 
       const double az = get(kv, "azimuth", 30.0) + 360.0 * get(kv, "turns", 1.0) * double(f) / n;
       const V3 target = centre + v3(0, float(get(kv, "height", 0.0)), 0);
       const V3 pos = target + fromAngles(az, get(kv, "elevation", 20.0)) * float(dist);
+      if (!(length(pos - centre) <= maxDistance))
+        throw usageError("--camera: distance " + fmt(dist) + " m is more than 10^4 scene radii (" + fmt(maxDistance) +
+                         " m) from the scene's centre: too far for single-precision ray marching");
       plan[size_t(f)].camera = makeCamera(pos, target, fov, o.width, o.height);
     }
   } else {
     const auto keys = readKeyframes(o.camera, "position", "target");
     for (int f = 0; f < o.frames; ++f) {
       const Key k = interpolate(keys, double(f));
-      if (length(k.b - k.a) <= 0.0f) throw invalidInput(o.camera + ": position and target coincide at frame " + std::to_string(f));
+      if (!(length(k.a - centre) <= maxDistance))
+        throw invalidInput(o.camera + ": the camera at frame " + std::to_string(f) + " is more than 10^4 scene radii (" +
+                           fmt(maxDistance) + " m) from the scene's centre: too far for single-precision ray marching");
+      const float span = length(k.b - k.a);
+      if (!(span > 0.0f)) throw invalidInput(o.camera + ": position and target coincide at frame " + std::to_string(f));
+      if (!std::isfinite(span)) throw invalidInput(o.camera + ": position and target too far apart at frame " + std::to_string(f));
       plan[size_t(f)].camera = makeCamera(k.a, k.b, k.fov, o.width, o.height);
     }
   }
@@ -263,14 +280,15 @@ std::vector<FrameSetup> framePlan(const PlayOptions& o, const HostScene& scene) 
     const auto keys = readKeyframes(o.sun, "direction", nullptr);
     for (int f = 0; f < o.frames; ++f) {
       const V3 d = interpolate(keys, double(f)).a;
-      if (length(d) <= 0.0f) throw invalidInput(o.sun + ": zero sun direction at frame " + std::to_string(f));
+      if (!(length(d) > 0.0f && std::isfinite(length(d))))
+        throw invalidInput(o.sun + ": zero or overflowing sun direction at frame " + std::to_string(f));
       plan[size_t(f)].toSun = normalize(d);
     }
   } else {
     float x, y, z;
     char tail;
     if (std::sscanf(o.sun.c_str(), "%f,%f,%f%c", &x, &y, &z, &tail) != 3 || !std::isfinite(x) || !std::isfinite(y) ||
-        !std::isfinite(z) || x * x + y * y + z * z <= 0.0f)
+        !std::isfinite(z) || !(x * x + y * y + z * z > 0.0f) || !std::isfinite(x * x + y * y + z * z))
       throw usageError("--sun '" + o.sun + "': expected x,y,z (towards the sun), orbit[:azimuth=..,elevation=..,turns=..] or a .json path");
     for (auto& p : plan) p.toSun = normalize(v3(x, y, z));
   }

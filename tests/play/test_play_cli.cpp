@@ -162,6 +162,13 @@ TEST(PlayCli, ErrorsHaveDocumentedExitCodesAndLeaveNoOutput) {
   canopy::writeFileAtomic(truncated, bytes.data(), bytes.size() / 2);
   const std::string badPath = dir + "/bad-path.json";
   std::ofstream(badPath) << R"({"keyframes":[{"frame":0,"position":[0,0,5]}]})";  // no target
+  // A camera 1e20 m away made NaN ray positions (float squares overflow) and crashed the descent.
+  const std::string farPath = dir + "/far.json";
+  std::ofstream(farPath) << R"({"keyframes":[{"frame":0,"position":[1e20,0,0],"target":[0,0,0]}]})";
+  const std::string hugePath = dir + "/huge.json";
+  std::ofstream(hugePath) << R"({"keyframes":[{"frame":0,"position":[1,0,0],"target":[1e39,0,0]}]})";
+  const std::string sunPath = dir + "/sun.json";
+  std::ofstream(sunPath) << R"({"keyframes":[{"frame":0,"direction":[1e20,1e20,0]}]})";
   const std::vector<Case> cases = {
       {"'" + sceneFile() + "' -o '" + out + "' --camera '" + badPath + "' --device cpu", 3, "target"},
       {"'" + dir + "/missing.canopy' -o '" + out + "' --device cpu", 2, "missing.canopy"},
@@ -180,6 +187,14 @@ TEST(PlayCli, ErrorsHaveDocumentedExitCodesAndLeaveNoOutput) {
       {"'" + sceneFile() + "' -o '" + out + "' --shadow-map-bias -1 --device cpu", 1, "--shadow-map-bias"},
       {"'" + sceneFile() + "' -o '" + out + "' --warp-tile 3 --device cpu", 1, "--warp-tile"},
       {"'" + sceneFile() + "' -o '" + out + "' --light precise --device cpu", 1, "--light"},
+      {"'" + sceneFile() + "' -o '" + out + "' --camera '" + farPath + "' --device cpu", 3,
+       "far.json: the camera at frame 0 is more than 10^4 scene radii"},
+      {"'" + sceneFile() + "' -o '" + out + "' --camera '" + hugePath + "' --device cpu", 3,
+       "huge.json: keyframe 0 target: not finite (in single precision)"},
+      {"'" + sceneFile() + "' -o '" + out + "' --camera orbit:distance=1e30 --device cpu", 1,
+       "--camera: distance 1e+30 m is more than 10^4 scene radii"},
+      {"'" + sceneFile() + "' -o '" + out + "' --sun 1e20,1e20,0 --device cpu", 1, "--sun '1e20,1e20,0'"},
+      {"'" + sceneFile() + "' -o '" + out + "' --sun '" + sunPath + "' --device cpu", 3, "zero or overflowing sun direction"},
   };
   for (const Case& c : cases) {
     std::remove(out.c_str());
