@@ -148,6 +148,10 @@ HostScene buildScene(const CanopyFile& f) {
       }
     }
     for (int a = 0; a < 3; ++a) {
+      // Beyond this, single-precision ray positions lose the instance (squares of coordinates
+      // near 1e19 overflow, and a NaN position crashed the descent).
+      if (!(std::fabs(v.boundsLo[a]) <= 1e9f && std::fabs(v.boundsHi[a]) <= 1e9f))
+        throw invalidInput(what + ": its world bounds reach beyond +-1e9 m (too far for single-precision rendering)");
       lo[a] = std::min(lo[a], double(v.boundsLo[a]));
       hi[a] = std::max(hi[a], double(v.boundsHi[a]));
     }

@@ -190,6 +190,8 @@ TEST(SceneJson, NonFiniteNonAffineAndSingularMatricesAreRejected) {
       {{3, nan}, "instances[1].matrix is not finite"},
       {{0, inf}, "instances[1].matrix is not finite"},
       {{15, -inf}, "instances[1].matrix is not finite"},
+      {{3, 1e20}, "instances[1].matrix has an entry beyond 1e9 in magnitude"},  // play cannot render it
+      {{0, -2e9}, "instances[1].matrix has an entry beyond 1e9 in magnitude"},
       {{12, 0.5}, "instances[1].matrix last row must be 0,0,0,1"},
       {{15, 2.0}, "instances[1].matrix last row must be 0,0,0,1"},
       {{2, 0.0}, "instances[1].matrix is singular"},  // the row (0,0,2) becomes 0: rank 2

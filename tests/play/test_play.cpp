@@ -686,6 +686,20 @@ TEST(Render, TruncatedFileIsRefusedAtOpen) {
   }
 }
 
+// An instance placed where single-precision rays cannot reach it (a crafted file: canopy-octreepack
+// refuses such a scene) is refused when the scene is built, not rendered with NaN positions.
+TEST(Render, InstanceBeyondSinglePrecisionReachIsRefused) {
+  const std::string p = pt::tmpDir("scenes") + "/far.canopy";
+  pt::writeScene(p, {pt::sphereModel(kEdge, kRadius, kDensity, kCell)}, {pt::instanceAt(0, 0, 0, 0), pt::instanceAt(0, 1e20f, 0, 0)});
+  try {
+    render(smallView(p, 8, 8));
+    FAIL() << "an instance at 1e20 m was accepted";
+  } catch (const canopy::Error& e) {
+    EXPECT_EQ(e.code(), canopy::ExitCode::InvalidInput);
+    EXPECT_NE(std::string(e.what()).find(p + ": instance 1: its world bounds reach beyond +-1e9 m"), std::string::npos) << e.what();
+  }
+}
+
 // Streaming with a cache of a quarter of the brick pages, real-time mode (one pass per frame, the
 // loader works between frames): a camera path through a small forest completes, pages are evicted
 // and reloaded, and once the path holds a distant view (warm-up) the frame equals the converged
