@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <sstream>
 
@@ -41,7 +42,10 @@ std::map<std::string, double> parseKeys(const std::string& spec, const std::stri
     char* end = nullptr;
     const std::string val = item.substr(eq + 1);
     const double v = std::strtod(val.c_str(), &end);
-    if (val.empty() || *end != '\0' || !std::isfinite(v)) throw usageError(what + " '" + spec + "': bad number '" + val + "'");
+    // finite in single precision too (the camera and sun are floats; a larger double cast to float
+    // is undefined)
+    if (val.empty() || *end != '\0' || !(std::fabs(v) <= double(std::numeric_limits<float>::max())))
+      throw usageError(what + " '" + spec + "': bad number '" + val + "'");
     kv[key] = v;
   }
   return kv;
@@ -60,7 +64,7 @@ V3 jsonV3(const nlohmann::json& j, const std::string& what) {
   for (int a = 0; a < 3; ++a) {
     if (!j[size_t(a)].is_number()) throw invalidInput(what + ": expected numbers");
     const double x = j[size_t(a)].get<double>();
-    if (!std::isfinite(float(x))) throw invalidInput(what + ": not finite (in single precision)");
+    if (!(std::fabs(x) <= double(std::numeric_limits<float>::max()))) throw invalidInput(what + ": not finite (in single precision)");
     (a == 0 ? v.x : a == 1 ? v.y : v.z) = float(x);
   }
   return v;

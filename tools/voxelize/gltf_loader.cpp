@@ -419,9 +419,9 @@ tinygltf::Model parseModel(const uint8_t* data, size_t size, bool binary, const 
   preflightDraco(data, size, binary, name);
   tinygltf::TinyGLTF loader;
   // External buffers and images are inputs of the run too: an output path naming one of them is
-  // refused like one naming the glTF itself (canopy/atomic_file.h). Only regular files are read
-  // (a URI naming a FIFO or a device would block or never end).
-  // (tinygltf's own FileExists opens the file, which blocks on a FIFO: stat instead).
+  // refused like one naming the glTF itself (canopy/atomic_file.h). Only regular files are read: a
+  // URI naming a FIFO or a device would block or never end (tinygltf's own FileExists opens the
+  // file, which blocks on a FIFO, so existence is a stat).
   loader.SetFsCallbacks({[](const std::string& path, void*) {
                            struct stat st;
                            return stat(path.c_str(), &st) == 0;
@@ -445,10 +445,11 @@ tinygltf::Model parseModel(const uint8_t* data, size_t size, bool binary, const 
                                    unsigned(size), baseDir);
   if (!ok || !err.empty()) {
     const std::string e = oneLine(err.empty() ? warn : err);
-    // A missing external buffer or image is an I/O problem; anything else is malformed content.
+    // A missing or unreadable external buffer or image (tinygltf: "File not found", "File read
+    // error", "Failed to load external") is an I/O problem; anything else is malformed content.
     const bool io = e.find("ile not found") != std::string::npos ||
-                    e.find("Failed to load external") != std::string::npos ||
-                    e.find("not a regular file") != std::string::npos;
+                    e.find("File read error") != std::string::npos ||
+                    e.find("Failed to load external") != std::string::npos;
     throw Error(io ? ExitCode::Io : ExitCode::InvalidInput,
                 name + ": invalid glTF (" + (e.empty() ? "unknown error" : e) + ")");
   }
