@@ -238,6 +238,9 @@ std::vector<FrameSetup> framePlan(const PlayOptions& o, const HostScene& scene) 
   // coordinates near 1e19 overflow; a NaN position crashed the descent); the scene is well under
   // a pixel wide long before (1e-4 rad).
   const float maxDistance = 1.0e4f * radius;
+  auto fromCentre = [&](V3 p) {  // in double: float squares overflow at 1.8e19
+    return std::hypot(double(p.x) - centre.x, double(p.y) - centre.y, double(p.z) - centre.z);
+  };
   auto fmt = [](double v) {
     char b[32];
     std::snprintf(b, sizeof b, "%g", v);
@@ -257,16 +260,16 @@ std::vector<FrameSetup> framePlan(const PlayOptions& o, const HostScene& scene) 
       const double az = get(kv, "azimuth", 30.0) + 360.0 * get(kv, "turns", 1.0) * double(f) / n;
       const V3 target = centre + v3(0, float(get(kv, "height", 0.0)), 0);
       const V3 pos = target + fromAngles(az, get(kv, "elevation", 20.0)) * float(dist);
-      if (!(length(pos - centre) <= maxDistance))
-        throw usageError("--camera: distance " + fmt(dist) + " m is more than 10^4 scene radii (" + fmt(maxDistance) +
-                         " m) from the scene's centre: too far for single-precision ray marching");
+      if (!(fromCentre(pos) <= maxDistance))
+        throw usageError("--camera: the orbit puts the camera " + fmt(fromCentre(pos)) + " m from the scene's centre, more than 10^4 scene radii (" +
+                         fmt(maxDistance) + " m): too far for single-precision ray marching");
       plan[size_t(f)].camera = makeCamera(pos, target, fov, o.width, o.height);
     }
   } else {
     const auto keys = readKeyframes(o.camera, "position", "target");
     for (int f = 0; f < o.frames; ++f) {
       const Key k = interpolate(keys, double(f));
-      if (!(length(k.a - centre) <= maxDistance))
+      if (!(fromCentre(k.a) <= maxDistance))
         throw invalidInput(o.camera + ": the camera at frame " + std::to_string(f) + " is more than 10^4 scene radii (" +
                            fmt(maxDistance) + " m) from the scene's centre: too far for single-precision ray marching");
       const float span = length(k.b - k.a);
@@ -289,12 +292,14 @@ std::vector<FrameSetup> framePlan(const PlayOptions& o, const HostScene& scene) 
       plan[size_t(f)].toSun = normalize(d);
     }
   } else {
-    float x, y, z;
+    double x, y, z;
     char tail;
-    if (std::sscanf(o.sun.c_str(), "%f,%f,%f%c", &x, &y, &z, &tail) != 3 || !std::isfinite(x) || !std::isfinite(y) ||
-        !std::isfinite(z) || !(x * x + y * y + z * z > 0.0f) || !std::isfinite(x * x + y * y + z * z))
+    // normalised in double precision: any finite, non-zero direction (1e20,1e20,0 included)
+    if (std::sscanf(o.sun.c_str(), "%lf,%lf,%lf%c", &x, &y, &z, &tail) != 3 || !std::isfinite(x) || !std::isfinite(y) ||
+        !std::isfinite(z) || !(std::hypot(x, y, z) > 0.0) || !std::isfinite(std::hypot(x, y, z)))
       throw usageError("--sun '" + o.sun + "': expected x,y,z (towards the sun), orbit[:azimuth=..,elevation=..,turns=..] or a .json path");
-    for (auto& p : plan) p.toSun = normalize(v3(x, y, z));
+    const double h = std::hypot(x, y, z);
+    for (auto& p : plan) p.toSun = v3(float(x / h), float(y / h), float(z / h));
   }
   return plan;
 }

@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <map>
@@ -486,4 +487,21 @@ TEST(VoxelizeFormats, OffStlPlyObjLoad) {
   const mesh::Mesh sh = mesh::loadMesh(dir + "/solid_header.stl");
   EXPECT_EQ(sh.triangles.size(), 12u);
   EXPECT_FALSE(sh.hasTriangleColors);
+  // What exporters write and OpenMesh reads: upper-case STL keywords; OBJ lines indented and with
+  // trailing comments; in an OFF, "1 0 0" beside "0.5 0.5 0.5" is a float colour (red) too.
+  std::string upper = stl;
+  std::transform(upper.begin(), upper.end(), upper.begin(), [](unsigned char ch) { return char(std::toupper(ch)); });
+  canopy::test::writeText(dir + "/upper.stl", upper);
+  EXPECT_EQ(mesh::loadMesh(dir + "/upper.stl").triangles.size(), 12u);
+  std::string indented;
+  for (auto s : v) indented += std::string("  v ") + s + "  # a vertex\n";
+  for (auto& t : f)
+    indented += "\tf " + std::to_string(t[0] + 1) + " " + std::to_string(t[1] + 1) + " " + std::to_string(t[2] + 1) + " # a face\n";
+  canopy::test::writeText(dir + "/indented.obj", indented);
+  EXPECT_EQ(mesh::loadMesh(dir + "/indented.obj").triangles.size(), 12u);
+  canopy::test::writeText(dir + "/mixed.off", "COFF\n4 2 0\n0 0 0 1 0 0\n1 0 0 1 0 0\n0 1 0 1 0 0\n0 0 1 0.5 0.5 0.5\n3 0 1 2\n3 0 1 3\n");
+  const mesh::Mesh mixed = mesh::loadMesh(dir + "/mixed.off");
+  ASSERT_EQ(mixed.triangles.size(), 2u);
+  EXPECT_FLOAT_EQ(mixed.triangles[0].color[0], 1.f);  // red, not 1/255
+  EXPECT_FLOAT_EQ(mixed.triangles[0].color[1], 0.f);
 }

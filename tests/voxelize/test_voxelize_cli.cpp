@@ -256,7 +256,7 @@ TEST_F(VoxelizeCli, BadInputsFailCleanly) {
        "neg.off: line 2: bad OFF counts"},
       {"OFF cut inside its faces",
        [](const std::string& d) { writeText(d + "/cut.off", "OFF\n4 3 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n3 0 1 3\n"); },
-       "cut.off", "", 3, "cut.off: truncated OFF file (2 of 3 faces)"},
+       "cut.off", "", 3, "cut.off: truncated OFF file (2 of 3 faces;"},
       {"OFF face index out of range",
        [](const std::string& d) { writeText(d + "/idx.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 99\n"); }, "idx.off", "",
        3, "idx.off: line 6: face 0 (counting from 0) refers to vertex '99', but the file has 3 vertices"},
@@ -281,7 +281,15 @@ TEST_F(VoxelizeCli, BadInputsFailCleanly) {
          writeText(d + "/cuta.stl", "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\n"
                                     "endloop\nendfacet\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\n");
        },
-       "cuta.stl", "", 3, "cuta.stl: truncated ASCII STL (no 'endsolid')"},
+       "cuta.stl", "", 3, "cuta.stl: truncated ASCII STL (no 'endsolid' after its last facet)"},
+      {"binary STL with a 'solid' header cut short",
+       [](const std::string& d) {
+         auto b = binaryStl({{0, 0, 0, 1, 0, 0, 0, 1, 0}, {0, 0, 0, 1, 0, 0, 0, 0, 1}});
+         std::memcpy(b.data(), "solid exported", 14);
+         b.resize(b.size() - 10);
+         writeBytes(d + "/cutsolid.stl", b);
+       },
+       "cutsolid.stl", "", 3, "cutsolid.stl: truncated or corrupt binary STL (its header declares 2 triangles"},
       // Whole-scene voxelisation applies the node matrix rule that --instances applies.
       {"non-affine node matrix",
        [](const std::string& d) { writeNodeMatrixGltf(d + "/proj.glb", {1, 0, 0, 0.5, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1}); },

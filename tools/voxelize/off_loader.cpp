@@ -10,8 +10,8 @@
 // "vertices faces [edges]" (on the keyword's line or the next), one vertex per line (x y z, then
 // nx ny nz with N, then r g b [a] with C, then s t with ST), one face per line (n i_1 .. i_n, then
 // an optional colour: r g b [a], or one colour-map index, which is ignored). '#' starts a comment;
-// blank lines are skipped. Colours are integers 0..255 or, where one has a '.', floats 0..1, as
-// 8-bit sRGB. The body must hold every declared element (the counts are checked against the size
+// blank lines are skipped. Colours are integers 0..255 or, where any colour value in the file has a
+// '.' or an exponent, floats 0..1, as 8-bit sRGB. The body must hold every declared element (the counts are checked against the size
 // first), every coordinate must be finite, every index must name a vertex, and nothing but
 // comments may follow the last face. Every failure is canopy::invalidInput naming the file.
 //
@@ -106,25 +106,26 @@ Mesh loadOffFromMemory(const uint8_t* data, size_t size, const std::string& name
                        " faces, more than its " + std::to_string(size) + " bytes can hold (truncated or corrupt)");
 
   const size_t colorAt = normal ? 6 : 3;  // where a vertex's colour starts
-  auto readColor = [&](size_t from, std::array<uint8_t, 3>& rgb) {
-    // Integers 0..255, or floats 0..1 where any of the three has a '.' or an exponent.
-    bool floats = false;
-    for (size_t k = 0; k < 3; ++k) floats |= t[from + k].find_first_of(".eE") != std::string_view::npos;
+  // Colours are kept as read until the end: integers 0..255, or floats 0..1 where any colour value
+  // in the file has a '.' or an exponent (decided once per file: "1 0 0" beside "0.5 0.5 0.5" is red).
+  bool floatColors = false;
+  auto readColor = [&](size_t from, std::array<float, 3>& rgb) {
     for (size_t k = 0; k < 3; ++k) {
       double v = 0;
       if (!toDouble(t[from + k], v) || !std::isfinite(v)) throw fail("colour value '" + std::string(t[from + k]) + "' is not a number");
-      if (floats) v *= 255.0;
-      rgb[k] = uint8_t(std::lround(std::clamp(v, 0.0, 255.0)));
+      floatColors |= t[from + k].find_first_of(".eE") != std::string_view::npos;
+      rgb[k] = float(std::clamp(v, 0.0, 255.0));
     }
   };
 
   std::vector<Vec3> points;
-  std::vector<std::array<uint8_t, 3>> vertexRgb;
+  std::vector<std::array<float, 3>> vertexRgb;
   points.reserve(size_t(nv));
   if (color) vertexRgb.reserve(size_t(nv));
   for (long long v = 0; v < nv; ++v) {
     if (!lines.next(t))
-      throw invalidInput(name + ": truncated OFF file (" + std::to_string(v) + " of " + std::to_string(nv) + " vertices)");
+      throw invalidInput(name + ": truncated OFF file (" + std::to_string(v) + " of " + std::to_string(nv) +
+                         " vertices; one vertex per line)");
     const size_t need = colorAt + (color ? 3 : 0);
     if (t.size() < need)
       throw fail("vertex " + std::to_string(v) + " (counting from 0) has " + std::to_string(t.size()) + " values, " +
@@ -138,47 +139,66 @@ Mesh loadOffFromMemory(const uint8_t* data, size_t size, const std::string& name
     if (color) readColor(colorAt, vertexRgb.emplace_back());
   }
 
-  Mesh out;
-  Material m;
-  m.name = "default";
-  m.hasColor = false;
-  out.materials.push_back(m);
-  bool anyFaceColor = false;
+  struct Face {
+    uint32_t firstCorner, corners;
+    bool hasColor;
+    std::array<float, 3> rgb;
+  };
+  std::vector<Face> faces;  // those of 3 corners or more (a line of at least 8 bytes each)
   std::vector<uint32_t> corners;
   for (long long f = 0; f < nf; ++f) {
     if (!lines.next(t))
-      throw invalidInput(name + ": truncated OFF file (" + std::to_string(f) + " of " + std::to_string(nf) + " faces)");
+      throw invalidInput(name + ": truncated OFF file (" + std::to_string(f) + " of " + std::to_string(nf) +
+                         " faces; one face per line)");
     const std::string face = "face " + std::to_string(f) + " (counting from 0) ";
     long long n = -1;
     if (!toInt(t[0], n) || n < 0 || uint64_t(n) + 1 > t.size())
       throw fail(face + "is not a corner count followed by that many vertex indices");
-    corners.clear();
+    Face fc{uint32_t(corners.size()), uint32_t(n), false, {}};
     for (size_t k = 1; k <= size_t(n); ++k) {
       long long i = -1;
       if (!toInt(t[k], i) || i < 0 || i >= nv)
         throw fail(face + "refers to vertex '" + std::string(t[k]) + "', but the file has " + std::to_string(nv) + " vertices");
       corners.push_back(uint32_t(i));
     }
-    const size_t rest = t.size() - 1 - size_t(n);  // 0, a colour-map index (1), or r g b [a]
-    std::array<uint8_t, 3> faceRgb{};
-    const bool faceColor = rest >= 3;
-    if (faceColor) readColor(1 + size_t(n), faceRgb);
-    anyFaceColor |= faceColor;
-    for (size_t k = 1; k + 1 < corners.size(); ++k) {  // fan from the first corner
+    // after the indices: nothing, a colour-map index (ignored), or r g b [a]
+    fc.hasColor = t.size() - 1 - size_t(n) >= 3;
+    if (fc.hasColor) readColor(1 + size_t(n), fc.rgb);
+    if (n >= 3) {
+      faces.push_back(fc);
+    } else {
+      corners.resize(fc.firstCorner);
+    }
+  }
+  if (lines.next(t)) throw fail("data after the last of the " + std::to_string(nf) + " faces the header declares");
+
+  auto linear = [&](const std::array<float, 3>& c, int ch) {
+    const float v = floatColors ? c[size_t(ch)] * 255.0f : c[size_t(ch)];
+    return vox::srgbToLinear8(int(std::lround(std::clamp(v, 0.0f, 255.0f))));
+  };
+  Mesh out;
+  Material m;
+  m.name = "default";
+  m.hasColor = false;
+  out.materials.push_back(m);
+  bool anyFaceColor = false;
+  for (const Face& fc : faces) {
+    anyFaceColor |= fc.hasColor;
+    const uint32_t* c0 = corners.data() + fc.firstCorner;
+    for (uint32_t k = 1; k + 1 < fc.corners; ++k) {  // fan from the first corner
       Triangle tri;
-      const uint32_t c[3] = {corners[0], corners[k], corners[k + 1]};
+      const uint32_t c[3] = {c0[0], c0[k], c0[k + 1]};
       for (int v = 0; v < 3; ++v) tri.p[size_t(v)] = points[c[v]];
-      if (faceColor) {
-        for (int ch = 0; ch < 3; ++ch) tri.color[size_t(ch)] = vox::srgbToLinear8(faceRgb[size_t(ch)]);
+      if (fc.hasColor) {
+        for (int ch = 0; ch < 3; ++ch) tri.color[size_t(ch)] = linear(fc.rgb, ch);
       } else if (color) {
         tri.color = {0, 0, 0};
         for (int v = 0; v < 3; ++v)
-          for (int ch = 0; ch < 3; ++ch) tri.color[size_t(ch)] += vox::srgbToLinear8(vertexRgb[c[v]][size_t(ch)]) / 3.f;
+          for (int ch = 0; ch < 3; ++ch) tri.color[size_t(ch)] += linear(vertexRgb[c[v]], ch) / 3.f;
       }
       out.triangles.push_back(tri);
     }
   }
-  if (lines.next(t)) throw fail("data after the last of the " + std::to_string(nf) + " faces the header declares");
   out.hasTriangleColors = color || anyFaceColor;  // an uncoloured face among coloured ones is white
   return out;
 }

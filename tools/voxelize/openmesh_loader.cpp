@@ -12,6 +12,7 @@
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 
 #include <algorithm>
+#include <cctype>
 #include <cstdlib>
 #include <cmath>
 #include <cstring>
@@ -58,6 +59,9 @@ ObjMaterials scanObjMaterials(const std::string& path) {
   auto at = [&] { return path + ": line " + std::to_string(lineNo) + ": "; };
   while (std::getline(in, line)) {
     ++lineNo;
+    // as OpenMesh reads a line: leading whitespace skipped, '#' to the end a comment
+    if (const auto hash = line.find('#'); hash != std::string::npos) line.erase(hash);
+    line.erase(0, std::min(line.size(), line.find_first_not_of(" \t\r\f\v")));
     if (line.size() < 2) continue;
     if (line[0] == 'v' && (line[1] == ' ' || line[1] == '\t')) {
       ++vertices;
@@ -74,7 +78,7 @@ ObjMaterials scanObjMaterials(const std::string& path) {
     }
     if (line.compare(0, 7, "usemtl ") == 0) {
       std::string n = line.substr(7);
-      while (!n.empty() && (n.back() == '\r' || n.back() == ' ')) n.pop_back();
+      while (!n.empty() && (n.back() == '\r' || n.back() == ' ' || n.back() == '\t')) n.pop_back();
       auto [it, added] = index.emplace(n, int(m.names.size()));
       if (added) m.names.push_back(n);
       current = it->second;
@@ -107,7 +111,17 @@ ObjMaterials scanObjMaterials(const std::string& path) {
 // An STL's structure, before OpenMesh reads it (OpenMesh reads a truncated file as far as it goes
 // and silently drops facets with NaN corners). A file of exactly 84 + 50 n bytes, n the count at
 // byte 80, is binary (even when its header starts with "solid", as some exporters write); any
-// other file must be ASCII: "solid" first, "endsolid" last, and finite `vertex` coordinates.
+// other file must be ASCII (keywords in any case, as OpenMesh reads them): `solid` first, a last
+// `endsolid` with no facet after it, finite `vertex` coordinates, and no NUL byte (a binary file
+// of the wrong size is reported as such).
+bool equalsNoCase(const std::string& a, const char* b) {
+  const size_t n = std::strlen(b);
+  if (a.size() != n) return false;
+  for (size_t i = 0; i < n; ++i)
+    if (std::tolower(static_cast<unsigned char>(a[i])) != b[i]) return false;
+  return true;
+}
+
 void checkStl(const std::vector<unsigned char>& b, const std::string& path) {
   uint32_t n = 0;
   if (b.size() >= 84) std::memcpy(&n, b.data() + 80, 4);
@@ -123,7 +137,8 @@ void checkStl(const std::vector<unsigned char>& b, const std::string& path) {
   const std::string text(b.begin(), b.end());
   std::istringstream in(text);
   std::string tok;
-  if (!(in >> tok) || tok != "solid") {
+  const bool ascii = (in >> tok) && equalsNoCase(tok, "solid") && text.find('\0') == std::string::npos;
+  if (!ascii) {
     if (b.size() >= 84)
       throw invalidInput(path + ": truncated or corrupt binary STL (its header declares " + std::to_string(n) +
                          " triangles, " + std::to_string(84 + 50 * uint64_t(n)) + " bytes; the file has " +
@@ -131,18 +146,18 @@ void checkStl(const std::vector<unsigned char>& b, const std::string& path) {
     throw invalidInput(path + ": not an STL file (no 'solid' keyword, and shorter than a binary STL header)");
   }
   long facet = -1;
+  bool ended = false;  // an `endsolid` with no facet after it
   while (in >> tok) {
-    if (tok == "facet") ++facet;
-    if (tok != "vertex") continue;
+    if (equalsNoCase(tok, "facet")) ++facet, ended = false;
+    if (equalsNoCase(tok, "endsolid")) ended = true;
+    if (!equalsNoCase(tok, "vertex")) continue;
     for (int k = 0; k < 3 && in >> tok; ++k) {
       char* end = nullptr;
       const double v = std::strtod(tok.c_str(), &end);
       if (end != tok.c_str() && !std::isfinite(v)) throw nonFiniteTriangle(path, size_t(std::max(facet, 0L)));
     }
   }
-  // "endsolid" may be followed by the solid's name.
-  if (text.rfind("endsolid") == std::string::npos)
-    throw invalidInput(path + ": truncated ASCII STL (no 'endsolid')");
+  if (!ended) throw invalidInput(path + ": truncated ASCII STL (no 'endsolid' after its last facet)");
 }
 
 }  // namespace
