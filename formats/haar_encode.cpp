@@ -3,7 +3,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <cstring>
 #include <limits>
 
@@ -11,14 +10,6 @@
 #include "canopy/parallel.h"
 
 namespace canopy::haar {
-namespace {
-// A value in a message: %g (1e-09, 0.05), not std::to_string's %f (0.000000).
-std::string number(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%g", v);
-  return b;
-}
-}  // namespace
 
 LatticeGeom LatticeGeom::fromBounds(const int32_t mn[3], const int32_t mx[3], const std::string& name) {
   LatticeGeom g;
@@ -107,7 +98,7 @@ LiftedBase::LiftedBase(const LatticeGeom& geom, const DenseLight& light, Precisi
   }
   valueMax_ = vmax;
   if (precision == Precision::Fp16 && vmax > kHalfMax)
-    throw unsupported(name_ + ": values up to " + number(vmax) +
+    throw unsupported(name_ + ": values up to " + formatNumber(vmax) +
                       " exceed the fp16 range (65504); use --precision fp32");
 
   nonEmpty_.assign(geom.bricks, 0);
@@ -292,12 +283,12 @@ LiftedBase::Result LiftedBase::encodeQuantBrick(size_t k, const float step[kQuan
 
 BaseCode LiftedBase::encodeQuant(float T) const {
   if (!(T > 0) || !std::isfinite(T))
-    throw unsupported(name_ + ": quantised coefficients need a threshold (their step) > 0, not " + number(T));
+    throw unsupported(name_ + ": quantised coefficients need a threshold (their step) > 0, not " + formatNumber(T));
   if (T >= 1e30f)  // the reader's bound: 2^14 levels of sqrt(2)^3 T stay finite
-    throw unsupported(name_ + ": quantisation step " + number(T) + " is 1e30 or more (values this large need "
+    throw unsupported(name_ + ": quantisation step " + formatNumber(T) + " is 1e30 or more (values this large need "
                       "--precision fp32)");
   if (T < minQuantStep_)
-    throw unsupported(name_ + ": threshold " + number(T) + " is below " + number(minQuantStep_) +
+    throw unsupported(name_ + ": threshold " + formatNumber(T) + " is below " + formatNumber(minQuantStep_) +
                       ", where a quantised coefficient would need more than 15 bits; raise it or use --precision "
                       "fp16 or fp32");
   float step[kQuantSteps];
@@ -370,8 +361,8 @@ float LiftedBase::searchQuantStep(float maxError, int* probes) const {
   const double e0 = errorAt(lo);
   if (e0 > double(maxError)) {
     if (probes) *probes = tries;
-    throw unsupported(name_ + ": --max-error " + number(maxError) + " cannot be met with quantised "
-                      "coefficients: the finest step gives " + number(e0) + "; use --precision fp16 or fp32");
+    throw unsupported(name_ + ": --max-error " + formatNumber(maxError) + " cannot be met with quantised "
+                      "coefficients: the finest step gives " + formatNumber(e0) + "; use --precision fp16 or fp32");
   }
   if (errorAt(hi) <= double(maxError)) {
     lo = hi;
@@ -454,8 +445,8 @@ float LiftedBase::searchThreshold(float maxError, int* probes) const {
   if (!feasible(0.0f)) {
     if (probes) *probes = tries;
     const float e0 = float(encode(0.0f).maxError);
-    throw unsupported(name_ + ": --max-error " + number(maxError) +
-                      " cannot be met: threshold 0 already gives " + number(e0) +
+    throw unsupported(name_ + ": --max-error " + formatNumber(maxError) +
+                      " cannot be met: threshold 0 already gives " + formatNumber(e0) +
                       (precision_ == Precision::Fp16 ? " (fp16 rounding); use --precision fp32" : ""));
   }
   size_t lo = 0, hi = cand.size() - 1;

@@ -86,8 +86,7 @@ void checkScene(const Scene& s, const std::string& name) {
       throw fail(at + ".model " + std::to_string(in.model) + " out of range (" + std::to_string(s.models.size()) + " models)");
     for (double v : in.matrix) {
       if (!std::isfinite(v)) throw fail(at + ".matrix is not finite");
-      // canopy-play refuses a scene reaching beyond 1e9 m (single precision): absurd here already
-      if (std::abs(v) > 1e9) throw fail(at + ".matrix has an entry beyond 1e9 in magnitude");
+      if (std::abs(v) > kMaxWorldCoordinate) throw fail(at + ".matrix has an entry beyond 1e9 in magnitude");
     }
     const auto& m = in.matrix;
     if (std::abs(m[12]) > 1e-6 || std::abs(m[13]) > 1e-6 || std::abs(m[14]) > 1e-6 || std::abs(m[15] - 1) > 1e-6)

@@ -26,6 +26,11 @@ namespace canopy {
 
 constexpr int kSceneJsonVersion = 1;
 
+// The farthest world coordinate a scene may reach (metres): canopy-play marches rays in single
+// precision, whose positions lose the scene beyond (squares of coordinates near 1e19 overflow).
+// checkScene bounds every matrix entry by it; canopy-play every instance's world bounds.
+constexpr double kMaxWorldCoordinate = 1e9;
+
 struct SceneModel {
   std::string name;     // label ("model<i>" where the file gives none)
   std::string density;  // the model's lattice (canopy-voxelize), model space

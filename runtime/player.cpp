@@ -26,6 +26,9 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 
 // "orbit:a=1,b=2" -> {a:1, b:2}; throws Usage naming `what` for a malformed or unknown key.
+// Whether v is finite as a float too (a larger double cast to float is undefined).
+bool fitsFloat(double v) { return std::fabs(v) <= double(std::numeric_limits<float>::max()); }
+
 std::map<std::string, double> parseKeys(const std::string& spec, const std::string& what,
                                         const std::vector<std::string>& allowed) {
   std::map<std::string, double> kv;
@@ -42,9 +45,7 @@ std::map<std::string, double> parseKeys(const std::string& spec, const std::stri
     char* end = nullptr;
     const std::string val = item.substr(eq + 1);
     const double v = std::strtod(val.c_str(), &end);
-    // finite in single precision too (the camera and sun are floats; a larger double cast to float
-    // is undefined)
-    if (val.empty() || *end != '\0' || !(std::fabs(v) <= double(std::numeric_limits<float>::max())))
+    if (val.empty() || *end != '\0' || !fitsFloat(v))  // the camera and sun are floats
       throw usageError(what + " '" + spec + "': bad number '" + val + "'");
     kv[key] = v;
   }
@@ -64,7 +65,7 @@ V3 jsonV3(const nlohmann::json& j, const std::string& what) {
   for (int a = 0; a < 3; ++a) {
     if (!j[size_t(a)].is_number()) throw invalidInput(what + ": expected numbers");
     const double x = j[size_t(a)].get<double>();
-    if (!(std::fabs(x) <= double(std::numeric_limits<float>::max()))) throw invalidInput(what + ": not finite (in single precision)");
+    if (!fitsFloat(x)) throw invalidInput(what + ": not finite (in single precision)");
     (a == 0 ? v.x : a == 1 ? v.y : v.z) = float(x);
   }
   return v;
@@ -241,11 +242,6 @@ std::vector<FrameSetup> framePlan(const PlayOptions& o, const HostScene& scene) 
   auto fromCentre = [&](V3 p) {  // in double: float squares overflow at 1.8e19
     return std::hypot(double(p.x) - centre.x, double(p.y) - centre.y, double(p.z) - centre.z);
   };
-  auto fmt = [](double v) {
-    char b[32];
-    std::snprintf(b, sizeof b, "%g", v);
-    return std::string(b);
-  };
   std::vector<FrameSetup> plan(size_t(o.frames));
   const double n = double(o.frames);
   // camera
@@ -261,8 +257,8 @@ std::vector<FrameSetup> framePlan(const PlayOptions& o, const HostScene& scene) 
       const V3 target = centre + v3(0, float(get(kv, "height", 0.0)), 0);
       const V3 pos = target + fromAngles(az, get(kv, "elevation", 20.0)) * float(dist);
       if (!(fromCentre(pos) <= maxDistance))
-        throw usageError("--camera: the orbit puts the camera " + fmt(fromCentre(pos)) + " m from the scene's centre, more than 10^4 scene radii (" +
-                         fmt(maxDistance) + " m): too far for single-precision ray marching");
+        throw usageError("--camera: the orbit puts the camera " + formatNumber(fromCentre(pos)) + " m from the scene's centre, more than 10^4 scene radii (" +
+                         formatNumber(maxDistance) + " m): too far for single-precision ray marching");
       plan[size_t(f)].camera = makeCamera(pos, target, fov, o.width, o.height);
     }
   } else {
@@ -271,7 +267,7 @@ std::vector<FrameSetup> framePlan(const PlayOptions& o, const HostScene& scene) 
       const Key k = interpolate(keys, double(f));
       if (!(fromCentre(k.a) <= maxDistance))
         throw invalidInput(o.camera + ": the camera at frame " + std::to_string(f) + " is more than 10^4 scene radii (" +
-                           fmt(maxDistance) + " m) from the scene's centre: too far for single-precision ray marching");
+                           formatNumber(maxDistance) + " m) from the scene's centre: too far for single-precision ray marching");
       const float span = length(k.b - k.a);
       if (!(span > 0.0f)) throw invalidInput(o.camera + ": position and target coincide at frame " + std::to_string(f));
       if (!std::isfinite(span)) throw invalidInput(o.camera + ": position and target too far apart at frame " + std::to_string(f));
@@ -287,18 +283,19 @@ std::vector<FrameSetup> framePlan(const PlayOptions& o, const HostScene& scene) 
     const auto keys = readKeyframes(o.sun, "direction", nullptr);
     for (int f = 0; f < o.frames; ++f) {
       const V3 d = interpolate(keys, double(f)).a;
-      if (!(length(d) > 0.0f && std::isfinite(length(d))))
+      const float len = length(d);
+      if (!(len > 0.0f && std::isfinite(len)))
         throw invalidInput(o.sun + ": zero or overflowing sun direction at frame " + std::to_string(f));
       plan[size_t(f)].toSun = normalize(d);
     }
   } else {
-    double x, y, z;
+    double x = 0, y = 0, z = 0;
     char tail;
     // normalised in double precision: any finite, non-zero direction (1e20,1e20,0 included)
-    if (std::sscanf(o.sun.c_str(), "%lf,%lf,%lf%c", &x, &y, &z, &tail) != 3 || !std::isfinite(x) || !std::isfinite(y) ||
-        !std::isfinite(z) || !(std::hypot(x, y, z) > 0.0) || !std::isfinite(std::hypot(x, y, z)))
+    const bool parsed = std::sscanf(o.sun.c_str(), "%lf,%lf,%lf%c", &x, &y, &z, &tail) == 3;
+    const double h = std::hypot(x, y, z);  // inf or NaN where a component is
+    if (!parsed || !(h > 0.0) || !std::isfinite(h))
       throw usageError("--sun '" + o.sun + "': expected x,y,z (towards the sun), orbit[:azimuth=..,elevation=..,turns=..] or a .json path");
-    const double h = std::hypot(x, y, z);
     for (auto& p : plan) p.toSun = v3(float(x / h), float(y / h), float(z / h));
   }
   return plan;

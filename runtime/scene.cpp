@@ -7,6 +7,7 @@
 
 #include "canopy/cli.h"
 #include "canopy/errors.h"
+#include "formats/scene_json.h"
 
 namespace canopy::play {
 namespace {
@@ -148,9 +149,8 @@ HostScene buildScene(const CanopyFile& f) {
       }
     }
     for (int a = 0; a < 3; ++a) {
-      // Beyond this, single-precision ray positions lose the instance (squares of coordinates
-      // near 1e19 overflow, and a NaN position crashed the descent).
-      if (!(std::fabs(v.boundsLo[a]) <= 1e9f && std::fabs(v.boundsHi[a]) <= 1e9f))
+      // (a NaN ray position from farther crashed the descent)
+      if (!(std::fabs(v.boundsLo[a]) <= kMaxWorldCoordinate && std::fabs(v.boundsHi[a]) <= kMaxWorldCoordinate))
         throw invalidInput(what + ": its world bounds reach beyond +-1e9 m (too far for single-precision rendering)");
       lo[a] = std::min(lo[a], double(v.boundsLo[a]));
       hi[a] = std::max(hi[a], double(v.boundsHi[a]));

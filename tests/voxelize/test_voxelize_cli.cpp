@@ -122,14 +122,10 @@ void writeSampleGltf(const std::string& dir, const std::string& name, bool embed
 
 // A binary STL of the given triangles (normals zero).
 std::vector<uint8_t> binaryStl(const std::vector<std::array<float, 9>>& tris) {
-  std::vector<uint8_t> b(80, 0);
+  std::vector<uint8_t> b(84 + 50 * tris.size(), 0);  // 80-byte header, count, 50-byte facets
   const uint32_t n = uint32_t(tris.size());
-  b.insert(b.end(), reinterpret_cast<const uint8_t*>(&n), reinterpret_cast<const uint8_t*>(&n) + 4);
-  for (const auto& t : tris) {
-    b.insert(b.end(), 12, 0);
-    b.insert(b.end(), reinterpret_cast<const uint8_t*>(t.data()), reinterpret_cast<const uint8_t*>(t.data()) + 36);
-    b.insert(b.end(), 2, 0);
-  }
+  std::memcpy(b.data() + 80, &n, 4);
+  for (size_t i = 0; i < tris.size(); ++i) std::memcpy(b.data() + 84 + 50 * i + 12, tris[i].data(), 36);  // after the normal
   return b;
 }
 

@@ -15,9 +15,9 @@
 // first), every coordinate must be finite, every index must name a vertex, and nothing but
 // comments may follow the last face. Every failure is canopy::invalidInput naming the file.
 //
-// The result is what ply_loader.cpp gives: one "default" material without colour, polygons fanned
-// from their first corner, faces of fewer than 3 corners skipped, face colours (else the mean of
-// the vertex colours) as linear RGB.
+// The result is built as ply_loader.cpp's is (polygons.h): one "default" material without colour,
+// polygons fanned from their first corner, faces of fewer than 3 corners skipped, face colours (else
+// the mean of the vertex colours) as linear RGB.
 #include <algorithm>
 #include <charconv>
 #include <cmath>
@@ -26,7 +26,7 @@
 #include "canopy/atomic_file.h"
 #include "canopy/errors.h"
 #include "mesh_io.h"
-#include "texture_sample.h"
+#include "polygons.h"
 
 namespace canopy::mesh {
 namespace {
@@ -118,10 +118,10 @@ Mesh loadOffFromMemory(const uint8_t* data, size_t size, const std::string& name
     }
   };
 
-  std::vector<Vec3> points;
-  std::vector<std::array<float, 3>> vertexRgb;
-  points.reserve(size_t(nv));
-  if (color) vertexRgb.reserve(size_t(nv));
+  Polygons poly;
+  std::vector<std::array<float, 3>> vertexColors, faceColors;  // as read (the scale is known at the end)
+  poly.points.reserve(size_t(nv));
+  if (color) vertexColors.reserve(size_t(nv));
   for (long long v = 0; v < nv; ++v) {
     if (!lines.next(t))
       throw invalidInput(name + ": truncated OFF file (" + std::to_string(v) + " of " + std::to_string(nv) +
@@ -135,17 +135,12 @@ Mesh loadOffFromMemory(const uint8_t* data, size_t size, const std::string& name
       if (!toDouble(t[k], p[k])) throw fail("vertex " + std::to_string(v) + " (counting from 0) has a coordinate '" + std::string(t[k]) + "' that is not a number");
       if (!std::isfinite(p[k])) throw fail("vertex " + std::to_string(v) + " (counting from 0) has a NaN or infinite coordinate");
     }
-    points.push_back(p);
-    if (color) readColor(colorAt, vertexRgb.emplace_back());
+    poly.points.push_back(p);
+    if (color) readColor(colorAt, vertexColors.emplace_back());
   }
 
-  struct Face {
-    uint32_t firstCorner, corners;
-    bool hasColor;
-    std::array<float, 3> rgb;
-  };
-  std::vector<Face> faces;  // those of 3 corners or more (a line of at least 8 bytes each)
-  std::vector<uint32_t> corners;
+  // Faces of 3 corners or more (a line of at least 8 bytes each); fewer give no triangle.
+  poly.faceStart.push_back(0);
   for (long long f = 0; f < nf; ++f) {
     if (!lines.next(t))
       throw invalidInput(name + ": truncated OFF file (" + std::to_string(f) + " of " + std::to_string(nf) +
@@ -154,53 +149,33 @@ Mesh loadOffFromMemory(const uint8_t* data, size_t size, const std::string& name
     long long n = -1;
     if (!toInt(t[0], n) || n < 0 || uint64_t(n) + 1 > t.size())
       throw fail(face + "is not a corner count followed by that many vertex indices");
-    Face fc{uint32_t(corners.size()), uint32_t(n), false, {}};
     for (size_t k = 1; k <= size_t(n); ++k) {
       long long i = -1;
       if (!toInt(t[k], i) || i < 0 || i >= nv)
         throw fail(face + "refers to vertex '" + std::string(t[k]) + "', but the file has " + std::to_string(nv) + " vertices");
-      corners.push_back(uint32_t(i));
+      if (n >= 3) poly.corners.push_back(uint32_t(i));
     }
     // after the indices: nothing, a colour-map index (ignored), or r g b [a]
-    fc.hasColor = t.size() - 1 - size_t(n) >= 3;
-    if (fc.hasColor) readColor(1 + size_t(n), fc.rgb);
-    if (n >= 3) {
-      faces.push_back(fc);
-    } else {
-      corners.resize(fc.firstCorner);
-    }
+    std::array<float, 3> rgb{};
+    const bool hasColor = t.size() - 1 - size_t(n) >= 3;
+    if (hasColor) readColor(1 + size_t(n), rgb);
+    if (n < 3) continue;
+    poly.faceStart.push_back(uint32_t(poly.corners.size()));
+    faceColors.push_back(rgb);
+    poly.faceHasRgb.push_back(hasColor);
   }
   if (lines.next(t)) throw fail("data after the last of the " + std::to_string(nf) + " faces the header declares");
 
-  auto linear = [&](const std::array<float, 3>& c, int ch) {
-    const float v = floatColors ? c[size_t(ch)] * 255.0f : c[size_t(ch)];
-    return vox::srgbToLinear8(int(std::lround(std::clamp(v, 0.0f, 255.0f))));
+  auto toSrgb8 = [&](const std::array<float, 3>& c) {
+    std::array<uint8_t, 3> b;
+    for (size_t ch = 0; ch < 3; ++ch)
+      b[ch] = uint8_t(std::lround(std::clamp(floatColors ? c[ch] * 255.0f : c[ch], 0.0f, 255.0f)));
+    return b;
   };
-  Mesh out;
-  Material m;
-  m.name = "default";
-  m.hasColor = false;
-  out.materials.push_back(m);
-  bool anyFaceColor = false;
-  for (const Face& fc : faces) {
-    anyFaceColor |= fc.hasColor;
-    const uint32_t* c0 = corners.data() + fc.firstCorner;
-    for (uint32_t k = 1; k + 1 < fc.corners; ++k) {  // fan from the first corner
-      Triangle tri;
-      const uint32_t c[3] = {c0[0], c0[k], c0[k + 1]};
-      for (int v = 0; v < 3; ++v) tri.p[size_t(v)] = points[c[v]];
-      if (fc.hasColor) {
-        for (int ch = 0; ch < 3; ++ch) tri.color[size_t(ch)] = linear(fc.rgb, ch);
-      } else if (color) {
-        tri.color = {0, 0, 0};
-        for (int v = 0; v < 3; ++v)
-          for (int ch = 0; ch < 3; ++ch) tri.color[size_t(ch)] += linear(vertexRgb[c[v]], ch) / 3.f;
-      }
-      out.triangles.push_back(tri);
-    }
-  }
-  out.hasTriangleColors = color || anyFaceColor;  // an uncoloured face among coloured ones is white
-  return out;
+  for (const auto& c : vertexColors) poly.vertexRgb.push_back(toSrgb8(c));
+  if (std::find(poly.faceHasRgb.begin(), poly.faceHasRgb.end(), uint8_t(1)) != poly.faceHasRgb.end())
+    for (const auto& c : faceColors) poly.faceRgb.push_back(toSrgb8(c));
+  return fanPolygons(poly);  // an uncoloured face among coloured ones is white
 }
 
 Mesh loadOff(const std::string& path) {

@@ -24,7 +24,7 @@
 #include "canopy/atomic_file.h"
 #include "canopy/errors.h"
 #include "mesh_io.h"
-#include "texture_sample.h"
+#include "polygons.h"
 
 namespace canopy::mesh {
 namespace {
@@ -301,10 +301,12 @@ Mesh loadPlyFromMemory(const uint8_t* data, size_t size, const std::string& name
     throw fail("truncated PLY body (" + std::to_string(body) + " bytes; the header's elements need at least " +
                std::to_string(need) + ")");
 
-  std::vector<Vec3> points;
-  std::vector<std::array<uint8_t, 3>> vertexRgb;
-  std::vector<uint32_t> corners, faceStart;
-  std::vector<std::array<uint8_t, 3>> faceRgb;
+  Polygons poly;
+  std::vector<Vec3>& points = poly.points;
+  std::vector<std::array<uint8_t, 3>>& vertexRgb = poly.vertexRgb;
+  std::vector<uint32_t>& corners = poly.corners;
+  std::vector<uint32_t>& faceStart = poly.faceStart;
+  std::vector<std::array<uint8_t, 3>>& faceRgb = poly.faceRgb;
   Body in(data, size, h.bodyOffset, h.format, name);
   std::vector<double> scalar;
   for (const Element& e : h.elements) {
@@ -352,30 +354,7 @@ Mesh loadPlyFromMemory(const uint8_t* data, size_t size, const std::string& name
   in.requireEnd();
   faceStart.push_back(uint32_t(corners.size()));
 
-  Mesh out;
-  Material m;
-  m.name = "default";
-  m.hasColor = false;
-  out.materials.push_back(m);
-  out.hasTriangleColors = faceColor || vertexColor;
-  for (size_t f = 0; f + 1 < faceStart.size(); ++f) {
-    const uint32_t b = faceStart[f], n = faceStart[f + 1] - b;
-    for (uint32_t k = 1; k + 1 < n; ++k) {  // fan from the first corner
-      Triangle t;
-      const uint32_t c[3] = {corners[b], corners[b + k], corners[b + k + 1]};
-      for (int v = 0; v < 3; ++v) t.p[size_t(v)] = points[c[v]];
-      if (faceColor) {
-        for (int ch = 0; ch < 3; ++ch) t.color[size_t(ch)] = vox::srgbToLinear8(faceRgb[f][size_t(ch)]);
-      } else if (vertexColor) {
-        t.color = {0, 0, 0};
-        for (int v = 0; v < 3; ++v)
-          for (int ch = 0; ch < 3; ++ch)
-            t.color[size_t(ch)] += vox::srgbToLinear8(vertexRgb[c[v]][size_t(ch)]) / 3.f;
-      }
-      out.triangles.push_back(t);
-    }
-  }
-  return out;
+  return fanPolygons(poly);
 }
 
 Mesh loadPly(const std::string& path) {

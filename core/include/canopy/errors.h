@@ -4,6 +4,7 @@
 // message on stderr and an exit code. The table is documented once, in README.md:
 //   0 ok, 1 usage, 2 I/O, 3 invalid input, 4 runtime failure, 5 unsupported.
 #pragma once
+#include <cstdio>
 #include <stdexcept>
 #include <string>
 
@@ -33,5 +34,12 @@ inline Error ioError(const std::string& m) { return Error(ExitCode::Io, m); }
 inline Error invalidInput(const std::string& m) { return Error(ExitCode::InvalidInput, m); }
 inline Error runtimeError(const std::string& m) { return Error(ExitCode::Runtime, m); }
 inline Error unsupported(const std::string& m) { return Error(ExitCode::Unsupported, m); }
+
+// A value in a message: %g (1e-09, 0.05, 1e+30), not std::to_string's %f (0.000000).
+inline std::string formatNumber(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%g", v);
+  return b;
+}
 
 }  // namespace canopy
