@@ -92,7 +92,7 @@ TEST(Lbsolve, WritesNineteenBasesWithLatticeAndConvergenceMetadata) {
   for (int b = 0; b < kQ; ++b)
     for (int c = 0; c < 3; ++c) {
       lb::SolveSpec s;
-      s.omega = lb::makeOmegaSet(p.sigmaA[c], p.sigmaS[c], p.g[c]);
+      s.omega = lb::makeOmegaSet(p.sigmaA[c], p.sigmaS[c], p.g[c], p.gWood, p.sigma);
       for (int m = 0; m < kQ; ++m) s.boundary[m] = (b == 0 || m == b) ? 1.f : 0.f;
       s.maxIterations = 12;
       specs.push_back(s);
@@ -303,6 +303,60 @@ TEST(Lbsolve, SceneModeBuildsTheCoarseLatticeFromInstances) {
   EXPECT_LT(bottom, top);
   EXPECT_GT(top / 60, 0.5);
   EXPECT_EQ(f.require<openvdb::FloatGrid>("B00")->getConstAccessor().getValue(openvdb::Coord(0)), 1.f);
+}
+
+// The scene lattice's normalisation: every base is 1 at an interior node that nothing occludes,
+// B00 included (there f_0 is zeroed at every collision and only the 18 moving populations arrive:
+// B00 = 18 before the normalisation, not the boundary's 19). Such a node is one whose 18 upstream
+// lines to the boundary (and itself) hold no coarse matter: nothing can be scattered into it either.
+TEST(Lbsolve, SceneLightIsOneWhereNothingOccludesAnInteriorNode) {
+  const std::string dir = fixtures::scratch("scene_unoccluded");
+  fixtures::writePlant(dir + "/tree.vdb", fixtures::makePlant(12));  // a 0.6 m cube
+  std::ofstream(dir + "/s.scene.json") << R"({"canopy_scene": 1,
+    "models": [{"name": "tree", "density": "tree.vdb"}],
+    "instances": [{"model": 0, "matrix": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1]},
+                  {"model": 0, "matrix": [1,0,0,3, 0,1,0,2, 0,0,1,3, 0,0,0,1]}]})";
+  LbsolveOptions o;
+  o.scene = dir + "/s.scene.json";
+  o.output = dir + "/scene.vdb";
+  o.sceneResolution = 12;
+  lbsolve(o);
+  const auto f = vdbio::readVdb(o.output);
+  auto density = f.require<openvdb::FloatGrid>("density")->getConstAccessor();
+  const auto meta = vdbio::readLatticeMeta(*f.require<openvdb::FloatGrid>("B00"), o.output);
+  const openvdb::Coord hi = meta.max;
+  auto interior = [&](const openvdb::Coord& c) {
+    return c.x() > 0 && c.y() > 0 && c.z() > 0 && c.x() < hi.x() && c.y() < hi.y() && c.z() < hi.z();
+  };
+  // upstream along -c_m from c to the boundary: all empty?
+  auto clear = [&](const openvdb::Coord& c) {
+    if (density.getValue(c) != 0.f) return false;
+    for (int m = 1; m < kQ; ++m) {
+      openvdb::Coord q = c;
+      while (interior(q)) {
+        if (density.getValue(q) != 0.f) return false;
+        q -= openvdb::Coord(lattice::dir(m, 0), lattice::dir(m, 1), lattice::dir(m, 2));
+      }
+    }
+    return true;
+  };
+  std::vector<openvdb::FloatGrid::ConstAccessor> bases;
+  for (int b = 0; b < kQ; ++b) bases.push_back(f.require<openvdb::FloatGrid>(lattice::baseName(b))->getConstAccessor());
+  int checked = 0, occludedBelowOne = 0;
+  for (int z = 1; z < hi.z(); ++z)
+    for (int y = 1; y < hi.y(); ++y)
+      for (int x = 1; x < hi.x(); ++x) {
+        const openvdb::Coord c(x, y, z);
+        if (clear(c)) {
+          ++checked;
+          for (int b = 0; b < kQ; ++b) EXPECT_NEAR(bases[size_t(b)].getValue(c), 1.f, 1e-6f) << lattice::baseName(b) << " at " << c;
+        } else if (bases[0].getValue(c) < 1.f) {
+          ++occludedBelowOne;
+        }
+      }
+  EXPECT_GT(checked, 10);          // the scene has open space
+  EXPECT_GT(occludedBelowOne, 10);  // and shade: B00 < 1 behind the trees
+  EXPECT_FLOAT_EQ(bases[0].getValue(openvdb::Coord(0)), 1.f);  // the boundary layer (19 / 19)
 }
 
 // ---- the CLI, run as a separate process -------------------------------------------------------

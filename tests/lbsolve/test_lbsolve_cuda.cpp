@@ -32,7 +32,7 @@ std::vector<SolveSpec> allSpecs(int iterations, float tolerance) {
   for (int b = 0; b < kQ; ++b)
     for (int c = 0; c < 3; ++c) {
       SolveSpec s;
-      s.omega = makeOmegaSet(p.sigmaA[c], p.sigmaS[c], p.g[c], p.gWood);
+      s.omega = makeOmegaSet(p.sigmaA[c], p.sigmaS[c], p.g[c], p.gWood, p.sigma);
       for (int m = 0; m < kQ; ++m) s.boundary[m] = (b == 0 || m == b) ? 1.f : 0.f;
       s.maxIterations = iterations;
       s.tolerance = tolerance;

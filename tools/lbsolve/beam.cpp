@@ -14,8 +14,10 @@ std::vector<float> directBeam(const DenseLattice& lattice, const OmegaSet& omega
   const Dims d = lattice.dims;
   const int n[3] = {d.nx, d.ny, d.nz};
   const int c[3] = {lattice::dir(base, 0), lattice::dir(base, 1), lattice::dir(base, 2)};
-  // Omega_jj of leaf and wood nodes (col[kind][j][i] = Omega_ij).
-  const float diag[2] = {omega.col[0][base][base], omega.col[1][base][base]};
+  // An interaction removes sigma_t of what interacts from direction j (Omega_jj = -sigma_t + what
+  // is scattered back into j itself, which is scattered light, not beam); the class of c_j picks p.
+  const float negSigmaT = -omega.sigmaT;
+  const int cls = lattice::isAxial(base) ? 0 : 1;
   // The slices are taken across an axis the beam moves along, and walked downstream: every node's
   // upstream neighbour r - c lies in the slice before.
   const int a = c[2] != 0 ? 2 : c[1] != 0 ? 1 : 0;
@@ -43,16 +45,15 @@ std::vector<float> directBeam(const DenseLattice& lattice, const OmegaSet& omega
         return;
       }
       if (depthOf(r) > iterations) return;  // still 0
-      // The upstream node's collision (collide.h, collideKind, with only f_j non-zero): the same
-      // operations, so the same bits as the solver's.
+      // The upstream node keeps what does not interact there: f + (-sigma_t) p_j f.
       const float f = beam[size_t(idx - off)];
       const float coded = lattice.coded[size_t(idx - off)];
-      const bool wood = coded < 0.0f;
-      const float rho = wood ? -coded : coded;
+      const float rho[1] = {coded < 0.0f ? -coded : coded};
       float out = f;
-      if (rho != 0.0f) {
-        const float acc = diag[wood ? 1 : 0] * f;
-        const float x = f + rho * acc;
+      if (rho[0] != 0.0f) {
+        float p[2][1];
+        interactionProbabilities<1>(omega, rho, p);
+        const float x = f + negSigmaT * (p[cls][0] * f);
         out = x > 0.0f ? x : 0.0f;
       }
       beam[size_t(idx)] = out;
@@ -73,7 +74,9 @@ std::vector<float> directBeam(const DenseLattice& lattice, const OmegaSet& omega
     if (d.interior(r[0], r[1], r[2]) && coded != 0.0f) {
       const int depth = depthOf(r);
       const bool wood = coded < 0.0f;
-      const float rho = wood ? -coded : coded;
+      const float rho[1] = {wood ? -coded : coded};
+      float p[2][1];
+      interactionProbabilities<1>(omega, rho, p);
       const float* w = row0[wood ? 1 : 0];
       // Iterations depth .. iterations-1 collided the beam fj here; a leaf node zeroes f_0 first at
       // each, so only the last one counts, a wood node carries f_0 over.
@@ -81,9 +84,9 @@ std::vector<float> directBeam(const DenseLattice& lattice, const OmegaSet& omega
       for (int t = first; t < iterations; ++t) {
         const float prev = wood ? f0 : 0.0f;
         float acc = 0.0f;
-        acc += w[0] * prev;
-        acc += w[1] * fj;
-        const float x = prev + rho * acc;
+        acc += w[0] * (p[0][0] * prev);
+        acc += w[1] * (p[cls][0] * fj);
+        const float x = prev + acc;
         f0 = x > 0.0f ? x : 0.0f;
       }
     }

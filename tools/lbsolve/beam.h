@@ -6,10 +6,15 @@
 // sum_m f_m, f_0 (the light absorbed at the node) included. Of that total, the beam U_j is the part
 // that was never scattered:
 //   - f_j carried straight along c_j from the boundary, each node r on the way keeping
-//     max(0, f + rho(r) * (Omega_jj * f)) of it (the collision of collide.h restricted to Omega_jj:
-//     what a node scatters back into direction j itself keeps its direction and counts as beam), and
-//   - f_0, what the node absorbs of that beam (Omega_0j = sigma_a; at wood nodes f_0 is kept and
-//     decays with Omega_00 = -1 as in the full update, at leaf nodes it is zeroed every iteration).
+//     max(0, f - sigma_t p_j(r) f) of it, i.e. what does not interact there (p_j: collide.h,
+//     OmegaSet; with the default Beer-Lambert interaction and sigma_t = 1 this is exp(-sigma rho
+//     |c_j|) per node, the player's direct-sun transmittance along c_j). What an interaction
+//     scatters back into direction j itself (Omega_jj + sigma_t > 0) is scattered light: it
+//     belongs to S_j, as the player's medium has no such forward spike (until 2026-12-04 it was
+//     counted as beam, and the beam fell linearly, 1 - rho (sigma_t - that share) per node), and
+//   - f_0, what the node absorbs of that beam (Omega_0j p_j f_j = sigma_a p_j f_j; at wood nodes f_0
+//     is kept and decays with Omega_00 p_0 as in the full update, at leaf nodes it is zeroed every
+//     iteration).
 // B_j - U_j >= 0 is then the light scattered at least once (every other entry of Omega that feeds
 // f_j or f_0 is >= 0 and the update is monotone), up to rounding.
 #pragma once

@@ -1,7 +1,9 @@
 // collide.h: the lattice-Boltzmann lighting update of one node, written once for CPU and CUDA.
 //
 // The model is the dissertation's (§2.2, §4.1; listing 5.1 for the order of operations):
-//   f_m(r + c_m, t+1) = max(0, f_m(r,t) + rho(r) * (Omega f(r,t))_m),   m = 0..18,
+//   f_m(r + c_m, t+1) = max(0, f_m(r,t) + (Omega (p(r) . f(r,t)))_m),   m = 0..18,
+// with p_m(r) the probability that light moving along c_m interacts at node r: rho(r) in the
+// dissertation (linear), 1 - exp(-sigma rho(r) |c_m|) by default (Beer-Lambert; OmegaSet),
 // where Omega is the 19x19 collision matrix of eq. 2.15-2.17 with sigma_s scaled by the normalised
 // Henyey-Greenstein phase function pn_ij(g) of eq. 4.1-4.2. At leaf ("green") nodes f_0 (the
 // absorbed light) is zeroed before the update; wood ("brown") nodes use their own Omega (g = -1)
@@ -18,6 +20,7 @@
 #pragma once
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 
 #include "canopy/hd.h"
 #include "canopy/lattice_dirs.h"
@@ -30,9 +33,66 @@ using lattice::kQ;
 // Omega for one colour channel, column-major: col[kind][j][i] = Omega_ij, kind 0 = leaf, 1 = wood.
 // On the CPU each entry is broadcast to 8 lanes (nodes); on the GPU every index is a compile-time
 // constant after unrolling and the struct is a kernel parameter, i.e. in constant memory.
+// The interaction of a node with the light passing through it (interactionProbabilities):
+//   beerLambert != 0: direction m interacts with probability p_m = 1 - exp(-tau[class] * rho), the
+//     Beer-Lambert law of the player's medium (extinction sigma per lattice cell at density 1):
+//     tau[0] = sigma for the rest and axial directions (one cell per step), tau[1] = sigma * sqrt 2
+//     for the diagonal ones (sqrt 2 cells per step), so the unscattered beam along any lattice
+//     direction falls as exp(-sigma * rho * length in cells), as the player's direct sun does;
+//   beerLambert == 0: p_m = rho for every m, the dissertation's linear collision (eq. 2.14).
 struct OmegaSet {
   float col[2][kQ][kQ];
+  float tau[2];         // Beer-Lambert optical depth per step at density 1: {axial, diagonal}
+  int32_t beerLambert;  // 1: p_m = 1 - exp(-tau rho); 0: p_m = rho (the dissertation's)
+  float sigmaT;         // sigma_a + sigma_s: what an interaction removes from its direction (beam.h)
 };
+
+// exp(-x) for 0 <= x (x > 87 gives 0) from IEEE additions and multiplications alone (no FMA, no
+// library call): the CPU and the GPU compute the same bits, which the solvers' bit-for-bit
+// agreement needs (a device expf differs from the host's in the last ulp). e^-x = 2^-n e^y with
+// n = round(x log2 e) and y = n ln 2 - x in [-0.347, 0.347], formed with ln 2 split in two
+// (Cody-Waite: n * kLn2Hi is exact for n < 2^12) so that y keeps its precision for large x;
+// e^y by its Taylor series to degree 8; 2^-n built from its exponent bits.
+CANOPY_HD CANOPY_FORCEINLINE float lbExpNeg(float x) {
+  if (!(x < 87.0f)) return 0.0f;
+  const float n = floorf(x * 1.44269504088896341f + 0.5f);
+  const float y = (n * 0.693145751953125f - x) + n * 1.42860682030941723e-6f;
+  float e = 2.48015873015873016e-5f;                // 1/8!
+  e = e * y + 1.98412698412698413e-4f;              // 1/7!
+  e = e * y + 1.38888888888888889e-3f;
+  e = e * y + 8.33333333333333333e-3f;
+  e = e * y + 4.16666666666666667e-2f;
+  e = e * y + 1.66666666666666667e-1f;
+  e = e * y + 0.5f;
+  e = e * y + 1.0f;
+  e = e * y + 1.0f;
+  const int k = 127 - int(n);  // 2^-n as a float: exponent field 127 - n (n <= 126 here)
+  if (k <= 0) return 0.0f;
+  const uint32_t bits = uint32_t(k) << 23;
+  float scale;
+#if defined(__CUDA_ARCH__)
+  scale = __uint_as_float(bits);
+#else
+  static_assert(sizeof(float) == sizeof(uint32_t), "float is 32 bits");
+  std::memcpy(&scale, &bits, sizeof scale);
+#endif
+  return e * scale;
+}
+
+// The interaction probabilities of L nodes of density rho[l] (OmegaSet): p[0][l] for the rest and
+// axial directions, p[1][l] for the diagonal ones.
+template <int L>
+CANOPY_HD CANOPY_FORCEINLINE void interactionProbabilities(const OmegaSet& om, const float rho[L], float p[2][L]) {
+  for (int l = 0; l < L; ++l) {
+    if (om.beerLambert) {
+      p[0][l] = 1.0f - lbExpNeg(om.tau[0] * rho[l]);
+      p[1][l] = 1.0f - lbExpNeg(om.tau[1] * rho[l]);
+    } else {
+      p[0][l] = rho[l];
+      p[1][l] = rho[l];
+    }
+  }
+}
 
 struct Dims {
   int nx = 0, ny = 0, nz = 0;
@@ -44,7 +104,9 @@ struct Dims {
 };
 
 // The collision of L nodes of one kind known at compile time (Wood: all wood, else all leaf/empty),
-// one per lane:   out_i = max(0, f_i + rho * (Omega f)_i),  f_0 zeroed first at leaf nodes.
+// one per lane:   out_i = max(0, f_i + (Omega (p . f))_i),  f_0 zeroed first at leaf nodes, where
+// p_m is the node's interaction probability for direction m (OmegaSet; the dissertation's
+// rho (Omega f)_i when om.beerLambert == 0, up to the order of the roundings).
 // f is modified (f_0 zeroing). (Omega f) is formed with grouped sums (omega_product.h, generated):
 // Omega's entries take one value per class of directions in each row (omegaIsClassStructured),
 // so each row multiplies sums of f over its classes: ~360 operations instead of the full
@@ -56,8 +118,8 @@ struct Dims {
 // The kind is a template parameter so that every Omega entry is read at a compile-time offset: on
 // the GPU the matrix is a kernel parameter (constant memory) and a run-time kind would turn its
 // uniform operands into per-thread indexed constant loads (measured: bench/lbsolve/NOTES.md).
-// Fused = true uses fmaf (one rounding per term instead of two): a benchmark variant only; the
-// reference (CPU) and the default CUDA path use Fused = false.
+// Fused = true uses fmaf in the product (one rounding per term instead of two): a benchmark variant
+// only; the reference (CPU) and the default CUDA path use Fused = false.
 template <int L, bool Wood, bool Fused = false>
 CANOPY_HD CANOPY_FORCEINLINE void collideKind(const OmegaSet& om, const float rho[L], float f[kQ][L],
                                               float out[kQ][L]) {
@@ -72,12 +134,17 @@ CANOPY_HD CANOPY_FORCEINLINE void collideKind(const OmegaSet& om, const float rh
       for (int l = 0; l < L; ++l) out[i][l] = f[i][l];
     return;
   }
-  float acc[kQ][L];
-  omegaProduct<L, Wood, Fused>(om.col[Wood ? 1 : 0], f, acc);
+  // What interacts: g_m = p_m f_m (p by direction class), then out = f + Omega g.
+  float p[2][L], g[kQ][L], acc[kQ][L];
+  interactionProbabilities<L>(om, rho, p);
+  CANOPY_UNROLL
+  for (int m = 0; m < kQ; ++m)
+    for (int l = 0; l < L; ++l) g[m][l] = p[lattice::isAxial(m) || m == 0 ? 0 : 1][l] * f[m][l];
+  omegaProduct<L, Wood, Fused>(om.col[Wood ? 1 : 0], g, acc);
   CANOPY_UNROLL
   for (int i = 0; i < kQ; ++i) {
     for (int l = 0; l < L; ++l) {
-      const float v = Fused ? fmaf(rho[l], acc[i][l], f[i][l]) : f[i][l] + rho[l] * acc[i][l];
+      const float v = f[i][l] + acc[i][l];
       out[i][l] = v > 0.f ? v : 0.f;
     }
   }
@@ -196,8 +263,10 @@ double normalisedPhase(double g, int i, int j);
 // anisotropy g, written column-major into col[j][i].
 void buildOmega(double sigmaA, double sigmaS, double g, float col[kQ][kQ]);
 
-// The leaf (g) and wood (gWood, -1 by default) matrices of one channel.
-OmegaSet makeOmegaSet(double sigmaA, double sigmaS, double g, double gWood = -1.0);
+// The leaf (g) and wood (gWood; the parameters' default is -1) matrices of one channel, with the Beer-Lambert
+// interaction of extinction `sigma` per lattice cell at density 1 (sigma > 0), or the
+// dissertation's linear one (sigma == 0; OmegaSet).
+OmegaSet makeOmegaSet(double sigmaA, double sigmaS, double g, double gWood, double sigma);
 
 // True when in every row i of col (col[j][i] = Omega_ij) the entries of each class of directions
 // j >= 1 (c_j axial or diagonal, and c_i . c_j) are bitwise equal: what omegaProduct assumes.

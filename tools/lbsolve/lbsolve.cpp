@@ -48,7 +48,9 @@ void validateOptions(const LbsolveOptions& o) {
 LightParams resolveParams(const LbsolveOptions& o) {
   LightParams p = o.paramsFile.empty() ? LightParams() : loadParams(o.paramsFile);
   if (o.woodThreshold) p.woodThreshold = *o.woodThreshold;
-  p.validate(o.paramsFile.empty() ? "--wood-threshold" : o.paramsFile);
+  if (o.sigma) p.sigma = *o.sigma;
+  if (o.beerLambert) p.beerLambert = *o.beerLambert;
+  p.validate(o.paramsFile.empty() ? "the options" : o.paramsFile);
   return p;
 }
 
@@ -59,6 +61,8 @@ void stampParams(openvdb::MetaMap& m, const LightParams& p) {
   m.insertMeta("canopy_g", openvdb::Vec3SMetadata(vec3(p.g)));
   m.insertMeta("canopy_wood_g", openvdb::FloatMetadata(float(p.gWood)));
   m.insertMeta("canopy_wood_threshold", openvdb::FloatMetadata(float(p.woodThreshold)));
+  m.insertMeta("canopy_sigma", openvdb::FloatMetadata(float(p.sigma)));
+  m.insertMeta("canopy_collision", openvdb::StringMetadata(p.beerLambert ? "beer-lambert" : "linear"));
 }
 
 void stampRun(openvdb::MetaMap& m, const std::string& kind, const LbsolveOptions& o, int cap,
@@ -87,7 +91,7 @@ CudaRun parseCudaRun(const LbsolveOptions& o) {
 }
 
 OmegaSet channelOmega(const LightParams& p, int c) {
-  return makeOmegaSet(p.sigmaA[c], p.sigmaS[c], p.g[c], p.gWood);
+  return makeOmegaSet(p.sigmaA[c], p.sigmaS[c], p.g[c], p.gWood, p.beerLambert ? p.sigma : 0.0);
 }
 
 // Runs specs with a progress bar and a log line per solve; fills report.solves (names given).

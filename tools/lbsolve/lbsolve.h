@@ -39,6 +39,8 @@ struct LbsolveOptions {
   float tolerance = 1e-4f; // residual at which a solve stops; 0 = run exactly `iterations`
   int checkEvery = 16;     // residual check interval (iterations)
   std::optional<double> woodThreshold;  // overrides the parameter file
+  std::optional<double> sigma;          // overrides the parameter file's extinction per cell (params.h)
+  std::optional<bool> beerLambert;      // overrides the parameter file's collision (params.h)
   int sceneResolution = 32;  // scene mode: coarse nodes along the scene's longest axis (interior)
   Device device;           // cpu, one GPU, or all GPUs
   // CUDA scheme (solver.h, CudaScheme): "shift" (default), "shift-split", "push" or "pull"; all compute

@@ -43,7 +43,7 @@ int main(int argc, char** argv) {
   auto& app = tool.app();
   app.add_option("input", o.input, "Density lattice from canopy-voxelize (.vdb)");
   app.add_option("-o,--output", o.output, "Output light file (.vdb)")->required();
-  app.add_option("--params", o.paramsFile, "JSON parameter file (sigma_a, sigma_s, fs/bs or g, wood_g, wood_threshold)");
+  app.add_option("--params", o.paramsFile, "JSON parameter file (sigma_a, sigma_s, fs/bs or g, wood_g, wood_threshold, sigma, collision)");
   app.add_option("--sun", sun, "One static solution for this sun: the direction light travels, x,y,z")
       ->delimiter(',')->expected(3);
   app.add_option("--ambient", o.ambient, "With --sun: ambient boundary value on all 19 directions")->capture_default_str();
@@ -52,6 +52,15 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--check-every", o.checkEvery, "Residual check interval (iterations)")->capture_default_str();
   app.add_option("--wood-threshold", woodThreshold, "Wood fraction at or above which a node is wood (default 0.5 or the parameter file's)");
+  double sigma = 0;
+  app.add_option("--sigma", sigma,
+                 "Extinction per lattice cell at density 1 (default 4 or the parameter file's): the medium of "
+                 "canopy-play --sigma, so that the light solved here and the player's shadows agree");
+  std::string collision;
+  app.add_option("--collision", collision,
+                 "How density becomes interaction: beer-lambert (p = 1 - exp(-sigma rho |c|), default) or linear "
+                 "(p = rho, the dissertation's collision)")
+      ->check(CLI::IsMember({"beer-lambert", "linear"}));
   app.add_option("--cuda-scheme", o.cudaScheme,
                  "CUDA streaming scheme: shift (index shift, work at occupied nodes only), shift-split, push "
                  "(listing 5.2 over every node) or pull (every node, aligned stores in tiles of 32 nodes); all give the CPU's bits")
@@ -79,6 +88,13 @@ int main(int argc, char** argv) {
       if (!canopy::lb::woodThresholdInRange(woodThreshold)) throw canopy::usageError("--wood-threshold must lie in [0, 1]");
       o.woodThreshold = woodThreshold;
     }
+    if (app.count("--sigma")) {
+      if (!canopy::lb::sigmaInRange(sigma)) throw canopy::usageError("--sigma must lie in (0, 64]");
+      o.sigma = sigma;
+    }
+    if (app.count("--collision")) o.beerLambert = collision == "beer-lambert";
+    if (!o.scene.empty() && (app.count("--sigma") || app.count("--collision")))
+      throw canopy::usageError("--sigma and --collision apply to a plant's lattice, not to --scene (its coarse lattice uses the linear collision)");
     if (!o.scene.empty() && !o.input.empty()) throw canopy::usageError("give either an input lattice or --scene, not both");
     o.device = tool.device();
     const canopy::LbsolveReport r = canopy::lbsolve(o);

@@ -63,10 +63,14 @@ bool omegaIsClassStructured(const float col[kQ][kQ]) {
   return true;
 }
 
-OmegaSet makeOmegaSet(double sigmaA, double sigmaS, double g, double gWood) {
+OmegaSet makeOmegaSet(double sigmaA, double sigmaS, double g, double gWood, double sigma) {
   OmegaSet s;
   buildOmega(sigmaA, sigmaS, g, s.col[0]);
   buildOmega(sigmaA, sigmaS, gWood, s.col[1]);
+  s.beerLambert = sigma > 0 ? 1 : 0;
+  s.sigmaT = float(sigmaA + sigmaS);
+  s.tau[0] = float(sigma > 0 ? sigma : 0.0);
+  s.tau[1] = float(sigma > 0 ? sigma * std::sqrt(2.0) : 0.0);
   return s;
 }
 

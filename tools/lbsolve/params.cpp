@@ -50,6 +50,12 @@ void applyParams(LightParams& p, const nlohmann::json& j, const std::string& wha
     }
     else if (k == "wood_g") p.gWood = readScalar(*it, what, k);
     else if (k == "wood_threshold") p.woodThreshold = readScalar(*it, what, k);
+    else if (k == "sigma") p.sigma = readScalar(*it, what, k);
+    else if (k == "collision") {
+      if (!it->is_string() || (*it != "beer-lambert" && *it != "linear"))
+        throw invalidInput(what + ": \"collision\" must be \"beer-lambert\" or \"linear\"");
+      p.beerLambert = *it == "beer-lambert";
+    }
     else throw invalidInput(what + ": unknown parameter \"" + k + "\"");
   }
   if (!sigmaSGiven)
@@ -74,11 +80,13 @@ void LightParams::validate(const std::string& what) const {
   if (!(gWood >= -1 && gWood <= 1)) throw invalidInput(what + ": wood_g must lie in [-1, 1]");
   if (!woodThresholdInRange(woodThreshold))
     throw invalidInput(what + ": wood_threshold must lie in [0, 1]");
+  if (!sigmaInRange(sigma)) throw invalidInput(what + ": sigma must lie in (0, 64]");
 }
 
 nlohmann::json LightParams::toJson() const {
   nlohmann::json j = {{"sigma_a", sigmaA}, {"sigma_s", sigmaS}, {"g", g},
-                      {"wood_g", gWood}, {"wood_threshold", woodThreshold}};
+                      {"wood_g", gWood}, {"wood_threshold", woodThreshold},
+                      {"sigma", sigma}, {"collision", beerLambert ? "beer-lambert" : "linear"}};
   if (gFromFsBs) {
     j["fs"] = fs;
     j["bs"] = bs;

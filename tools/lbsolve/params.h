@@ -11,7 +11,7 @@
 //
 // File format (every key optional; unknown keys are an error):
 //   { "sigma_a": [r,g,b], "sigma_s": [r,g,b], "fs": [r,g,b], "bs": [r,g,b] | "g": [r,g,b],
-//     "wood_g": -1, "wood_threshold": 0.5 }
+//     "wood_g": -1, "wood_threshold": 0.5, "sigma": 4, "collision": "beer-lambert" | "linear" }
 // A scalar may stand for all three channels. "g" and "fs"/"bs" are exclusive.
 #pragma once
 #include <array>
@@ -23,6 +23,9 @@ namespace canopy::lb {
 
 // The range of wood_threshold (and --wood-threshold): [0, 1]; false for NaN.
 inline bool woodThresholdInRange(double t) { return t >= 0 && t <= 1; }
+// The range of sigma (and --sigma): (0, 64]; false for NaN. (64 per cell is opaque in 1/64 cell.)
+constexpr double kMaxSigma = 64.0;
+inline bool sigmaInRange(double s) { return s > 0 && s <= kMaxSigma; }
 
 struct LightParams {
   std::array<double, 3> sigmaA{0.109, 0.091, 0.118};
@@ -33,9 +36,15 @@ struct LightParams {
   bool gFromFsBs = true;  // false when g was given directly
   double gWood = -1.0;
   double woodThreshold = 0.5;
+  // How a node's density rho turns into interaction (collide.h, OmegaSet): "beer-lambert" (default),
+  // p = 1 - exp(-sigma rho |c|), the medium canopy-play renders (its --sigma, the same default), or
+  // "linear", p = rho, the dissertation's collision. sigma: extinction per lattice cell at density 1.
+  double sigma = 4.0;
+  bool beerLambert = true;
 
   // Throws canopy::Error(InvalidInput) naming `what` if a value is out of range
-  // (sigma_a in [0,1], sigma_s >= 0, sigma_a + sigma_s > 0, g in [-1,1], fs, bs >= 0, fs + bs > 0).
+  // (sigma_a in [0,1], sigma_s >= 0, sigma_a + sigma_s > 0, g in [-1,1], fs, bs >= 0, fs + bs > 0,
+  // sigma in (0, kMaxSigma]).
   void validate(const std::string& what) const;
   nlohmann::json toJson() const;
   // Luminance parameters for the scene-level lattice: Rec. 709 weights (0.2126, 0.7152, 0.0722)

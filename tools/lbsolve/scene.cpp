@@ -8,8 +8,12 @@
 // contains its centre; the coarse density is that mass / h^3, clamped to 1. A coarse node is
 // wood where the wood-flagged share of its mass >= wood_threshold. The same update is solved for
 // luminance only (Rec. 709 weights of the parameters) for the 19 boundary conditions, and every
-// base is divided by its unoccluded value (19 for B00, 1 for B01..B18), so that each FloatGrid
-// Bjj is the factor (1 = unoccluded) that scales an instance's fine light at run time.
+// base is divided by its unoccluded value (unoccludedValue: 1 for B01..B18; 18 for B00 inside, 19
+// on the boundary layer), so that each FloatGrid Bjj is the factor (1 = unoccluded) that scales an
+// instance's fine light at run time. The coarse lattice keeps the dissertation's linear collision
+// (interaction p = rho per coarse node): its nodes are metres wide and each plant's fine solution
+// already holds its self-occlusion, which a Beer-Lambert coarse node inside the crown would count
+// a second time (a crown's coarse node would be nearly opaque).
 #include <cmath>
 #include <limits>
 
@@ -51,12 +55,18 @@ Scene readScene(const std::string& path) {
   return s;
 }
 
+// What base b holds at a node that nothing occludes (the normalisation of the scene lattice): a sun
+// base 1 (its one direction arrives whole); B_0 19 on the boundary layer (its fixed f_0 = 1 too) and
+// 18 inside, where f_0 is zeroed at every collision and the 18 moving populations arrive whole.
+float unoccludedValue(int b, bool interior) { return b != 0 ? 1.f : interior ? float(kQ - 1) : float(kQ); }
+
 }  // namespace
 
 LbsolveReport solveScene(const LbsolveOptions& o) {
   LbsolveReport report;
   report.mode = "scene";
   report.params = resolveParams(o);
+  report.params.beerLambert = false;  // the coarse lattice keeps the dissertation's collision (docs/lbsolve.md)
   report.device = o.device.str();
   vdbio::initialize();
   { AtomicOutput probe(o.output); }
@@ -127,7 +137,7 @@ LbsolveReport solveScene(const LbsolveOptions& o) {
           std::to_string(h) + " m, cap " + std::to_string(cap) + " iterations");
 
   const auto lum = report.params.luminance();
-  const OmegaSet omega = makeOmegaSet(lum[0], lum[1], lum[2], report.params.gWood);
+  const OmegaSet omega = makeOmegaSet(lum[0], lum[1], lum[2], report.params.gWood, 0.0);  // linear (above)
   std::vector<SolveSpec> specs;
   std::vector<LbsolveSolve> labels;
   for (int b = 0; b < kQ; ++b) {
@@ -154,9 +164,10 @@ LbsolveReport solveScene(const LbsolveOptions& o) {
     g->setName(lattice::baseName(b));
     g->setTransform(xform->copy());
     auto acc = g->getAccessor();
-    const float unoccluded = b == 0 ? float(kQ) : 1.f;
-    for (int64_t i = 0; i < d.count(); ++i)
-      acc.setValue(nodeCoord(d, meta.min, i), results[size_t(b)].values[size_t(i)] / unoccluded);
+    for (int64_t i = 0; i < d.count(); ++i) {
+      const openvdb::Coord c = nodeCoord(d, meta.min, i);
+      acc.setValue(c, results[size_t(b)].values[size_t(i)] / unoccludedValue(b, d.interior(c.x(), c.y(), c.z())));
+    }
     vdbio::stampGrid(*g, meta);
     g->insertMeta("canopy_direction", openvdb::Vec3IMetadata(openvdb::Vec3i(
                                           lattice::dir(b, 0), lattice::dir(b, 1), lattice::dir(b, 2))));
