@@ -134,13 +134,13 @@ TEST(Light, SampleLbLightIsLbIndirectOfTheTrilinearBases) {
   const float sun[3] = {1.5f, 1.0f, 0.75f};
   for (float lx : {0.0f, 0.1f, 0.37f, 0.5f, 0.93f, 1.0f}) {
     float out[3];
-    pl::sampleLbLight(item.data(), w, lx, 0.3f, 0.6f, sun, 0.35f, 0.5f, out);
+    pl::sampleLbLight(item.data(), w, lx, 0.3f, 0.6f, sun, 0.35f, pl::SceneLightPair{0.5f, 0.75f}, out);
     const float t = lx * 4.0f + 0.5f;
     for (int c = 0; c < 3; ++c) {
       float want = 0.0f;
       for (int v = 0; v < 3; ++v) want += w.weight[v] * (float(w.base[v]) + t);
-      want = want * sun[c] + 0.35f * pl::kAmbientB0Scale * t;
-      want *= 0.5f * float(c + 1) / 8.0f;
+      want = want * sun[c] * 0.75f + 0.35f * pl::kAmbientB0Scale * t * 0.5f;
+      want *= float(c + 1) / 8.0f;
       EXPECT_NEAR(out[c], want, 1e-5f) << "lx " << lx << " channel " << c;
     }
   }
