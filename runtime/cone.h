@@ -406,10 +406,10 @@ CANOPY_HD CANOPY_PLAY_NOINLINE void sampleHaarLbLight(const unsigned char* item,
       }
       if (!(weight[v] != 0.0f)) continue;  // a zero weight adds +0 (lbIndirect would add 0 * B)
       const haar::Rgb c = canopyHaarSampleAt(item, fp16, base[v], at);
-      const float f = v == 3 ? ambientFactor : 1.0f;  // B_0's term: ambient B_0 / 18 * ambientFactor
-      acc[0] += v == 3 ? weight[v] * c.r * f : weight[v] * c.r;
-      acc[1] += v == 3 ? weight[v] * c.g * f : weight[v] * c.g;
-      acc[2] += v == 3 ? weight[v] * c.b * f : weight[v] * c.b;
+      const float f = v == 3 ? ambientFactor : 1.0f;  // B_0's term: ambient B_0 / 18 * ambientFactor (x 1 is exact)
+      acc[0] += weight[v] * c.r * f;
+      acc[1] += weight[v] * c.g * f;
+      acc[2] += weight[v] * c.b * f;
     }
   }
   for (int c = 0; c < 3; ++c) out[c] = acc[c];

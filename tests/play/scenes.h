@@ -128,7 +128,7 @@ inline haar::ChaarData chaarOf(const octreepack::ModelSource& src, const octreep
 // as Haar pages (the finest level's exact light, canopy-play --light exact).
 inline void writeHaarLitScene(const std::string& path, const std::vector<octreepack::ModelSource>& sources,
                               const std::vector<octreepack::LightFn>& lights, const std::vector<CanopyInstance>& instances, float T,
-                              haar::Precision precision) {
+                              haar::Precision precision, const SceneLightData* sceneLight = nullptr) {
   std::vector<octreepack::BuiltModel> built;
   std::vector<CanopyHaarPages> pages(sources.size());
   built.reserve(sources.size());
@@ -141,6 +141,12 @@ inline void writeHaarLitScene(const std::string& path, const std::vector<octreep
   CanopyWriteInput w;
   for (size_t m = 0; m < built.size(); ++m) w.models.push_back({built[m].record, &built[m].tiles, &built[m].bricks, &built[m].light, &pages[m]});
   w.instances = instances;
+  if (sceneLight) {
+    w.hasSceneLight = true;
+    w.sceneLight = sceneLight->header;
+    w.sceneLightBases = sceneLight->bases;
+    w.sceneLightValues = sceneLight->values;
+  }
   w.metadata = "{\"tool\":\"tests/play\"}";
   writeCanopyFile(path, std::move(w));
 }
