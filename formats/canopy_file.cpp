@@ -42,6 +42,7 @@ const char* sectionName(uint32_t kind) {
     case CanopySectionKind::SceneLight: return "SceneLight";
     case CanopySectionKind::Metadata: return "Metadata";
     case CanopySectionKind::HaarIndex: return "HaarIndex";
+    case CanopySectionKind::SceneSunLight: return "SceneSunLight";
   }
   return "unknown";
 }
@@ -125,6 +126,7 @@ CanopyFile& CanopyFile::operator=(CanopyFile&& o) noexcept {
     pages_ = std::move(o.pages_);
     hasSceneLight_ = o.hasSceneLight_;
     sceneLight_ = o.sceneLight_;
+    sceneLightBases_ = o.sceneLightBases_;
     sceneLightValues_ = std::move(o.sceneLightValues_);
     metadata_ = std::move(o.metadata_);
     haarIndex_ = std::move(o.haarIndex_);
@@ -275,18 +277,36 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
   tiles_ = copyArray<CanopyNode>(resident_, st.offset, st.itemCount * 8);
   pages_ = copyArray<CanopyPageEntry>(resident_, sp.offset, sp.itemCount);
 
+  const CanopySection* sun = findSection(CanopySectionKind::SceneSunLight);
   if (const CanopySection* sl = findSection(CanopySectionKind::SceneLight)) {
     if (sl->bytes < sizeof(CanopySceneLight)) bad(P, "SceneLight section too small");
     std::memcpy(&sceneLight_, resident_.data() + sl->offset, sizeof sceneLight_);
+    for (double v : sceneLight_.indexToWorld)
+      if (!std::isfinite(v)) bad(P, "SceneLight has a non-finite transform");
     uint64_t n = 1;
     for (int a = 0; a < 3; ++a) {
       if (sceneLight_.dim[a] <= 0 || sceneLight_.dim[a] > 65536) bad(P, "SceneLight dimensions invalid");
       n *= uint64_t(sceneLight_.dim[a]);
     }
     if (sl->bytes != sizeof(CanopySceneLight) + n * sizeof(float)) bad(P, "SceneLight size does not match its dimensions");
-    sceneLightValues_.resize(size_t(n));
+    // 1.2: the sun bases B01..B18 of the same lattice, one item each.
+    if (sun) {
+      if (h.major == 1 && h.minor < 2) bad(P, "a 1." + std::to_string(h.minor) + " file has a SceneSunLight section");
+      if (sun->itemCount != kCanopySceneSunBases || uint64_t(sun->itemBytes) != n * sizeof(float))
+        bad(P, "SceneSunLight holds " + u64s(sun->itemCount) + " bases of " + u64s(sun->itemBytes) + " bytes, not " +
+                   u64s(kCanopySceneSunBases) + " of " + u64s(n * sizeof(float)) + " (SceneLight's lattice)");
+    }
+    sceneLightBases_ = sun ? 1 + kCanopySceneSunBases : 1;
+    sceneLightValues_.resize(size_t(n) * sceneLightBases_);
     std::memcpy(sceneLightValues_.data(), resident_.data() + sl->offset + sizeof(CanopySceneLight), size_t(n) * sizeof(float));
+    if (sun) std::memcpy(sceneLightValues_.data() + n, resident_.data() + sun->offset, size_t(n) * kCanopySceneSunBases * sizeof(float));
+    for (size_t i = 0; i < sceneLightValues_.size(); ++i)
+      if (!(sceneLightValues_[i] >= 0.0f) || sceneLightValues_[i] > 3.0e38f)
+        bad(P, "scene light base B" + std::string(i / n < 10 ? "0" : "") + std::to_string(i / n) + " value " + u64s(i % n) +
+                   " is negative or not finite");
     hasSceneLight_ = true;
+  } else if (sun) {
+    bad(P, "SceneSunLight section without a SceneLight section");
   }
   if (const CanopySection* md = findSection(CanopySectionKind::Metadata))
     metadata_.assign(reinterpret_cast<const char*>(resident_.data() + md->offset), size_t(md->bytes));

@@ -1,4 +1,4 @@
-// canopy_file.h: the packed, streamable scene file (`.canopy`), version 1.1 (reads 1.0 too).
+// canopy_file.h: the packed, streamable scene file (`.canopy`), version 1.2 (reads 1.0 and 1.1 too).
 //
 // A .canopy file holds plant models (each a sparse GigaVoxels-style octree of bricks, thesis ch. 5),
 // instances of those models (model id + transform) and an optional coarse scene lighting lattice.
@@ -16,6 +16,7 @@
 //                       NodeTiles   CanopyNode[8 * tiles]            16 B each (2x2x2 tiles)
 //                       PageTable   CanopyPageEntry[pageCount]       32 B each
 //                       SceneLight  CanopySceneLight + float[dim]    (optional)
+//                       SceneSunLight  float[18][dim]  (1.2, optional: the scene lattice's sun bases)
 //                       Metadata    UTF-8 JSON: tool version, inputs and their hashes (optional)
 //                       HaarIndex   uint32[]: Haar-lit models' group tables + brick locations (1.1)
 //   pagesOffset       page 0, page 1, ...        pageBytes each (65536), pagesOffset % pageBytes == 0
@@ -92,7 +93,10 @@
 // Versioning: major changes on any layout change (a reader refuses a newer major); minor adds
 // optional sections/page kinds that older readers may ignore. 1.1 added Haar light (the HaarIndex
 // section, HaarLight pages, model fields in 1.0's reserved bytes); the writer writes 1.0 when no
-// model has Haar light, so such files are byte-identical to 1.0 ones.
+// model has Haar light, so such files are byte-identical to 1.0 ones. 1.2 added the scene lattice's
+// sun bases (the SceneSunLight section, beside SceneLight's B00, which keeps its 1.0 layout): a 1.1
+// reader skips the unknown section and lights the scene with B00 alone, as before; the writer
+// writes 1.2 only for a file with that section.
 #pragma once
 #include <math.h>
 #include <string.h>
@@ -114,7 +118,8 @@ namespace canopy {
 // ------------------------------------------------------------------------------------------------
 constexpr char kCanopyMagic[8] = {'C', 'A', 'N', 'O', 'P', 'Y', 'P', 'K'};
 constexpr uint16_t kCanopyMajor = 1;
-constexpr uint16_t kCanopyMinor = 1;  // 1.1: Haar light pages (optional; a 1.0 reader skips them), kCanopyModelScatteredSun
+constexpr uint16_t kCanopyMinor = 2;  // 1.1: Haar light pages (optional; a 1.0 reader skips them), kCanopyModelScatteredSun;
+                                      // 1.2: the scene lattice's sun bases (SceneSunLight; a 1.1 reader skips it)
 constexpr uint32_t kCanopyPageBytes = 65536;   // page size written (readers accept powers of two >= 32 KiB)
 constexpr uint32_t kCanopySectionAlign = 64;   // every section starts on a 64-byte boundary
 constexpr uint32_t kCanopyBrickSize = 8;       // interior voxels per axis
@@ -167,6 +172,10 @@ enum class CanopySectionKind : uint32_t {
   SceneLight = 5,  // CanopySceneLight then float values[dim.x * dim.y * dim.z] (optional)
   Metadata = 6,    // UTF-8 JSON (optional)
   HaarIndex = 7,   // uint32[]: every Haar-lit model's group table and brick locations (1.1; optional)
+  // (1.2; optional, only with SceneLight) the scene lattice's sun bases B01..B18: 18 items (one per
+  // base, in order), each float values[dim.x * dim.y * dim.z] on SceneLight's lattice (x fastest),
+  // itemBytes = 4 * dim.x * dim.y * dim.z. Finite and >= 0 (1 = unoccluded), like SceneLight's B00.
+  SceneSunLight = 8,
 };
 
 struct CanopySection {             // offset
@@ -266,13 +275,16 @@ using CanopyPageEntry = CanopyPageHeader;  // the page table holds copies of eve
 constexpr char kCanopyPageMagic[4] = {'C', 'P', 'A', 'G'};
 
 // Coarse scene lighting lattice (lbsolve --scene): a dense float grid of luminance factors in
-// world space, followed by dim[0]*dim[1]*dim[2] floats, x fastest.
+// world space, followed by dim[0]*dim[1]*dim[2] floats, x fastest: B00, the ambient factor (1 =
+// unoccluded sky). A 1.2 file may add the 18 sun bases B01..B18 of the same lattice in the
+// SceneSunLight section (1 = unoccluded sun); without them B00 is the factor of all indirect light.
 struct CanopySceneLight {          // offset
   double indexToWorld[12];         //   0  3x4 row-major
   int32_t min[3];                  //  96  lattice index of value 0
   int32_t dim[3];                  // 108  values per axis
-  uint32_t reserved[2];            // 120
+  uint32_t reserved[2];            // 120  zero
 };
+constexpr uint32_t kCanopySceneSunBases = 18;  // SceneSunLight's items: B01..B18
 static_assert(sizeof(CanopySceneLight) == 128, "CanopySceneLight layout");
 
 // ------------------------------------------------------------------------------------------------
@@ -702,6 +714,10 @@ class CanopyFile {
   const CanopyPageEntry& pageEntry(uint32_t i) const { return pages_[i]; }
   bool hasSceneLight() const { return hasSceneLight_; }
   const CanopySceneLight& sceneLight() const { return sceneLight_; }
+  // The scene lattice's bases: 1 (B00 only) or 19 (B00 and the SceneSunLight section's B01..B18);
+  // 0 without a scene light.
+  uint32_t sceneLightBases() const { return sceneLightBases_; }
+  // Every base's values, base-major (B00's dim.x*dim.y*dim.z values first, then B01's, ...).
   const std::vector<float>& sceneLightValues() const { return sceneLightValues_; }
   const std::string& metadata() const { return metadata_; }
   // The HaarIndex section (every Haar-lit model's entries, from model.firstHaarIndex; empty if none).
@@ -737,6 +753,7 @@ class CanopyFile {
   std::vector<CanopyPageEntry> pages_;
   bool hasSceneLight_ = false;
   CanopySceneLight sceneLight_{};
+  uint32_t sceneLightBases_ = 0;
   std::vector<float> sceneLightValues_;
   std::string metadata_;
   std::vector<uint32_t> haarIndex_;

@@ -141,15 +141,27 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
   blobs.push_back(blobOf(CanopySectionKind::Instances, in.instances.data(), sizeof(CanopyInstance), uint32_t(in.instances.size()), "instances"));
   blobs.push_back(blobOf(CanopySectionKind::NodeTiles, tiles.data(), sizeof(CanopyNode) * 8, uint32_t(tiles.size() / 8), "node_tiles"));
   blobs.push_back(blobOf(CanopySectionKind::PageTable, L.pages.data(), sizeof(CanopyPageEntry), uint32_t(L.pages.size()), "page_table"));
+  bool sceneSun = false;  // the scene lattice's sun bases (1.2)
   if (in.hasSceneLight) {
     uint64_t n = 1;
     for (int a = 0; a < 3; ++a) n *= uint64_t(std::max(0, in.sceneLight.dim[a]));
-    if (n == 0 || n != in.sceneLightValues.size()) throw invalidInput("canopy writer: scene light size mismatch");
+    const uint32_t bases = in.sceneLightBases;
+    if (bases != 1 && bases != 1 + kCanopySceneSunBases)
+      throw invalidInput("canopy writer: a scene light has 1 or 19 bases, not " + std::to_string(bases));
+    if (n == 0 || n * bases != in.sceneLightValues.size()) throw invalidInput("canopy writer: scene light size mismatch");
+    if (n * sizeof(float) > 0xFFFFFFFFu) throw invalidInput("canopy writer: scene light lattice too large");
+    for (float v : in.sceneLightValues)
+      if (!(v >= 0.0f) || v > 3.0e38f) throw invalidInput("canopy writer: scene light value negative or not finite");
     Blob b{CanopySectionKind::SceneLight, 0, 1, {}, "scene_light"};
     b.bytes.resize(sizeof(CanopySceneLight) + n * sizeof(float));
     std::memcpy(b.bytes.data(), &in.sceneLight, sizeof(CanopySceneLight));
     std::memcpy(b.bytes.data() + sizeof(CanopySceneLight), in.sceneLightValues.data(), n * sizeof(float));
     blobs.push_back(std::move(b));
+    if (bases > 1) {
+      blobs.push_back(blobOf(CanopySectionKind::SceneSunLight, in.sceneLightValues.data() + n, uint32_t(n * sizeof(float)),
+                             kCanopySceneSunBases, "scene_sun_light"));
+      sceneSun = true;
+    }
   }
   if (!haarIndex.empty())
     blobs.push_back(blobOf(CanopySectionKind::HaarIndex, haarIndex.data(), sizeof(uint32_t), uint32_t(haarIndex.size()), "haar_index"));
@@ -181,8 +193,10 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
   CanopyFileHeader h{};
   std::memcpy(h.magic, kCanopyMagic, 8);
   h.major = kCanopyMajor;
-  // Without a 1.1 feature (Haar light, scattered-only sun bases) a file is a 1.0 file, byte for byte.
-  h.minor = haarIndex.empty() && !scatteredSun ? 0 : kCanopyMinor;
+  // Without a 1.1 feature (Haar light, scattered-only sun bases) a file is a 1.0 file, byte for byte;
+  // with one but no 1.2 feature (the scene lattice's sun bases) a 1.1 file.
+  h.minor = sceneSun ? 2 : haarIndex.empty() && !scatteredSun ? 0 : 1;
+  static_assert(kCanopyMinor == 2, "the writer's minor versions");
   h.headerBytes = sizeof(CanopyFileHeader);
   h.pageBytes = pageBytes;
   h.pageCount = uint32_t(L.pages.size());

@@ -49,7 +49,10 @@ struct CanopyWriteInput {
   std::vector<CanopyInstance> instances;
   bool hasSceneLight = false;
   CanopySceneLight sceneLight{};
-  std::vector<float> sceneLightValues;
+  // 1: B00 only (the SceneLight section; a 1.0/1.1 file). 19: B00..B18, the sun bases B01..B18 in
+  // the SceneSunLight section (a 1.2 file).
+  uint32_t sceneLightBases = 1;
+  std::vector<float> sceneLightValues;   // sceneLightBases x dim.x*dim.y*dim.z, base-major (B00 first)
   std::string metadata;                  // UTF-8 JSON; empty = no Metadata section
 };
 

@@ -43,7 +43,7 @@
 //      constant node always uses its nearest brick ancestor's, as canopy_file.h says); the node's
 //      own light page is asked for when it is missing. Only when no light page on the path is
 //      resident yet (a cold start) does the sample get the density-only indirect term
-//      (ambient x scene factor), and the coarsest brick's light page is asked for as well.
+//      (ambient x ambient scene factor), and the coarsest brick's light page is asked for as well.
 //      With --light exact (ShadeParams::exactLight), a segment at the finest level of a model that
 //      has Haar light (format 1.1) samples the .chaar's brick at its lattice point instead
 //      (segmentLight, sampleHaarLbLight), its Haar page used or asked for through the same cache.
@@ -198,8 +198,17 @@ struct InstanceView {
   sun::Weights sunWeights;  // the sun in this instance's model space -> LB bases (per frame)
 };
 
-struct SceneLightView {     // coarse scene lattice (lbsolve --scene), factor on indirect light
-  const float* values;      // nullptr: none (factor 1)
+// The two factors of the coarse scene lattice (lbsolve --scene, dissertation §4.3) at a point:
+// the ambient one (B00, 1 = unoccluded sky) on the ambient term, and the sun one (the lattice's
+// sun bases weighted by the frame's sun lookup, sum_v w_v B_v: 1 = unoccluded sun) on the
+// scattered sun term. A file with B00 alone gives both the value of B00.
+struct alignas(8) SceneLightPair {
+  float ambient;
+  float sun;
+};
+
+struct SceneLightView {     // coarse scene lattice (lbsolve --scene), factors on indirect light
+  const SceneLightPair* values;  // per node, x fastest (HostScene::setSun builds it); nullptr: none (factors 1)
   Affine worldToIndex;
   int32_t min[3];
   int32_t dim[3];
@@ -209,7 +218,7 @@ struct ShadeParams {
   V3 toSun;                 // unit vector towards the sun (world)
   float sun[3];             // sun radiance (linear RGB): scales the LB sun bases (lbIndirect)
   float direct[3];          // the direct term's sun radiance: sun, or 0 (--no-direct-sun)
-  float ambient;            // ambient factor (user): indirect = ambient * scene factor without LB data
+  float ambient;            // ambient factor (user): indirect = ambient * ambient scene factor without LB data
   float sigma;              // extinction per lattice cell at density 1
   float stepFactor;         // brick step in voxels of the chosen level
   float lodBias;            // added to the chosen level (negative = coarser)
@@ -303,9 +312,10 @@ CANOPY_HD CANOPY_FORCEINLINE void writeStamp(uint32_t* p, uint32_t v) {
 // Lighting
 // ------------------------------------------------------------------------------------------------
 
-// The coarse scene factor at world point p (trilinear, clamped to the lattice; 1 without one).
-CANOPY_HD inline float sceneLightFactor(const SceneLightView& L, V3 p) {
-  if (!L.values) return 1.0f;
+// The coarse scene factors at world point p (trilinear, clamped to the lattice; 1 without one):
+// one trilinear lookup of the node pairs (a pair is one 8-byte load per corner).
+CANOPY_HD inline SceneLightPair sceneLightFactors(const SceneLightView& L, V3 p) {
+  if (!L.values) return SceneLightPair{1.0f, 1.0f};
   const V3 q = applyPoint(L.worldToIndex, p);
   int i0[3];
   float f[3];
@@ -318,7 +328,7 @@ CANOPY_HD inline float sceneLightFactor(const SceneLightView& L, V3 p) {
     f[a] = x - fl;
     if (i0[a] >= L.dim[a] - 1) i0[a] = L.dim[a] > 1 ? L.dim[a] - 2 : 0, f[a] = L.dim[a] > 1 ? 1.0f : 0.0f;
   }
-  float v = 0.0f;
+  SceneLightPair v{0.0f, 0.0f};
   for (int c = 0; c < 8; ++c) {
     const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
     const float w = (dx ? f[0] : 1 - f[0]) * (dy ? f[1] : 1 - f[1]) * (dz ? f[2] : 1 - f[2]);
@@ -326,7 +336,9 @@ CANOPY_HD inline float sceneLightFactor(const SceneLightView& L, V3 p) {
     const int x = i0[0] + dx < L.dim[0] ? i0[0] + dx : L.dim[0] - 1;
     const int y = i0[1] + dy < L.dim[1] ? i0[1] + dy : L.dim[1] - 1;
     const int z = i0[2] + dz < L.dim[2] ? i0[2] + dz : L.dim[2] - 1;
-    v += w * L.values[size_t(x) + size_t(L.dim[0]) * (size_t(y) + size_t(L.dim[1]) * size_t(z))];
+    const SceneLightPair n = L.values[size_t(x) + size_t(L.dim[0]) * (size_t(y) + size_t(L.dim[1]) * size_t(z))];
+    v.ambient += w * n.ambient;
+    v.sun += w * n.sun;
   }
   return v;
 }
@@ -339,31 +351,31 @@ constexpr float kAmbientB0Scale = 1.0f / 18.0f;
 
 // The LB indirect light of the dissertation §4.2-4.3 at one sample, given the values of the three
 // sun bases chosen by the polyhedron lookup (bases[v] = B_{w.base[v]} there, RGB) and of the
-// ambient base B_0: ((sum_v w_v B_v) * sun + ambient B_0 / 18) * sceneFactor.
+// ambient base B_0, each term relit by the coarse scene lattice (§4.3: the same lookup on its
+// bases): (sum_v w_v B_v) * sun * scene.sun + ambient B_0 / 18 * scene.ambient.
 // The bases are solved for a unit sun, so their sum is scaled by the sun radiance like the direct
 // term. canopy-lbsolve stores the sun bases without their direct beam (kCanopyModelScatteredSun):
 // this is then the light scattered at least once, and the shadowed direct sun is the caller's
 // `sun * Tshadow`. Bases that include the beam (older files) count it twice (docs/play.md).
 CANOPY_HD inline void lbIndirect(const sun::Weights& w, const float bases[3][3], const float b0[3], const float sun[3],
-                                 float ambient, float sceneFactor, float out[3]) {
+                                 float ambient, SceneLightPair scene, float out[3]) {
   for (int c = 0; c < 3; ++c)
-    out[c] = ((w.weight[0] * bases[0][c] + w.weight[1] * bases[1][c] + w.weight[2] * bases[2][c]) * sun[c] +
-              ambient * kAmbientB0Scale * b0[c]) *
-             sceneFactor;
+    out[c] = (w.weight[0] * bases[0][c] + w.weight[1] * bases[1][c] + w.weight[2] * bases[2][c]) * sun[c] * scene.sun +
+             ambient * kAmbientB0Scale * b0[c] * scene.ambient;
 }
 
 // The indirect light of a sample of a model without LB light (or of a lit model before any of its
-// light pages is resident): the ambient term alone, B_0 taken as 1: ambient * sceneFactor.
-CANOPY_HD inline void ambientOnly(const SceneView& s, float sceneFactor, float out[3]) {
+// light pages is resident): the ambient term alone, B_0 taken as 1: ambient * scene.ambient.
+CANOPY_HD inline void ambientOnly(const SceneView& s, SceneLightPair scene, float out[3]) {
   const float zero[3][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
   const float b0[3] = {1.0f / kAmbientB0Scale, 1.0f / kAmbientB0Scale, 1.0f / kAmbientB0Scale};
   const sun::Weights none;
-  lbIndirect(none, zero, b0, s.shade.sun, s.shade.ambient, sceneFactor, out);
+  lbIndirect(none, zero, b0, s.shade.sun, s.shade.ambient, scene, out);
 }
 
 // The LB indirect light from a Haar item (--light exact at the finest level of a Haar-lit model) at
-// the brick-local footprint `at`: ((sum_v w_v B_v) * sun + ambient B_0 / 18) * sceneFactor, as
-// lbIndirect() computes it (the same terms in the same order), each base haar::sampleBrick of the item (bit for
+// the brick-local footprint `at`: (sum_v w_v B_v) * sun * sunFactor + ambient B_0 / 18 * ambientFactor,
+// as lbIndirect() computes it (the same terms in the same order), each base haar::sampleBrick of the item (bit for
 // bit the .chaar's own chaarSample). item == nullptr: no light stored there (every base 0).
 // On the device this is one out-of-line function, one copy of the sampler for both precisions, the
 // four bases in a rolled loop. Measured on the grove at 1080p on an H200 (bench/RESULTS.md): inlined
@@ -378,7 +390,7 @@ CANOPY_HD inline void ambientOnly(const SceneView& s, float sceneFactor, float o
 // 16.3 ms per 1080p frame on an H200), although --light fast never calls it.
 CANOPY_HD CANOPY_PLAY_NOINLINE void sampleHaarLbLight(const unsigned char* item, uint32_t fp16, const haar::BrickLookup& at,
                                                       const sun::Weights& w, haar::Rgb sun, float ambient,
-                                                      float sceneFactor, float out[3]) {
+                                                      float sunFactor, float ambientFactor, float out[3]) {
   float acc[3] = {0.0f, 0.0f, 0.0f};
   if (item) {
     const uint32_t base[4] = {uint32_t(w.base[0]), uint32_t(w.base[1]), uint32_t(w.base[2]), 0u};
@@ -387,26 +399,27 @@ CANOPY_HD CANOPY_PLAY_NOINLINE void sampleHaarLbLight(const unsigned char* item,
 #pragma unroll 1
 #endif
     for (int v = 0; v < 4; ++v) {
-      if (v == 3) {  // the three sun bases are summed: scale them by the sun radiance before B_0 joins
-        acc[0] *= sun.r;
-        acc[1] *= sun.g;
-        acc[2] *= sun.b;
+      if (v == 3) {  // the three sun bases are summed: scale them by the sun radiance and the scene's sun factor before B_0 joins
+        acc[0] = acc[0] * sun.r * sunFactor;
+        acc[1] = acc[1] * sun.g * sunFactor;
+        acc[2] = acc[2] * sun.b * sunFactor;
       }
       if (!(weight[v] != 0.0f)) continue;  // a zero weight adds +0 (lbIndirect would add 0 * B)
       const haar::Rgb c = canopyHaarSampleAt(item, fp16, base[v], at);
-      acc[0] += weight[v] * c.r;
-      acc[1] += weight[v] * c.g;
-      acc[2] += weight[v] * c.b;
+      const float f = v == 3 ? ambientFactor : 1.0f;  // B_0's term: ambient B_0 / 18 * ambientFactor (x 1 is exact)
+      acc[0] += weight[v] * c.r * f;
+      acc[1] += weight[v] * c.g * f;
+      acc[2] += weight[v] * c.b * f;
     }
   }
-  for (int c = 0; c < 3; ++c) out[c] = acc[c] * sceneFactor;
+  for (int c = 0; c < 3; ++c) out[c] = acc[c];
 }
 
 // The LB indirect light from a light item at node-local l in [0,1]^3: the (up to) three sun bases
 // of the instance's lookup and B_0, each trilinear (canopySampleLight's interpolation, the corners
 // found once), then lbIndirect().
 CANOPY_HD inline void sampleLbLight(const uint16_t* item, const sun::Weights& w, float lx, float ly, float lz,
-                                    const float sun[3], float ambient, float sceneFactor, float out[3]) {
+                                    const float sun[3], float ambient, SceneLightPair scene, float out[3]) {
   const CanopyLightCorners k = canopyLightCorners(lx, ly, lz);
   float bases[3][3];
   for (int v = 0; v < 3; ++v) {
@@ -415,7 +428,7 @@ CANOPY_HD inline void sampleLbLight(const uint16_t* item, const sun::Weights& w,
   }
   float b0[3];
   canopySampleLightAt(item, 0, k, b0);
-  lbIndirect(w, bases, b0, sun, ambient, sceneFactor, out);
+  lbIndirect(w, bases, b0, sun, ambient, scene, out);
 }
 
 // ------------------------------------------------------------------------------------------------
@@ -646,19 +659,19 @@ CANOPY_HD inline void segmentLight(const SceneView& s, const ModelView& m, const
 }
 
 // The indirect light of a shading segment of instance `inst` on the ray o + t dir: the LB light of
-// its light item, else the density-only ambient term; times the scene factor at its sample.
+// its light item, else the density-only ambient term; each term times its scene factor at its sample.
 // kWithLight = false: compiled without the LB light code, for scenes without lit models (where no
 // segment has a light item, so the result is the same).
 template <bool kWithLight = true>
 CANOPY_HD inline void segmentIndirect(const SceneView& s, const InstanceView& inst, const Segment& g, V3 o, V3 dir, float out[3]) {
-  const float factor = sceneLightFactor(s.light, o + dir * g.tSample);
+  const SceneLightPair factor = sceneLightFactors(s.light, o + dir * g.tSample);
   if (kWithLight && g.haarLocal != kHaarNone) {
     haar::BrickLookup at;
     at.slot = 0;
     at.lx = int(g.haarLocal & 3u), at.ly = int((g.haarLocal >> 2) & 3u), at.lz = int((g.haarLocal >> 4) & 3u);
     at.fx = g.light[0], at.fy = g.light[1], at.fz = g.light[2];
     const haar::Rgb sun = {s.shade.sun[0], s.shade.sun[1], s.shade.sun[2]};
-    sampleHaarLbLight(g.haarItem, (g.haarLocal >> 6) & 1u, at, inst.sunWeights, sun, s.shade.ambient, factor, out);
+    sampleHaarLbLight(g.haarItem, (g.haarLocal >> 6) & 1u, at, inst.sunWeights, sun, s.shade.ambient, factor.sun, factor.ambient, out);
     return;
   }
   if (!kWithLight || !g.lightItem) {

@@ -420,6 +420,9 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   r["haar_page_mb"] = double(scene.haarPageBytes) / (1024.0 * 1024.0);
   r["light"] = o.exactLight ? "exact" : "fast";
   r["lit_models"] = scene.litModels;
+  // The coarse scene light: 0 none, 1 (B00: one static factor), 19 (B00 on the ambient term, the
+  // sun's bases, relit per frame, on the scattered sun term).
+  r["scene_light_bases"] = scene.lightBases;
   // The LB sun bases: scattered light only (kCanopyModelScatteredSun), or beam included (counted twice).
   r["sun_bases"] = scene.litModels == 0 ? "none"
                    : scene.totalSunModels == 0 ? "scattered"

@@ -102,7 +102,8 @@ class CudaBackend final : public Backend {
     uploadVector(gridItems_, scene.gridItems);
     uploadVector(gridFaceStart_, scene.gridFaceStart);
     uploadVector(gridFaceItems_, scene.gridFaceItems);
-    uploadVector(light_, scene.lightValues);
+    uploadVector(light_, scene.lightPairs);
+    lightVersion_ = scene.lightVersion;
     instances_.resize(std::max<size_t>(scene.instances.size(), 1));
     pool_.resize(std::max<size_t>(size_t(slots) * pageBytes_, 1));
     table_.resize(std::max<uint32_t>(pageCount_, 1));
@@ -154,6 +155,15 @@ class CudaBackend final : public Backend {
     if (!scene.instances.empty())
       CANOPY_CUDA_CHECK(cudaMemcpyAsync(instances_.data(), scene.instances.data(), scene.instances.size() * sizeof(InstanceView),
                                         cudaMemcpyHostToDevice, compute_));
+    // The scene light's factor pairs change with the sun (HostScene::setSun): a few thousand nodes,
+    // copied before this frame's kernels on the same stream (the last frame's kernels have finished:
+    // render() ends with a synchronisation).
+    if (scene.lightVersion != lightVersion_ && !scene.lightPairs.empty()) {
+      if (light_.size() != scene.lightPairs.size()) light_.resize(scene.lightPairs.size());
+      CANOPY_CUDA_CHECK(cudaMemcpyAsync(light_.data(), scene.lightPairs.data(), scene.lightPairs.size() * sizeof(SceneLightPair),
+                                        cudaMemcpyHostToDevice, compute_));
+      lightVersion_ = scene.lightVersion;
+    }
     const size_t pixels = size_t(camera.width) * camera.height;
     if (image_.size() != pixels * 4) image_.resize(pixels * 4);
     SceneView v = hostSceneView(scene);
@@ -241,7 +251,8 @@ class CudaBackend final : public Backend {
   cuda::DeviceBuffer<ModelView> models_;
   cuda::DeviceBuffer<InstanceView> instances_;
   cuda::DeviceBuffer<uint32_t> gridStart_, gridItems_, gridFaceStart_, gridFaceItems_;
-  cuda::DeviceBuffer<float> light_;
+  cuda::DeviceBuffer<SceneLightPair> light_;  // the scene light's factor pairs (HostScene::lightPairs)
+  uint64_t lightVersion_ = 0;                  // the HostScene::lightVersion that light_ holds
   cuda::DeviceBuffer<unsigned char> pool_;
   cuda::DeviceBuffer<int32_t> table_;
   cuda::DeviceBuffer<uint32_t> slotUsed_, pageWanted_;

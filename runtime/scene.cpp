@@ -226,14 +226,41 @@ HostScene buildScene(const CanopyFile& f) {
     M34 i2w;
     for (int k = 0; k < 12; ++k) i2w[size_t(k)] = L.indexToWorld[k];
     s.hasSceneLight = true;
-    s.lightValues = f.sceneLightValues();
-    s.light.worldToIndex = toAffine(invert(i2w, f.path() + ": scene light indexToWorld"));
+    s.lightBases = f.sceneLightBases();
+    s.lightBaseValues = f.sceneLightValues();
+    const M34 w2i = invert(i2w, f.path() + ": scene light indexToWorld");
+    s.light.worldToIndex = toAffine(w2i);
+    s.worldToSceneLinear = toAffine(w2i);
+    s.worldToSceneLinear.m[3] = s.worldToSceneLinear.m[7] = s.worldToSceneLinear.m[11] = 0.0f;
     for (int a = 0; a < 3; ++a) {
       s.light.min[a] = L.min[a];
       s.light.dim[a] = L.dim[a];
     }
+    // B00 alone: one factor for both terms, built once. With the sun bases: B00 and no sun (until setSun).
+    s.lightSun = sun::Weights();
+    buildSceneLightPairs(s.lightBaseValues, s.lightBases, size_t(L.dim[0]) * size_t(L.dim[1]) * size_t(L.dim[2]), s.lightSun, s.lightPairs);
+    ++s.lightVersion;
   }
   return s;
+}
+
+void buildSceneLightPairs(const std::vector<float>& values, uint32_t bases, size_t nodes, const sun::Weights& w,
+                          std::vector<SceneLightPair>& out) {
+  if ((bases != 1 && bases != 1 + kCanopySceneSunBases) || values.size() != nodes * bases)
+    throw invalidInput("scene light: " + std::to_string(values.size()) + " values are not " + std::to_string(bases) + " bases of " +
+                       std::to_string(nodes) + " nodes");
+  out.resize(nodes);
+  for (size_t i = 0; i < nodes; ++i) out[i].ambient = values[i];
+  if (bases == 1) {
+    for (size_t i = 0; i < nodes; ++i) out[i].sun = values[i];
+    return;
+  }
+  for (size_t i = 0; i < nodes; ++i) out[i].sun = 0.0f;
+  for (int v = 0; v < 3; ++v) {
+    if (!(w.weight[v] != 0.0f) || w.base[v] < 1 || w.base[v] > int(kCanopySceneSunBases)) continue;
+    const float* b = values.data() + size_t(w.base[v]) * nodes;
+    for (size_t i = 0; i < nodes; ++i) out[i].sun += w.weight[v] * b[i];
+  }
 }
 
 void HostScene::setSun(V3 toSun) {
@@ -244,6 +271,20 @@ void HostScene::setSun(V3 toSun) {
     // is the transpose of the rotation; a non-uniform scale maps directions as displacements.
     const V3 d = normalize(applyVector(worldToLatticeLinear[i], toSun * -1.0f));
     sun::lookup(d.x, d.y, d.z, instances[i].sunWeights);
+  }
+  // The scene lattice's sun factor (§4.3: the coarse level relit with the same lookup), in its own
+  // index axes (world axes scaled by its cell); rebuilt only when the lookup changes.
+  if (hasSceneLight && lightBases > 1) {
+    const V3 d = normalize(applyVector(worldToSceneLinear, toSun * -1.0f));
+    sun::Weights w;
+    sun::lookup(d.x, d.y, d.z, w);
+    bool same = w.face == lightSun.face;
+    for (int v = 0; v < 3; ++v) same = same && w.base[v] == lightSun.base[v] && w.weight[v] == lightSun.weight[v];
+    if (!same) {
+      lightSun = w;
+      buildSceneLightPairs(lightBaseValues, lightBases, lightPairs.size(), lightSun, lightPairs);
+      ++lightVersion;
+    }
   }
 }
 
@@ -331,7 +372,7 @@ SceneView hostSceneView(const HostScene& s) {
   v.lightItemsPerPage = indexDivisor(s.lightItemsPerPage > 0 ? s.lightItemsPerPage : 1);
   v.litModels = s.litModels;
   v.light = s.light;
-  v.light.values = s.hasSceneLight ? s.lightValues.data() : nullptr;
+  v.light.values = s.hasSceneLight ? s.lightPairs.data() : nullptr;
   return v;
 }
 

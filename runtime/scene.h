@@ -3,7 +3,8 @@
 // HostScene holds the arrays that cone.h's SceneView points at (models, instances, the uniform grid
 // of instance boxes, the coarse scene light); the backends copy them (the CUDA one to the device)
 // and fill in the cache pointers. setSun() recomputes every instance's sun lookup (the sun taken
-// into the instance's model/lattice axes, dissertation §4.2) once per frame. Light pages share the
+// into the instance's model/lattice axes, dissertation §4.2) once per frame, and the coarse scene
+// lattice's sun factor (the same lookup on its bases, §4.3) where the file has its sun bases. Light pages share the
 // brick pages' cache (page table, pool, LRU, loader): see cone.h, 7.
 #pragma once
 #include <cstdint>
@@ -29,8 +30,13 @@ struct HostScene {
   float boundsLo[3] = {0, 0, 0}, boundsHi[3] = {0, 0, 0};  // world bounds of every instance
   bool empty = true;                      // no instance
   bool hasSceneLight = false;
-  SceneLightView light{};                 // values == nullptr; backends point it at lightValues
-  std::vector<float> lightValues;
+  SceneLightView light{};                 // values == nullptr; backends point it at lightPairs
+  uint32_t lightBases = 0;                // the scene lattice's bases: 0 (none), 1 (B00) or 19 (B00..B18)
+  std::vector<float> lightBaseValues;     // lightBases x nodes, base-major (CanopyFile::sceneLightValues)
+  Affine worldToSceneLinear{};            // world vectors -> scene lattice index axes (for the sun lookup)
+  sun::Weights lightSun;                  // the lookup the sun factors were built for
+  std::vector<SceneLightPair> lightPairs; // per node {B00, sum_v w_v B_v} (buildSceneLightPairs)
+  uint64_t lightVersion = 0;              // incremented whenever lightPairs changes (the CUDA backend re-uploads)
   uint32_t pageCount = 0, pageBytes = 0, bricksPerPage = 0, lightItemsPerPage = 0;
   uint64_t brickPageBytes = 0;            // bytes of all brick pages (streamed)
   uint64_t lightPageBytes = 0;            // bytes of the lit models' light pages (streamed, same cache)
@@ -38,9 +44,16 @@ struct HostScene {
   uint32_t litModels = 0;                 // models sampled with LB light
   uint32_t totalSunModels = 0;            // of them, with sun bases that include the direct beam (counted twice)
 
-  // Sets every instance's sun weights for the direction towards the sun (world).
+  // Sets every instance's sun weights for the direction towards the sun (world), and with a
+  // 19-base scene light the sun factors of lightPairs (rebuilt only when the lookup changes).
   void setSun(V3 toSun);
 };
+
+// The scene lattice's per-node factor pairs: ambient = B00, sun = sum_v w.weight[v] B_{w.base[v]}
+// (in v order, zero weights skipped), with `bases` = 19 and `values` holding B00..B18 base-major
+// (nodes values each); with bases = 1 (B00 alone) sun = B00 (one factor for all indirect light).
+void buildSceneLightPairs(const std::vector<float>& values, uint32_t bases, size_t nodes, const sun::Weights& w,
+                          std::vector<SceneLightPair>& out);
 
 // Builds the scene; throws canopy::Error(InvalidInput) for a degenerate transform.
 HostScene buildScene(const CanopyFile& file);

@@ -1,6 +1,6 @@
 // fuzz_canopy.cpp: libFuzzer harness for the .canopy reader. Any input must either be rejected
 // with a canopy::Error or be read in full (every page, a descent and a brick sample per model, its
-// float16 light item and its Haar light) without a sanitizer report.
+// float16 light item and its Haar light, every scene light base) without a sanitizer report.
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -17,6 +17,12 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         f.readPage(i, page.data());
       } catch (const canopy::Error&) {
       }
+    }
+    if (f.hasSceneLight()) {  // every base of the scene light (B00, and B01..B18 in a 1.2 file)
+      const size_t nodes = size_t(f.sceneLight().dim[0]) * size_t(f.sceneLight().dim[1]) * size_t(f.sceneLight().dim[2]);
+      if (f.sceneLightValues().size() != nodes * f.sceneLightBases()) __builtin_trap();
+      volatile float sum = 0.0f;
+      for (float v : f.sceneLightValues()) sum = sum + v;
     }
     for (uint32_t m = 0; m < f.modelCount(); ++m) {
       const canopy::CanopyModel& M = f.model(m);

@@ -1,8 +1,9 @@
 // test_canopy_file.cpp: the .canopy reader never trusts its input (built with ASan/UBSan: the
 // reader, writer and builder sources are compiled into this test).
-//   - the frozen 1.1 file in data/ still reads (its Haar light equal to the .chaar sampler's bit for
-//     bit), and the writer still produces it byte for byte (a layout change must be deliberate:
-//     bump the version and add a new frozen file); the frozen 1.0 file still reads;
+//   - the frozen 1.2 file in data/ still reads (its Haar light equal to the .chaar sampler's bit for
+//     bit, its 19-base scene light as written), and the writer still produces it byte for byte (a
+//     layout change must be deliberate: bump the version and add a new frozen file); the frozen
+//     1.1 and 1.0 files still read and are still written byte for byte;
 //   - every truncated prefix, flipped bytes (header, table, sections, padding, pages), trailing
 //     bytes, bad magic and a newer major version are rejected with a one-line canopy::Error.
 #include <gtest/gtest.h>
@@ -12,6 +13,7 @@
 #include <limits>
 #include <random>
 #include <string>
+#include <tuple>
 
 #include "canopy/atomic_file.h"
 #include "canopy/errors.h"
@@ -27,8 +29,9 @@ namespace op = canopy::octreepack;
 
 namespace {
 
-// The current format's frozen file (1.1) and the previous one (1.0), which must still read.
-const std::string kFrozen = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v1.1.canopy";
+// The current format's frozen file (1.2) and the previous ones (1.1, 1.0), which must still read.
+const std::string kFrozen = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v1.2.canopy";
+const std::string kFrozenV11 = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v1.1.canopy";
 const std::string kFrozenV1 = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v1.0.canopy";
 const std::string kFrozenChaar = std::string(CANOPY_SOURCE_DIR) + "/tests/haar/data/small_v1_0.chaar";
 const std::string kFrozenChaarQuant = std::string(CANOPY_SOURCE_DIR) + "/tests/haar/data/small_v2_0.chaar";
@@ -45,10 +48,17 @@ op::ModelSource haarModelSource(const haar::ChaarData& d) {
   return s;
 }
 
+// The frozen 1.2 file's scene light: a 4x3x5 lattice of 0.5 m cells, base j at node i holding
+// 0.01 (i + 1) + 0.1 j (B00 first).
+constexpr int kSceneDim[3] = {4, 3, 5};
+float sceneLightValue(uint32_t base, uint32_t node) { return 0.01f * float(node + 1) + 0.1f * float(base); }
+
 // The frozen files' content: a 20-cell synthetic plant (depth 2, density only), an 8-cell one with
 // analytic float16 lighting (depth 0) and three instances (1.0); 1.1 adds a fourth instance of a
-// third model lit by the frozen .chaar (float16 items of its decoded values and its Haar pages).
-std::vector<unsigned char> smallFileBytes(bool withHaar = true) {
+// third model lit by the frozen .chaar (float16 items of its decoded values and its Haar pages);
+// 1.2 adds a coarse scene light with its 19 bases (SceneLight's B00, SceneSunLight's B01..B18).
+std::vector<unsigned char> smallFileBytes(int minor = 2) {
+  const bool withHaar = minor >= 1;
   const op::ModelSource src = op::testing::syntheticPlant(20, 2, "frozen", 0);
   const op::BuiltModel m = op::buildOctree(src, "frozen");
   const op::BuiltModel lit = op::buildOctree(op::testing::syntheticPlant(8, 0, "lit", 0), "lit", op::testing::analyticLight);
@@ -70,7 +80,17 @@ std::vector<unsigned char> smallFileBytes(bool withHaar = true) {
   d.modelToWorld[11] = -6.0f;
   in.instances = {a, b, c};
   if (withHaar) in.instances.push_back(d);
-  in.metadata = withHaar ? R"({"tool":"test_canopy_file","note":"frozen .canopy 1.1"})" : R"({"tool":"test_canopy_file","note":"frozen .canopy 1.0"})";
+  in.metadata = R"({"tool":"test_canopy_file","note":"frozen .canopy 1.)" + std::to_string(minor) + R"("})";
+  if (minor >= 2) {
+    in.hasSceneLight = true;
+    const double m[12] = {0.5, 0, 0, -1.0, 0, 0.5, 0, -0.25, 0, 0, 0.5, -7.0};
+    for (int i = 0; i < 12; ++i) in.sceneLight.indexToWorld[i] = m[i];
+    for (int a = 0; a < 3; ++a) in.sceneLight.min[a] = a - 1, in.sceneLight.dim[a] = kSceneDim[a];
+    in.sceneLightBases = kCanopyLightBases;
+    const uint32_t n = uint32_t(kSceneDim[0] * kSceneDim[1] * kSceneDim[2]);
+    for (uint32_t b = 0; b < kCanopyLightBases; ++b)
+      for (uint32_t i = 0; i < n; ++i) in.sceneLightValues.push_back(sceneLightValue(b, i));
+  }
   return writeCanopyBytes(std::move(in));
 }
 
@@ -146,6 +166,9 @@ std::string expectRejected(const std::vector<unsigned char>& bytes, bool readPag
 
 }  // namespace
 
+// The 1.1 and 1.2 frozen files' Haar-lit model and their content otherwise (1.2: the scene light).
+void checkFrozenV11Content(CanopyFile& f);
+
 TEST(CanopyFile, FrozenSmallFileStillReads) {
   if (std::getenv("CANOPY_WRITE_FROZEN")) {  // regenerate deliberately (new format version only)
     const auto bytes = smallFileBytes();
@@ -153,11 +176,44 @@ TEST(CanopyFile, FrozenSmallFileStillReads) {
   }
   CanopyFile f = CanopyFile::open(kFrozen);
   EXPECT_EQ(f.header().major, 1);
+  EXPECT_EQ(f.header().minor, 2);
+  checkFrozenV11Content(f);
+  EXPECT_NE(f.metadata().find("frozen .canopy 1.2"), std::string::npos);
+  // The scene light: B00 in SceneLight, B01..B18 in SceneSunLight, read back base-major.
+  ASSERT_TRUE(f.hasSceneLight());
+  EXPECT_EQ(f.sceneLightBases(), 19u);
+  EXPECT_EQ(f.sceneLight().min[2], 1);
+  EXPECT_EQ(f.sceneLight().dim[2], 5);
+  EXPECT_EQ(f.sceneLight().indexToWorld[11], -7.0);
+  const uint32_t n = uint32_t(kSceneDim[0] * kSceneDim[1] * kSceneDim[2]);
+  ASSERT_EQ(f.sceneLightValues().size(), size_t(19 * n));
+  for (uint32_t b = 0; b < 19; ++b)
+    for (uint32_t i = 0; i < n; ++i) ASSERT_EQ(f.sceneLightValues()[b * n + i], sceneLightValue(b, i)) << b << " " << i;
+  const CanopySection* sun = f.findSection(CanopySectionKind::SceneSunLight);
+  ASSERT_NE(sun, nullptr);
+  EXPECT_EQ(sun->itemCount, 18u);
+  EXPECT_EQ(sun->itemBytes, n * 4);
+  // The writer still produces exactly these bytes.
+  EXPECT_EQ(readFile(kFrozen), smallFileBytes()) << "the .canopy layout changed: bump the version";
+}
+
+// The 1.1 file (before the scene light's sun bases) still reads, and a file without them is still
+// written as exactly that 1.1 file.
+TEST(CanopyFile, FrozenVersion11FileStillReadsAndIsStillWritten) {
+  CanopyFile f = CanopyFile::open(kFrozenV11);
+  EXPECT_EQ(f.header().major, 1);
   EXPECT_EQ(f.header().minor, 1);
+  checkFrozenV11Content(f);
+  EXPECT_FALSE(f.hasSceneLight());
+  EXPECT_EQ(f.sceneLightBases(), 0u);
+  EXPECT_NE(f.metadata().find("frozen .canopy 1.1"), std::string::npos);
+  EXPECT_EQ(readFile(kFrozenV11), smallFileBytes(1)) << "a file without the scene light's sun bases must stay a 1.1 file";
+}
+
+void checkFrozenV11Content(CanopyFile& f) {
   ASSERT_EQ(f.modelCount(), 3u);
   ASSERT_EQ(f.instanceCount(), 4u);
   checkDensityAndFloat16Models(f);
-  EXPECT_NE(f.metadata().find("frozen .canopy 1.1"), std::string::npos);
   // The Haar-lit model: its Haar light at any point equals the .chaar sampler's value, bit for bit.
   const CanopyModel& H = f.model(2);
   ASSERT_TRUE(H.flags & kCanopyModelHaarLight);
@@ -176,8 +232,6 @@ TEST(CanopyFile, FrozenSmallFileStillReads) {
     const haar::Rgb got = S.sampleHaar(2, base, p[0], p[1], p[2]);
     ASSERT_EQ(std::memcmp(&want, &got, sizeof want), 0) << "base " << base << " at " << p[0] << "," << p[1] << "," << p[2];
   }
-  // The writer still produces exactly these bytes.
-  EXPECT_EQ(readFile(kFrozen), smallFileBytes()) << "the .canopy layout changed: bump the version";
 }
 
 // The 1.0 file (before Haar light) still reads, with the same content, and a file without Haar
@@ -191,12 +245,12 @@ TEST(CanopyFile, FrozenVersion10FileStillReadsAndIsStillWritten) {
   EXPECT_TRUE(f.haarIndex().empty());
   checkDensityAndFloat16Models(f);
   EXPECT_NE(f.metadata().find("frozen .canopy 1.0"), std::string::npos);
-  EXPECT_EQ(readFile(kFrozenV1), smallFileBytes(false)) << "a file without Haar light must stay a 1.0 file";
+  EXPECT_EQ(readFile(kFrozenV1), smallFileBytes(0)) << "a file without Haar light must stay a 1.0 file";
 }
 
 // kCanopyModelScatteredSun (1.1): only on a lit model, and not in a 1.0 file (valid CRCs).
 TEST(CanopyFile, ScatteredSunFlagNeedsLightAndVersion11) {
-  for (const std::string& path : {kFrozen, kFrozenV1}) {
+  for (const std::string& path : {kFrozen, kFrozenV11, kFrozenV1}) {
     const std::vector<unsigned char> good = readFile(path);
     CanopyFile f = CanopyFile::fromMemory(good.data(), good.size(), "ok.canopy");
     const CanopySection* models = f.findSection(CanopySectionKind::Models);
@@ -224,7 +278,7 @@ TEST(CanopyFile, ScatteredSunFlagNeedsLightAndVersion11) {
 // small-v1.1.canopy and reads every page.)
 TEST(CanopyFile, Version11KeepsWhatA10ReaderRequires) {
   // What 1.0 checked of a model still holds for the Haar-lit one: one light item per brick.
-  CanopyFile f = CanopyFile::open(kFrozen);
+  CanopyFile f = CanopyFile::open(kFrozenV11);
   for (uint32_t m = 0; m < f.modelCount(); ++m) {
     const CanopyModel& M = f.model(m);
     EXPECT_EQ(M.lightCount, (M.flags & kCanopyModelHasLight) ? M.brickCount : 0u);
@@ -426,6 +480,78 @@ TEST(CanopyFile, CraftedHaarPagesAndLocationsAreRejectedEvenWithValidChecksums) 
     EXPECT_NE(expectRejected(bad, false).find("twice"), std::string::npos);
     break;
   }
+}
+
+// The scene light's sun bases (1.2) in crafted files with valid checksums: refused in a 1.1 file,
+// with another base count or size than SceneLight's lattice, without SceneLight, or holding a
+// negative or non-finite value; the writer refuses to write such a scene light.
+TEST(CanopyFile, SceneSunLightIsCheckedEvenWithValidChecksums) {
+  const std::vector<unsigned char> good = readFile(kFrozen);
+  CanopyFile f = CanopyFile::fromMemory(good.data(), good.size(), "ok.canopy");
+  const CanopySection* sl = f.findSection(CanopySectionKind::SceneLight);
+  const CanopySection* sun = f.findSection(CanopySectionKind::SceneSunLight);
+  ASSERT_NE(sl, nullptr);
+  ASSERT_NE(sun, nullptr);
+  const size_t sunEntry = size_t(sun - &f.section(0)), slEntry = size_t(sl - &f.section(0));
+  auto editSection = [&](std::vector<unsigned char>& b, size_t entry, size_t field, uint32_t value) {
+    std::memcpy(b.data() + sizeof(CanopyFileHeader) + entry * sizeof(CanopySection) + field, &value, 4);
+  };
+  {  // a 1.1 file
+    std::vector<unsigned char> bad = good;
+    CanopyFileHeader h;
+    std::memcpy(&h, bad.data(), sizeof h);
+    h.minor = 1;
+    std::memcpy(bad.data(), &h, sizeof h);
+    reseal(bad);
+    EXPECT_NE(expectRejected(bad, false).find("a 1.1 file has a SceneSunLight section"), std::string::npos);
+  }
+  {  // 36 half-size bases (the same bytes)
+    std::vector<unsigned char> bad = good;
+    editSection(bad, sunEntry, offsetof(CanopySection, itemBytes), sun->itemBytes / 2);
+    editSection(bad, sunEntry, offsetof(CanopySection, itemCount), sun->itemCount * 2);
+    reseal(bad);
+    EXPECT_NE(expectRejected(bad, false).find("SceneSunLight holds 36 bases"), std::string::npos);
+  }
+  {  // SceneLight's kind unknown (skipped): the sun bases have no lattice
+    std::vector<unsigned char> bad = good;
+    editSection(bad, slEntry, offsetof(CanopySection, kind), 99u);
+    reseal(bad);
+    EXPECT_NE(expectRejected(bad, false).find("SceneSunLight section without a SceneLight section"), std::string::npos);
+  }
+  const uint64_t n = uint64_t(kSceneDim[0]) * kSceneDim[1] * kSceneDim[2];
+  for (const auto& [at, value, base] : {std::tuple<uint64_t, float, const char*>{sun->offset + 4 * (4 * n + 7), -0.5f, "B05"},
+                                        {sl->offset + sizeof(CanopySceneLight) + 4 * 3, std::numeric_limits<float>::quiet_NaN(), "B00"},
+                                        {sun->offset + 4 * (17 * n), std::numeric_limits<float>::infinity(), "B18"}}) {
+    std::vector<unsigned char> bad = good;
+    std::memcpy(bad.data() + at, &value, 4);
+    reseal(bad);
+    const std::string m = expectRejected(bad, false);
+    EXPECT_NE(m.find(std::string("scene light base ") + base), std::string::npos) << m;
+    EXPECT_NE(m.find("negative or not finite"), std::string::npos) << m;
+  }
+  // The writer: 1 or 19 bases, values finite and >= 0, base-major sizes.
+  CanopyWriteInput in;
+  in.hasSceneLight = true;
+  for (int a = 0; a < 3; ++a) in.sceneLight.dim[a] = 2;
+  in.sceneLight.indexToWorld[0] = in.sceneLight.indexToWorld[5] = in.sceneLight.indexToWorld[10] = 1.0;
+  for (auto [bases, count, value, expect] : {std::tuple<uint32_t, size_t, float, const char*>{2, 16, 1.0f, "1 or 19 bases"},
+                                              {19, 8 * 18, 1.0f, "size mismatch"},
+                                              {19, 8 * 19, -1.0f, "negative or not finite"}}) {
+    CanopyWriteInput w = in;
+    w.sceneLightBases = bases;
+    w.sceneLightValues.assign(count, value);
+    try {
+      writeCanopyBytes(std::move(w));
+      ADD_FAILURE() << "scene light of " << bases << " bases, " << count << " values accepted";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(expect), std::string::npos) << e.what();
+    }
+  }
+  CanopyWriteInput ok = in;  // the same input with a valid scene light writes
+  ok.sceneLightBases = 19;
+  ok.sceneLightValues.assign(8 * 19, 1.0f);
+  const std::vector<unsigned char> bytes = writeCanopyBytes(std::move(ok));
+  EXPECT_EQ(CanopyFile::fromMemory(bytes.data(), bytes.size(), "ok.canopy").sceneLightBases(), 19u);
 }
 
 // Light items are float16 through canopy/half.h; the writer's policy on top is saturation: out of

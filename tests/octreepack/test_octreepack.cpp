@@ -28,6 +28,7 @@
 #include "formats/scene_json.h"
 #include "gltf_scene.h"
 #include "tests/octreepack/packed_sampler.h"
+#include "tests/octreepack/source_vdb.h"
 #include "tests/octreepack/synthetic.h"
 #include "tools/octreepack/inputs.h"
 #include "tools/octreepack/octreepack.h"
@@ -37,6 +38,8 @@ using canopy::CanopyFile;
 using canopy::CanopySample;
 using op::testing::PackedSampler;
 using op::testing::syntheticPlant;
+using op::testing::kNoMesh;
+using op::testing::writeSourceVdb;
 
 namespace {
 
@@ -50,44 +53,6 @@ std::string tmpDir() {
     return d;
   }();
   return dir;
-}
-
-// A lattice as canopy-voxelize writes it; `source` is its canopy_source ("<mesh file> xxh64:<hash>")
-// and meshIndex (>= -1) its file's canopy_mesh_index (none where kNoMesh).
-constexpr int kNoMesh = -2;
-void writeSourceVdb(const std::string& path, const op::ModelSource& s, const std::string& source = "test",
-                    int meshIndex = kNoMesh) {
-  canopy::vdbio::initialize();
-  auto density = openvdb::FloatGrid::create(0.0f);
-  auto wood = openvdb::FloatGrid::create(0.0f);
-  auto albedo = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
-  density->setName("density");
-  wood->setName("wood");
-  albedo->setName("albedo");
-  openvdb::Mat4d m = openvdb::Mat4d::identity();
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 4; ++c) m(c, r) = s.indexToModel[size_t(r * 4 + c)];  // OpenVDB: row vectors
-  auto xf = openvdb::math::Transform::createLinearTransform(m);
-  auto da = density->getAccessor();
-  auto wa = wood->getAccessor();
-  auto aa = albedo->getAccessor();
-  for (const auto& c : s.cells) {
-    const openvdb::Coord ijk(c.ijk[0], c.ijk[1], c.ijk[2]);
-    da.setValue(ijk, c.density);
-    wa.setValue(ijk, c.wood);
-    aa.setValue(ijk, openvdb::Vec3s(c.albedo[0], c.albedo[1], c.albedo[2]));
-  }
-  canopy::vdbio::LatticeMeta meta;
-  meta.min = openvdb::Coord(s.latticeMin[0], s.latticeMin[1], s.latticeMin[2]);
-  meta.max = openvdb::Coord(s.latticeMax[0], s.latticeMax[1], s.latticeMax[2]);
-  meta.source = source;
-  for (openvdb::GridBase::Ptr g : {openvdb::GridBase::Ptr(density), openvdb::GridBase::Ptr(wood), openvdb::GridBase::Ptr(albedo)}) {
-    g->setTransform(xf);
-    canopy::vdbio::stampGrid(*g, meta);
-  }
-  openvdb::MetaMap fileMeta;
-  if (meshIndex != kNoMesh) fileMeta.insertMeta("canopy_mesh_index", openvdb::Int32Metadata(meshIndex));
-  canopy::vdbio::writeVdb(path, {density, wood, albedo}, fileMeta);
 }
 
 // An lbsolve-style light VDB: 19 Vec3 grids B00..B18 holding analyticLight over an n^3 lattice.
@@ -290,15 +255,21 @@ TEST(Octreepack, SceneJsonPacksModelsInstancesAndSceneLight) {
   const std::string dir = tmpDir();
   writeSourceVdb(dir + "/a.density.vdb", syntheticPlant(24, 0, "a", 0));
   writeSourceVdb(dir + "/b.density.vdb", syntheticPlant(20, 5, "b", 0));
-  // A coarse scene lighting lattice: a float grid named B00, as canopy-lbsolve --scene names its
-  // ambient factor (the default --scene-light-grid; before it was "light", which lbsolve never writes).
-  auto light = openvdb::FloatGrid::create(0.0f);
-  light->setName("B00");
-  for (int k = 0; k < 3; ++k)
-    for (int j = 0; j < 4; ++j)
-      for (int i = 0; i < 5; ++i) light->tree().setValue(openvdb::Coord(i, j, k), 1.0f + float(i + 10 * j + 100 * k));
-  light->setTransform(openvdb::math::Transform::createLinearTransform(2.0));
-  canopy::vdbio::writeVdb(dir + "/scene_light.vdb", {light});
+  // A coarse scene lighting lattice: the float grids B00..B18 of canopy-lbsolve --scene (B00 the
+  // ambient factor, B01..B18 the sun bases), base b at (i, j, k) holding 1 + i + 10 j + 100 k + 1000 b.
+  openvdb::GridPtrVec bases;
+  for (int b = 0; b < 19; ++b) {
+    auto light = openvdb::FloatGrid::create(0.0f);
+    char name[8];
+    std::snprintf(name, sizeof name, "B%02d", b);
+    light->setName(name);
+    for (int k = 0; k < 3; ++k)
+      for (int j = 0; j < 4; ++j)
+        for (int i = 0; i < 5; ++i) light->tree().setValue(openvdb::Coord(i, j, k), 1.0f + float(i + 10 * j + 100 * k + 1000 * b));
+    light->setTransform(openvdb::math::Transform::createLinearTransform(2.0));
+    bases.push_back(light);
+  }
+  canopy::vdbio::writeVdb(dir + "/scene_light.vdb", bases);
   std::ofstream(dir + "/scene.json") << R"({"canopy_scene": 1,
     "models": [{"name": "a", "density": "a.density.vdb"}, {"name": "b", "density": "b.density.vdb"}],
     "instances": [{"model": 0, "matrix": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1]},
@@ -321,9 +292,23 @@ TEST(Octreepack, SceneJsonPacksModelsInstancesAndSceneLight) {
   ASSERT_TRUE(f.hasSceneLight());
   EXPECT_EQ(f.sceneLight().dim[0], 5);
   EXPECT_EQ(f.sceneLight().dim[2], 3);
-  EXPECT_FLOAT_EQ(f.sceneLightValues()[size_t(4 + 5 * (3 + 4 * 2))], 1.0f + 4 + 30 + 200);
+  EXPECT_EQ(f.header().minor, 2);  // the sun bases are a 1.2 feature
+  ASSERT_EQ(f.sceneLightBases(), 19u);
+  for (int b = 0; b < 19; ++b)  // base-major, every base on the one lattice
+    EXPECT_FLOAT_EQ(f.sceneLightValues()[size_t(60 * b + 4 + 5 * (3 + 4 * 2))], 1.0f + 4 + 30 + 200 + 1000 * b) << b;
   EXPECT_DOUBLE_EQ(f.sceneLight().indexToWorld[0], 2.0);
   EXPECT_EQ(report["models"][1]["instances"].get<int>(), 1);
+  EXPECT_EQ(report["scene_light_bases"].get<int>(), 19);
+  // --scene-light-grid B00: that grid alone, the one static factor (a file without 1.2 features).
+  o.sceneLightGrid = "B00";
+  o.output = dir + "/scene-b00.canopy";
+  const nlohmann::json one = op::octreepack(o);
+  CanopyFile g = CanopyFile::open(o.output);
+  EXPECT_EQ(g.sceneLightBases(), 1u);
+  EXPECT_LT(g.header().minor, 2);
+  ASSERT_EQ(g.sceneLightValues().size(), 60u);
+  EXPECT_TRUE(std::equal(g.sceneLightValues().begin(), g.sceneLightValues().end(), f.sceneLightValues().begin()));
+  EXPECT_EQ(one["scene_light_bases"].get<int>(), 1);
   // Both models sample back exactly.
   PackedSampler S(f);
   const auto b = syntheticPlant(20, 5, "b", 0);
@@ -585,9 +570,10 @@ TEST(OctreepackCli, SceneListErrorsAreTheSameAsLbsolves) {
   }
 }
 
-// What canopy-lbsolve --scene writes packs with the default --scene-light-grid (B00): before, the
-// default was "light", a grid lbsolve never writes, so this failed with exit 3.
-TEST(OctreepackCli, LbsolveSceneLightPacksWithTheDefaultGrid) {
+// What canopy-lbsolve --scene writes packs by default: its 19 bases B00..B18 (format 1.2), B00 first
+// and the same as --scene-light-grid B00 packs alone (before format 1.2, the only factor). `info`
+// tells them apart. (Before 2026-12 the default grid was "light", which lbsolve never writes.)
+TEST(OctreepackCli, LbsolveSceneLightPacksItsNineteenBasesByDefault) {
   const std::string lbsolve = std::string(CANOPY_BINARY_DIR) + "/bin/canopy-lbsolve";
   if (!exists(lbsolve)) GTEST_SKIP() << "canopy-lbsolve is not built";
   const std::string dir = tmpDir();
@@ -600,10 +586,70 @@ TEST(OctreepackCli, LbsolveSceneLightPacksWithTheDefaultGrid) {
   ASSERT_EQ(std::system((lbsolve + " --scene '" + dir + "/lit.scene.json' -o '" + sceneLight +
                          "' --scene-resolution 8 --device cpu -q").c_str()), 0);
   ASSERT_EQ(run("--scene '" + dir + "/lit.scene.json' --scene-light '" + sceneLight + "' -o '" + out + "'"), 0);
-  EXPECT_TRUE(CanopyFile::open(out).hasSceneLight());
+  const CanopyFile all = CanopyFile::open(out);
+  ASSERT_TRUE(all.hasSceneLight());
+  EXPECT_EQ(all.sceneLightBases(), 19u);
   const std::string named = dir + "/lit-b00.canopy";
   ASSERT_EQ(run("--scene '" + dir + "/lit.scene.json' --scene-light '" + sceneLight + "' --scene-light-grid B00 -o '" + named + "'"), 0);
-  EXPECT_EQ(canopy::readFile(out), canopy::readFile(named));  // the default is B00
+  const CanopyFile one = CanopyFile::open(named);
+  EXPECT_EQ(one.sceneLightBases(), 1u);
+  const size_t n = one.sceneLightValues().size();
+  ASSERT_EQ(all.sceneLightValues().size(), 19 * n);
+  EXPECT_TRUE(std::equal(one.sceneLightValues().begin(), one.sceneLightValues().end(), all.sceneLightValues().begin()));
+  // lbsolve's sun bases are factors of an unoccluded 1: the one from above (B04) is 1 on the top
+  // layer of nodes (nothing above them) and below 1 under the plants.
+  const int* dim = all.sceneLight().dim;
+  const float* b04 = all.sceneLightValues().data() + 4 * n;
+  float lowest = 1.0f;
+  for (size_t i = 0; i < n; ++i) lowest = std::min(lowest, b04[i]);
+  EXPECT_NEAR(b04[size_t(dim[0]) * (size_t(dim[1] - 1) + size_t(dim[1]) * size_t(dim[2] / 2)) + size_t(dim[0] / 2)], 1.0f, 0.05f);
+  EXPECT_LT(lowest, 0.95f);
+  // info reports the base count.
+  const auto infoOf = [&](const std::string& file) {
+    FILE* p = popen((std::string(CANOPY_BINARY_DIR) + "/bin/canopy-octreepack info '" + file + "' 2>/dev/null").c_str(), "r");
+    std::string text;
+    char buf[512];
+    while (p && std::fgets(buf, sizeof buf, p)) text += buf;
+    if (p) pclose(p);
+    return text;
+  };
+  EXPECT_NE(infoOf(out).find("19 bases (B00 ambient, B01..B18 sun)"), std::string::npos) << infoOf(out);
+  EXPECT_NE(infoOf(named).find("1 base (B00"), std::string::npos) << infoOf(named);
+  // A scene lighting file without all 19 bases, or with a base on another lattice, is refused
+  // (exit 3, nothing written), unless one grid is named.
+  auto lattice = [](const char* name, double cell, int edge) {
+    auto g = openvdb::FloatGrid::create(0.0f);
+    g->setName(name);
+    for (int k = 0; k < edge; ++k)
+      for (int j = 0; j < edge; ++j)
+        for (int i = 0; i < edge; ++i) g->tree().setValue(openvdb::Coord(i, j, k), 0.5f);
+    g->setTransform(openvdb::math::Transform::createLinearTransform(cell));
+    return openvdb::GridBase::Ptr(g);
+  };
+  openvdb::GridPtrVec partial, mixed;
+  for (int b = 0; b < 19; ++b) {
+    char name[8];
+    std::snprintf(name, sizeof name, "B%02d", b);
+    if (b != 7) partial.push_back(lattice(name, 1.0, 3));
+    mixed.push_back(lattice(name, b == 11 ? 2.0 : 1.0, 3));
+  }
+  canopy::vdbio::writeVdb(dir + "/partial.scenelight.vdb", partial);
+  canopy::vdbio::writeVdb(dir + "/mixed.scenelight.vdb", mixed);
+  const std::string bad = dir + "/bad-scene-light.canopy";
+  for (const char* file : {"partial", "mixed"}) {
+    std::remove(bad.c_str());
+    EXPECT_EQ(run("--scene '" + dir + "/lit.scene.json' --scene-light '" + dir + "/" + file + ".scenelight.vdb' -o '" + bad + "'"), 3) << file;
+    EXPECT_FALSE(exists(bad)) << file;
+  }
+  EXPECT_EQ(run("--scene '" + dir + "/lit.scene.json' --scene-light '" + dir + "/partial.scenelight.vdb' --scene-light-grid B00 -o '" + bad + "'"), 0);
+  EXPECT_EQ(CanopyFile::open(bad).sceneLightBases(), 1u);
+  EXPECT_THROW(op::readSceneLightVdb(dir + "/partial.scenelight.vdb", ""), canopy::Error);
+  try {
+    op::readSceneLightVdb(dir + "/mixed.scenelight.vdb", "");
+    ADD_FAILURE() << "a base on another lattice was accepted";
+  } catch (const canopy::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("'B11' is not on B00's lattice"), std::string::npos) << e.what();
+  }
 }
 
 TEST(OctreepackCli, NonFiniteDensityIsRejected) {

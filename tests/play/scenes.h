@@ -59,13 +59,22 @@ inline void writeScene(const std::string& path, const std::vector<octreepack::Mo
   writeCanopyFile(path, std::move(w));
 }
 
+// A coarse scene light as the writer takes it (CanopyWriteInput): 1 base (B00) or 19 (B00..B18),
+// base-major.
+struct SceneLightData {
+  CanopySceneLight header{};
+  uint32_t bases = 1;
+  std::vector<float> values;
+};
+
 // Builds every model with its lighting (lights[m] may be null: density only; the octreepack
 // builder makes the light items, canopy_file.h's "Light pages") and writes `path`.
 // scatteredSun: the lit models are flagged kCanopyModelScatteredSun, as canopy-octreepack flags
 // canopy-lbsolve's default output (sun bases without their direct beam); false: beam included.
+// sceneLight: an optional coarse scene light (lbsolve --scene's bases).
 inline void writeLitScene(const std::string& path, const std::vector<octreepack::ModelSource>& sources,
                           const std::vector<octreepack::LightFn>& lights, const std::vector<CanopyInstance>& instances,
-                          bool scatteredSun = true) {
+                          bool scatteredSun = true, const SceneLightData* sceneLight = nullptr) {
   std::vector<octreepack::BuiltModel> built;
   built.reserve(sources.size());
   for (size_t m = 0; m < sources.size(); ++m) {
@@ -75,6 +84,12 @@ inline void writeLitScene(const std::string& path, const std::vector<octreepack:
   CanopyWriteInput w;
   for (auto& b : built) w.models.push_back({b.record, &b.tiles, &b.bricks, &b.light});
   w.instances = instances;
+  if (sceneLight) {
+    w.hasSceneLight = true;
+    w.sceneLight = sceneLight->header;
+    w.sceneLightBases = sceneLight->bases;
+    w.sceneLightValues = sceneLight->values;
+  }
   w.metadata = "{\"tool\":\"tests/play\"}";
   writeCanopyFile(path, std::move(w));
 }
@@ -113,7 +128,7 @@ inline haar::ChaarData chaarOf(const octreepack::ModelSource& src, const octreep
 // as Haar pages (the finest level's exact light, canopy-play --light exact).
 inline void writeHaarLitScene(const std::string& path, const std::vector<octreepack::ModelSource>& sources,
                               const std::vector<octreepack::LightFn>& lights, const std::vector<CanopyInstance>& instances, float T,
-                              haar::Precision precision) {
+                              haar::Precision precision, const SceneLightData* sceneLight = nullptr) {
   std::vector<octreepack::BuiltModel> built;
   std::vector<CanopyHaarPages> pages(sources.size());
   built.reserve(sources.size());
@@ -126,6 +141,12 @@ inline void writeHaarLitScene(const std::string& path, const std::vector<octreep
   CanopyWriteInput w;
   for (size_t m = 0; m < built.size(); ++m) w.models.push_back({built[m].record, &built[m].tiles, &built[m].bricks, &built[m].light, &pages[m]});
   w.instances = instances;
+  if (sceneLight) {
+    w.hasSceneLight = true;
+    w.sceneLight = sceneLight->header;
+    w.sceneLightBases = sceneLight->bases;
+    w.sceneLightValues = sceneLight->values;
+  }
   w.metadata = "{\"tool\":\"tests/play\"}";
   writeCanopyFile(path, std::move(w));
 }

@@ -185,31 +185,45 @@ TEST(Cone, IndexDivisorIsExactDivision) {
 }
 
 // B_0 enters in open-sky units (divided by 18, see kAmbientB0Scale); the sun bases, solved for a
-// unit sun, are scaled by the sun radiance per channel (the direct term's).
-TEST(Cone, LbIndirectIsTheWeightedBasesTimesSunPlusAmbientTimesSceneFactor) {
+// unit sun, are scaled by the sun radiance per channel (the direct term's). The scene lattice's
+// factors (§4.3) scale each term on its own: the sun one the sun bases, the ambient one B_0.
+TEST(Cone, LbIndirectIsTheWeightedBasesTimesSunPlusAmbientEachTimesItsSceneFactor) {
   canopy::sun::Weights w;
   ASSERT_TRUE(canopy::sun::lookupToSun(0.3f, 1.0f, 0.2f, w));
   const float bases[3][3] = {{1, 2, 3}, {4, 5, 6}, {7, 8, 9}};
   const float b0[3] = {0.5f, 0.25f, 1.0f};
   const float sun[3] = {2.0f, 1.0f, 0.5f};
   float out[3];
-  pl::lbIndirect(w, bases, b0, sun, 0.4f, 0.5f, out);
+  pl::lbIndirect(w, bases, b0, sun, 0.4f, pl::SceneLightPair{0.5f, 0.25f}, out);
   for (int c = 0; c < 3; ++c) {
-    const float expect = ((w.weight[0] * bases[0][c] + w.weight[1] * bases[1][c] + w.weight[2] * bases[2][c]) * sun[c] +
-                          0.4f * b0[c] / 18.0f) * 0.5f;
+    const float expect = (w.weight[0] * bases[0][c] + w.weight[1] * bases[1][c] + w.weight[2] * bases[2][c]) * sun[c] * 0.25f +
+                         0.4f * b0[c] / 18.0f * 0.5f;
     EXPECT_NEAR(out[c], expect, 1e-6f);
   }
+  // The density-only term: ambient x the ambient factor (the sun factor does not enter).
+  pl::SceneView s{};
+  s.shade.ambient = 0.4f;
+  for (int c = 0; c < 3; ++c) s.shade.sun[c] = sun[c];
+  pl::ambientOnly(s, pl::SceneLightPair{0.5f, 0.0f}, out);
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(out[c], 0.2f, 1e-6f);
 }
 
-TEST(Cone, SceneLightFactorIsTrilinearAndOneWithoutALattice) {
+TEST(Cone, SceneLightFactorsAreTrilinearAndOneWithoutALattice) {
   pl::SceneLightView L{};
-  EXPECT_EQ(pl::sceneLightFactor(L, pl::v3(1, 2, 3)), 1.0f);
-  const float values[8] = {0, 1, 0, 1, 0, 1, 0, 1};  // 2x2x2, value = x index
+  const pl::SceneLightPair none = pl::sceneLightFactors(L, pl::v3(1, 2, 3));
+  EXPECT_EQ(none.ambient, 1.0f);
+  EXPECT_EQ(none.sun, 1.0f);
+  pl::SceneLightPair values[8];  // 2x2x2: ambient = x index, sun = 2 - 2 y index
+  for (int i = 0; i < 8; ++i) values[i] = {float(i & 1), 2.0f - 2.0f * float((i >> 1) & 1)};
   L.values = values;
   for (int i = 0; i < 12; ++i) L.worldToIndex.m[i] = (i % 5 == 0) ? 1.0f : 0.0f;  // identity
   for (int a = 0; a < 3; ++a) L.min[a] = 0, L.dim[a] = 2;
-  EXPECT_NEAR(pl::sceneLightFactor(L, pl::v3(0.25f, 0.5f, 0.5f)), 0.25f, 1e-6f);
-  EXPECT_NEAR(pl::sceneLightFactor(L, pl::v3(5.0f, 0.5f, 0.5f)), 1.0f, 1e-6f);  // clamped
+  const pl::SceneLightPair f = pl::sceneLightFactors(L, pl::v3(0.25f, 0.75f, 0.5f));
+  EXPECT_NEAR(f.ambient, 0.25f, 1e-6f);
+  EXPECT_NEAR(f.sun, 0.5f, 1e-6f);
+  const pl::SceneLightPair c = pl::sceneLightFactors(L, pl::v3(5.0f, -3.0f, 0.5f));  // clamped
+  EXPECT_NEAR(c.ambient, 1.0f, 1e-6f);
+  EXPECT_NEAR(c.sun, 2.0f, 1e-6f);
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -79,13 +79,35 @@ std::string haarForestFile() {
   return p;
 }
 
+// The lit forest with a 19-base coarse scene light (format 1.2) over it: smooth synthetic bases,
+// each its own pattern, so that the sun's lookup on them (rebuilt and uploaded per frame as the
+// sun moves) selects different factors than B00.
+std::string sceneLitForestFile() {
+  const std::string p = pt::tmpDir("cuda") + "/forest-scene-light.canopy";
+  pt::SceneLightData L;
+  const double cell = 0.75, lo[3] = {-9.0, -1.5, -7.5};
+  const int dim[3] = {25, 8, 21};
+  const double m[12] = {cell, 0, 0, lo[0], 0, cell, 0, lo[1], 0, 0, cell, lo[2]};
+  for (int i = 0; i < 12; ++i) L.header.indexToWorld[i] = m[i];
+  for (int a = 0; a < 3; ++a) L.header.min[a] = 0, L.header.dim[a] = dim[a];
+  L.bases = 19;
+  for (int j = 0; j < 19; ++j)
+    for (int z = 0; z < dim[2]; ++z)
+      for (int y = 0; y < dim[1]; ++y)
+        for (int x = 0; x < dim[0]; ++x)
+          L.values.push_back(float(0.55 + 0.45 * std::sin(0.4 * x + 0.3 * (j + 1) * z + 0.2 * y + j)));
+  pt::writeLitScene(p, forestModels(), forestLights(), forestInstances(), true, &L);
+  return p;
+}
+
 }  // namespace
 
 // The forest unlit, then lit (LB light on both models: the light pages go through the same device
 // pool and page table, and the kernel samples them with the same canopySampleLight / lbIndirect
 // code; the lit file also with the sun off, so that the indirect term alone is compared), then
 // Haar-lit with --light exact (the finest level's light from Haar pages, canopyHaarSampleAt on the
-// device). One
+// device), then lit with a 19-base scene light (format 1.2: the sun factor rebuilt on the host and
+// uploaded per frame as the sun moves over three frames; the last frame is compared). One
 // test case, so that bench/play/gpu.sh's count of passed cases stays valid.
 TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
   if (canopy::cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA device";
@@ -95,10 +117,12 @@ TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
     int litModels;
     const char* shadows;  // the sun transmittance map (default) or the per-sample shadow cones
     bool exact = false;   // --light exact (the Haar-lit file's Haar pages)
+    bool movingSun = false;  // three frames, the sun orbiting (the scene light's sun factor changes per frame)
   };
-  const std::string lit = litForestFile(), unlit = forestFile(), haar = haarForestFile();
+  const std::string lit = litForestFile(), unlit = forestFile(), haar = haarForestFile(), sceneLit = sceneLitForestFile();
   for (const Case& k : {Case{unlit, true, 0, "map"}, Case{unlit, true, 0, "cone"}, Case{lit, true, 2, "map"}, Case{lit, false, 2, "map"},
-                        Case{haar, true, 2, "map", true}, Case{haar, false, 2, "map", true}}) {
+                        Case{haar, true, 2, "map", true}, Case{haar, false, 2, "map", true}, Case{sceneLit, true, 2, "map", false, true},
+                        Case{sceneLit, false, 2, "map", false, true}}) {
     pl::PlayOptions o;
     o.input = k.file;
     o.shadowMethod = k.shadows;
@@ -108,6 +132,7 @@ TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
     o.directSun = k.direct;
     o.exactLight = k.exact;
     if (k.litModels) o.sun = "0.3,0.8,-0.52";
+    if (k.movingSun) o.sun = "orbit:azimuth=40,elevation=35,turns=0.3", o.frames = 3;
     // the whole forest (coarse levels), and a close view among the trees (finest bricks,
     // overlapping crowns, long shadow cones)
     for (const char* camera : {"orbit:azimuth=25,elevation=20,turns=0", "orbit:azimuth=60,elevation=8,distance=5,turns=0"}) {
@@ -116,6 +141,7 @@ TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
       pl::play(o, canopy::Device{}, &cpu);
       const nlohmann::json rg = pl::play(o, cuda(), &gpu);
       EXPECT_EQ(int(rg["lit_models"]), k.litModels) << k.file;
+      EXPECT_EQ(int(rg["scene_light_bases"]), k.movingSun ? 19 : 0) << k.file;
       ASSERT_EQ(cpu.size(), gpu.size());
       std::printf("%s %s shadows %s direct %s: RMS %.2e, within 1e-2: %.4f\n", k.file.c_str(), camera, k.shadows, k.direct ? "on" : "off",
                   rms(cpu, gpu), fractionWithin(cpu, gpu, 1e-2f));

@@ -134,13 +134,13 @@ TEST(Light, SampleLbLightIsLbIndirectOfTheTrilinearBases) {
   const float sun[3] = {1.5f, 1.0f, 0.75f};
   for (float lx : {0.0f, 0.1f, 0.37f, 0.5f, 0.93f, 1.0f}) {
     float out[3];
-    pl::sampleLbLight(item.data(), w, lx, 0.3f, 0.6f, sun, 0.35f, 0.5f, out);
+    pl::sampleLbLight(item.data(), w, lx, 0.3f, 0.6f, sun, 0.35f, pl::SceneLightPair{0.5f, 0.75f}, out);
     const float t = lx * 4.0f + 0.5f;
     for (int c = 0; c < 3; ++c) {
       float want = 0.0f;
       for (int v = 0; v < 3; ++v) want += w.weight[v] * (float(w.base[v]) + t);
-      want = want * sun[c] + 0.35f * pl::kAmbientB0Scale * t;
-      want *= 0.5f * float(c + 1) / 8.0f;
+      want = want * sun[c] * 0.75f + 0.35f * pl::kAmbientB0Scale * t * 0.5f;
+      want *= float(c + 1) / 8.0f;
       EXPECT_NEAR(out[c], want, 1e-5f) << "lx " << lx << " channel " << c;
     }
   }
@@ -414,6 +414,60 @@ TEST(Light, ExactHaarLightIsSampledAtTheSamplesLatticePoint) {
   EXPECT_EQ(rf["light"], "fast");
   EXPECT_EQ(int(rf["pages_streamed"]), int(ri["pages_streamed"]));  // no Haar page was wanted
   for (size_t i = 0; i < fast.size(); ++i) ASSERT_NEAR(fast[i], ref[i], 2e-5f * std::fabs(ref[i]) + 1e-6f) << "value " << i;
+}
+
+// A 19-base scene light (format 1.2), uniform over the ball: B00 = 0.6 and sun base j = 0.1 + 0.05 j.
+// With the sun's direct term off, a pixel of the lit ball is the density-only ball's pixel (no scene
+// light: its indirect term is ambient * 1) times
+//   (I sum_v w_v (b_v + 1) * sunFactor + ambient / 18 * 0.6) * kRgb[c] / ambient,
+// sunFactor = sum_v w'_v (0.1 + 0.05 b'_v) from the sun's lookup in the scene lattice's axes (world
+// axes here, as the unrotated instance's: w' = w). The float16 items (--light fast) and the Haar
+// items (--light exact, lossless) alike: the same terms, each with its own factor. Tolerance as in
+// IndirectIsTheLookupWeightedSunBasesPlusAmbientB0 (float rounding: 2e-5 relative).
+TEST(Light, NineteenBaseSceneLightScalesTheSunTermByTheSunsBasesAndTheAmbientTermByB00) {
+  pt::SceneLightData L;
+  const double m[12] = {1, 0, 0, -3, 0, 1, 0, -3, 0, 0, 1, -3};
+  for (int i = 0; i < 12; ++i) L.header.indexToWorld[i] = m[i];
+  for (int a = 0; a < 3; ++a) L.header.min[a] = 0, L.header.dim[a] = 7;
+  L.bases = 19;
+  for (int j = 0; j < 19; ++j) L.values.insert(L.values.end(), 7 * 7 * 7, j == 0 ? 0.6f : 0.1f + 0.05f * float(j));
+  const std::string items = pt::tmpDir("light") + "/sphere-lit-scene19.canopy", haar = pt::tmpDir("light") + "/sphere-haar-scene19.canopy";
+  pt::writeLitScene(items, {pt::sphereModel(24, 10, 0.3f)}, {pt::rampLight(kRgb)}, {pt::instanceAt(0, 0, 0, 0)}, true, &L);
+  pt::writeHaarLitScene(haar, {pt::sphereModel(24, 10, 0.3f)}, {pt::rampLight(kRgb)}, {pt::instanceAt(0, 0, 0, 0)}, 0.0f,
+                        canopy::haar::Precision::Fp32, &L);
+  const float intensity = 1.5f;
+  pl::PlayOptions o = view(plainSphere(), 21, 21);
+  o.sun = "0.3,0.8,-0.52";
+  o.sunIntensity = intensity;
+  o.directSun = false;
+  const std::vector<float> ref = render(o);
+  canopy::sun::Weights w;
+  const pl::V3 toSun = pl::normalize(pl::v3(0.3f, 0.8f, -0.52f));
+  ASSERT_TRUE(canopy::sun::lookup(-toSun.x, -toSun.y, -toSun.z, w));
+  float sum = 0.0f, sunFactor = 0.0f;
+  for (int v = 0; v < 3; ++v) {
+    sum += w.weight[v] * float(w.base[v] + 1);
+    sunFactor += w.weight[v] * (0.1f + 0.05f * float(w.base[v]));
+  }
+  for (const bool exact : {false, true}) {
+    o.input = exact ? haar : items;
+    o.exactLight = exact;
+    nlohmann::json r;
+    const std::vector<float> lit = render(o, &r);
+    EXPECT_EQ(int(r["scene_light_bases"]), 19);
+    double peak = 0;
+    for (size_t i = 0; i < lit.size(); ++i) {
+      if (i % 4 == 3) {
+        ASSERT_EQ(lit[i], ref[i]);
+        continue;
+      }
+      const float ratio = (intensity * sum * sunFactor + o.ambient * pl::kAmbientB0Scale * 0.6f) * kRgb[i % 4] / o.ambient;
+      const float want = ref[i] * ratio;
+      ASSERT_NEAR(lit[i], want, 2e-5f * want + 1e-7f) << (exact ? "exact" : "fast") << " value " << i;
+      peak = std::max(peak, double(ref[i]));
+    }
+    EXPECT_GT(peak, 0.05);
+  }
 }
 
 // A flipped byte in a Haar page: reported once, never cached, and the samples that wanted it use the

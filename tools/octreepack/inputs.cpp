@@ -173,36 +173,64 @@ LatticeOrigin readLatticeOrigin(const std::string& path) {
 
 SceneLightSource readSceneLightVdb(const std::string& path, const std::string& gridName) {
   vdbio::VdbFile file = vdbio::readVdb(path);
-  auto grid = file.require<openvdb::FloatGrid>(gridName);
-  openvdb::CoordBBox box;
-  if (grid->getMetadata<openvdb::Vec3IMetadata>("canopy_lattice_min")) {
-    const vdbio::LatticeMeta meta = vdbio::readLatticeMeta(*grid, path);
-    box = openvdb::CoordBBox(meta.min, meta.max);
+  // The grids packed: the one named, or canopy-lbsolve --scene's 19 bases B00..B18 (B00 first).
+  std::vector<std::string> names;
+  if (!gridName.empty()) {
+    names.push_back(gridName);
   } else {
-    box = grid->evalActiveVoxelBoundingBox();
+    std::string missing;
+    for (uint32_t b = 0; b <= kCanopySceneSunBases; ++b) {
+      char name[8];
+      std::snprintf(name, sizeof name, "B%02u", b);
+      names.push_back(name);
+      if (!file.find(name)) missing += std::string(missing.empty() ? "" : ", ") + name;
+    }
+    if (!missing.empty())
+      throw invalidInput(path + ": the scene lighting needs the 19 float grids B00..B18 of canopy-lbsolve --scene; " + missing +
+                         " missing (--scene-light-grid NAME packs one grid as the only factor)");
   }
-  if (box.empty()) throw invalidInput(path + ": scene lighting grid '" + gridName + "' is empty");
+  std::vector<openvdb::FloatGrid::Ptr> grids;
+  for (const std::string& name : names) grids.push_back(file.require<openvdb::FloatGrid>(name));
+  auto boxOf = [&](const openvdb::FloatGrid& g) {
+    if (g.getMetadata<openvdb::Vec3IMetadata>("canopy_lattice_min")) {
+      const vdbio::LatticeMeta meta = vdbio::readLatticeMeta(g, path);
+      return openvdb::CoordBBox(meta.min, meta.max);
+    }
+    return g.evalActiveVoxelBoundingBox();
+  };
+  const openvdb::CoordBBox box = boxOf(*grids[0]);
+  if (box.empty()) throw invalidInput(path + ": scene lighting grid '" + names[0] + "' is empty");
+  const auto m = affineOf(grids[0]->transform(), path);
+  for (size_t g = 1; g < grids.size(); ++g)
+    if (boxOf(*grids[g]) != box || affineOf(grids[g]->transform(), path) != m)
+      throw invalidInput(path + ": scene lighting grid '" + names[g] + "' is not on " + names[0] + "'s lattice (bounds or transform differ)");
   const openvdb::Coord dim = box.dim();
   const int64_t n = int64_t(dim.x()) * dim.y() * dim.z();
-  if (n > (int64_t(1) << 26)) throw invalidInput(path + ": scene lighting lattice of " + std::to_string(n) + " nodes is too large for the resident part");
+  if (n > (int64_t(1) << 26) / int64_t(grids.size()))
+    throw invalidInput(path + ": scene lighting lattice of " + std::to_string(n) + " nodes x " + std::to_string(grids.size()) +
+                       " grids is too large for the resident part");
   SceneLightSource s;
   s.sourceLabel = vdbio::describeSource(path);
-  const auto m = affineOf(grid->transform(), path);
   for (int i = 0; i < 12; ++i) s.header.indexToWorld[i] = m[size_t(i)];
   for (int a = 0; a < 3; ++a) {
     s.header.min[a] = box.min()[a];
     s.header.dim[a] = dim[a];
   }
-  s.values.resize(size_t(n));
-  auto acc = grid->getConstAccessor();
+  s.bases = uint32_t(grids.size());
+  s.values.resize(size_t(n) * grids.size());
   size_t i = 0;
-  for (int z = box.min().z(); z <= box.max().z(); ++z)
-    for (int y = box.min().y(); y <= box.max().y(); ++y)
-      for (int x = box.min().x(); x <= box.max().x(); ++x) {
-        const float v = acc.getValue(openvdb::Coord(x, y, z));
-        if (!std::isfinite(v)) throw invalidInput(path + ": scene lighting value at (" + std::to_string(x) + "," + std::to_string(y) + "," + std::to_string(z) + ") is not finite");
-        s.values[i++] = v;
-      }
+  for (size_t g = 0; g < grids.size(); ++g) {
+    auto acc = grids[g]->getConstAccessor();
+    for (int z = box.min().z(); z <= box.max().z(); ++z)
+      for (int y = box.min().y(); y <= box.max().y(); ++y)
+        for (int x = box.min().x(); x <= box.max().x(); ++x) {
+          const float v = acc.getValue(openvdb::Coord(x, y, z));
+          if (!std::isfinite(v) || v < 0.0f)
+            throw invalidInput(path + ": scene lighting value of '" + names[g] + "' at (" + std::to_string(x) + "," + std::to_string(y) + "," +
+                               std::to_string(z) + ") is " + (std::isfinite(v) ? "negative" : "not finite"));
+          s.values[i++] = v;
+        }
+  }
   return s;
 }
 

@@ -1,7 +1,7 @@
 // inputs.h: canopy-octreepack's inputs -> plain structures (the only OpenVDB code of the tool).
 //   readDensityVdb:     a canopy-voxelize lattice (grids density, wood, albedo; §0 metadata)
 //   readLatticeOrigin:  which mesh (file hash, glTF mesh index) a lattice was voxelised from
-//   readSceneLightVdb:  the coarse scene lighting lattice (lbsolve --scene), one float grid
+//   readSceneLightVdb:  the coarse scene lighting lattice (lbsolve --scene): its 19 bases, or one grid
 // Every failure is a canopy::Error naming the file.
 #pragma once
 #include <array>
@@ -51,9 +51,12 @@ LatticeOrigin readLatticeOrigin(const std::string& path);
 
 struct SceneLightSource {
   CanopySceneLight header{};
-  std::vector<float> values;
+  uint32_t bases = 1;        // 19 (B00..B18) or 1 (one named grid)
+  std::vector<float> values; // bases x dim.x*dim.y*dim.z, base-major, x fastest
   std::string sourceLabel;
 };
+// gridName empty: the 19 FloatGrids B00..B18 of canopy-lbsolve --scene, all present and on one
+// lattice (bounds and transform); else that one grid. Values finite and >= 0. InvalidInput otherwise.
 SceneLightSource readSceneLightVdb(const std::string& path, const std::string& gridName);
 
 }  // namespace canopy::octreepack

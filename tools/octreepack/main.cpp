@@ -24,8 +24,12 @@ int main(int argc, char** argv) {
   app.add_option("--scene", o.scene,
                  "Scene: an instance list (SCENE.json, docs/scene-json.md) or a glTF scene whose nodes share "
                  "meshes (SCENE.glb/.gltf, with the meshes' lattices as inputs)");
-  app.add_option("--scene-light", o.sceneLight, "Coarse scene lighting lattice (VDB, lbsolve --scene)");
-  app.add_option("--scene-light-grid", o.sceneLightGrid, "Float grid of --scene-light packed as the indirect-light factor (canopy-lbsolve --scene writes B00..B18; B00 is the ambient one)")->capture_default_str();
+  app.add_option("--scene-light", o.sceneLight,
+                 "Coarse scene lighting lattice (VDB of canopy-lbsolve --scene): its 19 bases B00..B18 are packed (the player "
+                 "weights each instance's scattered sun by the sun's bases, its ambient light by B00)");
+  app.add_option("--scene-light-grid", o.sceneLightGrid,
+                 "Pack only this float grid of --scene-light, as the one factor of all indirect light (a static scene light, "
+                 "as before format 1.2; e.g. B00)");
   app.add_flag("--ignore-light", o.ignoreLight, "Pack density only, even where a .chaar is given");
   app.add_flag("--no-haar-light", o.noHaarLight,
                "Pack a .chaar's lighting as float16 light items only, without its Haar bricks (the finest level's exact light: "

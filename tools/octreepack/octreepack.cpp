@@ -143,8 +143,10 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
     SceneLightSource sl = readSceneLightVdb(o.sceneLight, o.sceneLightGrid);
     w.hasSceneLight = true;
     w.sceneLight = sl.header;
+    w.sceneLightBases = sl.bases;
     w.sceneLightValues = std::move(sl.values);
     meta["scene_light"] = sl.sourceLabel;
+    if (!o.sceneLightGrid.empty()) meta["scene_light_grid"] = o.sceneLightGrid;
   }
   std::vector<BuiltModel> built;
   built.reserve(scene.models.size());
@@ -213,10 +215,10 @@ nlohmann::json canopyInfo(const CanopyFile& f) {
   j["bricks_per_page"] = h.bricksPerPage;
   j["instances"] = h.instanceCount;
   nlohmann::json sections = nlohmann::json::array();
-  const char* names[] = {"", "models", "instances", "node_tiles", "page_table", "scene_light", "metadata", "haar_index"};
+  const char* names[] = {"", "models", "instances", "node_tiles", "page_table", "scene_light", "metadata", "haar_index", "scene_sun_light"};
   for (uint32_t i = 0; i < f.sectionCount(); ++i) {
     const CanopySection& s = f.section(i);
-    sections.push_back({{"name", s.kind < 8 ? names[s.kind] : "unknown"}, {"offset", s.offset}, {"bytes", s.bytes}, {"items", s.itemCount}});
+    sections.push_back({{"name", s.kind < 9 ? names[s.kind] : "unknown"}, {"offset", s.offset}, {"bytes", s.bytes}, {"items", s.itemCount}});
   }
   sections.push_back({{"name", "pages"}, {"offset", h.pagesOffset}, {"bytes", uint64_t(h.pageCount) * h.pageBytes}, {"items", h.pageCount}});
   j["sections"] = sections;
@@ -267,6 +269,7 @@ nlohmann::json canopyInfo(const CanopyFile& f) {
     const auto& s = f.sceneLight();
     j["scene_light_dim"] = {s.dim[0], s.dim[1], s.dim[2]};
   }
+  j["scene_light_bases"] = f.sceneLightBases();  // 0 (none), 1 (B00: one factor) or 19 (B00..B18)
   return j;
 }
 
@@ -279,6 +282,12 @@ std::string formatInfo(const nlohmann::json& j) {
   o << "sections:\n";
   for (const auto& s : j["sections"])
     o << "  " << s["name"].get<std::string>() << ": " << s["bytes"].get<uint64_t>() << " bytes at " << s["offset"].get<uint64_t>() << "\n";
+  if (j["scene_light"].get<bool>()) {
+    const auto& d = j["scene_light_dim"];
+    o << "scene light: " << d[0].get<int>() << "x" << d[1].get<int>() << "x" << d[2].get<int>() << " nodes, "
+      << j["scene_light_bases"].get<uint32_t>() << (j["scene_light_bases"].get<uint32_t>() == 1 ? " base (B00: one factor for all indirect light)\n"
+                                                                                          : " bases (B00 ambient, B01..B18 sun)\n");
+  }
   for (const auto& m : j["models"]) {
     o << "model '" << m["name"].get<std::string>() << "': depth " << m["depth"].get<uint32_t>() << " (" << m["root_cells"].get<uint32_t>()
       << " cells/axis), " << m["nodes"].get<uint64_t>() << " nodes, " << m["bricks"].get<uint64_t>() << " bricks in "

@@ -21,7 +21,9 @@ struct OctreepackOptions {
   std::string scene;                 // SCENE.json (docs/scene-json.md) or SCENE.glb|.gltf
   std::string output;                // OUT.canopy
   std::string sceneLight;            // coarse scene lighting lattice (VDB), optional
-  std::string sceneLightGrid = "B00";  // lbsolve --scene writes B00..B18; B00 (ambient, 1 = unoccluded) is the factor
+  // Empty: the 19 bases B00..B18 of lbsolve --scene (the player weights the sun term by the sun's
+  // bases, the ambient term by B00). A name: that one float grid, the factor of all indirect light.
+  std::string sceneLightGrid;
   bool ignoreLight = false;          // pack density only even where a .chaar is named
   bool noHaarLight = false;          // a .chaar's bricks are not packed (float16 light items only)
 };
