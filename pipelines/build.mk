@@ -38,9 +38,11 @@ library.json: $(addsuffix .canopy,$(PLANT_NAMES)) $(PIPELINES)/library_index.py
 # Each distinct mesh is voxelised (in its own model space), lit and compressed once; the instance
 # list comes from the glTF's nodes; the coarse scene lattice is solved over all instances.
 SCENE ?=
-# The coarse scene lattice grid packed as the per-instance indirect factor: B00, the ambient
-# solution normalised to 1 where unoccluded (lbsolve --scene writes B00..B18).
-SCENE_LIGHT_GRID ?= B00
+# The coarse scene lattice (lbsolve --scene: B00..B18, each 1 where unoccluded) is packed whole: the
+# player weights each instance's scattered sun by the coarse sun lookup and its ambient light by
+# B00, so a tree in its neighbour's shadow loses in-scattered sun. SCENE_LIGHT_GRID=B00 packs the
+# ambient grid alone (one static factor for both terms, as before 2026-12-04).
+SCENE_LIGHT_GRID ?=
 SCENE_NAME := $(basename $(notdir $(SCENE)))
 ifneq ($(SCENE),)
 scene: $(SCENE_NAME).canopy
@@ -61,7 +63,7 @@ $(SCENE_NAME).scenelight.vdb: $(SCENE_NAME).lit.scene.json $(SCENE_DENSITIES)
 	$(LAUNCH_GPU) $(CANOPY_LBSOLVE) $(CANOPY_QUIET) --device $(DEVICE) --scene $< -o $@
 $(SCENE_NAME).canopy: $(SCENE_NAME).lit.scene.json $(SCENE_DENSITIES) $(SCENE_LIGHTS) $(SCENE_NAME).scenelight.vdb
 	$(LAUNCH) $(CANOPY_OCTREEPACK) $(CANOPY_QUIET) $(PACK_FLAGS) --scene $< \
-	  --scene-light $(SCENE_NAME).scenelight.vdb --scene-light-grid $(SCENE_LIGHT_GRID) -o $@
+	  --scene-light $(SCENE_NAME).scenelight.vdb $(if $(SCENE_LIGHT_GRID),--scene-light-grid $(SCENE_LIGHT_GRID)) -o $@
 endif
 
 # --- forest: scatter the plants, pack, render a short flight ------------------------------------

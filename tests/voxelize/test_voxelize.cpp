@@ -346,9 +346,11 @@ TEST(VoxelizeAssets, DracoAndPlainOakDifferInAtMostOnePercentOfCells) {
   const VoxelizeResult plain = voxelize(o);
   o.input = kShared + "/assets/plants/oak_medium.draco.glb";
   const VoxelizeResult draco = voxelize(o);
-  // Draco's quantisation collapses some slivers: same input triangles, a few more removed by CGAL.
-  EXPECT_EQ(plain.stats.inputTriangles, draco.stats.inputTriangles);
-  EXPECT_GT(draco.stats.degenerateRemoved, plain.stats.degenerateRemoved);
+  // Draco's quantisation collapses some slivers. The shared file (re-exported in metres) has them
+  // dropped by the encoder already: 13619 triangles against the plain file's 13806 (1.4 % fewer);
+  // files encoded without that pass keep them and CGAL removes them here instead.
+  EXPECT_LE(draco.stats.inputTriangles, plain.stats.inputTriangles);
+  EXPECT_GE(double(draco.stats.inputTriangles + draco.stats.degenerateRemoved), 0.97 * double(plain.stats.inputTriangles));
   std::set<Key> a, b;
   for (const auto& c : plain.cells) a.insert({c.i, c.j, c.k});
   for (const auto& c : draco.cells) b.insert({c.i, c.j, c.k});
