@@ -382,10 +382,24 @@ PixelEstimate tracePixel(const Medium& m, const Lighting& L, V3 o, V3 d, const T
       for (int c = 0; c < 3; ++c) acc[c] += beta[c] * L.sun[c] * Ts;  // (1/4pi) * 4pi sun * T
     }
     if (opt.firstVertexOnly) continue;
-    V3 dir = uniformSphere(rng);
+    // Deeper vertices: HG lobes that differ per channel. Spectral MIS at the path level (the
+    // "hero wavelength" scheme, Wilkie et al. 2014): the path's directions follow one channel's
+    // lobes (the hero, picked per path), and channel c's estimate is f_c / mean_k pdf_k(path),
+    // the balance heuristic over the three channels' path densities. With A_c the product of
+    // channel c's albedos and r_k = pdf_k(path) / pdf_hero(path): beta_c = A_c r_c / mean_k r_k,
+    // at most 3 A_c (no product of per-vertex weights that could grow without bound).
+    const int hero = std::min(2, int(rng.next() * 3.0f));
+    double A[3] = {beta[0], beta[1], beta[2]}, r[3] = {1.0, 1.0, 1.0};
+    const auto weights = [&](double out[3]) {
+      const double mean = (r[0] + r[1] + r[2]) / 3.0;
+      for (int c = 0; c < 3; ++c) out[c] = A[c] * r[c] / mean;
+    };
+    V3 dir = uniformSphere(rng);  // the camera vertex's isotropic phase: the same pdf in every channel
     for (int bounce = 1; bounce < opt.maxBounces; ++bounce) {
+      double w[3];
+      weights(w);
       if (!firstCollision(m, x, dir, rng, h)) {
-        for (int c = 0; c < 3; ++c) acc[c] += beta[c] * L.ambient;  // the sky
+        for (int c = 0; c < 3; ++c) acc[c] += w[c] * L.ambient;  // the sky
         break;
       }
       x = x + dir * h.t;
@@ -393,36 +407,37 @@ PixelEstimate tracePixel(const Medium& m, const Lighting& L, V3 o, V3 d, const T
       const bool wood = pickWood(v, h.q, rng.next()) >= lb.woodThreshold;
       // light leaves this vertex travelling -dir; the sun's arrives travelling -toSun
       const float muSun = play::dot(L.toSun, dir);
+      const float Ts = sunTransmittance(m, x, L.toSun, rng);
       if (!wood) {
-        const float Ts = sunTransmittance(m, x, L.toSun, rng);
-        for (int c = 0; c < 3; ++c) acc[c] += beta[c] * leafAlbedo[c] * hgPhase(lb.g[c], muSun) * 4.0f * kPi * L.sun[c] * Ts;
-        // next direction: one channel's lobe, weighted by the balance heuristic over the three
-        const int pick = std::min(2, int(rng.next() * 3.0f));
-        const V3 nd = sampleHg(lb.g[pick], dir, rng);
+        for (int c = 0; c < 3; ++c) acc[c] += w[c] * leafAlbedo[c] * hgPhase(lb.g[c], muSun) * 4.0f * kPi * L.sun[c] * Ts;
+        const V3 nd = sampleHg(lb.g[hero], dir, rng);
         const float mu = play::dot(nd, dir);
-        float p[3], pdf = 0.0f;
-        for (int c = 0; c < 3; ++c) pdf += (p[c] = hgPhase(lb.g[c], mu)) / 3.0f;
-        for (int c = 0; c < 3; ++c) beta[c] *= leafAlbedo[c] * p[c] / pdf;
+        const double ph = hgPhase(lb.g[hero], mu);
+        for (int c = 0; c < 3; ++c) {
+          r[c] = std::min(r[c] * (double(hgPhase(lb.g[c], mu)) / ph), 1e200);
+          A[c] *= leafAlbedo[c];
+        }
         dir = nd;
       } else {
-        const float Ts = sunTransmittance(m, x, L.toSun, rng);
         for (int c = 0; c < 3; ++c) {
           float f = woodIso[c] * (1.0f / (4.0f * kPi));
           if (!woodDelta) f += woodBack[c] * hgPhase(lb.gWood, muSun);
-          acc[c] += beta[c] * f * 4.0f * kPi * L.sun[c] * Ts;
+          acc[c] += w[c] * f * 4.0f * kPi * L.sun[c] * Ts;
         }
+        // the component is picked with channel-independent probabilities: r is unchanged
         if (rng.next() < qBack) {  // the scattered part: back (g = -1) or an HG lobe
           dir = woodDelta ? (lb.gWood < 0.0f ? dir * -1.0f : dir) : sampleHg(lb.gWood, dir, rng);
-          for (int c = 0; c < 3; ++c) beta[c] *= woodBack[c] / qBack;
+          for (int c = 0; c < 3; ++c) A[c] *= woodBack[c] / qBack;
         } else {  // the absorbed f_0, re-emitted isotropically
           dir = uniformSphere(rng);
-          for (int c = 0; c < 3; ++c) beta[c] *= woodIso[c] / (1.0f - qBack);
+          for (int c = 0; c < 3; ++c) A[c] *= woodIso[c] / (1.0f - qBack);
         }
       }
       if (bounce >= opt.minBounces) {
-        const float pc = std::min(0.95f, std::max(beta[0], std::max(beta[1], beta[2])));
-        if (!(pc > 0.0f) || rng.next() >= pc) break;
-        for (int c = 0; c < 3; ++c) beta[c] /= pc;
+        weights(w);
+        const double pc = std::min(0.95, std::max(w[0], std::max(w[1], w[2])));
+        if (!(pc > 0.0) || rng.next() >= pc) break;
+        for (int c = 0; c < 3; ++c) A[c] /= pc;
       }
     }
   }
