@@ -15,13 +15,15 @@ namespace {
 
 const char* kUsage =
     "usage: bench-reference [--mesh PLANT.glb] [--resolution N] [--size N] [--spp N] [--seed S]\n"
-    "                       [--shadows map|cone|both] [--elevations LOW,HIGH] [--work DIR] [--images DIR]\n"
+    "                       [--shadows map|cone|both] [--elevations LOW,HIGH] [--two-seeds]\n"
+    "                       [--work DIR] [--images DIR]\n"
     "  Runs voxelize (N^3, default 40, at most 48) -> lbsolve -> octreepack in-process on the plant\n"
     "  (default ../shared/assets/plants/oak_medium.glb) and on a 3-tree scene of it, renders each with\n"
     "  canopy-play's CPU renderer and with the Monte Carlo path tracer (size^2 pixels, default 128,\n"
     "  at most 128; --spp paths per pixel, default 256) under a low and a high sun (default 15,70\n"
     "  degrees), and prints a Markdown table: image RMS / mean, MC noise, alpha RMS, mean ratio,\n"
-    "  times. --images DIR writes CASE.mc.exr/.png and CASE.play.exr/.png there.\n";
+    "  times. --two-seeds traces each case again with seed S+1 and reports the noise measured from\n"
+    "  the two images too. --images DIR writes CASE.mc.exr/.png and CASE.play.exr/.png there.\n";
 
 }  // namespace
 
@@ -32,8 +34,13 @@ int main(int argc, char** argv) {
   int resolution = 40, size = 128, spp = 256;
   unsigned long long seed = 1;
   double low = 15.0, high = 70.0;
+  bool twoSeeds = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
+    if (a == "--two-seeds") {
+      twoSeeds = true;
+      continue;
+    }
     if (i + 1 >= argc) return benchUsageError("bench-reference", ("missing value after " + a).c_str(), kUsage);
     const char* v = argv[++i];
     if (a == "--mesh") mesh = v;
@@ -66,8 +73,8 @@ int main(int argc, char** argv) {
       if (std::system(cmd.c_str()) != 0) return 2;
     }
     std::printf("pipeline on %s at %d^3 (voxelize, lbsolve, octreepack x2): %.1f s\n\n", mesh.c_str(), resolution, p.seconds);
-    std::printf("| scene | sun elev. | shadows | pixels | spp | RMS / mean | MC noise | alpha RMS | mean play/MC | player s | MC s |\n");
-    std::printf("|---|---|---|---|---|---|---|---|---|---|---|\n");
+    std::printf("| scene | sun elev. | shadows | pixels | spp | RMS / mean | MC noise | MC noise (2 seeds) | alpha RMS | mean play/MC | player s | MC s |\n");
+    std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     std::vector<std::string> methods = shadows == "both" ? std::vector<std::string>{"map", "cone"} : std::vector<std::string>{shadows};
     for (const ref::PreparedScene* s : {&p.plant, &p.trees})
       for (double elev : {low, high})
@@ -78,14 +85,17 @@ int main(int argc, char** argv) {
           o.shadows = m;
           o.trace.spp = spp;
           o.trace.seed = seed;
+          if (twoSeeds) o.secondSeed = seed + 1;
           if (!images.empty()) {
             char name[256];
             std::snprintf(name, sizeof name, "%s/%s-sun%g-%s", images.c_str(), s == &p.plant ? "plant" : "trees", elev, m.c_str());
             o.exrPrefix = name;
           }
           const ref::CaseResult r = ref::compareCase(*s, o);
-          std::printf("| %s | %g | %s | %dx%d | %d | %.4f | %.4f | %.4f | %.4f | %.2f | %.1f |\n", s->name.c_str(), elev, m.c_str(), size,
-                      size, spp, r.rms, r.noise, r.alphaRms, r.meanRatio, r.playSeconds, r.mcSeconds);
+          char two[32] = "-";
+          if (r.noiseTwoSeeds >= 0) std::snprintf(two, sizeof two, "%.4f", r.noiseTwoSeeds);
+          std::printf("| %s | %g | %s | %dx%d | %d | %.4f | %.4f | %s | %.4f | %.4f | %.2f | %.1f |\n", s->name.c_str(), elev, m.c_str(),
+                      size, size, spp, r.rms, r.noise, two, r.alphaRms, r.meanRatio, r.playSeconds, r.mcSeconds);
           std::fflush(stdout);
         }
   } catch (const std::exception& e) {

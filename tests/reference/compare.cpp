@@ -204,6 +204,7 @@ CaseResult compareCase(const PreparedScene& scene, const CaseOptions& o) {
   po.sigma = scene.medium.sigma;
   po.shadowMethod = o.shadows;
   po.converge = true;
+  po.sunIntensity = o.playerSunScale;
   CaseResult r;
   auto t0 = std::chrono::steady_clock::now();
   play::play(po, Device{}, &r.play);
@@ -215,7 +216,7 @@ CaseResult compareCase(const PreparedScene& scene, const CaseOptions& o) {
   const play::FrameSetup fs = play::framePlan(po, hs)[0];
   Lighting L;
   L.toSun = fs.toSun;
-  for (float& s : L.sun) s = po.sunIntensity;
+  for (float& s : L.sun) s = 1.0f;  // canopy-play's default --sun-intensity (the player's may be scaled: controls)
   L.ambient = po.ambient;
   std::vector<float> var;
   t0 = std::chrono::steady_clock::now();
@@ -246,6 +247,15 @@ CaseResult compareCase(const PreparedScene& scene, const CaseOptions& o) {
   r.meanPlay = sp / double(3 * px);
   r.meanMc = sm / double(3 * px);
   r.meanRatio = sm > 0 ? sp / sm : 0.0;
+  if (o.secondSeed != 0) {
+    TraceOptions t2 = o.trace;
+    t2.seed = o.secondSeed;
+    const std::vector<float> mc2 = renderReference(scene.medium, L, fs.camera, t2);
+    double s2 = 0;
+    for (size_t i = 0; i < px; ++i)
+      for (int c = 0; c < 3; ++c) s2 += double(r.mc[4 * i + size_t(c)] - mc2[4 * i + size_t(c)]) * (r.mc[4 * i + size_t(c)] - mc2[4 * i + size_t(c)]);
+    r.noiseTwoSeeds = r.norm > 0 ? std::sqrt(s2 / double(3 * px) / 2.0) / r.norm : 0.0;
+  }
   if (!o.exrPrefix.empty()) {
     play::writeExr(o.exrPrefix + ".mc.exr", r.mc, o.width, o.height);
     play::writeExr(o.exrPrefix + ".play.exr", r.play, o.width, o.height);

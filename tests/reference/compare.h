@@ -48,7 +48,9 @@ struct CaseOptions {
   double sunElevation = 15.0, sunAzimuth = 40.0;  // canopy-play --sun orbit:azimuth=..,elevation=..
   std::string camera = "orbit";                   // canopy-play --camera
   std::string shadows = "map";                    // canopy-play --shadows (map: the default)
+  float playerSunScale = 1.0f;                    // the player's --sun-intensity x this (controls: a wrong sun)
   TraceOptions trace;
+  uint64_t secondSeed = 0;                        // non-zero: also trace with this seed (noiseTwoSeeds)
   std::string exrPrefix;                          // non-empty: write PREFIX.mc.exr and PREFIX.play.exr
 };
 
@@ -58,8 +60,10 @@ struct CaseOptions {
 //               the part of rms that MC noise explains (rms^2 ~ bias^2 + noise^2)
 //   alphaRms  = sqrt(mean over all pixels of (alpha_play - alpha_mc)^2)
 //   meanRatio = sum of the player's RGB / sum of the reference's RGB (all pixels)
+//   noiseTwoSeeds = RMS of (MC seed 1 - MC seed 2) / sqrt(2) / norm (secondSeed only; else -1): the
+//               same noise measured another way
 struct CaseResult {
-  double rms = 0, noise = 0, alphaRms = 0, meanRatio = 0;
+  double rms = 0, noise = 0, alphaRms = 0, meanRatio = 0, noiseTwoSeeds = -1;
   double norm = 0, meanPlay = 0, meanMc = 0;
   double playSeconds = 0, mcSeconds = 0;
   int coveredPixels = 0;
