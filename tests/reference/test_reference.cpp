@@ -284,15 +284,28 @@ constexpr Bounds kPlantHigh{0.20, 0.0045, 0.40};
 constexpr Bounds kTreesLow{0.11, 0.0045, 0.05};
 constexpr Bounds kTreesHigh{0.16, 0.0045, 0.18};
 
-TEST(Reference, PlantLowSun) { runCase(prepared().plant, 15.0, kPlantLow); }
-TEST(Reference, PlantHighSun) { runCase(prepared().plant, 70.0, kPlantHigh); }
-TEST(Reference, ThreeTreesLowSun) { runCase(prepared().trees, 15.0, kTreesLow); }
-TEST(Reference, ThreeTreesHighSun) { runCase(prepared().trees, 70.0, kTreesHigh); }
-
-// The bounds catch a lighting error: the player's sun 1.5x too strong (what counting part of the
-// direct beam twice looks like) on the low-sun plant leaves its RMS and mean-ratio bounds (the MC
-// at 32 spp here: its noise only adds to the RMS; the ratio is what must move).
-TEST(Reference, ASunTooStrongLeavesTheBounds) {
+// One test case for the four cases and the control, so that the pipeline (~8-10 s of it: the 57 LB
+// solves) runs once per process: CTest runs each test case in its own process. ~20 s in all here.
+TEST(Reference, PlayMatchesTheReferenceForAPlantAndThreeTreesUnderALowAndAHighSun) {
+  {
+    SCOPED_TRACE("plant, sun 15 deg");
+    runCase(prepared().plant, 15.0, kPlantLow);
+  }
+  {
+    SCOPED_TRACE("plant, sun 70 deg");
+    runCase(prepared().plant, 70.0, kPlantHigh);
+  }
+  {
+    SCOPED_TRACE("3 trees, sun 15 deg");
+    runCase(prepared().trees, 15.0, kTreesLow);
+  }
+  {
+    SCOPED_TRACE("3 trees, sun 70 deg");
+    runCase(prepared().trees, 70.0, kTreesHigh);
+  }
+  // The bounds catch a lighting error: the player's sun 1.5x too strong (what counting part of the
+  // direct beam twice looks like) on the low-sun plant leaves its RMS and mean-ratio bounds (the MC
+  // at 32 spp here: its noise only adds to the RMS; the ratio is what must move).
   const ref::CaseResult r = measure(prepared().plant, 15.0, 32, 1.5f);
   std::printf("control (player sun x1.5): RMS %.4f, mean ratio %.4f\n", r.rms, r.meanRatio);
   EXPECT_GT(r.rms, kPlantLow.rms);
