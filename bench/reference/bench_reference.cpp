@@ -22,7 +22,8 @@ const char* kUsage =
     "  canopy-play's CPU renderer and with the Monte Carlo path tracer (size^2 pixels, default 128,\n"
     "  at most 128; --spp paths per pixel, default 256) under a low and a high sun (default 15,70\n"
     "  degrees), and prints a Markdown table: image RMS / mean, MC noise, alpha RMS, mean ratio,\n"
-    "  times. --two-seeds traces each case again with seed S+1 and reports the noise measured from\n"
+    "  times; each case also direct sun only (the player on the unlit file with --ambient 0, the\n"
+    "  reference's single scattering). --two-seeds traces each case again with seed S+1 and reports the noise measured from\n"
     "  the two images too. --images DIR writes CASE.mc.exr/.png and CASE.play.exr/.png there.\n";
 
 }  // namespace
@@ -73,13 +74,15 @@ int main(int argc, char** argv) {
       if (std::system(cmd.c_str()) != 0) return 2;
     }
     std::printf("pipeline on %s at %d^3 (voxelize, lbsolve, octreepack x2): %.1f s\n\n", mesh.c_str(), resolution, p.seconds);
-    std::printf("| scene | sun elev. | shadows | pixels | spp | RMS / mean | MC noise | MC noise (2 seeds) | alpha RMS | mean play/MC | player s | MC s |\n");
-    std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    std::printf("| scene | sun elev. | light | shadows | pixels | spp | RMS / mean | MC noise | MC noise (2 seeds) | alpha RMS | mean play | mean MC | mean play/MC | player s | MC s |\n");
+    std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     std::vector<std::string> methods = shadows == "both" ? std::vector<std::string>{"map", "cone"} : std::vector<std::string>{shadows};
     for (const ref::PreparedScene* s : {&p.plant, &p.trees})
       for (double elev : {low, high})
+        for (bool direct : {false, true})
         for (const std::string& m : methods) {
           ref::CaseOptions o;
+          o.directOnly = direct;
           o.width = o.height = size;
           o.sunElevation = elev;
           o.shadows = m;
@@ -88,14 +91,16 @@ int main(int argc, char** argv) {
           if (twoSeeds) o.secondSeed = seed + 1;
           if (!images.empty()) {
             char name[256];
-            std::snprintf(name, sizeof name, "%s/%s-sun%g-%s", images.c_str(), s == &p.plant ? "plant" : "trees", elev, m.c_str());
+            std::snprintf(name, sizeof name, "%s/%s-sun%g-%s%s", images.c_str(), s == &p.plant ? "plant" : "trees", elev, m.c_str(),
+                          direct ? "-direct" : "");
             o.exrPrefix = name;
           }
           const ref::CaseResult r = ref::compareCase(*s, o);
           char two[32] = "-";
           if (r.noiseTwoSeeds >= 0) std::snprintf(two, sizeof two, "%.4f", r.noiseTwoSeeds);
-          std::printf("| %s | %g | %s | %dx%d | %d | %.4f | %.4f | %s | %.4f | %.4f | %.2f | %.1f |\n", s->name.c_str(), elev, m.c_str(),
-                      size, size, spp, r.rms, r.noise, two, r.alphaRms, r.meanRatio, r.playSeconds, r.mcSeconds);
+          std::printf("| %s | %g | %s | %s | %dx%d | %d | %.4f | %.4f | %s | %.4f | %.5f | %.5f | %.4f | %.2f | %.1f |\n", s->name.c_str(),
+                      elev, direct ? "direct sun" : "full", m.c_str(), size, size, spp, r.rms, r.noise, two, r.alphaRms, r.meanPlay, r.meanMc,
+                      r.meanRatio, r.playSeconds, r.mcSeconds);
           std::fflush(stdout);
         }
   } catch (const std::exception& e) {

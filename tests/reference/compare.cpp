@@ -157,6 +157,13 @@ Prepared prepareScenes(const PrepareOptions& o) {
     po.output = p.plant.canopyPath;
     octreepack::octreepack(po);
   }
+  p.plant.unlitCanopyPath = o.workDir + "/plant-unlit.canopy";
+  {
+    octreepack::OctreepackOptions po;
+    po.inputs = {density};
+    po.output = p.plant.unlitCanopyPath;
+    octreepack::octreepack(po);
+  }
   p.plant.models = {model};
   p.plant.medium = mediumFromCanopy(p.plant.canopyPath, p.plant.models, o.sigma);
 
@@ -186,6 +193,17 @@ Prepared prepareScenes(const PrepareOptions& o) {
     po.output = p.trees.canopyPath;
     octreepack::octreepack(po);
   }
+  p.trees.unlitCanopyPath = o.workDir + "/trees-unlit.canopy";
+  {
+    Scene unlit = sc;
+    unlit.models[0].light.clear();
+    const std::string unlitJson = o.workDir + "/trees-unlit.scene.json";
+    writeSceneJson(unlitJson, unlit);
+    octreepack::OctreepackOptions po;
+    po.scene = unlitJson;
+    po.output = p.trees.unlitCanopyPath;
+    octreepack::octreepack(po);
+  }
   p.trees.models = {model};
   p.trees.medium = mediumFromCanopy(p.trees.canopyPath, p.trees.models, o.sigma);
   p.seconds = seconds(t0);
@@ -194,7 +212,7 @@ Prepared prepareScenes(const PrepareOptions& o) {
 
 CaseResult compareCase(const PreparedScene& scene, const CaseOptions& o) {
   play::PlayOptions po;
-  po.input = scene.canopyPath;
+  po.input = o.directOnly ? scene.unlitCanopyPath : scene.canopyPath;
   po.width = o.width;
   po.height = o.height;
   po.camera = o.camera;
@@ -205,6 +223,8 @@ CaseResult compareCase(const PreparedScene& scene, const CaseOptions& o) {
   po.shadowMethod = o.shadows;
   po.converge = true;
   po.sunIntensity = o.playerSunScale;
+  if (o.directOnly) po.ambient = 0.0f;
+  if (o.tweakPlayer) o.tweakPlayer(po);
   CaseResult r;
   auto t0 = std::chrono::steady_clock::now();
   play::play(po, Device{}, &r.play);
@@ -219,8 +239,10 @@ CaseResult compareCase(const PreparedScene& scene, const CaseOptions& o) {
   for (float& s : L.sun) s = 1.0f;  // canopy-play's default --sun-intensity (the player's may be scaled: controls)
   L.ambient = po.ambient;
   std::vector<float> var;
+  TraceOptions trace = o.trace;
+  trace.firstVertexOnly = trace.firstVertexOnly || o.directOnly;
   t0 = std::chrono::steady_clock::now();
-  r.mc = renderReference(scene.medium, L, fs.camera, o.trace, &var);
+  r.mc = renderReference(scene.medium, L, fs.camera, trace, &var);
   r.mcSeconds = seconds(t0);
 
   const size_t px = size_t(o.width) * o.height;
@@ -248,7 +270,7 @@ CaseResult compareCase(const PreparedScene& scene, const CaseOptions& o) {
   r.meanMc = sm / double(3 * px);
   r.meanRatio = sm > 0 ? sp / sm : 0.0;
   if (o.secondSeed != 0) {
-    TraceOptions t2 = o.trace;
+    TraceOptions t2 = trace;
     t2.seed = o.secondSeed;
     const std::vector<float> mc2 = renderReference(scene.medium, L, fs.camera, t2);
     double s2 = 0;

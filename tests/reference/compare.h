@@ -8,9 +8,11 @@
 // (the CPU reference renderer, default options: shadow map, LB light) and path-traces the same
 // lattices with the same camera (framePlan), sun and sky, and returns the figures.
 #pragma once
+#include <functional>
 #include <string>
 #include <vector>
 
+#include "runtime/player.h"
 #include "tests/reference/pathtrace.h"
 #include "tools/octreepack/octree_build.h"
 
@@ -19,6 +21,7 @@ namespace canopy::reference {
 struct PreparedScene {
   std::string name;
   std::string canopyPath;
+  std::string unlitCanopyPath;                  // the same packed without LB light (density only)
   std::vector<octreepack::ModelSource> models;  // in the .canopy's model order
   Medium medium;                                // the lattices, instances, sigma and LB parameters
 };
@@ -49,6 +52,11 @@ struct CaseOptions {
   std::string camera = "orbit";                   // canopy-play --camera
   std::string shadows = "map";                    // canopy-play --shadows (map: the default)
   float playerSunScale = 1.0f;                    // the player's --sun-intensity x this (controls: a wrong sun)
+  // Direct sun only: the player renders the unlit file with --ambient 0 (its indirect term is then
+  // 0: albedo x sun x Tshadow alone), the reference traces single scattering only (the camera
+  // vertex's sun). Isolates the camera, transforms, extinction, albedo and shadows from the LB light.
+  bool directOnly = false;
+  std::function<void(play::PlayOptions&)> tweakPlayer;  // applied last to the player's options (experiments)
   TraceOptions trace;
   uint64_t secondSeed = 0;                        // non-zero: also trace with this seed (noiseTwoSeeds)
   std::string exrPrefix;                          // non-empty: write PREFIX.mc.exr and PREFIX.play.exr

@@ -378,7 +378,7 @@ PixelEstimate tracePixel(const Medium& m, const Lighting& L, V3 o, V3 d, const T
     const Volume& v0 = m.volumes[m.instances[h.instance].volume];
     albedoAt(v0, h.q, beta);
     {
-      const float Ts = sunTransmittance(m, x, L.toSun, rng);
+      const float Ts = opt.unshadowedSun ? 1.0f : sunTransmittance(m, x, L.toSun, rng);
       for (int c = 0; c < 3; ++c) acc[c] += beta[c] * L.sun[c] * Ts;  // (1/4pi) * 4pi sun * T
     }
     if (opt.firstVertexOnly) continue;
@@ -407,7 +407,7 @@ PixelEstimate tracePixel(const Medium& m, const Lighting& L, V3 o, V3 d, const T
       const bool wood = pickWood(v, h.q, rng.next()) >= lb.woodThreshold;
       // light leaves this vertex travelling -dir; the sun's arrives travelling -toSun
       const float muSun = play::dot(L.toSun, dir);
-      const float Ts = sunTransmittance(m, x, L.toSun, rng);
+      const float Ts = opt.unshadowedSun ? 1.0f : sunTransmittance(m, x, L.toSun, rng);
       if (!wood) {
         for (int c = 0; c < 3; ++c) acc[c] += w[c] * leafAlbedo[c] * hgPhase(lb.g[c], muSun) * 4.0f * kPi * L.sun[c] * Ts;
         const V3 nd = sampleHg(lb.g[hero], dir, rng);

@@ -89,6 +89,7 @@ struct TraceOptions {
   int minBounces = 3;        // Russian roulette from this camera-path vertex on
   int maxBounces = 1000;     // hard cap (never reached in practice: roulette ends paths first)
   bool firstVertexOnly = false;  // single scattering only (camera vertex's NEE): tests
+  bool unshadowedSun = false;    // the sun's transmittance taken as 1 (diagnostics: canopy-play --no-shadows)
 };
 
 // Unit-square RNG (PCG32 stream per pixel and sample).
