@@ -23,7 +23,8 @@ const char* kUsage =
     "  at most 128; --spp paths per pixel, default 256) under a low and a high sun (default 15,70\n"
     "  degrees), and prints a Markdown table: image RMS / mean, MC noise, alpha RMS, mean ratio,\n"
     "  times; each case also direct sun only (the player on the unlit file with --ambient 0, the\n"
-    "  reference's single scattering). --two-seeds traces each case again with seed S+1 and reports the noise measured from\n"
+    "  reference's single scattering) and indirect light only (--no-direct-sun; the reference without\n"
+    "  the camera vertex's sun). --two-seeds traces each case again with seed S+1 and reports the noise measured from\n"
     "  the two images too. --images DIR writes CASE.mc.exr/.png and CASE.play.exr/.png there.\n";
 
 }  // namespace
@@ -79,10 +80,13 @@ int main(int argc, char** argv) {
     std::vector<std::string> methods = shadows == "both" ? std::vector<std::string>{"map", "cone"} : std::vector<std::string>{shadows};
     for (const ref::PreparedScene* s : {&p.plant, &p.trees})
       for (double elev : {low, high})
-        for (bool direct : {false, true})
+        for (int light = 0; light < 3; ++light)  // full, direct sun only, indirect only
         for (const std::string& m : methods) {
+          if (light == 2 && m != methods.front()) continue;  // no direct sun: no shadows either
+          const bool direct = light == 1;
           ref::CaseOptions o;
           o.directOnly = direct;
+          o.indirectOnly = light == 2;
           o.width = o.height = size;
           o.sunElevation = elev;
           o.shadows = m;
@@ -92,14 +96,14 @@ int main(int argc, char** argv) {
           if (!images.empty()) {
             char name[256];
             std::snprintf(name, sizeof name, "%s/%s-sun%g-%s%s", images.c_str(), s == &p.plant ? "plant" : "trees", elev, m.c_str(),
-                          direct ? "-direct" : "");
+                          light == 1 ? "-direct" : light == 2 ? "-indirect" : "");
             o.exrPrefix = name;
           }
           const ref::CaseResult r = ref::compareCase(*s, o);
           char two[32] = "-";
           if (r.noiseTwoSeeds >= 0) std::snprintf(two, sizeof two, "%.4f", r.noiseTwoSeeds);
           std::printf("| %s | %g | %s | %s | %dx%d | %d | %.4f | %.4f | %s | %.4f | %.5f | %.5f | %.4f | %.2f | %.1f |\n", s->name.c_str(),
-                      elev, direct ? "direct sun" : "full", m.c_str(), size, size, spp, r.rms, r.noise, two, r.alphaRms, r.meanPlay, r.meanMc,
+                      elev, light == 0 ? "full" : light == 1 ? "direct sun" : "indirect", light == 2 ? "-" : m.c_str(), size, size, spp, r.rms, r.noise, two, r.alphaRms, r.meanPlay, r.meanMc,
                       r.meanRatio, r.playSeconds, r.mcSeconds);
           std::fflush(stdout);
         }

@@ -224,6 +224,7 @@ CaseResult compareCase(const PreparedScene& scene, const CaseOptions& o) {
   po.converge = true;
   po.sunIntensity = o.playerSunScale;
   if (o.directOnly) po.ambient = 0.0f;
+  if (o.indirectOnly) po.directSun = false;
   if (o.tweakPlayer) o.tweakPlayer(po);
   CaseResult r;
   auto t0 = std::chrono::steady_clock::now();
@@ -241,6 +242,7 @@ CaseResult compareCase(const PreparedScene& scene, const CaseOptions& o) {
   std::vector<float> var;
   TraceOptions trace = o.trace;
   trace.firstVertexOnly = trace.firstVertexOnly || o.directOnly;
+  trace.noCameraSun = trace.noCameraSun || o.indirectOnly;
   t0 = std::chrono::steady_clock::now();
   r.mc = renderReference(scene.medium, L, fs.camera, trace, &var);
   r.mcSeconds = seconds(t0);

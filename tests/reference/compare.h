@@ -56,6 +56,9 @@ struct CaseOptions {
   // 0: albedo x sun x Tshadow alone), the reference traces single scattering only (the camera
   // vertex's sun). Isolates the camera, transforms, extinction, albedo and shadows from the LB light.
   bool directOnly = false;
+  // The indirect light only: the player with --no-direct-sun, the reference without the camera
+  // vertex's sun (every other path of the sun and the sky kept).
+  bool indirectOnly = false;
   std::function<void(play::PlayOptions&)> tweakPlayer;  // applied last to the player's options (experiments)
   TraceOptions trace;
   uint64_t secondSeed = 0;                        // non-zero: also trace with this seed (noiseTwoSeeds)

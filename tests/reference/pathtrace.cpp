@@ -377,7 +377,7 @@ PixelEstimate tracePixel(const Medium& m, const Lighting& L, V3 o, V3 d, const T
     float beta[3];
     const Volume& v0 = m.volumes[m.instances[h.instance].volume];
     albedoAt(v0, h.q, beta);
-    {
+    if (!opt.noCameraSun) {
       const float Ts = opt.unshadowedSun ? 1.0f : sunTransmittance(m, x, L.toSun, rng);
       for (int c = 0; c < 3; ++c) acc[c] += beta[c] * L.sun[c] * Ts;  // (1/4pi) * 4pi sun * T
     }

@@ -89,6 +89,7 @@ struct TraceOptions {
   int minBounces = 3;        // Russian roulette from this camera-path vertex on
   int maxBounces = 1000;     // hard cap (never reached in practice: roulette ends paths first)
   bool firstVertexOnly = false;  // single scattering only (camera vertex's NEE): tests
+  bool noCameraSun = false;      // without the camera vertex's sun (canopy-play --no-direct-sun: the indirect light alone)
   bool unshadowedSun = false;    // the sun's transmittance taken as 1 (diagnostics: canopy-play --no-shadows)
 };
 
