@@ -60,8 +60,8 @@ int main(int argc, char** argv) {
       return benchUsageError("bench-reference", ("unknown option " + a).c_str(), kUsage);
     }
   }
-  if (resolution < 8 || resolution > 48 || size < 1 || size > 128 || spp < 2)
-    return benchUsageError("bench-reference", "--resolution must be 8..48, --size 1..128, --spp >= 2", kUsage);
+  if (resolution < 8 || resolution > 48 || size < 1 || size > 128 || spp < 2 || spp > canopy::reference::kMaxSpp)
+    return benchUsageError("bench-reference", "--resolution must be 8..48, --size 1..128, --spp 2..4096", kUsage);
   if (shadows != "map" && shadows != "cone" && shadows != "both") return benchUsageError("bench-reference", "--shadows map|cone|both", kUsage);
   try {
     namespace ref = canopy::reference;

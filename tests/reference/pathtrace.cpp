@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 
 #include "canopy/parallel.h"
 
@@ -347,99 +348,117 @@ float extinctionAt(const Medium& m, V3 x) {
   return k;
 }
 
-PixelEstimate tracePixel(const Medium& m, const Lighting& L, V3 o, V3 d, const TraceOptions& opt, uint64_t pixel) {
-  double sum[3] = {0, 0, 0}, sumSq[3] = {0, 0, 0}, trans = 0.0;
-  const LbMaterial& lb = m.lb;
+namespace {
+
+// The derived LB scattering parameters (pathtrace.h, Medium::lb).
+struct LbScatter {
   float leafAlbedo[3], woodBack[3], woodIso[3];
+  float qBack;     // the probability of picking a wood event's back-scattered part
+  bool woodDelta;  // wood's scattered part is a delta (g = +-1)
+};
+
+LbScatter lbScatter(const LbMaterial& lb) {
+  LbScatter k;
   for (int c = 0; c < 3; ++c) {
     const float st = lb.sigmaA[c] + lb.sigmaS[c];
-    leafAlbedo[c] = lb.sigmaS[c] / st;
-    woodBack[c] = lb.sigmaS[c] / st;
-    woodIso[c] = lb.sigmaA[c] / st;
+    k.leafAlbedo[c] = lb.sigmaS[c] / st;
+    k.woodBack[c] = lb.sigmaS[c] / st;
+    k.woodIso[c] = lb.sigmaA[c] / st;
   }
-  const float qBack = (woodBack[0] + woodBack[1] + woodBack[2]) / 3.0f;
-  const bool woodDelta = std::fabs(lb.gWood) > 0.999f;
-  for (int s = 0; s < opt.spp; ++s) {
-    Rng rng(opt.seed, pixel * 4096u + uint64_t(s));
-    double acc[3] = {0, 0, 0};  // this path's contribution
-    struct Flush {              // added to the sums whatever way the path ends
-      double* acc;
-      double *sum, *sumSq;
-      ~Flush() {
-        for (int c = 0; c < 3; ++c) sum[c] += acc[c], sumSq[c] += acc[c] * acc[c];
-      }
-    } flush{acc, sum, sumSq};
-    trans += ratioTrackTransmittance(m, o, d, kInf, rng);
-    Hit h;
-    if (!firstCollision(m, o, d, rng, h)) continue;  // escaped: no background
-    V3 x = o + d * h.t;
-    // camera vertex: the voxel's albedo, isotropic phase
-    float beta[3];
-    const Volume& v0 = m.volumes[m.instances[h.instance].volume];
-    albedoAt(v0, h.q, beta);
-    if (!opt.noCameraSun) {
-      const float Ts = opt.unshadowedSun ? 1.0f : sunTransmittance(m, x, L.toSun, rng);
-      for (int c = 0; c < 3; ++c) acc[c] += beta[c] * L.sun[c] * Ts;  // (1/4pi) * 4pi sun * T
+  k.qBack = (k.woodBack[0] + k.woodBack[1] + k.woodBack[2]) / 3.0f;
+  k.woodDelta = std::fabs(lb.gWood) > 0.999f;
+  return k;
+}
+
+// One camera path from o along d: adds its RGB contribution to acc and returns its alpha estimate's
+// transmittance (ratio tracking along the camera ray).
+float tracePath(const Medium& m, const Lighting& L, V3 o, V3 d, const TraceOptions& opt, const LbScatter& k, Rng& rng, double acc[3]) {
+  const LbMaterial& lb = m.lb;
+  const float trans = ratioTrackTransmittance(m, o, d, kInf, rng);
+  Hit h;
+  if (!firstCollision(m, o, d, rng, h)) return trans;  // escaped: no background
+  V3 x = o + d * h.t;
+  // camera vertex: the voxel's albedo, isotropic phase
+  float beta[3];
+  const Volume& v0 = m.volumes[m.instances[h.instance].volume];
+  albedoAt(v0, h.q, beta);
+  if (!opt.noCameraSun) {
+    const float Ts = opt.unshadowedSun ? 1.0f : sunTransmittance(m, x, L.toSun, rng);
+    for (int c = 0; c < 3; ++c) acc[c] += beta[c] * L.sun[c] * Ts;  // (1/4pi) * 4pi sun * T
+  }
+  if (opt.firstVertexOnly) return trans;
+  // Deeper vertices: HG lobes that differ per channel. Spectral MIS at the path level (the
+  // "hero wavelength" scheme, Wilkie et al. 2014): the path's directions follow one channel's
+  // lobes (the hero, picked per path), and channel c's estimate is f_c / mean_k pdf_k(path),
+  // the balance heuristic over the three channels' path densities. With A_c the product of
+  // channel c's albedos and r_k = pdf_k(path) / pdf_hero(path): beta_c = A_c r_c / mean_k r_k,
+  // at most 3 A_c (no product of per-vertex weights that could grow without bound).
+  const int hero = std::min(2, int(rng.next() * 3.0f));
+  double A[3] = {beta[0], beta[1], beta[2]}, r[3] = {1.0, 1.0, 1.0};
+  const auto weights = [&](double out[3]) {
+    const double mean = (r[0] + r[1] + r[2]) / 3.0;
+    for (int c = 0; c < 3; ++c) out[c] = A[c] * r[c] / mean;
+  };
+  V3 dir = uniformSphere(rng);  // the camera vertex's isotropic phase: the same pdf in every channel
+  for (int bounce = 1; bounce < opt.maxBounces; ++bounce) {
+    double w[3];
+    weights(w);
+    if (!firstCollision(m, x, dir, rng, h)) {
+      for (int c = 0; c < 3; ++c) acc[c] += w[c] * L.ambient;  // the sky
+      break;
     }
-    if (opt.firstVertexOnly) continue;
-    // Deeper vertices: HG lobes that differ per channel. Spectral MIS at the path level (the
-    // "hero wavelength" scheme, Wilkie et al. 2014): the path's directions follow one channel's
-    // lobes (the hero, picked per path), and channel c's estimate is f_c / mean_k pdf_k(path),
-    // the balance heuristic over the three channels' path densities. With A_c the product of
-    // channel c's albedos and r_k = pdf_k(path) / pdf_hero(path): beta_c = A_c r_c / mean_k r_k,
-    // at most 3 A_c (no product of per-vertex weights that could grow without bound).
-    const int hero = std::min(2, int(rng.next() * 3.0f));
-    double A[3] = {beta[0], beta[1], beta[2]}, r[3] = {1.0, 1.0, 1.0};
-    const auto weights = [&](double out[3]) {
-      const double mean = (r[0] + r[1] + r[2]) / 3.0;
-      for (int c = 0; c < 3; ++c) out[c] = A[c] * r[c] / mean;
-    };
-    V3 dir = uniformSphere(rng);  // the camera vertex's isotropic phase: the same pdf in every channel
-    for (int bounce = 1; bounce < opt.maxBounces; ++bounce) {
-      double w[3];
+    x = x + dir * h.t;
+    const Volume& v = m.volumes[m.instances[h.instance].volume];
+    const bool wood = pickWood(v, h.q, rng.next()) >= lb.woodThreshold;
+    // light leaves this vertex travelling -dir; the sun's arrives travelling -toSun
+    const float muSun = play::dot(L.toSun, dir);
+    const float Ts = opt.unshadowedSun ? 1.0f : sunTransmittance(m, x, L.toSun, rng);
+    if (!wood) {
+      for (int c = 0; c < 3; ++c) acc[c] += w[c] * k.leafAlbedo[c] * hgPhase(lb.g[c], muSun) * 4.0f * kPi * L.sun[c] * Ts;
+      const V3 nd = sampleHg(lb.g[hero], dir, rng);
+      const float mu = play::dot(nd, dir);
+      const double ph = hgPhase(lb.g[hero], mu);
+      for (int c = 0; c < 3; ++c) {
+        r[c] = std::min(r[c] * (double(hgPhase(lb.g[c], mu)) / ph), 1e200);
+        A[c] *= k.leafAlbedo[c];
+      }
+      dir = nd;
+    } else {
+      for (int c = 0; c < 3; ++c) {
+        float f = k.woodIso[c] * (1.0f / (4.0f * kPi));
+        if (!k.woodDelta) f += k.woodBack[c] * hgPhase(lb.gWood, muSun);
+        acc[c] += w[c] * f * 4.0f * kPi * L.sun[c] * Ts;
+      }
+      // the component is picked with channel-independent probabilities: r is unchanged
+      if (rng.next() < k.qBack) {  // the scattered part: back (g = -1) or an HG lobe
+        dir = k.woodDelta ? (lb.gWood < 0.0f ? dir * -1.0f : dir) : sampleHg(lb.gWood, dir, rng);
+        for (int c = 0; c < 3; ++c) A[c] *= k.woodBack[c] / k.qBack;
+      } else {  // the absorbed f_0, re-emitted isotropically
+        dir = uniformSphere(rng);
+        for (int c = 0; c < 3; ++c) A[c] *= k.woodIso[c] / (1.0f - k.qBack);
+      }
+    }
+    if (bounce >= opt.minBounces) {
       weights(w);
-      if (!firstCollision(m, x, dir, rng, h)) {
-        for (int c = 0; c < 3; ++c) acc[c] += w[c] * L.ambient;  // the sky
-        break;
-      }
-      x = x + dir * h.t;
-      const Volume& v = m.volumes[m.instances[h.instance].volume];
-      const bool wood = pickWood(v, h.q, rng.next()) >= lb.woodThreshold;
-      // light leaves this vertex travelling -dir; the sun's arrives travelling -toSun
-      const float muSun = play::dot(L.toSun, dir);
-      const float Ts = opt.unshadowedSun ? 1.0f : sunTransmittance(m, x, L.toSun, rng);
-      if (!wood) {
-        for (int c = 0; c < 3; ++c) acc[c] += w[c] * leafAlbedo[c] * hgPhase(lb.g[c], muSun) * 4.0f * kPi * L.sun[c] * Ts;
-        const V3 nd = sampleHg(lb.g[hero], dir, rng);
-        const float mu = play::dot(nd, dir);
-        const double ph = hgPhase(lb.g[hero], mu);
-        for (int c = 0; c < 3; ++c) {
-          r[c] = std::min(r[c] * (double(hgPhase(lb.g[c], mu)) / ph), 1e200);
-          A[c] *= leafAlbedo[c];
-        }
-        dir = nd;
-      } else {
-        for (int c = 0; c < 3; ++c) {
-          float f = woodIso[c] * (1.0f / (4.0f * kPi));
-          if (!woodDelta) f += woodBack[c] * hgPhase(lb.gWood, muSun);
-          acc[c] += w[c] * f * 4.0f * kPi * L.sun[c] * Ts;
-        }
-        // the component is picked with channel-independent probabilities: r is unchanged
-        if (rng.next() < qBack) {  // the scattered part: back (g = -1) or an HG lobe
-          dir = woodDelta ? (lb.gWood < 0.0f ? dir * -1.0f : dir) : sampleHg(lb.gWood, dir, rng);
-          for (int c = 0; c < 3; ++c) A[c] *= woodBack[c] / qBack;
-        } else {  // the absorbed f_0, re-emitted isotropically
-          dir = uniformSphere(rng);
-          for (int c = 0; c < 3; ++c) A[c] *= woodIso[c] / (1.0f - qBack);
-        }
-      }
-      if (bounce >= opt.minBounces) {
-        weights(w);
-        const double pc = std::min(0.95, std::max(w[0], std::max(w[1], w[2])));
-        if (!(pc > 0.0) || rng.next() >= pc) break;
-        for (int c = 0; c < 3; ++c) A[c] /= pc;
-      }
+      const double pc = std::min(0.95, std::max(w[0], std::max(w[1], w[2])));
+      if (!(pc > 0.0) || rng.next() >= pc) break;
+      for (int c = 0; c < 3; ++c) A[c] /= pc;
     }
+  }
+  return trans;
+}
+
+}  // namespace
+
+PixelEstimate tracePixel(const Medium& m, const Lighting& L, V3 o, V3 d, const TraceOptions& opt, uint64_t pixel) {
+  if (opt.spp < 1 || opt.spp > kMaxSpp) throw std::invalid_argument("reference: spp must be 1..4096");
+  const LbScatter k = lbScatter(m.lb);
+  double sum[3] = {0, 0, 0}, sumSq[3] = {0, 0, 0}, trans = 0.0;
+  for (int s = 0; s < opt.spp; ++s) {
+    Rng rng(opt.seed, pixel * uint64_t(kMaxSpp) + uint64_t(s));  // one stream per (pixel, sample)
+    double acc[3] = {0, 0, 0};
+    trans += tracePath(m, L, o, d, opt, k, rng, acc);
+    for (int c = 0; c < 3; ++c) sum[c] += acc[c], sumSq[c] += acc[c] * acc[c];
   }
   const double n = double(opt.spp);
   PixelEstimate e;

@@ -83,8 +83,10 @@ struct Lighting {
   float ambient = 0.35f;            // sky radiance, every direction
 };
 
+constexpr int kMaxSpp = 4096;  // paths per pixel at most (the random streams are pixel * kMaxSpp + sample)
+
 struct TraceOptions {
-  int spp = 16;
+  int spp = 16;              // 1..kMaxSpp
   uint64_t seed = 1;
   int minBounces = 3;        // Russian roulette from this camera-path vertex on
   int maxBounces = 1000;     // hard cap (never reached in practice: roulette ends paths first)
