@@ -15,7 +15,7 @@ namespace {
 
 const char* kUsage =
     "usage: bench-reference [--mesh PLANT.glb] [--resolution N] [--size N] [--spp N] [--seed S]\n"
-    "                       [--shadows map|cone|both] [--elevations LOW,HIGH] [--two-seeds]\n"
+    "                       [--shadows map|cone|both] [--elevations LOW,HIGH] [--two-seeds] [--indirect-sigma S]\n"
     "                       [--work DIR] [--images DIR]\n"
     "  Runs voxelize (N^3, default 40, at most 48) -> lbsolve -> octreepack in-process on the plant\n"
     "  (default ../shared/assets/plants/oak_medium.glb) and on a 3-tree scene of it, renders each with\n"
@@ -24,7 +24,10 @@ const char* kUsage =
     "  degrees), and prints a Markdown table: image RMS / mean, MC noise, alpha RMS, mean ratio,\n"
     "  times; each case also direct sun only (the player on the unlit file with --ambient 0, the\n"
     "  reference's single scattering) and indirect light only (--no-direct-sun; the reference without\n"
-    "  the camera vertex's sun). --two-seeds traces each case again with seed S+1 and reports the noise measured from\n"
+    "  the camera vertex's sun). --indirect-sigma S adds an indirect row whose reference light field\n"
+    "  (every path segment after the camera vertex) is traced with extinction S instead of --sigma's 4:\n"
+    "  S = 1 is the medium lbsolve's linear collision solves (a diagnostic).\n"
+    "  --two-seeds traces each case again with seed S+1 and reports the noise measured from\n"
     "  the two images too. --images DIR writes CASE.mc.exr/.png and CASE.play.exr/.png there.\n";
 
 }  // namespace
@@ -37,6 +40,7 @@ int main(int argc, char** argv) {
   unsigned long long seed = 1;
   double low = 15.0, high = 70.0;
   bool twoSeeds = false;
+  float indirectSigma = 0.0f;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--two-seeds") {
@@ -53,6 +57,7 @@ int main(int argc, char** argv) {
     else if (a == "--shadows") shadows = v;
     else if (a == "--work") work = v;
     else if (a == "--images") images = v;
+    else if (a == "--indirect-sigma") indirectSigma = float(std::atof(v));
     else if (a == "--elevations") {
       if (std::sscanf(v, "%lf,%lf", &low, &high) != 2) return benchUsageError("bench-reference", "--elevations LOW,HIGH", kUsage);
     } else {
@@ -62,6 +67,7 @@ int main(int argc, char** argv) {
   }
   if (resolution < 8 || resolution > 48 || size < 1 || size > 128 || spp < 2 || spp > canopy::reference::kMaxSpp)
     return benchUsageError("bench-reference", "--resolution must be 8..48, --size 1..128, --spp 2..4096", kUsage);
+  if (!(indirectSigma >= 0.0f && indirectSigma < 1e6f)) return benchUsageError("bench-reference", "--indirect-sigma must be >= 0", kUsage);
   if (shadows != "map" && shadows != "cone" && shadows != "both") return benchUsageError("bench-reference", "--shadows map|cone|both", kUsage);
   try {
     namespace ref = canopy::reference;
@@ -80,13 +86,15 @@ int main(int argc, char** argv) {
     std::vector<std::string> methods = shadows == "both" ? std::vector<std::string>{"map", "cone"} : std::vector<std::string>{shadows};
     for (const ref::PreparedScene* s : {&p.plant, &p.trees})
       for (double elev : {low, high})
-        for (int light = 0; light < 3; ++light)  // full, direct sun only, indirect only
+        for (int light = 0; light < 4; ++light)  // full, direct sun only, indirect only, indirect in the LB's medium
         for (const std::string& m : methods) {
-          if (light == 2 && m != methods.front()) continue;  // no direct sun: no shadows either
+          if (light >= 2 && m != methods.front()) continue;  // no direct sun: no shadows either
+          if (light == 3 && !(indirectSigma > 0.0f)) continue;
           const bool direct = light == 1;
           ref::CaseOptions o;
           o.directOnly = direct;
-          o.indirectOnly = light == 2;
+          o.indirectOnly = light >= 2;
+          if (light == 3) o.trace.indirectSigma = indirectSigma;
           o.width = o.height = size;
           o.sunElevation = elev;
           o.shadows = m;
@@ -96,14 +104,15 @@ int main(int argc, char** argv) {
           if (!images.empty()) {
             char name[256];
             std::snprintf(name, sizeof name, "%s/%s-sun%g-%s%s", images.c_str(), s == &p.plant ? "plant" : "trees", elev, m.c_str(),
-                          light == 1 ? "-direct" : light == 2 ? "-indirect" : "");
+                          light == 1 ? "-direct" : light == 2 ? "-indirect" : light == 3 ? "-indirect-lbmedium" : "");
             o.exrPrefix = name;
           }
           const ref::CaseResult r = ref::compareCase(*s, o);
-          char two[32] = "-";
+          char two[32] = "-", lightName[64];
+          std::snprintf(lightName, sizeof lightName, "indirect, MC field sigma %g", double(indirectSigma));
           if (r.noiseTwoSeeds >= 0) std::snprintf(two, sizeof two, "%.4f", r.noiseTwoSeeds);
           std::printf("| %s | %g | %s | %s | %dx%d | %d | %.4f | %.4f | %s | %.4f | %.5f | %.5f | %.4f | %.2f | %.1f |\n", s->name.c_str(),
-                      elev, light == 0 ? "full" : light == 1 ? "direct sun" : "indirect", light == 2 ? "-" : m.c_str(), size, size, spp, r.rms, r.noise, two, r.alphaRms, r.meanPlay, r.meanMc,
+                      elev, light == 0 ? "full" : light == 1 ? "direct sun" : light == 2 ? "indirect" : lightName, light >= 2 ? "-" : m.c_str(), size, size, spp, r.rms, r.noise, two, r.alphaRms, r.meanPlay, r.meanMc,
                       r.meanRatio, r.playSeconds, r.mcSeconds);
           std::fflush(stdout);
         }

@@ -94,7 +94,7 @@ struct InstanceRay {
   float perCell;       // extinction per world unit at density 1: sigma / cellWorld
 };
 
-bool instanceRay(const Medium& m, const Instance& in, V3 o, V3 d, float tMax, InstanceRay& r) {
+bool instanceRay(const Medium& m, const Instance& in, V3 o, V3 d, float tMax, InstanceRay& r, float sigma = -1.0f) {
   const Volume& v = m.volumes[in.volume];
   const double* A = in.worldToIndex;
   const double od[3] = {o.x, o.y, o.z}, dd[3] = {d.x, d.y, d.z};
@@ -115,7 +115,7 @@ bool instanceRay(const Medium& m, const Instance& in, V3 o, V3 d, float tMax, In
     r.t0 = std::max(r.t0, float(ta));
     r.t1 = std::min(r.t1, float(tb));
   }
-  r.perCell = m.sigma / in.cellWorld;
+  r.perCell = (sigma >= 0.0f ? sigma : m.sigma) / in.cellWorld;
   return r.t0 < r.t1;
 }
 
@@ -211,11 +211,12 @@ struct Hit {
 };
 
 // The summed medium's first collision along o + t d: the nearest of the instances' own.
-bool firstCollision(const Medium& m, V3 o, V3 d, Rng& rng, Hit& h) {
+// sigma >= 0 replaces the medium's extinction scale (TraceOptions::indirectSigma).
+bool firstCollision(const Medium& m, V3 o, V3 d, Rng& rng, Hit& h, float sigma = -1.0f) {
   h.t = kInf;
   for (uint32_t i = 0; i < m.instances.size(); ++i) {
     InstanceRay r;
-    if (!instanceRay(m, m.instances[i], o, d, h.t, r)) continue;
+    if (!instanceRay(m, m.instances[i], o, d, h.t, r, sigma)) continue;
     const float t = deltaTrack(m.volumes[m.instances[i].volume], r, rng);
     if (t < h.t) {
       h.t = t;
@@ -261,7 +262,20 @@ V3 sampleHg(float g, V3 axis, Rng& rng) {
   return play::normalize(b1 * (st * std::cos(phi)) + b2 * (st * std::sin(phi)) + axis * mu);
 }
 
-float sunTransmittance(const Medium& m, V3 x, V3 toSun, Rng& rng) { return ratioTrackTransmittance(m, x, toSun, kInf, rng); }
+float ratioTrackWithSigma(const Medium& m, V3 o, V3 d, float tMax, Rng& rng, float sigma) {
+  float T = 1.0f;
+  for (const Instance& in : m.instances) {
+    InstanceRay r;
+    if (!instanceRay(m, in, o, d, tMax, r, sigma)) continue;
+    ratioTrack(m.volumes[in.volume], r, rng, T);
+    if (T == 0.0f) break;
+  }
+  return T;
+}
+
+float sunTransmittance(const Medium& m, V3 x, V3 toSun, Rng& rng, float sigma = -1.0f) {
+  return ratioTrackWithSigma(m, x, toSun, kInf, rng, sigma);
+}
 
 }  // namespace
 
@@ -304,16 +318,7 @@ float Rng::next() {
   return float(r >> 8) * (1.0f / 16777216.0f);
 }
 
-float ratioTrackTransmittance(const Medium& m, V3 o, V3 d, float tMax, Rng& rng) {
-  float T = 1.0f;
-  for (const Instance& in : m.instances) {
-    InstanceRay r;
-    if (!instanceRay(m, in, o, d, tMax, r)) continue;
-    ratioTrack(m.volumes[in.volume], r, rng, T);
-    if (T == 0.0f) break;
-  }
-  return T;
-}
+float ratioTrackTransmittance(const Medium& m, V3 o, V3 d, float tMax, Rng& rng) { return ratioTrackWithSigma(m, o, d, tMax, rng, -1.0f); }
 
 double quadratureTransmittance(const Medium& m, V3 o, V3 d, double tMax, double stepCells) {
   double tau = 0.0;
@@ -387,6 +392,7 @@ float tracePath(const Medium& m, const Lighting& L, V3 o, V3 d, const TraceOptio
     for (int c = 0; c < 3; ++c) acc[c] += beta[c] * L.sun[c] * Ts;  // (1/4pi) * 4pi sun * T
   }
   if (opt.firstVertexOnly) return trans;
+  const float deepSigma = opt.indirectSigma > 0.0f ? opt.indirectSigma : m.sigma;  // the light field's medium
   // Deeper vertices: HG lobes that differ per channel. Spectral MIS at the path level (the
   // "hero wavelength" scheme, Wilkie et al. 2014): the path's directions follow one channel's
   // lobes (the hero, picked per path), and channel c's estimate is f_c / mean_k pdf_k(path),
@@ -403,7 +409,7 @@ float tracePath(const Medium& m, const Lighting& L, V3 o, V3 d, const TraceOptio
   for (int bounce = 1; bounce < opt.maxBounces; ++bounce) {
     double w[3];
     weights(w);
-    if (!firstCollision(m, x, dir, rng, h)) {
+    if (!firstCollision(m, x, dir, rng, h, deepSigma)) {
       for (int c = 0; c < 3; ++c) acc[c] += w[c] * L.ambient;  // the sky
       break;
     }
@@ -412,7 +418,7 @@ float tracePath(const Medium& m, const Lighting& L, V3 o, V3 d, const TraceOptio
     const bool wood = pickWood(v, h.q, rng.next()) >= lb.woodThreshold;
     // light leaves this vertex travelling -dir; the sun's arrives travelling -toSun
     const float muSun = play::dot(L.toSun, dir);
-    const float Ts = opt.unshadowedSun ? 1.0f : sunTransmittance(m, x, L.toSun, rng);
+    const float Ts = opt.unshadowedSun ? 1.0f : sunTransmittance(m, x, L.toSun, rng, deepSigma);
     if (!wood) {
       for (int c = 0; c < 3; ++c) acc[c] += w[c] * k.leafAlbedo[c] * hgPhase(lb.g[c], muSun) * 4.0f * kPi * L.sun[c] * Ts;
       const V3 nd = sampleHg(lb.g[hero], dir, rng);

@@ -93,6 +93,11 @@ struct TraceOptions {
   bool firstVertexOnly = false;  // single scattering only (camera vertex's NEE): tests
   bool noCameraSun = false;      // without the camera vertex's sun (canopy-play --no-direct-sun: the indirect light alone)
   bool unshadowedSun = false;    // the sun's transmittance taken as 1 (diagnostics: canopy-play --no-shadows)
+  // > 0: the extinction scale of every path segment after the camera vertex (and of their sun
+  // rays) instead of Medium::sigma; the camera ray and the camera vertex's sun keep Medium::sigma.
+  // Diagnostics: the light field in a thinner medium, as lbsolve's linear collision solves it
+  // (interaction rho x sigma_t = rho per cell crossed: indirectSigma = 1).
+  float indirectSigma = 0.0f;
 };
 
 // Unit-square RNG (PCG32 stream per pixel and sample).
