@@ -37,7 +37,7 @@ struct PlayOptions {
   std::string shadowMethod = "map";  // map: per-frame sun transmittance map; cone: a shadow cone per
                                      // shadow interval (the exact, slow reference)
   float shadowMapCells = 4.0f;       // extinction grid voxel in lattice cells of the finest instance...
-  float shadowMapBias = 1.5f;        // map lookups move this many blur widths (the larger of a map voxel
+  float shadowMapBias = 0.0f;        // map lookups move this many blur widths (the larger of a map voxel
                                      // and a finest node) towards the sun
   uint32_t shadowMapMaxVoxels = 1u << 23;  // ...grown until the grid (and the map) has at most this many voxels
   bool descentCache = true;          // reuse a ray's last octree descent per instance (same image, fewer descents)

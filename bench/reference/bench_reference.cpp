@@ -16,6 +16,7 @@ namespace {
 const char* kUsage =
     "usage: bench-reference [--mesh PLANT.glb] [--resolution N] [--size N] [--spp N] [--seed S]\n"
     "                       [--shadows map|cone|both] [--elevations LOW,HIGH] [--two-seeds] [--indirect-sigma S]\n"
+    "                       [--shadow-map-bias B]\n"
     "                       [--work DIR] [--images DIR]\n"
     "  Runs voxelize (N^3, default 40, at most 48) -> lbsolve -> octreepack in-process on the plant\n"
     "  (default ../shared/assets/plants/oak_medium.glb) and on a 3-tree scene of it, renders each with\n"
@@ -27,6 +28,7 @@ const char* kUsage =
     "  the camera vertex's sun). --indirect-sigma S adds an indirect row whose reference light field\n"
     "  (every path segment after the camera vertex) is traced with extinction S instead of --sigma's 4:\n"
     "  S = 1 is the medium lbsolve's linear collision solves (a diagnostic).\n"
+    "  --shadow-map-bias B plays the map rows with canopy-play --shadow-map-bias B (blur widths).\n"
     "  --two-seeds traces each case again with seed S+1 and reports the noise measured from\n"
     "  the two images too. --images DIR writes CASE.mc.exr/.png and CASE.play.exr/.png there.\n";
 
@@ -40,7 +42,7 @@ int main(int argc, char** argv) {
   unsigned long long seed = 1;
   double low = 15.0, high = 70.0;
   bool twoSeeds = false;
-  float indirectSigma = 0.0f;
+  float indirectSigma = 0.0f, shadowMapBias = -1.0f;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--two-seeds") {
@@ -58,6 +60,7 @@ int main(int argc, char** argv) {
     else if (a == "--work") work = v;
     else if (a == "--images") images = v;
     else if (a == "--indirect-sigma") indirectSigma = float(std::atof(v));
+    else if (a == "--shadow-map-bias") shadowMapBias = float(std::atof(v));
     else if (a == "--elevations") {
       if (std::sscanf(v, "%lf,%lf", &low, &high) != 2) return benchUsageError("bench-reference", "--elevations LOW,HIGH", kUsage);
     } else {
@@ -98,6 +101,7 @@ int main(int argc, char** argv) {
           o.width = o.height = size;
           o.sunElevation = elev;
           o.shadows = m;
+          if (shadowMapBias >= 0.0f) o.tweakPlayer = [shadowMapBias](canopy::play::PlayOptions& po) { po.shadowMapBias = shadowMapBias; };
           o.trace.spp = spp;
           o.trace.seed = seed;
           if (twoSeeds) o.secondSeed = seed + 1;
