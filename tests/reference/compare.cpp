@@ -2,6 +2,7 @@
 #include "tests/reference/compare.h"
 
 #include <chrono>
+#include <filesystem>
 #include <cmath>
 #include <cstdlib>
 #include <sys/stat.h>
@@ -133,9 +134,12 @@ Medium mediumFromCanopy(const std::string& canopyPath, const std::vector<octreep
   return m;
 }
 
-Prepared prepareScenes(const PrepareOptions& o) {
+Prepared prepareScenes(const PrepareOptions& options) {
   const auto t0 = std::chrono::steady_clock::now();
-  makeDir(o.workDir);
+  makeDir(options.workDir);
+  // absolute: the scene lists written below name their lattices relative to themselves
+  PrepareOptions o = options;
+  o.workDir = std::filesystem::absolute(o.workDir).lexically_normal().string();
   const std::string density = o.workDir + "/plant.density.vdb", light = o.workDir + "/plant.light.vdb";
   VoxelizeOptions vo;
   vo.input = o.mesh;
