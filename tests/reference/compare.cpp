@@ -12,6 +12,7 @@
 #include "formats/scene_json.h"
 #include "lbsolve.h"
 #include "runtime/image_io.h"
+#include "runtime/affine.h"
 #include "runtime/player.h"
 #include "runtime/scene.h"
 #include "tools/octreepack/inputs.h"
@@ -21,43 +22,12 @@
 namespace canopy::reference {
 namespace {
 
-using M34 = std::array<double, 12>;
+using play::M34;
+using play::compose;
+using play::det3;
 
 double seconds(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-
-M34 compose(const M34& a, const M34& b) {  // a * b, as 4x4 with last row 0 0 0 1
-  M34 r{};
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 4; ++j) {
-      double v = j == 3 ? a[size_t(i * 4 + 3)] : 0.0;
-      for (int k = 0; k < 3; ++k) v += a[size_t(i * 4 + k)] * b[size_t(k * 4 + j)];
-      r[size_t(i * 4 + j)] = v;
-    }
-  return r;
-}
-
-double det3(const M34& m) {
-  return m[0] * (m[5] * m[10] - m[6] * m[9]) - m[1] * (m[4] * m[10] - m[6] * m[8]) + m[2] * (m[4] * m[9] - m[5] * m[8]);
-}
-
-M34 invert(const M34& m) {
-  const double det = det3(m);
-  if (!std::isfinite(det) || std::fabs(det) < 1e-18) throw invalidInput("reference: singular instance transform");
-  const double id = 1.0 / det;
-  M34 r{};
-  r[0] = (m[5] * m[10] - m[6] * m[9]) * id;
-  r[1] = (m[2] * m[9] - m[1] * m[10]) * id;
-  r[2] = (m[1] * m[6] - m[2] * m[5]) * id;
-  r[4] = (m[6] * m[8] - m[4] * m[10]) * id;
-  r[5] = (m[0] * m[10] - m[2] * m[8]) * id;
-  r[6] = (m[2] * m[4] - m[0] * m[6]) * id;
-  r[8] = (m[4] * m[9] - m[5] * m[8]) * id;
-  r[9] = (m[1] * m[8] - m[0] * m[9]) * id;
-  r[10] = (m[0] * m[5] - m[1] * m[4]) * id;
-  for (int i = 0; i < 3; ++i) r[size_t(i * 4 + 3)] = -(r[size_t(i * 4)] * m[3] + r[size_t(i * 4 + 1)] * m[7] + r[size_t(i * 4 + 2)] * m[11]);
-  return r;
 }
 
 Volume volumeOf(const octreepack::ModelSource& s) {
@@ -124,7 +94,7 @@ Medium mediumFromCanopy(const std::string& canopyPath, const std::vector<octreep
     M34 m2w;
     for (int e = 0; e < 12; ++e) m2w[size_t(e)] = I.modelToWorld[e];
     const M34 l2w = compose(m2w, i2m[I.model]);  // as runtime/scene.cpp composes it
-    const M34 w2l = invert(l2w);
+    const M34 w2l = play::invert(l2w, "reference: instance transform");
     Instance in;
     in.volume = I.model;
     for (int e = 0; e < 12; ++e) in.worldToIndex[e] = w2l[size_t(e)];
