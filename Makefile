@@ -18,7 +18,10 @@ build: configure
 test: build
 	ctest --test-dir $(BUILD) --output-on-failure -j $(JOBS)
 
-demo: build
+# The demo builds the five tools it runs, not the tests and benchmarks.
+DEMO_TOOLS = canopy-voxelize canopy-lbsolve canopy-haar canopy-octreepack canopy-play
+demo: configure
+	cmake --build $(BUILD) -j $(JOBS) --target $(DEMO_TOOLS)
 	$(MAKE) -C pipelines demo BIN=$(abspath $(BUILD))/bin O=$(abspath out)
 	@echo "demo: out/demo/sample.png"
 

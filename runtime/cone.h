@@ -1326,7 +1326,7 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
                  (!(tm - shadowT < shadowSpacing) || T < kShadowReuseT * shadowRefT)) {
         // One shadow cone per shadow interval: samples closer than about a voxel (1.5 cells of the
         // nearest active instance, or two footprints) to the last shadow origin reuse its value,
-        // unless the primary ray has since crossed matter of optical depth 0.05 (its T fell by 5 %):
+        // unless the primary ray has since crossed matter of optical depth 0.051 (its T fell by 5 %):
         // a dense interval's deeper samples are darker than its first. (Reusing over the whole interval
         // made the direct sun 25-31 % too bright on a 40^3 oak against the path tracer,
         // docs/validation.md.)

@@ -148,7 +148,7 @@ std::array<int, 3> parseBox(const std::string& s) {
 SolveSpec baseSpec(int b, int c, int iterations, float tolerance) {
   const LightParams p;
   SolveSpec s;
-  s.omega = makeOmegaSet(p.sigmaA[c], p.sigmaS[c], p.g[c], p.gWood, p.sigma);
+  s.omega = makeOmegaSet(p.sigmaA[c], p.sigmaS[c], p.g[c], p.gWood, p.beerLambert ? p.sigma : 0.0);
   for (int m = 0; m < kQ; ++m) s.boundary[m] = (b == 0 || m == b) ? 1.f : 0.f;
   s.maxIterations = iterations;
   s.tolerance = tolerance;

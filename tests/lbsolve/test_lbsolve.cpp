@@ -127,6 +127,9 @@ TEST(Lbsolve, WritesNineteenBasesWithLatticeAndConvergenceMetadata) {
   auto sa = f.meta->metaValue<openvdb::Vec3s>("canopy_sigma_a");
   EXPECT_FLOAT_EQ(sa[0], 0.109f);
   EXPECT_FLOAT_EQ(f.meta->metaValue<openvdb::Vec3s>("canopy_g")[2], float(-0.02 / 0.06));
+  // the medium it was lit for: canopy-play's default sigma, the Beer-Lambert collision
+  EXPECT_FLOAT_EQ(f.meta->metaValue<float>("canopy_sigma"), 4.0f);
+  EXPECT_EQ(f.meta->metaValue<std::string>("canopy_collision"), "beer-lambert");
   const auto conv = nlohmann::json::parse(f.meta->metaValue<std::string>("canopy_convergence"));
   EXPECT_EQ(conv.size(), 57u);
   EXPECT_EQ(f.meta->metaValue<std::string>("canopy_kind"), "bases");
@@ -357,6 +360,10 @@ TEST(Lbsolve, SceneLightIsOneWhereNothingOccludesAnInteriorNode) {
   EXPECT_GT(checked, 10);          // the scene has open space
   EXPECT_GT(occludedBelowOne, 10);  // and shade: B00 < 1 behind the trees
   EXPECT_FLOAT_EQ(bases[0].getValue(openvdb::Coord(0)), 1.f);  // the boundary layer (19 / 19)
+  // the coarse lattice's collision is the linear one, which has no sigma
+  EXPECT_EQ(f.meta->metaValue<std::string>("canopy_collision"), "linear");
+  EXPECT_FALSE(nlohmann::json::parse(f.meta->metaValue<std::string>("canopy_params")).contains("sigma"));
+  EXPECT_EQ(f.meta->getMetadata<openvdb::FloatMetadata>("canopy_sigma"), nullptr);
 }
 
 // ---- the CLI, run as a separate process -------------------------------------------------------

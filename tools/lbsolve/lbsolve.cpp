@@ -61,7 +61,9 @@ void stampParams(openvdb::MetaMap& m, const LightParams& p) {
   m.insertMeta("canopy_g", openvdb::Vec3SMetadata(vec3(p.g)));
   m.insertMeta("canopy_wood_g", openvdb::FloatMetadata(float(p.gWood)));
   m.insertMeta("canopy_wood_threshold", openvdb::FloatMetadata(float(p.woodThreshold)));
-  m.insertMeta("canopy_sigma", openvdb::FloatMetadata(float(p.sigma)));
+  // sigma is a property of the Beer-Lambert collision only (the linear one, and the scene lattice,
+  // never read it)
+  if (p.beerLambert) m.insertMeta("canopy_sigma", openvdb::FloatMetadata(float(p.sigma)));
   m.insertMeta("canopy_collision", openvdb::StringMetadata(p.beerLambert ? "beer-lambert" : "linear"));
 }
 

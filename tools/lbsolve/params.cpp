@@ -86,7 +86,8 @@ void LightParams::validate(const std::string& what) const {
 nlohmann::json LightParams::toJson() const {
   nlohmann::json j = {{"sigma_a", sigmaA}, {"sigma_s", sigmaS}, {"g", g},
                       {"wood_g", gWood}, {"wood_threshold", woodThreshold},
-                      {"sigma", sigma}, {"collision", beerLambert ? "beer-lambert" : "linear"}};
+                      {"collision", beerLambert ? "beer-lambert" : "linear"}};
+  if (beerLambert) j["sigma"] = sigma;  // the linear collision has no sigma
   if (gFromFsBs) {
     j["fs"] = fs;
     j["bs"] = bs;
