@@ -301,6 +301,28 @@ std::vector<FrameSetup> framePlan(const PlayOptions& o, const HostScene& scene) 
   return plan;
 }
 
+ShadeParams shadeParams(const PlayOptions& o) {
+  ShadeParams shade{};
+  shade.sun[0] = shade.sun[1] = shade.sun[2] = o.sunIntensity;
+  for (int c = 0; c < 3; ++c) shade.direct[c] = o.directSun ? shade.sun[c] : 0.0f;
+  shade.ambient = o.ambient;
+  shade.sigma = o.sigma;
+  shade.stepFactor = o.stepFactor;
+  shade.lodBias = o.lodBias;
+  shade.stopT = o.stopTransmittance;
+  shade.shadowAperture = o.shadowAperture;
+  // Without the direct term no shadow is needed (--no-direct-sun: the indirect light alone).
+  shade.shadows = !o.shadows || !o.directSun ? kShadowsOff : (o.shadowMethod == "cone" ? kShadowsCone : kShadowsMap);
+  shade.shadowMapCells = o.shadowMapCells;
+  shade.shadowMapBias = o.shadowMapBias;
+  shade.descentCache = o.descentCache ? 1 : 0;
+  shade.holdEmpty = o.holdEmpty ? 1 : 0;
+  shade.skipEmptyBlocks = o.skipEmptyBlocks ? 1 : 0;
+  shade.exactLight = o.exactLight ? 1 : 0;
+  shade.shadowMapMaxVoxels = o.shadowMapMaxVoxels;
+  return shade;
+}
+
 nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<float>* lastImage) {
   const auto t0 = std::chrono::steady_clock::now();
   if (!o.output.empty()) {
@@ -331,24 +353,7 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
           " instance(s), " + std::to_string(file.pageCount()) + " pages; cache " + std::to_string(slots) + " pages (" +
           std::to_string(uint64_t(slots) * file.header().pageBytes >> 20) + " MiB) on " + backend->name());
 
-  ShadeParams shade{};
-  shade.sun[0] = shade.sun[1] = shade.sun[2] = o.sunIntensity;
-  for (int c = 0; c < 3; ++c) shade.direct[c] = o.directSun ? shade.sun[c] : 0.0f;
-  shade.ambient = o.ambient;
-  shade.sigma = o.sigma;
-  shade.stepFactor = o.stepFactor;
-  shade.lodBias = o.lodBias;
-  shade.stopT = o.stopTransmittance;
-  shade.shadowAperture = o.shadowAperture;
-  // Without the direct term no shadow is needed (--no-direct-sun: the indirect light alone).
-  shade.shadows = !o.shadows || !o.directSun ? kShadowsOff : (o.shadowMethod == "cone" ? kShadowsCone : kShadowsMap);
-  shade.shadowMapCells = o.shadowMapCells;
-  shade.shadowMapBias = o.shadowMapBias;
-  shade.descentCache = o.descentCache ? 1 : 0;
-  shade.holdEmpty = o.holdEmpty ? 1 : 0;
-  shade.skipEmptyBlocks = o.skipEmptyBlocks ? 1 : 0;
-  shade.exactLight = o.exactLight ? 1 : 0;
-  shade.shadowMapMaxVoxels = o.shadowMapMaxVoxels;
+  ShadeParams shade = shadeParams(o);
   WorkCounters work{};
   if (o.countWork) backend->countWork(&work);
   backend->setPixelTile(o.warpTileWidth, 32 / o.warpTileWidth);

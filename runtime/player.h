@@ -75,4 +75,7 @@ std::string frameFileName(const std::string& pattern, int frame, int frames);
 // the frames it has written, so a failed run leaves no output (each frame is written atomically).
 nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<float>* lastImage = nullptr);
 
+// The per-sample parameters of the options (everything but the frame's sun direction, toSun).
+ShadeParams shadeParams(const PlayOptions& o);
+
 }  // namespace canopy::play

@@ -19,11 +19,10 @@
 #include <string>
 #include <vector>
 
-#include <openvdb/openvdb.h>
 
 #include "canopy/atomic_file.h"
 #include "canopy/cli.h"
-#include "formats/lattice_vdb.h"
+#include "tests/octreepack/source_vdb.h"
 #include "tests/octreepack/synthetic.h"
 #include "formats/canopy_write.h"
 #include "tools/octreepack/inputs.h"
@@ -33,35 +32,6 @@
 namespace op = canopy::octreepack;
 
 namespace {
-
-void writeSourceVdb(const std::string& path, const op::ModelSource& s) {
-  canopy::vdbio::initialize();
-  auto density = openvdb::FloatGrid::create(0.0f);
-  auto wood = openvdb::FloatGrid::create(0.0f);
-  auto albedo = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
-  density->setName("density");
-  wood->setName("wood");
-  albedo->setName("albedo");
-  auto da = density->getAccessor();
-  auto wa = wood->getAccessor();
-  auto aa = albedo->getAccessor();
-  for (const auto& c : s.cells) {
-    const openvdb::Coord ijk(c.ijk[0], c.ijk[1], c.ijk[2]);
-    da.setValue(ijk, c.density);
-    wa.setValue(ijk, c.wood);
-    aa.setValue(ijk, openvdb::Vec3s(c.albedo[0], c.albedo[1], c.albedo[2]));
-  }
-  canopy::vdbio::LatticeMeta meta;
-  meta.min = openvdb::Coord(s.latticeMin[0], s.latticeMin[1], s.latticeMin[2]);
-  meta.max = openvdb::Coord(s.latticeMax[0], s.latticeMax[1], s.latticeMax[2]);
-  meta.source = s.sourceLabel;
-  auto xf = openvdb::math::Transform::createLinearTransform(0.02);
-  for (openvdb::GridBase::Ptr g : {openvdb::GridBase::Ptr(density), openvdb::GridBase::Ptr(wood), openvdb::GridBase::Ptr(albedo)}) {
-    g->setTransform(xf);
-    canopy::vdbio::stampGrid(*g, meta);
-  }
-  canopy::vdbio::writeVdb(path, {density, wood, albedo});
-}
 
 uint64_t fileBytes(const std::string& p) { return canopy::readFile(p).size(); }
 
@@ -113,7 +83,10 @@ int main(int argc, char** argv) {
       for (int edge : {128, 192, 256}) {
         const std::string name = "synthetic" + std::to_string(edge);
         const std::string path = work + "/" + name + ".density.vdb";
-        writeSourceVdb(path, op::testing::syntheticPlant(edge, 0, name.c_str(), edge / 16));
+        {
+          const op::ModelSource plant = op::testing::syntheticPlant(edge, 0, name.c_str(), edge / 16);
+          op::testing::writeSourceVdb(path, plant, plant.sourceLabel);  // as canopy-voxelize writes it
+        }
         plants.push_back(path);
       }
     }

@@ -150,18 +150,12 @@ std::unique_ptr<PlayerSlab> playerSlab(float sigma, float biasBlurs) {
   auto r = std::make_unique<PlayerSlab>(PlayerSlab{canopy::CanopyFile::open(path), {}, nullptr, {}, {}, {}, {}, {}, {}});
   r->scene = pl::buildScene(r->file);
   r->backend = pl::makeCpuBackend(r->scene, r->file.pageCount());
-  const pl::PlayOptions defaults;
-  pl::ShadeParams shade{};
+  pl::PlayOptions o;  // canopy-play's defaults (the map), but for sigma and the bias
+  o.sigma = sigma;
+  o.shadowMapBias = biasBlurs;
+  pl::ShadeParams shade = pl::shadeParams(o);
+  EXPECT_EQ(shade.shadows, pl::kShadowsMap);
   shade.toSun = pl::v3(0, 1, 0);
-  for (int c = 0; c < 3; ++c) shade.sun[c] = shade.direct[c] = 1.0f;
-  shade.sigma = sigma;
-  shade.stepFactor = defaults.stepFactor;
-  shade.shadows = pl::kShadowsMap;
-  shade.shadowMapCells = defaults.shadowMapCells;
-  shade.shadowMapBias = biasBlurs;
-  shade.shadowMapMaxVoxels = defaults.shadowMapMaxVoxels;
-  shade.stopT = pl::kStopT;
-  shade.descentCache = 1;
   r->scene.setSun(shade.toSun);
   pl::CameraView cam{};
   cam.position = pl::v3(2, 1, 10);
