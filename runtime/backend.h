@@ -1,11 +1,14 @@
 // backend.h: what the frame loop needs from a renderer (CPU reference or CUDA).
 //
 // A backend owns the page pool (slots of pageBytes), the page table (page -> slot or -1), the use
-// and want stamps that rays write, the staging buffers the loader reads pages into, and the image.
-// The CPU backend keeps all of it in host memory; the CUDA backend keeps the pool, table, stamps,
-// node tiles and scene on the device, stages pages in pinned host memory and copies them on a copy
-// stream that the next frame's kernel waits for (cudaStreamWaitEvent), so a frame never waits for
-// the disk and uploads never race a kernel.
+// and want stamps that rays write, the staging buffers the loader reads pages into, and the images
+// (two eyes). The CPU backend keeps all of it in host memory; the CUDA backend keeps the pool,
+// table, stamps, node tiles and scene on the device, stages pages in pinned host memory and copies
+// them on a copy stream that the next frame's kernel waits for (cudaStreamWaitEvent), so a frame
+// never waits for the disk and uploads never race a kernel.
+//
+// A backend renders a band of rows of the frame (tiles.h: one band per GPU); its images are the
+// whole frame's size, of which only the band's rows are written and read back.
 #pragma once
 #include <cstdint>
 #include <memory>
@@ -13,6 +16,8 @@
 #include <vector>
 
 #include "runtime/scene.h"
+#include "runtime/stereo.h"
+#include "runtime/tiles.h"
 
 namespace canopy::play {
 
@@ -28,12 +33,20 @@ class Backend {
   virtual void setPageTable(const std::vector<int32_t>& table) = 0;
   // Waits until the staging buffers passed to upload() may be reused.
   virtual void waitUploads() = 0;
-  // Renders one pass (scene.instances carry this frame's sun weights).
-  virtual void render(const HostScene& scene, const ShadeParams& shade, const CameraView& camera, uint32_t stamp) = 0;
+  // Renders the rows `band` of one pass into eye `eye`'s image (0, or 1: stereo's second eye traced
+  // in full) (scene.instances carry this frame's sun weights). disparityScale > 0: also records each
+  // pixel's disparity for reprojection (stereo.h; eye 0 only).
+  virtual void renderRows(const HostScene& scene, const ShadeParams& shade, const CameraView& camera, uint32_t stamp, Band band,
+                          int eye, float disparityScale) = 0;
+  // Stereo's second eye over `band`: reprojects eye 0 (rendered with a disparityScale by the last
+  // renderRows of this pass) into eye 1 and traces its holes with `right` (the same stamp, shade
+  // and shadow map as that render). Returns the number of pixels traced.
+  virtual uint64_t reprojectRows(const HostScene& scene, const CameraView& right, uint32_t stamp, Band band, const StereoParams& p) = 0;
   // Copies the stamps written by the last render() to the host.
   virtual void readStamps(std::vector<uint32_t>& slotUsed, std::vector<uint32_t>& pageWanted) = 0;
-  // The last render's image: width * height RGBA floats (premultiplied RGB, alpha = 1 - T).
-  virtual void readImage(std::vector<float>& rgba) = 0;
+  // Copies eye `eye`'s rows `band` into rgba (width * height RGBA floats, premultiplied RGB,
+  // alpha = 1 - T; the caller sizes it).
+  virtual void readRows(std::vector<float>& rgba, int eye, Band band, int width) = 0;
   // The pixels one GPU warp renders: a w x h tile, w h = 32 (CUDA only; 8x4 by default).
   virtual void setPixelTile(int w, int h) { (void)w, (void)h; }
   // CUDA: the pixel kernel compiled for at least this many blocks of 128 threads per SM (6 or 8;
@@ -43,6 +56,15 @@ class Backend {
   virtual void countWork(WorkCounters* work) { (void)work; }
   // The last render's sun transmittance map (kShadowsMap; dim all 1 otherwise).
   const ShadowMapView& lastShadowMap() const { return lastShadowMap_; }
+
+  // The whole frame, one eye (tests, single-band use).
+  void render(const HostScene& scene, const ShadeParams& shade, const CameraView& camera, uint32_t stamp) {
+    renderRows(scene, shade, camera, stamp, Band{0, camera.height}, 0, 0.0f);
+  }
+  void readImage(std::vector<float>& rgba, const CameraView& camera) {
+    rgba.assign(size_t(camera.width) * camera.height * 4, 0.0f);
+    readRows(rgba, 0, Band{0, camera.height}, camera.width);
+  }
 
  protected:
   ShadowMapView lastShadowMap_{};

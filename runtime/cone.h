@@ -1184,6 +1184,10 @@ CANOPY_HD inline float shadowMapLookup(const ShadowMapView& m, V3 p) {
 struct ConeResult {
   float rgb[3];           // premultiplied radiance
   float transmittance;
+  // kWithDepth only: sums over the shaded samples of w, w / t and w / t^2, w = T alpha (a sample's
+  // share of the pixel): the moments of the inverse depth that stereo reprojection needs
+  // (pixelDisparity, stereo.h).
+  float depthSums[3];
 };
 
 // Transmittance from p towards the sun (shadow cone, footprint starts at `footprint0`).
@@ -1232,11 +1236,13 @@ CANOPY_HD inline float shadowTransmittance(const SceneView& s, V3 p, float footp
 // kWithCones: compiled with the shadow-cone path (kShadowsCone); without it that mode is treated
 // as kShadowsOff, so the CUDA kernel of the other modes carries neither the shadow cone's instance
 // walk (its hit list and descent caches in local memory) nor its registers. Same code otherwise.
-template <bool kWithCones, bool kWithLight = true>
+// kWithDepth: also sums the inverse-depth moments of the shaded samples (ConeResult::depthSums).
+template <bool kWithCones, bool kWithLight = true, bool kWithDepth = false>
 CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixelAngle, float tMax) {
   ConeResult r;
   r.rgb[0] = r.rgb[1] = r.rgb[2] = 0.0f;
   r.transmittance = 1.0f;
+  r.depthSums[0] = r.depthSums[1] = r.depthSums[2] = 0.0f;
   CANOPY_PLAY_COUNT(s, cones, 1);
   InstanceWalk w;
   walkBegin(s, w, o, d, 0.0f, tMax);
@@ -1337,6 +1343,12 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
       }
       const float scale = T * alpha / k;
       for (int c = 0; c < 3; ++c) r.rgb[c] += scale * (kAlbedo[c] * s.shade.direct[c] * sunT + kIndirect[c]);
+      if (kWithDepth) {
+        const float w = T * alpha, inv = 1.0f / tm;
+        r.depthSums[0] += w;
+        r.depthSums[1] += w * inv;
+        r.depthSums[2] += w * inv * inv;
+      }
     }
     T *= 1.0f - alpha;
     t = next;
@@ -1366,27 +1378,57 @@ CANOPY_HD inline V3 cameraRay(const CameraView& c, int x, int y, float& footprin
   return d * (1.0f / len);
 }
 
+// The disparity of a pixel's content between two parallel eyes: a point at depth z (along the view
+// axis) moves by disparityScale / z pixels between them, disparityScale = eye separation x focal
+// length in pixels. From the sums of w, w / t and w / t^2 over the pixel's samples (depthSums) and
+// the ray's cosine to the view axis (z = t cos): out[0] = the w-weighted mean disparity, out[1] =
+// its standard deviation, the spread of the pixel's content in disparity. No sample: 0, 0 (the
+// sky, infinitely far).
+CANOPY_HD inline void pixelDisparity(const float sums[3], float cosAxis, float disparityScale, float out[2]) {
+  if (!(sums[0] > 0.0f)) {
+    out[0] = out[1] = 0.0f;
+    return;
+  }
+  const float k = disparityScale / cosAxis;
+  const float m1 = sums[1] / sums[0], m2 = sums[2] / sums[0];
+  const float var = m2 - m1 * m1;
+  out[0] = k * m1;
+  out[1] = k * sqrtf(var > 0.0f ? var : 0.0f);
+}
+
 // Renders pixel i of the frame into rgba (premultiplied RGB, alpha = 1 - T). kWithCones must be
 // true when s.shade.shadows == kShadowsCone, kWithLight when s.litModels > 0 (renderPixel() picks
-// them; the CUDA backend launches the kernel of the mode and scene).
-template <bool kWithCones, bool kWithLight>
-CANOPY_HD inline void renderPixelT(const SceneView& s, const CameraView& c, int64_t i, float* rgba) {
+// them; the CUDA backend launches the kernel of the mode and scene). kWithDepth: also writes the
+// pixel's disparity statistics for stereo reprojection into depth[2 i], depth[2 i + 1]
+// (pixelDisparity: mean and spread, in pixels, for an eye separation of disparityScale / focal).
+template <bool kWithCones, bool kWithLight, bool kWithDepth = false>
+CANOPY_HD inline void renderPixelT(const SceneView& s, const CameraView& c, int64_t i, float* rgba, float* depth = nullptr,
+                                   float disparityScale = 0.0f) {
   const int x = int(i % c.width), y = int(i / c.width);
   float fpPerT;
   const V3 d = cameraRay(c, x, y, fpPerT);
-  const ConeResult r = traceCone<kWithCones, kWithLight>(s, c.position, d, fpPerT, 3.0e37f);
+  const ConeResult r = traceCone<kWithCones, kWithLight, kWithDepth>(s, c.position, d, fpPerT, 3.0e37f);
   rgba[4 * i + 0] = r.rgb[0];
   rgba[4 * i + 1] = r.rgb[1];
   rgba[4 * i + 2] = r.rgb[2];
   rgba[4 * i + 3] = 1.0f - r.transmittance;
+  if (kWithDepth) pixelDisparity(r.depthSums, dot(d, c.forward), disparityScale, depth + 2 * i);
 }
 
-CANOPY_HD inline void renderPixel(const SceneView& s, const CameraView& c, int64_t i, float* rgba) {
+// renderPixelT of the mode and scene (s.shade.shadows, s.litModels), with depth when `depth` is set.
+CANOPY_HD inline void renderPixel(const SceneView& s, const CameraView& c, int64_t i, float* rgba, float* depth = nullptr,
+                                  float disparityScale = 0.0f) {
   const bool cones = s.shade.shadows == kShadowsCone, light = s.litModels > 0;
-  if (cones)
+  if (depth) {
+    if (cones)
+      light ? renderPixelT<true, true, true>(s, c, i, rgba, depth, disparityScale) : renderPixelT<true, false, true>(s, c, i, rgba, depth, disparityScale);
+    else
+      light ? renderPixelT<false, true, true>(s, c, i, rgba, depth, disparityScale) : renderPixelT<false, false, true>(s, c, i, rgba, depth, disparityScale);
+  } else if (cones) {
     light ? renderPixelT<true, true>(s, c, i, rgba) : renderPixelT<true, false>(s, c, i, rgba);
-  else
+  } else {
     light ? renderPixelT<false, true>(s, c, i, rgba) : renderPixelT<false, false>(s, c, i, rgba);
+  }
 }
 
 }  // namespace canopy::play

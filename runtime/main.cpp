@@ -9,7 +9,8 @@ int main(int argc, char** argv) {
   canopy::Tool tool("canopy-play",
                     "Cone-traces a packed scene (.canopy) headless, streaming bricks through a cache.\n"
                     "  canopy-play FILE.canopy -o out.png [--size WxH]\n"
-                    "  canopy-play FILE.canopy -o frames/f_%04d.exr --frames 120 --camera orbit:turns=1 --sun orbit:turns=0.25");
+                    "  canopy-play FILE.canopy -o frames/f_%04d.exr --frames 120 --camera orbit:turns=1 --sun orbit:turns=0.25\n"
+                    "  canopy-play FILE.canopy -o pair.png --stereo 0.064   (left | right)");
   CLI::App& app = tool.app();
   canopy::play::PlayOptions o;
   std::string size = "640x360";
@@ -56,6 +57,21 @@ int main(int argc, char** argv) {
   bool coldStart = false;
   app.add_flag("--no-warm-start", coldStart, "Render the first frame in real-time mode too (node means until pages arrive)");
   app.add_option("--loader-threads", o.loaderThreads, "Page reader threads")->capture_default_str()->check(CLI::Range(1, 64));
+  app.add_option("--stereo", o.stereoIpd,
+                 "Render a stereo pair, the eyes IPD scene units apart (0.064 for people in a scene in metres): the left eye traced, "
+                 "the right reprojected from it and only its holes traced; side by side in -o unless --right-output is given");
+  app.add_option("--right-output", o.rightOutput, "With --stereo: the right eye's frames (a name or pattern as -o); -o then holds the left eye");
+  app.add_option("--stereo-fill", o.stereoFill, "reproject: the right eye from the left's pixels, holes traced; trace: traced in full (the reference)")
+      ->check(CLI::IsMember({"reproject", "trace"}))
+      ->capture_default_str();
+  app.add_option("--stereo-spread", o.stereo.maxSpread,
+                 "A left-eye pixel whose content spreads over more than this many pixels of disparity is traced in the right eye")
+      ->capture_default_str();
+  app.add_option("--tiles", o.tiles,
+                 "Bands of rows the frame is cut into, over the renderers in turn, each with its own cache (0: one per GPU of "
+                 "--device cuda, else one); balanced every frame by the last frame's times")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 64));
 
   return tool.run(argc, argv, [&] {
     int w = 0, h = 0;

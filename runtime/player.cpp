@@ -6,10 +6,13 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <exception>
 #include <fstream>
 #include <limits>
 #include <map>
+#include <memory>
 #include <sstream>
+#include <thread>
 
 #include "canopy/atomic_file.h"
 #include "canopy/cli.h"
@@ -323,11 +326,18 @@ ShadeParams shadeParams(const PlayOptions& o) {
   return shade;
 }
 
-nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<float>* lastImage) {
-  const auto t0 = std::chrono::steady_clock::now();
+namespace {
+
+void validateOptions(const PlayOptions& o) {
   if (!o.output.empty()) {
     if (!isImageName(o.output)) throw usageError("-o " + o.output + ": output must end in .png or .exr");
     frameFileName(o.output, 0, o.frames);  // validates the pattern before any work
+  }
+  if (!o.rightOutput.empty()) {
+    if (!(o.stereoIpd > 0.0f)) throw usageError("--right-output needs --stereo IPD");
+    if (o.output.empty()) throw usageError("--right-output needs -o for the left eye");
+    if (!isImageName(o.rightOutput)) throw usageError("--right-output " + o.rightOutput + ": output must end in .png or .exr");
+    frameFileName(o.rightOutput, 0, o.frames);
   }
   if (!(o.cacheMb > 0.0) || o.cacheMb > 1.0e6) throw usageError("--cache-mb must be in (0, 1e6]");
   for (float v : {o.sigma, o.stepFactor, o.ambient, o.sunIntensity, o.shadowAperture, o.lodBias})
@@ -340,75 +350,177 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   if (!(o.shadowMapBias >= 0.0f && o.shadowMapBias <= 64.0f)) throw usageError("--shadow-map-bias must be in [0, 64]");
   if (!(o.shadowMapCells >= 0.25f && o.shadowMapCells <= 1024.0f) || o.shadowMapMaxVoxels < 27 || o.shadowMapMaxVoxels > (1u << 28))
     throw usageError("--shadow-map-cells must be in [0.25, 1024] and --shadow-map-voxels in [27, 2^28]");
+  if (!(o.stereoIpd >= 0.0f && o.stereoIpd <= 1.0e3f)) throw usageError("--stereo must be an eye separation in (0, 1000] scene units");
+  if (o.stereoFill != "reproject" && o.stereoFill != "trace") throw usageError("--stereo-fill must be reproject or trace, got '" + o.stereoFill + "'");
+  if (!(o.stereo.maxSpread >= 0.0f && o.stereo.maxSpread <= 1.0e3f)) throw usageError("--stereo-spread must be in [0, 1000] pixels");
+  if (o.tiles < 0 || o.tiles > 64) throw usageError("--tiles must be 0..64");
+}
 
-  const CanopyFile file = CanopyFile::open(o.input);
-  HostScene scene = buildScene(file);
-  const std::vector<FrameSetup> plan = framePlan(o, scene);
-  const uint64_t cacheBytes = uint64_t(o.cacheMb * 1024.0 * 1024.0);
-  const uint32_t slots = uint32_t(std::min<uint64_t>(std::max<uint64_t>(cacheBytes / file.header().pageBytes, 1), std::max<uint32_t>(file.pageCount(), 1)));
+// The renderers a run uses: the CPU, one GPU, or every GPU for a plain "cuda".
+std::vector<int> deviceList(const Device& device) {
+  if (!device.isCuda()) return {-1};
+  if (device.index >= 0) return {device.index};
+  std::vector<int> all;
+  for (int i = 0; i < std::max(cudaDeviceCount(), 1); ++i) all.push_back(i);
+  return all;
+}
 
-  std::unique_ptr<Backend> backend = device.isCuda() ? makeCudaBackend(scene, slots, device.index) : makeCpuBackend(scene, slots);
-  Streamer streamer(file, *backend, slots, std::min<uint32_t>(o.stagingPages, std::max<uint32_t>(slots, 1)), o.loaderThreads);
-  logInfo("canopy-play: " + o.input + ": " + std::to_string(file.modelCount()) + " model(s), " + std::to_string(file.instanceCount()) +
-          " instance(s), " + std::to_string(file.pageCount()) + " pages; cache " + std::to_string(slots) + " pages (" +
-          std::to_string(uint64_t(slots) * file.header().pageBytes >> 20) + " MiB) on " + backend->name());
-
-  ShadeParams shade = shadeParams(o);
-  WorkCounters work{};
-  if (o.countWork) backend->countWork(&work);
-  backend->setPixelTile(o.warpTileWidth, 32 / o.warpTileWidth);
-  backend->setPixelOccupancy(o.pixelMinBlocks);
-
-  std::vector<double> frameMs;
-  std::vector<float> image;
+// One band of the frame and the renderer, cache and loader that draw it.
+struct Tile {
+  int device = -1;  // CUDA ordinal, -1 for the CPU
+  std::unique_ptr<Backend> backend;
+  std::unique_ptr<Streamer> streamer;
+  Band band;
   uint32_t stamp = 0;
-  double firstCompleteS = -1.0;
-  uint64_t coldStartBytes = 0;  // streamed by the first complete frame
   uint64_t passes = 0;
-  Progress progress("canopy-play", o.frames);
-  WrittenFrames written;
-  for (int f = 0; f < o.frames; ++f) {
-    const FrameSetup& fs = plan[size_t(f)];
-    shade.toSun = fs.toSun;
-    scene.setSun(fs.toSun);
-    const auto tf = std::chrono::steady_clock::now();
-    uint32_t missing = 0;
-    const uint32_t frameStart = stamp + 1;
-    for (int pass = 0; pass < 64; ++pass) {
-      ++stamp;
-      ++passes;
-      const uint64_t loadedBefore = streamer.stats().pagesLoaded;
-      streamer.beginPass(frameStart);
-      backend->render(scene, shade, fs.camera, stamp);
-      missing = streamer.endPass(stamp);
-      const bool complete = o.converge || (o.warmStart && f == 0);
-      if (!complete || missing == 0) break;
-      // the frame's pages do not all fit in the cache: nothing more can be installed
-      if (pass > 0 && streamer.stats().pagesLoaded == loadedBefore) break;
-      streamer.waitLoader();
-    }
-    frameMs.push_back(1000.0 * secondsSince(tf));
-    if (missing == 0 && firstCompleteS < 0.0) {
-      firstCompleteS = secondsSince(t0);
-      coldStartBytes = streamer.stats().bytesLoaded;
-    }
-    if (!o.output.empty() || lastImage) backend->readImage(image);
-    if (!o.output.empty()) {
-      const std::string path = frameFileName(o.output, f, o.frames);
-      writeImage(path, image, o.width, o.height, o.background);
-      written.add(path);
-    }
-    progress.add();
-  }
-  written.keep();
-  progress.done();
+  uint32_t missing = 0;           // this frame's last pass
+  double firstEyeS = 0.0;         // this frame's render time: the traced eye
+  double secondEyeS = 0.0;        // stereo's second eye (reprojection and holes, or traced in full)
+  uint64_t traced = 0;            // second-eye pixels traced this frame (last pass)
+  std::vector<double> costMs;     // per frame, for the report
+};
 
-  const StreamStats& st = streamer.stats();
+// The cameras of one frame: the traced one (the centre, or stereo's left eye) and stereo's right.
+struct EyeCameras {
+  CameraView traced, right;
+  float disparityScale = 0.0f;  // > 0: stereo
+};
+
+EyeCameras eyeCameras(const PlayOptions& o, const CameraView& centre) {
+  EyeCameras e;
+  e.traced = e.right = centre;
+  if (o.stereoIpd > 0.0f) {
+    stereoEyes(centre, o.stereoIpd, e.traced, e.right);
+    e.disparityScale = stereoDisparityScale(centre, o.stereoIpd);
+  }
+  return e;
+}
+
+// The passes of one frame on one tile (all of them when `complete`, until no loadable page is
+// missing; else one: real time). The stamps, cache and loader are the tile's own.
+void renderTileFrame(Tile& t, const PlayOptions& o, const HostScene& scene, const ShadeParams& shade, const EyeCameras& eyes, bool complete) {
+  const bool stereo = eyes.disparityScale > 0.0f;
+  const uint32_t frameStart = t.stamp + 1;
+  t.firstEyeS = t.secondEyeS = 0.0;
+  t.traced = 0;
+  for (int pass = 0; pass < 64; ++pass) {
+    ++t.stamp;
+    ++t.passes;
+    const uint64_t loadedBefore = t.streamer->stats().pagesLoaded;
+    t.streamer->beginPass(frameStart);
+    auto t0 = std::chrono::steady_clock::now();
+    t.backend->renderRows(scene, shade, eyes.traced, t.stamp, t.band, 0, stereo && o.stereoFill == "reproject" ? eyes.disparityScale : 0.0f);
+    t.firstEyeS += secondsSince(t0);
+    if (stereo) {
+      t0 = std::chrono::steady_clock::now();
+      if (o.stereoFill == "trace") {
+        t.backend->renderRows(scene, shade, eyes.right, t.stamp, t.band, 1, 0.0f);
+        t.traced = uint64_t(t.band.rows()) * uint64_t(eyes.right.width);
+      } else {
+        t.traced = t.backend->reprojectRows(scene, eyes.right, t.stamp, t.band, o.stereo);
+      }
+      t.secondEyeS += secondsSince(t0);
+    }
+    t.missing = t.streamer->endPass(t.stamp);
+    if (!complete || t.missing == 0) break;
+    // the frame's pages do not all fit in the cache: nothing more can be installed
+    if (pass > 0 && t.streamer->stats().pagesLoaded == loadedBefore) break;
+    t.streamer->waitLoader();
+  }
+  t.costMs.push_back(1000.0 * (t.firstEyeS + t.secondEyeS));
+}
+
+// Every tile's passes of one frame, each tile on its own thread when there are several.
+void renderFrame(std::vector<Tile>& tiles, const PlayOptions& o, const HostScene& scene, const ShadeParams& shade, const EyeCameras& eyes,
+                 bool complete) {
+  if (tiles.size() == 1) {
+    renderTileFrame(tiles[0], o, scene, shade, eyes, complete);
+    return;
+  }
+  std::vector<std::thread> threads;
+  std::vector<std::exception_ptr> errors(tiles.size());
+  for (size_t k = 0; k < tiles.size(); ++k)
+    threads.emplace_back([&, k] {
+      try {
+        renderTileFrame(tiles[k], o, scene, shade, eyes, complete);
+      } catch (...) {
+        errors[k] = std::current_exception();
+      }
+    });
+  for (auto& th : threads) th.join();
+  for (auto& e : errors)
+    if (e) std::rethrow_exception(e);
+}
+
+// Eye `eye` of the frame, assembled from every tile's band.
+void readEye(std::vector<Tile>& tiles, int eye, int width, int height, std::vector<float>& rgba) {
+  rgba.assign(size_t(width) * height * 4, 0.0f);
+  for (Tile& t : tiles) t.backend->readRows(rgba, eye, t.band, width);
+}
+
+// Left and right side by side: one image twice as wide.
+std::vector<float> sideBySide(const std::vector<float>& left, const std::vector<float>& right, int width, int height) {
+  std::vector<float> out(size_t(width) * height * 8);
+  for (int y = 0; y < height; ++y) {
+    std::copy_n(left.begin() + size_t(y) * width * 4, size_t(width) * 4, out.begin() + size_t(y) * width * 8);
+    std::copy_n(right.begin() + size_t(y) * width * 4, size_t(width) * 4, out.begin() + size_t(y) * width * 8 + size_t(width) * 4);
+  }
+  return out;
+}
+
+StreamStats sumStats(const std::vector<Tile>& tiles) {
+  StreamStats s;
+  for (const Tile& t : tiles) {
+    const StreamStats& a = t.streamer->stats();
+    s.pagesUsed += a.pagesUsed, s.pagesMissed += a.pagesMissed, s.pagesLoaded += a.pagesLoaded, s.bytesLoaded += a.bytesLoaded;
+    s.pagesDeferred += a.pagesDeferred, s.corruptPages += a.corruptPages, s.loadSeconds += a.loadSeconds, s.evictions += a.evictions;
+  }
+  return s;
+}
+
+std::vector<Band> bandsOf(const std::vector<Tile>& tiles) {
+  std::vector<Band> b;
+  for (const Tile& t : tiles) b.push_back(t.band);
+  return b;
+}
+
+double mean(const std::vector<double>& v) {
+  double s = 0.0;
+  for (double x : v) s += x;
+  return v.empty() ? 0.0 : s / double(v.size());
+}
+
+nlohmann::json workReport(const WorkCounters& work, uint64_t passes) {
+  return {{"passes", passes},
+          {"cones", work.cones},
+          {"primary_steps", work.primarySteps},
+          {"shaded_samples", work.shadedSamples},
+          {"segments", work.segments},
+          {"descents", work.descents},
+          {"brick_samples", work.brickSamples},
+          {"shadow_cones", work.shadowCones},
+          {"shadow_steps", work.shadowSteps},
+          {"shadow_map_lookups", work.shadowMapLookups},
+          {"shadow_map_steps", work.shadowMapSteps},
+          {"held_segments", work.heldSegments},
+          {"empty_steps", work.emptySteps},
+          {"zero_brick_samples", work.zeroBrickSamples},
+          {"empty_block_skips", work.emptyBlockSkips},
+          {"hit_drops", work.hitDrops}};
+}
+
+// The report of a run (frame times, cache and streaming statistics, the scene's light, the bands).
+nlohmann::json playReport(const PlayOptions& o, const CanopyFile& file, const HostScene& scene, const std::vector<Tile>& tiles,
+                          const ShadeParams& shade, const std::vector<double>& frameMs, std::chrono::steady_clock::time_point t0,
+                          double firstCompleteS, uint64_t coldStartBytes, uint32_t slots) {
+  const StreamStats st = sumStats(tiles);
   const double total = secondsSince(t0);
+  uint64_t passes = 0;
+  for (const Tile& t : tiles) passes += t.passes;
   nlohmann::json r;
   r["input"] = o.input;
   r["output"] = o.output;
-  r["device"] = backend->name();
+  r["device"] = tiles[0].backend->name();
   r["size"] = {o.width, o.height};
   r["frames"] = o.frames;
   r["passes"] = passes;
@@ -418,7 +530,7 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   r["first_complete_frame_s"] = firstCompleteS;  // -1: no frame was complete
   const uint64_t lookups = st.pagesUsed + st.pagesMissed;
   r["cache_hit_rate"] = lookups ? double(st.pagesUsed) / double(lookups) : 1.0;
-  r["cache_slots"] = slots;
+  r["cache_slots"] = slots;  // per band
   r["cache_mb"] = double(uint64_t(slots) * file.header().pageBytes) / (1024.0 * 1024.0);
   r["scene_page_mb"] = double(scene.brickPageBytes + scene.lightPageBytes + scene.haarPageBytes) / (1024.0 * 1024.0);
   r["light_page_mb"] = double(scene.lightPageBytes) / (1024.0 * 1024.0);
@@ -446,36 +558,155 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   r["seconds"] = total;
   r["shadows"] = shade.shadows == kShadowsOff ? "off" : o.shadowMethod;
   if (shade.shadows == kShadowsMap) {
-    const ShadowMapView& m = backend->lastShadowMap();
+    const ShadowMapView& m = tiles[0].backend->lastShadowMap();
     r["shadow_map"] = {{"dim", {m.dim[0], m.dim[1], m.dim[2]}}, {"voxel", m.voxel}};
   }
-  if (o.countWork && backend->name() == "cpu")
-    r["work"] = {{"passes", passes},
-                 {"cones", work.cones},
-                 {"primary_steps", work.primarySteps},
-                 {"shaded_samples", work.shadedSamples},
-                 {"segments", work.segments},
-                 {"descents", work.descents},
-                 {"brick_samples", work.brickSamples},
-                 {"shadow_cones", work.shadowCones},
-                 {"shadow_steps", work.shadowSteps},
-                 {"shadow_map_lookups", work.shadowMapLookups},
-                 {"shadow_map_steps", work.shadowMapSteps},
-                 {"held_segments", work.heldSegments},
-                 {"empty_steps", work.emptySteps},
-                 {"zero_brick_samples", work.zeroBrickSamples},
-                 {"empty_block_skips", work.emptyBlockSkips},
-                 {"hit_drops", work.hitDrops}};
+  // The bands (rows of the last frame) and each one's render time per frame.
+  nlohmann::json bands = nlohmann::json::array();
+  for (const Tile& t : tiles)
+    bands.push_back({{"device", t.device >= 0 ? "cuda:" + std::to_string(t.device) : std::string("cpu")},
+                     {"rows", {t.band.y0, t.band.y1}},
+                     {"ms_median", percentile(t.costMs, 0.5)}});
+  r["bands"] = bands;
+  return r;
+}
+
+void logSummary(const PlayOptions& o, const nlohmann::json& r, const StreamStats& st, const std::string& backendName) {
   char line[512];
   std::snprintf(line, sizeof(line),
                 "canopy-play: %d frame(s) %dx%d on %s: median %.2f ms, p95 %.2f ms; cache hit rate %.1f%%; streamed %llu pages "
                 "(%.1f MB, %.1f MB/s)%s",
-                o.frames, o.width, o.height, backend->name().c_str(), double(r["frame_ms_median"]), double(r["frame_ms_p95"]),
+                o.frames, o.width, o.height, backendName.c_str(), double(r["frame_ms_median"]), double(r["frame_ms_p95"]),
                 100.0 * double(r["cache_hit_rate"]), static_cast<unsigned long long>(st.pagesLoaded), double(r["mb_streamed"]),
                 double(r["stream_mb_per_s"]),
                 st.corruptPages ? (", " + std::to_string(st.corruptPages) + " corrupt page(s) skipped").c_str() : "");
   logInfo(line);
+  if (r.contains("stereo")) {
+    const auto& s = r["stereo"];
+    std::snprintf(line, sizeof(line), "canopy-play: stereo (%s): second eye %.2f ms median (%.2fx the first eye), %.1f%% of its pixels traced",
+                  std::string(s["fill"]).c_str(), double(s["second_eye_ms_median"]), double(s["second_over_first"]),
+                  100.0 * double(s["traced_fraction_mean"]));
+    logInfo(line);
+  }
+}
+
+}  // namespace
+
+nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<float>* lastImage, std::vector<float>* lastRight) {
+  const auto t0 = std::chrono::steady_clock::now();
+  validateOptions(o);
+  const bool stereo = o.stereoIpd > 0.0f;
+
+  const CanopyFile file = CanopyFile::open(o.input);
+  HostScene scene = buildScene(file);
+  const std::vector<FrameSetup> plan = framePlan(o, scene);
+  const uint64_t cacheBytes = uint64_t(o.cacheMb * 1024.0 * 1024.0);
+  const uint32_t slots = uint32_t(std::min<uint64_t>(std::max<uint64_t>(cacheBytes / file.header().pageBytes, 1), std::max<uint32_t>(file.pageCount(), 1)));
+
+  // One band per renderer (or --tiles bands over them, round robin), each with its own cache.
+  const std::vector<int> devices = deviceList(device);
+  const int tileH = 32 / o.warpTileWidth;
+  const std::vector<Band> bands0 = equalBands(o.height, o.tiles > 0 ? o.tiles : int(devices.size()), tileH);
+  std::vector<Tile> tiles(bands0.size());
+  for (size_t k = 0; k < tiles.size(); ++k) {
+    Tile& t = tiles[k];
+    t.device = devices[k % devices.size()];
+    t.band = bands0[k];
+    t.backend = t.device >= 0 ? makeCudaBackend(scene, slots, t.device) : makeCpuBackend(scene, slots);
+    t.streamer = std::make_unique<Streamer>(file, *t.backend, slots, std::min<uint32_t>(o.stagingPages, std::max<uint32_t>(slots, 1)), o.loaderThreads);
+  }
+  const std::string backendName = tiles[0].backend->name();
+  logInfo("canopy-play: " + o.input + ": " + std::to_string(file.modelCount()) + " model(s), " + std::to_string(file.instanceCount()) +
+          " instance(s), " + std::to_string(file.pageCount()) + " pages; cache " + std::to_string(slots) + " pages (" +
+          std::to_string(uint64_t(slots) * file.header().pageBytes >> 20) + " MiB) on " + backendName +
+          (tiles.size() > 1 ? " x " + std::to_string(tiles.size()) + " bands, a cache each" : ""));
+
+  ShadeParams shade = shadeParams(o);
+  WorkCounters work{};
+  for (Tile& t : tiles) {
+    if (o.countWork && tiles.size() == 1) t.backend->countWork(&work);
+    t.backend->setPixelTile(o.warpTileWidth, tileH);
+    t.backend->setPixelOccupancy(o.pixelMinBlocks);
+  }
+
+  std::vector<double> frameMs, firstEyeMs, secondEyeMs, tracedFraction;
+  std::vector<float> image, right;
+  double firstCompleteS = -1.0;
+  uint64_t coldStartBytes = 0;  // streamed by the first complete frame
+  Progress progress("canopy-play", o.frames);
+  WrittenFrames written;
+  for (int f = 0; f < o.frames; ++f) {
+    const FrameSetup& fs = plan[size_t(f)];
+    shade.toSun = fs.toSun;
+    scene.setSun(fs.toSun);
+    const EyeCameras eyes = eyeCameras(o, fs.camera);
+    const auto tf = std::chrono::steady_clock::now();
+    renderFrame(tiles, o, scene, shade, eyes, o.converge || (o.warmStart && f == 0));
+    frameMs.push_back(1000.0 * secondsSince(tf));
+    uint32_t missing = 0;
+    double first = 0.0, second = 0.0;
+    uint64_t traced = 0;
+    std::vector<double> cost;
+    for (const Tile& t : tiles) {
+      missing += t.missing;
+      first = std::max(first, t.firstEyeS), second = std::max(second, t.secondEyeS);
+      traced += t.traced;
+      cost.push_back(t.firstEyeS + t.secondEyeS);
+    }
+    if (stereo) {
+      firstEyeMs.push_back(1000.0 * first);
+      secondEyeMs.push_back(1000.0 * second);
+      tracedFraction.push_back(double(traced) / (double(o.width) * o.height));
+    }
+    if (missing == 0 && firstCompleteS < 0.0) {
+      firstCompleteS = secondsSince(t0);
+      coldStartBytes = sumStats(tiles).bytesLoaded;
+    }
+    if (!o.output.empty() || lastImage) {
+      readEye(tiles, 0, o.width, o.height, image);
+      if (stereo) readEye(tiles, 1, o.width, o.height, right);
+    }
+    if (!o.output.empty()) {
+      const std::string path = frameFileName(o.output, f, o.frames);
+      if (stereo && o.rightOutput.empty()) {
+        writeImage(path, sideBySide(image, right, o.width, o.height), 2 * o.width, o.height, o.background);
+      } else {
+        writeImage(path, image, o.width, o.height, o.background);
+      }
+      written.add(path);
+      if (!o.rightOutput.empty()) {
+        const std::string rpath = frameFileName(o.rightOutput, f, o.frames);
+        writeImage(rpath, right, o.width, o.height, o.background);
+        written.add(rpath);
+      }
+    }
+    if (tiles.size() > 1) {
+      const std::vector<Band> next = balanceBands(bandsOf(tiles), cost, o.height, tileH);
+      for (size_t k = 0; k < tiles.size(); ++k) tiles[k].band = next[k];
+    }
+    progress.add();
+  }
+  written.keep();
+  progress.done();
+
+  nlohmann::json r = playReport(o, file, scene, tiles, shade, frameMs, t0, firstCompleteS, coldStartBytes, slots);
+  if (stereo) {
+    r["stereo"] = {{"ipd", o.stereoIpd},
+                   {"fill", o.stereoFill},
+                   {"max_spread_px", o.stereo.maxSpread},
+                   {"layout", o.rightOutput.empty() ? "side-by-side" : "separate"},
+                   {"traced_fraction_mean", mean(tracedFraction)},
+                   {"first_eye_ms_median", percentile(firstEyeMs, 0.5)},
+                   {"second_eye_ms_median", percentile(secondEyeMs, 0.5)},
+                   {"second_over_first", percentile(firstEyeMs, 0.5) > 0 ? percentile(secondEyeMs, 0.5) / percentile(firstEyeMs, 0.5) : 0.0},
+                   {"traced_fraction", tracedFraction},
+                   {"second_eye_ms", secondEyeMs}};
+  }
+  if (o.countWork && backendName == "cpu" && tiles.size() == 1)
+    r["work"] = workReport(work, tiles[0].passes);
+  logSummary(o, r, sumStats(tiles), backendName);
   if (lastImage) *lastImage = image;
+  if (lastRight) *lastRight = right;
   return r;
 }
 

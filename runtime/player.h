@@ -13,6 +13,7 @@
 #include "canopy/device.h"
 #include "runtime/cone.h"
 #include "runtime/scene.h"
+#include "runtime/stereo.h"
 
 namespace canopy::play {
 
@@ -53,6 +54,17 @@ struct PlayOptions {
                                      // rest are real-time (one pass, loads land in later frames)
   int loaderThreads = 2;
   uint32_t stagingPages = 256;       // pages read ahead per pass at most (16 MiB pinned)
+  // Stereo (stereo.h): --stereo IPD renders a left and a right eye IPD scene units apart; the left
+  // is traced, the right reprojected from it with its holes traced (stereoFill "reproject"), or
+  // traced in full ("trace": the reference the reprojection is measured against).
+  float stereoIpd = 0.0f;            // 0: one eye
+  std::string stereoFill = "reproject";
+  StereoParams stereo;               // --stereo-spread: stereo.maxSpread
+  std::string rightOutput;           // the right eye's frames; "" = both eyes side by side in `output`
+  // Bands (tiles.h): the frame cut into this many bands of rows over the renderers (round robin),
+  // each band with its own renderer, cache and loader, rebalanced every frame. 0: one per renderer
+  // (every GPU of --device cuda, else one).
+  int tiles = 0;
 };
 
 // A frame's camera and sun.
@@ -71,9 +83,12 @@ std::vector<FrameSetup> framePlan(const PlayOptions& o, const HostScene& scene);
 // pattern for anything else (%s, %n, two conversions, ...) and for several frames without a pattern.
 std::string frameFileName(const std::string& pattern, int frame, int frames);
 
-// Runs everything; `lastImage` (optional) receives the last frame's RGBA. A run that fails removes
-// the frames it has written, so a failed run leaves no output (each frame is written atomically).
-nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<float>* lastImage = nullptr);
+// Runs everything; `lastImage` (optional) receives the last frame's RGBA (with --stereo the left
+// eye's, and `lastRight` the right eye's). A run that fails removes the frames it has written, so a
+// failed run leaves no output (each frame is written atomically). A plain "cuda" device renders on
+// every GPU, a band each (tiles.h).
+nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<float>* lastImage = nullptr,
+                    std::vector<float>* lastRight = nullptr);
 
 // The per-sample parameters of the options (everything but the frame's sun direction, toSun).
 ShadeParams shadeParams(const PlayOptions& o);

@@ -1,5 +1,6 @@
 // render_cpu.cpp: the CPU reference backend: TBB over pixels, every array in host memory, the same
 // renderPixel() (cone.h) as the CUDA kernel.
+#include <algorithm>
 #include <cstring>
 
 #include "canopy/parallel.h"
@@ -28,7 +29,8 @@ class CpuBackend final : public Backend {
   void setPageTable(const std::vector<int32_t>& table) override { table_ = table; }
   void waitUploads() override {}
 
-  void render(const HostScene& scene, const ShadeParams& shade, const CameraView& camera, uint32_t stamp) override {
+  void renderRows(const HostScene& scene, const ShadeParams& shade, const CameraView& camera, uint32_t stamp, Band band, int eye,
+                  float disparityScale) override {
     SceneView v = hostSceneView(scene);
     v.pageSlot = table_.data();
     v.pool = pool_.data();
@@ -58,15 +60,62 @@ class CpuBackend final : public Backend {
       if (work_) work_->shadowMapSteps += uint64_t(columns) * uint64_t(m.dim[2]) * uint64_t(sub);
     }
     lastShadowMap_ = v.shadowMap;
-    image_.assign(size_t(camera.width) * camera.height * 4, 0.0f);
-    float* out = image_.data();
-    parallelFor(int64_t(camera.width) * camera.height, [&](int64_t i) { renderPixel(v, camera, i, out); }, 64);
+    view_ = v;
+    const size_t pixels = size_t(camera.width) * camera.height;
+    std::vector<float>& image = image_[eye];
+    if (image.size() != pixels * 4) image.assign(pixels * 4, 0.0f);
+    float* out = image.data();
+    float* depth = nullptr;
+    if (disparityScale > 0.0f) {
+      if (disparity_.size() != pixels * 2) disparity_.assign(pixels * 2, 0.0f);
+      depth = disparity_.data();
+    }
+    const int64_t first = int64_t(band.y0) * camera.width;
+    parallelFor(int64_t(band.rows()) * camera.width, [&](int64_t i) { renderPixel(v, camera, first + i, out, depth, disparityScale); }, 64);
+  }
+  uint64_t reprojectRows(const HostScene& scene, const CameraView& right, uint32_t stamp, Band band, const StereoParams& p) override {
+    (void)scene, (void)stamp;  // the stamp and scene of view_, the last render of this pass
+    const size_t pixels = size_t(right.width) * right.height;
+    if (keys_.size() != pixels) keys_.resize(pixels), cover_.resize(pixels);
+    if (image_[1].size() != pixels * 4) image_[1].assign(pixels * 4, 0.0f);
+    StereoView sv;
+    sv.left = image_[0].data();
+    sv.disparity = disparity_.data();
+    sv.keys = keys_.data();
+    sv.cover = cover_.data();
+    sv.right = image_[1].data();
+    sv.width = right.width;
+    sv.p = p;
+    // one row per task: a row's spans land in the row (max and count, in any order: the same keys)
+    std::vector<uint8_t> hole(size_t(band.rows()) * right.width);
+    parallelFor(band.rows(), [&](int64_t r) {
+      const int y = band.y0 + int(r);
+      const int64_t row = int64_t(y) * right.width;
+      std::fill(keys_.begin() + row, keys_.begin() + row + right.width, 0ull);
+      std::fill(cover_.begin() + row, cover_.begin() + row + right.width, 0u);
+      for (int x = 0; x < right.width; ++x)
+        stereoSplat(sv, x, y, [&](int64_t i, unsigned long long key, bool counts) {
+          keys_[size_t(i)] = std::max(keys_[size_t(i)], key);
+          cover_[size_t(i)] += counts ? 1u : 0u;
+        });
+      for (int x = 0; x < right.width; ++x) hole[size_t(r) * right.width + x] = stereoResolve(sv, x, y) ? 0 : 1;
+    }, 1);
+    std::vector<int64_t> holes;
+    for (size_t k = 0; k < hole.size(); ++k)
+      if (hole[k]) holes.push_back(int64_t(band.y0) * right.width + int64_t(k));
+    const SceneView v = view_;
+    float* out = image_[1].data();
+    parallelFor(int64_t(holes.size()), [&](int64_t k) { renderPixel(v, right, holes[size_t(k)], out); }, 64);
+    return holes.size();
   }
   void readStamps(std::vector<uint32_t>& slotUsed, std::vector<uint32_t>& pageWanted) override {
     slotUsed = slotUsed_;
     pageWanted = pageWanted_;
   }
-  void readImage(std::vector<float>& rgba) override { rgba = image_; }
+  void readRows(std::vector<float>& rgba, int eye, Band band, int width) override {
+    const size_t first = size_t(band.y0) * width * 4, count = size_t(band.rows()) * width * 4;
+    std::copy(image_[eye].begin() + first, image_[eye].begin() + first + count, rgba.begin() + first);
+  }
   void countWork(WorkCounters* work) override { work_ = work; }
 
  private:
@@ -74,7 +123,10 @@ class CpuBackend final : public Backend {
   std::vector<unsigned char> pool_, staging_;
   std::vector<int32_t> table_;
   std::vector<uint32_t> slotUsed_, pageWanted_;
-  std::vector<float> image_, shadowMap_, extinction_;
+  std::vector<float> image_[2], disparity_, shadowMap_, extinction_;
+  std::vector<unsigned long long> keys_;
+  std::vector<uint32_t> cover_;
+  SceneView view_{};  // the last render's view (its stamp, shade and shadow map): the second eye's holes use it
   ExtinctionGridView grid_{};
   float gridSigma_ = -1.0f, gridCells_ = -1.0f;
   uint32_t gridCap_ = 0;

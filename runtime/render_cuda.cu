@@ -9,6 +9,8 @@
 // for the copies either (they overlap the host's work until the kernel launch).
 #include <cstring>
 
+#include <cub/device/device_select.cuh>
+
 #include "canopy/parallel_cuda.cuh"
 #include "runtime/backend.h"
 
@@ -19,19 +21,24 @@ namespace {
 // pixels of one row: the rays of a warp stay closer together, so they walk the same instances and
 // nodes longer). Thread j -> tile j / (tileW tileH), lane j % (tileW tileH). One kernel per shadow
 // path (renderPixelT): the map's and no-shadow kernel has no shadow-cone code.
-template <bool kWithCones, bool kWithLight>
+template <bool kWithCones, bool kWithLight, bool kWithDepth = false>
 struct PixelKernel {
   SceneView scene;
   CameraView camera;
   float* out;
   int tilesX, tileW, tileH;
-  __device__ void operator()(int64_t j) const {
+  int y0;                    // the band's first row (tiles.h)
+  const int32_t* list;       // nullptr: thread j renders tile position j; else list[j] (stereo's holes)
+  float* depth;              // kWithDepth: the disparity per pixel (stereo's traced eye)
+  float disparityScale;
+  __device__ void operator()(int64_t k) const {
+    const int64_t j = list ? int64_t(list[k]) : k;
     const int64_t tile = j / (tileW * tileH);
     const int lane = int(j % (tileW * tileH));
     const int x = int(tile % tilesX) * tileW + lane % tileW;
-    const int y = int(tile / tilesX) * tileH + lane / tileW;
+    const int y = y0 + int(tile / tilesX) * tileH + lane / tileW;
     if (x >= camera.width || y >= camera.height) return;
-    renderPixelT<kWithCones, kWithLight>(scene, camera, int64_t(y) * camera.width + x, out);
+    renderPixelT<kWithCones, kWithLight, kWithDepth>(scene, camera, int64_t(y) * camera.width + x, out, depth, disparityScale);
   }
 };
 
@@ -45,18 +52,53 @@ struct PixelKernel {
 // the grove (lit) 14.44 -> 14.90 ms; 8 blocks was slower on all three. setPixelOccupancy overrides
 // it (6, 8, or -1 for unconstrained). Shadow-cone kernel: 5 (96 registers, as before the light change).
 constexpr int kPixelBlock = 128;
-template <bool kWithCones, bool kWithLight, int kMinBlocks>
-__global__ void __launch_bounds__(kPixelBlock, kMinBlocks > 0 ? kMinBlocks : 1) pixelKernel(PixelKernel<kWithCones, kWithLight> k, int64_t n) {
+template <bool kWithCones, bool kWithLight, bool kWithDepth, int kMinBlocks>
+__global__ void __launch_bounds__(kPixelBlock, kMinBlocks > 0 ? kMinBlocks : 1)
+    pixelKernel(PixelKernel<kWithCones, kWithLight, kWithDepth> k, int64_t n) {
   const int64_t i = blockIdx.x * int64_t(kPixelBlock) + threadIdx.x;
   if (i < n) k(i);
 }
 
-template <bool kWithCones, bool kWithLight, int kMinBlocks>
-void launchPixels(const PixelKernel<kWithCones, kWithLight>& k, int64_t n, cudaStream_t stream) {
+template <int kMinBlocks, bool kWithCones, bool kWithLight, bool kWithDepth>
+void launchPixels(const PixelKernel<kWithCones, kWithLight, kWithDepth>& k, int64_t n, cudaStream_t stream) {
   if (n <= 0) return;
-  pixelKernel<kWithCones, kWithLight, kMinBlocks><<<unsigned((n + kPixelBlock - 1) / kPixelBlock), kPixelBlock, 0, stream>>>(k, n);
+  pixelKernel<kWithCones, kWithLight, kWithDepth, kMinBlocks><<<unsigned((n + kPixelBlock - 1) / kPixelBlock), kPixelBlock, 0, stream>>>(k, n);
   CANOPY_CUDA_CHECK(cudaGetLastError());
 }
+
+// Stereo (stereo.h): the traced eye's spans into the right eye's keys and cover counts (one thread
+// per traced pixel of the band), then each right-eye pixel resolved or marked a hole: hole[j] = j
+// for the tile position j of a hole, -1 otherwise (compacted in order into the list of pixels to
+// trace, so a warp traces neighbouring holes).
+struct StereoSplatKernel {
+  StereoView view;
+  int y0;
+  __device__ void operator()(int64_t i) const {
+    const int x = int(i % view.width), y = y0 + int(i / view.width);
+    stereoSplat(view, x, y, [&](int64_t r, unsigned long long key, bool counts) {
+      atomicMax(view.keys + r, key);
+      if (counts) atomicAdd(view.cover + r, 1u);
+    });
+  }
+};
+
+struct StereoResolveKernel {
+  StereoView view;
+  int height, tilesX, tileW, tileH, y0;
+  int32_t* hole;
+  __device__ void operator()(int64_t j) const {
+    const int64_t tile = j / (tileW * tileH);
+    const int lane = int(j % (tileW * tileH));
+    const int x = int(tile % tilesX) * tileW + lane % tileW;
+    const int y = y0 + int(tile / tilesX) * tileH + lane / tileW;
+    const bool inFrame = x < view.width && y < height;
+    hole[j] = inFrame && !stereoResolve(view, x, y) ? int32_t(j) : -1;
+  }
+};
+
+struct IsHole {
+  __host__ __device__ bool operator()(int32_t j) const { return j >= 0; }
+};
 
 struct ExtinctionKernel {
   SceneView scene;
@@ -80,7 +122,9 @@ void uploadVector(cuda::DeviceBuffer<T>& d, const std::vector<T>& h) {
 class CudaBackend final : public Backend {
  public:
   CudaBackend(const HostScene& scene, uint32_t slots, int device) : pageBytes_(scene.pageBytes), pageCount_(scene.pageCount) {
+    device_ = device;
     CANOPY_CUDA_CHECK(cudaSetDevice(device));
+    holeCount_.resize(1);
     CANOPY_CUDA_CHECK(cudaStreamCreateWithFlags(&compute_, cudaStreamNonBlocking));
     CANOPY_CUDA_CHECK(cudaStreamCreateWithFlags(&copy_, cudaStreamNonBlocking));
     for (int i = 0; i < 2; ++i) CANOPY_CUDA_CHECK(cudaEventCreateWithFlags(&tableCopied_[i], cudaEventDisableTiming));
@@ -119,6 +163,7 @@ class CudaBackend final : public Backend {
     CANOPY_CUDA_CHECK(cudaDeviceSynchronize());
   }
   ~CudaBackend() override {
+    cudaSetDevice(device_);
     cudaStreamSynchronize(copy_);
     cudaStreamSynchronize(compute_);
     if (staging_) cudaFreeHost(staging_);
@@ -132,14 +177,17 @@ class CudaBackend final : public Backend {
 
   std::string name() const override { return "cuda"; }
   unsigned char* stagingBuffers(uint32_t count) override {
+    CANOPY_CUDA_CHECK(cudaSetDevice(device_));
     if (staging_) cudaFreeHost(staging_);
     CANOPY_CUDA_CHECK(cudaMallocHost(reinterpret_cast<void**>(&staging_), size_t(count) * pageBytes_));
     return staging_;
   }
   void upload(uint32_t slot, const unsigned char* staged) override {
+    CANOPY_CUDA_CHECK(cudaSetDevice(device_));
     CANOPY_CUDA_CHECK(cudaMemcpyAsync(pool_.data() + size_t(slot) * pageBytes_, staged, pageBytes_, cudaMemcpyHostToDevice, copy_));
   }
   void setPageTable(const std::vector<int32_t>& table) override {
+    CANOPY_CUDA_CHECK(cudaSetDevice(device_));
     // two pinned mirrors, alternating: the one rewritten now was copied two calls ago, a copy that
     // a finished kernel has already waited for, so this never waits for the page uploads
     mirror_ ^= 1;
@@ -149,9 +197,14 @@ class CudaBackend final : public Backend {
     CANOPY_CUDA_CHECK(cudaEventRecord(tableCopied_[mirror_], copy_));
     CANOPY_CUDA_CHECK(cudaStreamWaitEvent(compute_, tableCopied_[mirror_], 0));
   }
-  void waitUploads() override { CANOPY_CUDA_CHECK(cudaStreamSynchronize(copy_)); }
+  void waitUploads() override {
+    CANOPY_CUDA_CHECK(cudaSetDevice(device_));
+    CANOPY_CUDA_CHECK(cudaStreamSynchronize(copy_));
+  }
 
-  void render(const HostScene& scene, const ShadeParams& shade, const CameraView& camera, uint32_t stamp) override {
+  void renderRows(const HostScene& scene, const ShadeParams& shade, const CameraView& camera, uint32_t stamp, Band band, int eye,
+                  float disparityScale) override {
+    CANOPY_CUDA_CHECK(cudaSetDevice(device_));  // the frame loop may call from any thread (one per band)
     if (!scene.instances.empty())
       CANOPY_CUDA_CHECK(cudaMemcpyAsync(instances_.data(), scene.instances.data(), scene.instances.size() * sizeof(InstanceView),
                                         cudaMemcpyHostToDevice, compute_));
@@ -165,7 +218,12 @@ class CudaBackend final : public Backend {
       lightVersion_ = scene.lightVersion;
     }
     const size_t pixels = size_t(camera.width) * camera.height;
-    if (image_.size() != pixels * 4) image_.resize(pixels * 4);
+    if (image_[eye].size() != pixels * 4) image_[eye].resize(pixels * 4);
+    float* depth = nullptr;
+    if (disparityScale > 0.0f) {
+      if (disparity_.size() != pixels * 2) disparity_.resize(pixels * 2);
+      depth = disparity_.data();
+    }
     SceneView v = hostSceneView(scene);
     v.models = models_.data();
     v.instances = instances_.data();
@@ -203,30 +261,84 @@ class CudaBackend final : public Backend {
       cuda::parallelFor(columns, ShadowMapKernel{v.shadowMap, grid_, sub}, compute_, 128);
     }
     lastShadowMap_ = v.shadowMap;
-    const int tilesX = (camera.width + tileW_ - 1) / tileW_, tilesY = (camera.height + tileH_ - 1) / tileH_;
+    view_ = v;
+    const int tilesX = (camera.width + tileW_ - 1) / tileW_, tilesY = (band.rows() + tileH_ - 1) / tileH_;
     const int64_t threads = int64_t(tilesX) * tilesY * tileW_ * tileH_;
     // one kernel per shadow path and per light (renderPixelT): the map's kernel for a scene
     // without lit models has neither shadow-cone nor LB light code
-    if (shade.shadows == kShadowsCone) {
-      launchPixels<true, true, 5>(PixelKernel<true, true>{v, camera, image_.data(), tilesX, tileW_, tileH_}, threads, compute_);
-    } else if (scene.litModels > 0) {
-      launchMap(PixelKernel<false, true>{v, camera, image_.data(), tilesX, tileW_, tileH_}, threads);
-    } else {
-      launchMap(PixelKernel<false, false>{v, camera, image_.data(), tilesX, tileW_, tileH_}, threads);
-    }
+    float* out = image_[eye].data();
+    if (depth)
+      launchMode<true>(scene, shade, camera, out, band.y0, nullptr, threads, depth, disparityScale);
+    else
+      launchMode<false>(scene, shade, camera, out, band.y0, nullptr, threads, nullptr, 0.0f);
     CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
   }
-  template <bool kWithLight>
-  void launchMap(const PixelKernel<false, kWithLight>& k, int64_t threads) {
-    const int blocks = minBlocks_ != 0 ? minBlocks_ : (kWithLight ? -1 : 6);
-    if (blocks >= 8)
-      launchPixels<false, kWithLight, 8>(k, threads, compute_);
-    else if (blocks >= 6)
-      launchPixels<false, kWithLight, 6>(k, threads, compute_);
-    else
-      launchPixels<false, kWithLight, 0>(k, threads, compute_);
+  // The pixel kernel of the mode (shadow path, LB light, depth) over `threads` tile positions of
+  // the band from y0 (or list[0, threads) of them), with view_.
+  template <bool kWithDepth>
+  void launchMode(const HostScene& scene, const ShadeParams& shade, const CameraView& camera, float* out, int y0, const int32_t* list,
+                  int64_t threads, float* depth, float disparityScale) {
+    const int tilesX = (camera.width + tileW_ - 1) / tileW_;
+    if (shade.shadows == kShadowsCone) {
+      launchPixels<5>(PixelKernel<true, true, kWithDepth>{view_, camera, out, tilesX, tileW_, tileH_, y0, list, depth, disparityScale}, threads, compute_);
+    } else if (scene.litModels > 0) {
+      launchMap(PixelKernel<false, true, kWithDepth>{view_, camera, out, tilesX, tileW_, tileH_, y0, list, depth, disparityScale}, threads);
+    } else {
+      launchMap(PixelKernel<false, false, kWithDepth>{view_, camera, out, tilesX, tileW_, tileH_, y0, list, depth, disparityScale}, threads);
+    }
+  }
+  // The map's (or no-shadow) kernel at the occupancy asked for (setPixelOccupancy); the depth
+  // kernels (stereo's traced eye) at the default one only.
+  template <bool kWithLight, bool kWithDepth>
+  void launchMap(const PixelKernel<false, kWithLight, kWithDepth>& k, int64_t threads) {
+    if constexpr (kWithDepth) {
+      launchPixels<kWithLight ? 0 : 6>(k, threads, compute_);
+    } else {
+      const int blocks = minBlocks_ != 0 ? minBlocks_ : (kWithLight ? -1 : 6);
+      if (blocks >= 8)
+        launchPixels<8>(k, threads, compute_);
+      else if (blocks >= 6)
+        launchPixels<6>(k, threads, compute_);
+      else
+        launchPixels<0>(k, threads, compute_);
+    }
+  }
+  uint64_t reprojectRows(const HostScene& scene, const CameraView& right, uint32_t stamp, Band band, const StereoParams& p) override {
+    (void)stamp;  // view_'s, the last render of this pass
+    CANOPY_CUDA_CHECK(cudaSetDevice(device_));
+    const size_t pixels = size_t(right.width) * right.height;
+    if (image_[1].size() != pixels * 4) image_[1].resize(pixels * 4);
+    if (keys_.size() != pixels) keys_.resize(pixels), cover_.resize(pixels);
+    const size_t first = size_t(band.y0) * right.width, count = size_t(band.rows()) * right.width;
+    CANOPY_CUDA_CHECK(cudaMemsetAsync(keys_.data() + first, 0, count * sizeof(unsigned long long), compute_));
+    CANOPY_CUDA_CHECK(cudaMemsetAsync(cover_.data() + first, 0, count * sizeof(uint32_t), compute_));
+    StereoView sv;
+    sv.left = image_[0].data();
+    sv.disparity = disparity_.data();
+    sv.keys = keys_.data();
+    sv.cover = cover_.data();
+    sv.right = image_[1].data();
+    sv.width = right.width;
+    sv.p = p;
+    cuda::parallelFor(int64_t(count), StereoSplatKernel{sv, band.y0}, compute_, 256);
+    const int tilesX = (right.width + tileW_ - 1) / tileW_, tilesY = (band.rows() + tileH_ - 1) / tileH_;
+    const int64_t threads = int64_t(tilesX) * tilesY * tileW_ * tileH_;
+    if (hole_.size() < size_t(threads)) hole_.resize(size_t(threads)), holeList_.resize(size_t(threads));
+    cuda::parallelFor(threads, StereoResolveKernel{sv, right.height, tilesX, tileW_, tileH_, band.y0, hole_.data()}, compute_, 256);
+    size_t tempBytes = 0;
+    CANOPY_CUDA_CHECK(cub::DeviceSelect::If(nullptr, tempBytes, hole_.data(), holeList_.data(), holeCount_.data(), threads, IsHole{}, compute_));
+    if (selectTemp_.size() < tempBytes) selectTemp_.resize(tempBytes);
+    CANOPY_CUDA_CHECK(cub::DeviceSelect::If(selectTemp_.data(), tempBytes, hole_.data(), holeList_.data(), holeCount_.data(), threads, IsHole{},
+                                            compute_));
+    int64_t holes = 0;
+    CANOPY_CUDA_CHECK(cudaMemcpyAsync(&holes, holeCount_.data(), sizeof holes, cudaMemcpyDeviceToHost, compute_));
+    CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
+    launchMode<false>(scene, view_.shade, right, image_[1].data(), band.y0, holeList_.data(), holes, nullptr, 0.0f);
+    CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
+    return uint64_t(holes);
   }
   void readStamps(std::vector<uint32_t>& slotUsed, std::vector<uint32_t>& pageWanted) override {
+    CANOPY_CUDA_CHECK(cudaSetDevice(device_));
     slotUsed.resize(slots_);
     pageWanted.resize(pageCount_);
     if (slots_) slotUsed_.download(slotUsed.data(), slots_);
@@ -234,9 +346,10 @@ class CudaBackend final : public Backend {
   }
   void setPixelTile(int w, int h) override { tileW_ = w, tileH_ = h; }
   void setPixelOccupancy(int minBlocks) override { minBlocks_ = minBlocks; }
-  void readImage(std::vector<float>& rgba) override {
-    rgba.resize(image_.size());
-    image_.download(rgba.data(), image_.size());
+  void readRows(std::vector<float>& rgba, int eye, Band band, int width) override {
+    CANOPY_CUDA_CHECK(cudaSetDevice(device_));
+    const size_t first = size_t(band.y0) * width * 4, count = size_t(band.rows()) * width * 4;
+    if (count) CANOPY_CUDA_CHECK(cudaMemcpy(rgba.data() + first, image_[eye].data() + first, count * sizeof(float), cudaMemcpyDeviceToHost));
   }
 
  private:
@@ -256,7 +369,14 @@ class CudaBackend final : public Backend {
   cuda::DeviceBuffer<unsigned char> pool_;
   cuda::DeviceBuffer<int32_t> table_;
   cuda::DeviceBuffer<uint32_t> slotUsed_, pageWanted_;
-  cuda::DeviceBuffer<float> image_, shadowMap_, extinction_;
+  cuda::DeviceBuffer<float> image_[2], disparity_, shadowMap_, extinction_;
+  cuda::DeviceBuffer<unsigned long long> keys_;   // stereo: per right-eye pixel, the nearest span (stereo.h)
+  cuda::DeviceBuffer<uint32_t> cover_;
+  cuda::DeviceBuffer<int32_t> hole_, holeList_;   // stereo: holes by tile position, and compacted
+  cuda::DeviceBuffer<int64_t> holeCount_;
+  cuda::DeviceBuffer<unsigned char> selectTemp_;
+  SceneView view_{};  // the last render's view (its stamp, shade and shadow map): the second eye's holes use it
+  int device_ = 0;
   ExtinctionGridView grid_{};
   float gridSigma_ = -1.0f, gridCells_ = -1.0f;
   uint32_t gridCap_ = 0;
