@@ -364,7 +364,7 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyVoxelIndex(uint32_t x, uint32_t y, u
 // mask (word i / 64, bit i % 64) is set when all of those voxels have density 0, so the density is
 // exactly 0 everywhere in the cell. A set bit is a proof; a clear one proves nothing (a page
 // without masks reads as all clear).
-constexpr uint32_t kCanopyEmptyCells = 8;  // 4: 1.08x slower forest orbit (bench/play/NOTES.md, fifth round)
+constexpr uint32_t kCanopyEmptyCells = 8;  // 4: 1.08x slower forest orbit (docs/performance.md, 'Empty cells inside bricks')
 constexpr uint32_t kCanopyEmptyWords = (kCanopyEmptyCells * kCanopyEmptyCells * kCanopyEmptyCells + 63) / 64;
 
 inline void canopyBrickEmptyCells(CanopyBrickView b, uint64_t mask[kCanopyEmptyWords]) {

@@ -208,7 +208,7 @@ CANOPY_HD CANOPY_FORCEINLINE float trilinear(const float v[2][2][2], float fx, f
 // lane needs: on oak_medium's light at 64^3 (1 % RMS) 30.2 iterations for a mean of 11.1 needed
 // coefficients per lane (quant), 25.8 for 7.3 (fp16). Spreading a warp's terms evenly over its
 // lanes (same terms, same order of addition, through shared memory) was tried and measured slower
-// (bench/RESULTS.md, 2026-12-02: quant 9.5 against 11.6 G samples/s on an H200).
+// (docs/performance.md, 'Raw bricks': quant 9.5 against 11.6 G samples/s on an H200).
 //
 // The sum is in coefficient order with explicitly rounded operations: CPU and CUDA give the same
 // bits. It is not the same rounding as decoding the brick (decodeBrick) and interpolating its 8
@@ -380,7 +380,7 @@ constexpr int32_t kQuantMaxLevel = 16383;  // |q| <= 2^14 - 1 (15-bit fields, on
 // Raw quantised bricks (.chaar 2.1): the brick's values (Y, R-Y, B-Y), not its coefficients, each
 // q = round(v / (kQuantRawFactor * T)); flagged by kQuantRawBit in QuantRecord::widths. The encoder
 // stores a brick raw where its Haar form keeps more than kQuantRawAbove coefficients: a sample then
-// needs at most 8 fields instead of up to 64 (bench/RESULTS.md, 2026-12-02).
+// needs at most 8 fields instead of up to 64 (docs/performance.md, 'Raw bricks').
 constexpr uint32_t kQuantRawBit = 0x80000000u;
 constexpr float kQuantRawFactor = 4.0f;  // a power of two: T * 4 is exact
 constexpr int kQuantRawAbove = 16;

@@ -379,7 +379,7 @@ CANOPY_HD inline void ambientOnly(const SceneView& s, SceneLightPair scene, floa
 // as lbIndirect() computes it (the same terms in the same order), each base haar::sampleBrick of the item (bit for
 // bit the .chaar's own chaarSample). item == nullptr: no light stored there (every base 0).
 // On the device this is one out-of-line function, one copy of the sampler for both precisions, the
-// four bases in a rolled loop. Measured on the grove at 1080p on an H200 (bench/RESULTS.md): inlined
+// four bases in a rolled loop. Measured on the grove at 1080p on an H200 (docs/performance.md): inlined
 // per base, precision and call site the decoder made the lit pixel kernel 10x larger (44.7 k PTX
 // lines against 4.7 k) and the frame 257.7 ms; out of line 195.0 ms; out of line with its
 // coefficient loops rolled too (a fifth of the code) 377.9 ms (all with the sampler that rebuilt the
@@ -1267,7 +1267,7 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
     // ascending order, so the sums are the same bit for bit. On the GPU this is what lets a warp
     // run instanceSegment() once for all its lanes: in one loop doing both, a lane that evaluates
     // its first hit and a lane that evaluates its third ran the evaluation at different iterations,
-    // one after the other (bench/play/NOTES.md, sixth round).
+    // one after the other (docs/performance.md, 'Warp-uniform evaluation').
     uint32_t evaluate = 0;
     for (uint32_t m = w.live; m != 0; m &= m - 1u) {
       const uint32_t h = lowestSetBit(m);

@@ -50,7 +50,7 @@ int main(int argc, char** argv) {
   std::string lightMode = "fast";
   app.add_option("--light", lightMode,
                  "fast: LB light from the float16 light items on every level; exact: at the finest level, from the .chaar's Haar "
-                 "bricks where the file has them (the .chaar's own samples; the grove measured 17.3 against 16.4 ms per frame, bench/RESULTS.md)")
+                 "bricks where the file has them (the .chaar's own samples; a little slower, docs/play.md)")
       ->check(CLI::IsMember({"fast", "exact"}))
       ->capture_default_str();
   app.add_flag("--converge", o.converge, "Per frame, render passes until no loadable page is missing (reference quality)");

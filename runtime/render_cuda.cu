@@ -47,7 +47,7 @@ struct PixelKernel {
 // Map kernels by default: 6 blocks for scenes without LB light, unconstrained with it (ptxas -v,
 // sm_90, with the empty-cell skip: 91 registers and a 2608-byte stack free, 56 bytes of spill
 // stores at 6 blocks; 134 registers with light). Measured on an H200 before the skip, when a step
-// stopped keeping a per-hit segment array (bench/play/NOTES.md, fourth round; 87 registers then,
+// stopped keeping a per-hit segment array (docs/performance.md, 'Occupancy'; 87 registers then,
 // 12 bytes of spills at 6): 6 blocks took the forest orbit 43.19 -> 42.49 ms and the walk 15.41 -> 14.84 ms,
 // the grove (lit) 14.44 -> 14.90 ms; 8 blocks was slower on all three. setPixelOccupancy overrides
 // it (6, 8, or -1 for unconstrained). Shadow-cone kernel: 5 (96 registers, as before the light change).

@@ -3,7 +3,7 @@
 // pull-fused arithmetic). Not part of the build; run from the repository root:
 //   g++ -std=c++17 -O2 -ffp-contract=off -I. -Icore/include bench/lbsolve/collide_fma_cpu.cpp -o /tmp/c && /tmp/c
 //   g++ -std=c++17 -O2 -ffp-contract=off -mfma -I. -Icore/include bench/lbsolve/collide_fma_cpu.cpp -o /tmp/c && /tmp/c
-// (bench/lbsolve/NOTES.md, fifth round: what making fmaf the reference on both sides would cost the CPU).
+// (docs/performance.md, 'Fused multiply-adds stay off': what making fmaf the reference on both sides would cost the CPU).
 #include <chrono>
 #include <cmath>
 #include <cstdio>

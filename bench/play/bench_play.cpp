@@ -51,7 +51,7 @@ struct Scene {
 }  // namespace
 
 int main(int argc, char** argv) {
-  canopy::Tool tool("bench-play", "canopy-play benchmark: plant + forest at 1920x1080 (see bench/play/gpu.sh)");
+  canopy::Tool tool("bench-play", "canopy-play benchmark: plant + forest at 1920x1080 (see bench/run-gpu.sh, phase play)");
   CLI::App& app = tool.app();
   std::string outDir, size = "1920x1080";
   int frames = 120;

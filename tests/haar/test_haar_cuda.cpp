@@ -1,7 +1,7 @@
 // The CUDA decoder against the CPU decoder: bit for bit (fp32, fp16 and quantised coefficients), 19 bases,
 // random points everywhere (inside, on brick seams, outside the lattice) and every lattice cell.
 // Skips without a GPU. Set CANOPY_HAAR_LIGHT_VDB=path/to/plant.light.vdb to use a real lbsolve
-// output instead of the synthetic field (the lead runs this on the GPU host: bench/haar/gpu.sh).
+// output instead of the synthetic field (bench/run-gpu.sh, phase tests, does both).
 #include <gtest/gtest.h>
 
 #include <cstdlib>

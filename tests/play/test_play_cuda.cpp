@@ -108,8 +108,8 @@ std::string sceneLitForestFile() {
 // code; the lit file also with the sun off, so that the indirect term alone is compared), then
 // Haar-lit with --light exact (the finest level's light from Haar pages, canopyHaarSampleAt on the
 // device), then lit with a 19-base scene light (format 1.2: the sun factor rebuilt on the host and
-// uploaded per frame as the sun moves over three frames; the last frame is compared). One
-// test case, so that bench/play/gpu.sh's count of passed cases stays valid.
+// uploaded per frame as the sun moves over three frames; the last frame is compared), all in one
+// test case.
 TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
   if (canopy::cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA device";
   struct Case {

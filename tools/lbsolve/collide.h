@@ -117,7 +117,7 @@ struct Dims {
 // (f + 0 * x == f for finite x and f >= 0).
 // The kind is a template parameter so that every Omega entry is read at a compile-time offset: on
 // the GPU the matrix is a kernel parameter (constant memory) and a run-time kind would turn its
-// uniform operands into per-thread indexed constant loads (measured: bench/lbsolve/NOTES.md).
+// uniform operands into per-thread indexed constant loads (measured: docs/performance.md, 'Omega at compile-time offsets').
 // Fused = true uses fmaf in the product (one rounding per term instead of two): a benchmark variant
 // only; the reference (CPU) and the default CUDA path use Fused = false.
 template <int L, bool Wood, bool Fused = false>

@@ -3,7 +3,7 @@
 // functions so that the CPU tests run the very same index arithmetic (tests/lbsolve/test_collide.cpp
 // compares it with the reference push update bit for bit, iteration by iteration).
 //
-// Why (bench/lbsolve/NOTES.md, third round): the push update over every node reaches 53-59 % of
+// Why (docs/performance.md, 'The pull scheme'): the push update over every node reaches 53-59 % of
 // the copy bandwidth on an H100 and 45-56 % on an H200, and bench_lbsolve_streams shows that its memory traffic alone,
 // without the collision, does the same (58 % at 128^3, 68 % at 256^3 on an H200): shifted stores in
 // structure-of-arrays layout are the limit. Pull (shifted loads, aligned stores) in an
@@ -74,7 +74,7 @@ CANOPY_HD CANOPY_FORCEINLINE void pullCollideStore(const OmegaSet& om, const Pul
 // boundary node or padding slot of an interior row runs the same loads and stores on its own slots,
 // through the wood branch with density 0 (the identity: no f_0 zeroing, post = f bit for bit), so
 // that every warp of the row writes whole 32-byte sectors without a second memory round trip (a
-// sector written in part is read from DRAM first: bench/lbsolve/NOTES.md, seventh round). Boundary
+// sector written in part is read from DRAM first: docs/performance.md, 'Whole sectors'). Boundary
 // rows and planes are not written at all.
 template <bool Fused = false>
 CANOPY_HD CANOPY_FORCEINLINE void pullNode(const OmegaSet& om, const PullLayout& L, const float* coded, const float* in,

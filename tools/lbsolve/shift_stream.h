@@ -68,7 +68,7 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t shifted(uint32_t p, uint32_t off, uint32_t
 // Returns v; on the GPU the compiler must then assume it is a new value (an empty asm statement,
 // no instruction). shiftCollideNode recomputes its 19 store addresses from such a copy of the
 // node index instead of keeping the 19 load addresses live across the collision: 38 fewer
-// registers, more resident threads (bench/lbsolve/NOTES.md).
+// registers, more resident threads (docs/performance.md, 'Registers of the shift step').
 CANOPY_HD CANOPY_FORCEINLINE uint32_t opaqueCopy(uint32_t v) {
 #if defined(__CUDA_ARCH__)
   asm volatile("" : "+r"(v));

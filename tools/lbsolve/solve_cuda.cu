@@ -1,7 +1,7 @@
 // solve_cuda.cu: the CUDA backend. The kernels call the CANOPY_HD functions of collide.h and
 // shift_stream.h, the same ones the CPU reference (solve_cpu.cpp) and the CPU tests run.
 //
-// Schemes (solver.h, CudaScheme; measurements in bench/lbsolve/NOTES.md):
+// Schemes (solver.h, CudaScheme; measurements in docs/performance.md and bench/RESULTS.md):
 // - Shift (default): streaming by index shift (shift_stream.h). One state buffer of 19 floats per
 //   node, updated in place; an iteration is one launch over the occupied interior nodes (leaf
 //   nodes, then wood nodes, in separate blocks) and the empty boundary nodes (occupied boundary
@@ -131,7 +131,7 @@ __global__ void pushGatherKernel(const float* __restrict__ cur, int64_t n, const
 // at most one node, i.e. two tiles), every store writes 128 aligned bytes. The blocks run in z-major
 // order, so a launch's resident blocks read and write a few neighbouring z-slices; blocks scattered
 // over the lattice (to mix the plant's colliding warps with the air's streaming ones) were slower
-// by 7-13 points of the copy bandwidth (bench/lbsolve/NOTES.md, fourth round).
+// by 7-13 points of the copy bandwidth (docs/performance.md, 'Row order and solves in flight').
 template <bool Fused>
 __global__ void __launch_bounds__(kBlockX) pullLeafKernel(const OmegaSet omega, const PullLayout L,
                                                           const float* __restrict__ coded,
@@ -146,8 +146,8 @@ __global__ void __launch_bounds__(kBlockX) pullLeafKernel(const OmegaSet omega, 
   const int y = int(blockIdx.y), z = int(blockIdx.z);
   // A wood node (the trunk: a few warps) takes the other branch, on the values already loaded (a
   // second kernel per iteration used to update the wood nodes from a list, loading their arrivals
-  // again, scattered: bench/lbsolve/NOTES.md, fifth round). The boundary and padding lanes of an
-  // interior row store the values they hold, so that every store covers whole sectors (seventh round).
+  // again, scattered: docs/performance.md, 'Wood nodes in the pull kernel'). The boundary and padding lanes of an
+  // interior row store the values they hold, so that every store covers whole sectors ('Whole sectors').
   pullNode<Fused>(omega, L, coded, in, out, x, y, z);
 }
 
@@ -525,7 +525,7 @@ class CudaSolver final : public Solver {
   // One pull iteration, cur_ -> prev_, as a programmatic dependent launch: the launch (block
   // scheduling) overlaps the end of the launch before it, whose results the kernel waits for first
   // (cudaGridDependencySynchronize). Between two pull launches of a solve this removes most of the
-  // few microseconds a dependent launch otherwise waits (bench/lbsolve/NOTES.md, seventh round).
+  // few microseconds a dependent launch otherwise waits (docs/performance.md, 'Programmatic dependent launch').
   void launchPull(const OmegaSet& omega) {
     cudaLaunchConfig_t config = {};
     config.gridDim = grid();

@@ -59,7 +59,7 @@ class Solver {
   virtual std::vector<float> gather() = 0;          // rho of the current state at stored nodes
 };
 
-// How the CUDA backend advances the lattice (bench/lbsolve/NOTES.md has the measurements):
+// How the CUDA backend advances the lattice (docs/performance.md has the measurements):
 //   Shift:      streaming by index shift (shift_stream.h): one state buffer updated in place, work
 //               only at occupied and boundary nodes, one launch per iteration. The default.
 //   ShiftSplit: the same in three launches per iteration (leaf nodes, wood nodes, boundary nodes),
@@ -76,7 +76,7 @@ class Solver {
 enum class CudaScheme { Shift, ShiftSplit, Push, PushFused, Pull, PullFused };
 const char* cudaSchemeName(CudaScheme scheme);
 
-// How the CUDA solves run (bench/lbsolve/NOTES.md, fourth round, has the measurements). Nothing
+// How the CUDA solves run (docs/performance.md, 'Row order and solves in flight', has the measurements). Nothing
 // here changes a result: every solve has its own buffers and computes the same bits.
 struct CudaRun {
   CudaRun(CudaScheme s = CudaScheme::Shift) : scheme(s) {}  // NOLINT: a scheme alone is a CudaRun

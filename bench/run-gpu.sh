@@ -1,0 +1,300 @@
+#!/usr/bin/env bash
+# run-gpu.sh: Canopy's GPU checks and benchmarks, by phases, on a machine with an NVIDIA GPU.
+#
+# The binaries come from a bundle or from a build folder:
+#   on the build machine (Release, -DCMAKE_CUDA_ARCHITECTURES=90):
+#     cmake --build build && ../shared/scripts/bundle-libs .gpu/canopy.tar.xz build/bin/* -- ../shared
+#     (add a grove for the play phase: make -C pipelines scene RESOLUTION=64 DEVICE=cpu O=/tmp/grove,
+#      then cp /tmp/grove/scene/grove.canopy /tmp/grove-in/ and append /tmp/grove-in after ../shared)
+#   on the GPU machine, from the repository root with .gpu/ beside it:
+#     PHASES="tests lbsolve" bash bench/run-gpu.sh
+#   or, where the GPU machine has its own build:  BIN=build/bin bash bench/run-gpu.sh
+# Logs and Markdown tables go to $OUT (default /tmp/canopy-gpu), one file per step; stdout gets the
+# summary lines. Exit status 0 when every step ran and no CUDA test failed or was skipped.
+# bench/RESULTS.md says which phase measured each figure.
+#
+# PHASES (default "tests lbsolve haar octreepack grove play"; run in this order whatever the order given):
+#   tests            the CUDA tests against the CPU reference: test_core and test_octreepack (their
+#                    cuda cases), test_lbsolve_cuda (every scheme bit for bit, 1/3/8 solves in flight),
+#                    test_haar_cuda (synthetic field, then oak_medium's light lit here at 64^3),
+#                    test_play_cuda (GPU frames vs the CPU renderer; quarter-size cache path).
+#   lbsolve          bench_lbsolve_streams (the dense update's traffic alone, per layout); bench_lbsolve:
+#                    node updates/s and fraction of the copy bandwidth per scheme, synthetic plant and
+#                    full box at 128^3 and 256^3, then the 57 solves of the synthetic plant and of
+#                    oak_medium at 128^3 (on every GPU too where several are visible); canopy-lbsolve
+#                    on that oak per --cuda-scheme (light files must be byte-identical) and with
+#                    --collision linear; the host CPU's figure.
+#   haar             oak_medium's light at 64^3: bench_haar (size at 1 % volume RMS against dense fp32
+#                    and ZFP; CPU) and bench_haar_gpu (random trilinear lookups/s against a float4
+#                    texture, GPU samples checked against the CPU) per precision.
+#   octreepack       bench-octreepack (pack time, size, resident part; the host's CPUs) and
+#                    bench-light-packing on oak_medium at 128^3 lit here (light bytes and error per
+#                    Haar threshold).
+#   grove            the grove through the Make rules on the GPU (voxelize, lbsolve, lbsolve --scene,
+#                    haar, octreepack) at GROVE_RESOLUTION, played at 1080p with the sun moving.
+#   play             bench-play: the synthetic plant and 400-instance forest (orbit and walk), plus the
+#                    grove where GROVE or the bundle's grove-in/grove.canopy exists, 1920x1080, 1 GiB
+#                    cache, FRAMES frames, once per binary of PLAY_BINS.
+#   profile-lbsolve  Nsight Compute on one pull launch in the middle of a solve (clocks and caches
+#                    left alone): duration and DRAM bytes per lattice node against the model's 156 B.
+#   profile-play     Nsight Compute on one forest-orbit frame's pixel kernel of PROFILE_BIN (build it
+#                    with -lineinfo for the per-line table: bench/play/variant.sh li -lineinfo), the
+#                    hottest source lines (bench/play/ncu_lines.py) and the kernel's SASS.
+#
+# Settings (environment):
+#   BIN               folder of the binaries (default: the unpacked bundle's bin/)
+#   BUNDLE            the bundle (default .gpu/canopy.tar.xz)
+#   CANOPY_BUILT_AT   checkout the tests were built in (default /work/main): its path is linked to this
+#                     tree, and its ../shared to the bundle's shared/, so that their absolute paths hold
+#   SHARED            the shared assets folder (default: the bundle's share/shared, else ../shared)
+#   LB_BINS           bench_lbsolve binaries run in turn (default bench_lbsolve; e.g. "bench_lbsolve
+#                     bench_lbsolve-prev" for an A/B of two builds on one machine)
+#   LB_SCHEMES        default shift,pull (also shift-split, push, push-fused, pull-fused)
+#   LB_IN_FLIGHT      solves in flight per GPU, default 1 (e.g. 1,3)
+#   LB_SOLVES_SIZES   synthetic plants whose 57 solves are timed, default 128
+#   HAAR_PRECISIONS   default "quant fp16 fp32"
+#   GROVE_RESOLUTION  default 96;  SHADOWS: the grove phase's shadow methods, default "map" (e.g. "map cone")
+#   GROVE             a packed grove for the play phase
+#   PLAY_BINS         bench-play binaries run in turn (default bench-play; a binary may appear twice, to
+#                     alternate builds made by bench/play/variant.sh)
+#   PLAY_VARIANTS     bench-play's methods, default "--shadows map" (e.g. "--shadows map --shadows cone
+#                     --shadows map-stop99"); FRAMES default 120
+#   PNGS=1            keep the first play run's last frames as $OUT/play-*.png
+#   SMALL_CACHE=1     the play phase again with a 32 MiB cache (less than the forest's file)
+#   PROFILE_BIN       default canopy-play;  GTEST_TIMEOUT per CUDA test binary, default 300 s
+set -uo pipefail
+here=$(pwd)
+O=${OUT:-/tmp/canopy-gpu}
+W=${WORK:-/tmp/canopy-gpu-work}
+mkdir -p "$O" "$W"
+status=0
+
+# --- binaries and paths ------------------------------------------------------------------------
+if [[ -z ${BIN:-} ]]; then
+  bundle=${BUNDLE:-.gpu/canopy.tar.xz}
+  [[ -f $bundle ]] || { echo "run-gpu.sh: no BIN and no bundle at $bundle" >&2; exit 1; }
+  B=$W/bundle
+  mkdir -p "$B" && tar xJf "$bundle" -C "$B" || exit 1
+  BIN=$B/bin
+  export LD_LIBRARY_PATH=$B/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
+  [[ -d $B/share/shared ]] && SHARED=${SHARED:-$B/share/shared}
+  [[ -z ${GROVE:-} && -f $B/share/grove-in/grove.canopy ]] && GROVE=$B/share/grove-in/grove.canopy
+fi
+BIN=$(cd "$BIN" 2>/dev/null && pwd) || { echo "run-gpu.sh: no folder $BIN (BIN)" >&2; exit 1; }
+export PATH=$BIN:$PATH
+SHARED=$(cd "${SHARED:-$here/../shared}" 2>/dev/null && pwd) || { echo "run-gpu.sh: no shared assets folder (SHARED)" >&2; exit 1; }
+built=${CANOPY_BUILT_AT:-/work/main}  # the tests carry absolute paths of the checkout they were built in
+if [[ $built != "$here" ]]; then
+  mkdir -p "$(dirname "$built")"
+  [[ -e $built ]] || ln -s "$here" "$built"
+  [[ -e $(dirname "$built")/shared ]] || ln -s "$SHARED" "$(dirname "$built")/shared"
+fi
+mkdir -p build && { [[ -e build/bin ]] || ln -s "$BIN" build/bin; }
+OAK=$SHARED/assets/plants/oak_medium.glb
+
+PHASES=${PHASES:-tests lbsolve haar octreepack grove play}
+has() { [[ " $PHASES " == *" $1 "* ]]; }
+for p in $PHASES; do
+  case $p in tests|lbsolve|haar|octreepack|grove|play|profile-lbsolve|profile-play) ;;
+    *) echo "run-gpu.sh: unknown phase '$p'" >&2; exit 1 ;;
+  esac
+done
+
+step() { echo "=== $1 $(date -u +%T)"; }
+fail() { echo "FAILED: $*"; status=1; }
+need() {  # need BINARY...: true when every one is in BIN, else a failure naming the missing ones
+  local b ok=0
+  for b in "$@"; do [[ -x $BIN/$b ]] || { fail "$b is not in $BIN"; ok=1; }; done
+  return $ok
+}
+run() {  # run LOG COMMAND...: the command's stdout and stderr into $O/LOG; a failure fails the run
+  local log=$O/$1; shift
+  "$@" > "$log" 2>&1 || fail "$* (exit $?, see $log)"
+}
+gtest() {  # gtest NAME BINARY [args]: the verdicts on stdout, the log in $O; a failure or a skip fails the run
+  local log=$O/$1.log exe=$2; shift 2
+  need "$exe" || return
+  timeout "${GTEST_TIMEOUT:-300}" "$BIN/$exe" "$@" > "$log" 2>&1 || fail "$exe (see $log)"
+  grep -E "^\[ +(OK|FAILED|PASSED|SKIPPED) +\]" "$log"
+  ! grep -q "SKIPPED" "$log" || fail "$exe: skipped cases (no GPU visible?)"
+}
+oak() {  # oak N: oak_medium voxelised at N^3 and lit on the GPU, once per run: $W/oakN.{density,light}.vdb
+  local n=$1
+  [[ -f $W/oak$n.light.vdb ]] && return
+  need canopy-voxelize canopy-lbsolve || return
+  if ! { canopy-voxelize "$OAK" -o "$W/oak$n.density.vdb" --resolution "$n" -q &&
+         canopy-lbsolve "$W/oak$n.density.vdb" -o "$W/oak$n.light.vdb" --device cuda -q; }; then
+    fail "oak_medium at $n^3"; return 1
+  fi
+}
+seconds() { python3 -c 'import json, sys; print(round(json.load(open(sys.argv[1]))["seconds"], 3))' "$1"; }
+
+{ nvidia-smi -L; date -u; echo "commit $(git rev-parse --short HEAD 2>/dev/null || echo unknown)"; } | tee "$O/device.txt"
+
+# --- phases ------------------------------------------------------------------------------------
+if has tests; then
+  step tests
+  gtest test_core_cuda test_core --gtest_filter='*cuda*'
+  gtest test_octreepack_cuda test_octreepack --gtest_filter='*cuda*'
+  gtest test_lbsolve_cuda test_lbsolve_cuda
+  gtest test_haar_cuda_synthetic test_haar_cuda
+  oak 64 && CANOPY_HAAR_LIGHT_VDB=$W/oak64.light.vdb gtest test_haar_cuda_oak test_haar_cuda
+  gtest test_play_cuda test_play_cuda
+fi
+
+if has lbsolve; then
+  step lbsolve
+  if need bench_lbsolve_streams; then
+    run lbsolve_streams.md timeout 300 bench_lbsolve_streams --sizes 128,256
+    grep -E "^\|" "$O/lbsolve_streams.md" | head -30
+  fi
+  oak 128
+  for b in ${LB_BINS:-bench_lbsolve}; do
+    need "$b" || continue
+    run "lbsolve_$b.md" timeout 600 "$b" --device cuda --sizes 128,256 --fill plant,full \
+      --schemes "${LB_SCHEMES:-shift,pull}" --in-flight "${LB_IN_FLIGHT:-1}" --iterations 400 \
+      --solves-sizes "${LB_SOLVES_SIZES:-128}" --lattices "$W/oak128.density.vdb"
+    grep -E "^copy|^\| " "$O/lbsolve_$b.md"
+  done
+  if need canopy-lbsolve; then  # the tool end to end (read, 57 solves, write) per scheme and collision
+    for s in shift shift-split push pull; do
+      t0=$(date +%s.%N)
+      run "lbsolve_oak128_$s.json" canopy-lbsolve "$W/oak128.density.vdb" -o "$W/oak128.$s.light.vdb" --device cuda --cuda-scheme "$s" --json -q
+      echo "canopy-lbsolve oak128 --cuda-scheme $s: $(awk "BEGIN{printf \"%.3f\", $(date +%s.%N) - $t0}") s process wall, report seconds $(seconds "$O/lbsolve_oak128_$s.json")"
+    done
+    for s in shift-split push pull; do
+      if cmp -s "$W/oak128.shift.light.vdb" "$W/oak128.$s.light.vdb"; then echo "light file of $s: byte-identical to shift's"
+      else fail "light file of $s differs from shift's"; fi
+    done
+    run lbsolve_oak128_linear.json canopy-lbsolve "$W/oak128.density.vdb" -o "$W/oak128.linear.light.vdb" --device cuda --collision linear --json -q
+    echo "canopy-lbsolve oak128 --collision linear: report seconds $(seconds "$O/lbsolve_oak128_linear.json")"
+    rm -f "$W"/oak128.*.light.vdb
+  fi
+  if need bench_lbsolve; then
+    run lbsolve_cpu.md timeout 300 bench_lbsolve --device cpu --sizes 128 --solves-sizes "" --iterations 16
+    grep -E "^\| " "$O/lbsolve_cpu.md"
+  fi
+fi
+
+if has haar; then
+  step haar
+  oak 64
+  if need bench_haar bench_haar_gpu; then
+    for p in ${HAAR_PRECISIONS:-quant fp16 fp32}; do
+      run "haar_$p.md" timeout 600 bench_haar "$W/oak64.light.vdb" --precision "$p" --write-chaar "$W/oak64.$p.chaar"
+      grep -E "^\| (\.chaar at|ratio vs dense|\.chaar / ZFP)" "$O/haar_$p.md"
+      run "haar_gpu_$p.md" timeout 300 bench_haar_gpu "$W/oak64.$p.chaar"
+      grep -E "all [0-9]+|^check:|compressed on device" "$O/haar_gpu_$p.md"
+    done
+  fi
+fi
+
+if has octreepack; then
+  step octreepack
+  if need bench-octreepack; then
+    run octreepack.md timeout 300 bench-octreepack "$W/octreepack"
+    grep -E "^\| " "$O/octreepack.md"
+  fi
+  oak 128
+  if need bench-light-packing canopy-haar canopy-octreepack; then
+    run light_packing.md timeout 600 bench-light-packing "$W/light-packing" "$W/oak128.density.vdb" "$W/oak128.light.vdb" \
+      --thresholds 0,0.01,0.03,0.05,0.1
+    grep -E "^\| " "$O/light_packing.md"
+  fi
+fi
+
+if has grove && need canopy-voxelize canopy-lbsolve canopy-haar canopy-octreepack canopy-play; then
+  step grove
+  g=$W/grove/scene/grove.canopy
+  run grove_make.log timeout 600 make -C pipelines scene SCENE="$SHARED/assets/scenes/grove.glb" BIN="$BIN" O="$W/grove" \
+    DEVICE=cuda RESOLUTION="${GROVE_RESOLUTION:-96}"
+  canopy-octreepack info "$g" 2>&1 | grep -iE "scene light|version" | head -3
+  for m in ${SHADOWS:-map}; do
+    run "grove_play_$m.json" timeout 300 canopy-play "$g" --device cuda --size 1920x1080 --frames 120 --cache-mb 1024 --shadows "$m" \
+      --camera orbit:turns=0.5,elevation=20 --sun orbit:azimuth=40,elevation=30,turns=0.5 --json -q
+    python3 -c 'import json, sys; r = json.load(open(sys.argv[1])); print("grove 1080p", sys.argv[2], {k: r[k] for k in r if k in ("frame_ms_median", "frame_ms_p95", "first_complete_frame_s", "scene_light_bases", "sun_bases", "lit_models")})' \
+      "$O/grove_play_$m.json" "$m"
+  done
+  run grove_png.log canopy-play "$g" --device cuda --size 640x360 -o "$O/grove.png" -q
+fi
+
+if has play; then
+  step play
+  extra=()
+  [[ -n ${GROVE:-} ]] && extra=(--extra grove="$GROVE")
+  i=0
+  for b in ${PLAY_BINS:-bench-play}; do
+    need "$b" || continue
+    i=$((i + 1))
+    echo "--- $b (run $i)"
+    # shellcheck disable=SC2086  # PLAY_VARIANTS is a list of options
+    run "play_$i.md" timeout 600 "$b" "$W/play-$i" --device cuda --size 1920x1080 --frames "${FRAMES:-120}" --cache-mb 1024 \
+      ${PLAY_VARIANTS:---shadows map} "${extra[@]}"
+    grep -E "^\| " "$O/play_$i.md"
+    if [[ $i == 1 && ${PNGS:-0} == 1 ]]; then
+      for n in plant forest-orbit forest-walk grove; do [[ -e $W/play-1/$n.png ]] && cp "$W/play-1/$n.png" "$O/play-$n.png"; done
+    fi
+  done
+  if [[ ${SMALL_CACHE:-0} == 1 ]] && need bench-play; then
+    run play_small_cache.md timeout 600 bench-play "$W/play-small-cache" --device cuda --size 1920x1080 --frames "${FRAMES:-120}" --cache-mb 32
+    grep -E "^\| " "$O/play_small_cache.md"
+  fi
+fi
+
+if has profile-lbsolve && need bench_lbsolve; then
+  step profile-lbsolve
+  ncu=$(command -v ncu || ls /usr/local/cuda/bin/ncu 2>/dev/null || true)
+  if [[ -z $ncu ]]; then fail "profile-lbsolve: no ncu on this machine"; else
+    for n in 128 256; do
+      run "ncu_pull_$n.txt" timeout 300 "$ncu" --kernel-name regex:pullLeafKernel --launch-skip 50 --launch-count 5 \
+        --clock-control none --cache-control none \
+        --metrics gpu__time_duration.sum,dram__bytes_read.sum,dram__bytes_write.sum,sm__cycles_active.avg,gpc__cycles_elapsed.max \
+        "$BIN/bench_lbsolve" --device cuda --sizes "$n" --fill plant --schemes pull --in-flight 1 --iterations 100 --solves-sizes ""
+      python3 - "$O/ncu_pull_$n.txt" "$n" <<'PY'
+import re, sys
+text, n = open(sys.argv[1]).read(), int(sys.argv[2])
+scale = {"byte": 1, "Kbyte": 1e3, "Mbyte": 1e6, "Gbyte": 1e9, "KB": 1e3, "MB": 1e6, "GB": 1e9,
+         "nsecond": 1e-9, "usecond": 1e-6, "msecond": 1e-3, "ns": 1e-9, "us": 1e-6, "ms": 1e-3}
+def values(name):
+    return [float(v.replace(",", "")) * scale.get(u, 1) for u, v in re.findall(name + r"\s+(\S+)\s+([\d,\.]+)", text)]
+r, w, t = values("dram__bytes_read.sum"), values("dram__bytes_write.sum"), values("gpu__time_duration.sum")
+if not (r and w and t):
+    sys.exit("no metrics in " + sys.argv[1])
+inner = (n - 2) ** 3
+print(f"pull {n}^3, {len(t)} launches: {min(t) * 1e6:.1f}-{max(t) * 1e6:.1f} us; DRAM per interior node "
+      f"{sum(r) / len(r) / inner:.1f} B read + {sum(w) / len(w) / inner:.1f} B written (model 80 + 76 = 156)")
+PY
+    done
+  fi
+fi
+
+if has profile-play; then
+  step profile-play
+  pb=${PROFILE_BIN:-canopy-play}
+  ncu=$(command -v ncu || ls /usr/local/cuda/bin/ncu 2>/dev/null || true)
+  forest=$W/play-1/forest.canopy
+  if [[ ! -f $forest ]] && need bench-play; then  # the play phase's forest, or a short run that writes it
+    run play_profile_scene.md timeout 300 bench-play "$W/play-1" --device cuda --size 1920x1080 --frames 2 --cache-mb 1024 --shadows map
+  fi
+  if [[ -z $ncu ]]; then fail "profile-play: no ncu on this machine"; elif need "$pb" && [[ -f $forest ]]; then
+    # the 10th launch of the pixel kernel: one converged frame of the orbit
+    mkdir -p "$W/ncu-frames"
+    timeout 400 "$ncu" --kernel-name regex:'[Pp]ixel' --launch-skip 9 --launch-count 1 --import-source yes \
+      --section SpeedOfLight --section Occupancy --section WarpStateStats --section LaunchStats --section MemoryWorkloadAnalysis \
+      --section MemoryWorkloadAnalysis_Tables --section ComputeWorkloadAnalysis --section InstructionStats --section SourceCounters \
+      -o "$W/prof" -f "$BIN/$pb" "$forest" --device cuda --size 1920x1080 --frames 10 \
+      --camera orbit:elevation=30,distance=55 -o "$W/ncu-frames/f_%04d.exr" > "$O/ncu_play_run.txt" 2>&1 || fail "ncu on $pb (see ncu_play_run.txt)"
+    if [[ -f $W/prof.ncu-rep ]]; then
+      "$ncu" -i "$W/prof.ncu-rep" --page details > "$O/ncu_play.txt" 2>&1
+      "$ncu" -i "$W/prof.ncu-rep" --page source --csv --print-source cuda,sass > "$W/source-both.csv" 2>&1 || echo "no cuda,sass source page (build with -lineinfo)"
+      grep -E "Duration|Active Threads|Warp Cycles Per Issued|Issued Instructions  |Registers Per|L1/TEX Hit|L2 Hit|Achieved Occ|Local Memory" "$O/ncu_play.txt"
+      python3 bench/play/ncu_lines.py "$W/source-both.csv" 30 > "$O/ncu_play_lines.txt" 2>&1 && head -40 "$O/ncu_play_lines.txt"
+      tar cJf "$O/ncu_play.tar.xz" -C "$W" prof.ncu-rep source-both.csv
+    fi
+    cuobjdump=$(command -v cuobjdump || ls /usr/local/cuda/bin/cuobjdump 2>/dev/null || true)
+    [[ -n $cuobjdump ]] && "$cuobjdump" -sass "$BIN/$pb" | xz > "$O/sass_$pb.txt.xz"
+  fi
+fi
+
+echo "=== end $(date -u +%T), status $status"
+exit $status
