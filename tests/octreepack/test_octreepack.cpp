@@ -520,8 +520,8 @@ TEST(OctreepackCli, BadInputsFailCleanlyAndLeaveNoOutput) {
   std::ofstream(dir + "/not.vdb") << "this is not a vdb";
   EXPECT_EQ(run("'" + dir + "/not.vdb' -o '" + out + "'"), 3);
   std::ofstream(dir + "/p.light.chaar") << "x";
-  // Without the chaar decoder a .chaar is unsupported (5); with it, this one is corrupt (3).
-  EXPECT_EQ(run("'" + dir + "/cli.density.vdb' '" + dir + "/p.light.chaar' -o '" + out + "'"), op::chaarSupported() ? 3 : 5);
+  // A corrupt .chaar (3).
+  EXPECT_EQ(run("'" + dir + "/cli.density.vdb' '" + dir + "/p.light.chaar' -o '" + out + "'"), 3);
   EXPECT_EQ(run("--scene '" + dir + "/not-a-scene.glb' -o '" + out + "'"), 2);  // missing glTF
   std::ofstream(dir + "/corrupt.glb") << "glTF garbage";
   EXPECT_EQ(run("--scene '" + dir + "/corrupt.glb' '" + dir + "/cli.density.vdb' -o '" + out + "'"), 3);

@@ -11,12 +11,9 @@
 #include "formats/density_lattice.h"
 #include "formats/lattice_vdb.h"
 
-#if __has_include("formats/chaar.h")  // the chaar decoder (canopy-haar's branch) is in this tree
 #include <memory>
 
 #include "formats/chaar.h"
-#define CANOPY_OCTREEPACK_HAS_CHAAR 1
-#endif
 
 namespace canopy::octreepack {
 namespace {
@@ -91,16 +88,7 @@ LightVdb readLightVdb(const std::string& path, const ModelSource& model) {
   return out;
 }
 
-bool chaarSupported() {
-#ifdef CANOPY_OCTREEPACK_HAS_CHAAR
-  return true;
-#else
-  return false;
-#endif
-}
-
 LightVdb readChaarLight(const std::string& path, const ModelSource& model, bool withHaar) {
-#ifdef CANOPY_OCTREEPACK_HAS_CHAAR
   auto data = std::make_shared<haar::ChaarData>(haar::readChaar(path));
   const haar::ChaarHeader& h = data->header;
   if (h.baseCount != kCanopyLightBases)
@@ -120,12 +108,6 @@ LightVdb readChaarLight(const std::string& path, const ModelSource& model, bool 
   if (withHaar) out.haar = std::make_shared<const CanopyHaarPages>(canopyHaarPagesFromChaar(*data));
   out.fn = [data, fn = chaarLightFn(data->view())](int32_t i, int32_t j, int32_t k, float* o) { fn(i, j, k, o); };  // keeps data alive
   return out;
-#else
-  (void)model;
-  (void)withHaar;
-  throw unsupported(path + ": packing .chaar lighting needs the chaar decoder, which this build does not have yet; "
-                    "pass PLANT.light.vdb (canopy-lbsolve) instead, or --ignore-light to pack density only");
-#endif
 }
 
 SceneLightSource readSceneLightVdb(const std::string& path, const std::string& gridName) {

@@ -33,9 +33,7 @@ LightVdb readLightVdb(const std::string& path, const ModelSource& model);
 
 // Compressed lighting from canopy-haar (.chaar, 19 bases): fn samples it through the chaar decoder
 // at every lattice cell (0 outside the lattice; chaarLightFn) for the float16 light items, and with
-// withHaar its bricks become Haar pages. Its lattice must equal `model`'s. Throws
-// Unsupported when this build has no chaar decoder (chaarSupported() == false).
-bool chaarSupported();
+// withHaar its bricks become Haar pages. Its lattice must equal `model`'s.
 LightVdb readChaarLight(const std::string& path, const ModelSource& model, bool withHaar = true);
 
 struct SceneLightSource {

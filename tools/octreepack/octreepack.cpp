@@ -131,12 +131,7 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
   if (o.output.empty()) throw usageError("no output: give -o OUT.canopy");
   for (const SceneModel& m : scene.models) {
     requireReadableFile(m.density);
-    if (!m.light.empty() && !o.ignoreLight) {
-      requireReadableFile(m.light);
-      if (endsWith(m.light, ".chaar") && !chaarSupported())  // fail before any work
-        throw unsupported(m.light + ": packing .chaar lighting needs the chaar decoder, which this build does not have yet; "
-                          "pass PLANT.light.vdb (canopy-lbsolve) instead, or --ignore-light to pack density only");
-    }
+    if (!m.light.empty() && !o.ignoreLight) requireReadableFile(m.light);
   }
 
   CanopyWriteInput w;
