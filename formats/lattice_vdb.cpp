@@ -87,6 +87,11 @@ static void verifyHeaderAndContent(const std::string& path) {
   in.read(head, sizeof head);
   if (in.gcount() != std::streamsize(sizeof head) || !hasVdbMagic(head))
     throw invalidInput(path + ": not an OpenVDB file (bad magic or shorter than a VDB header)");
+  uint32_t fileVersion;
+  std::memcpy(&fileVersion, head + 8, 4);
+  if (fileVersion > openvdb::OPENVDB_FILE_VERSION)
+    throw invalidInput(path + ": OpenVDB file format version " + std::to_string(fileVersion) +
+                       " is newer than this build reads (" + std::to_string(openvdb::OPENVDB_FILE_VERSION) + ")");
   const std::string stored(head + kUuidOffset, kUuidLength);
   if (stored[14] != '8') return;
   Hasher h;

@@ -6,7 +6,8 @@
 //   canopy_version (string), canopy_source (string: "<file> xxh64:<hash>").
 // writeVdb() writes atomically and deterministically: OpenVDB puts a random UUID into every file
 // header; we replace it with one derived from the rest of the file's bytes, so the same inputs
-// give the same bytes. readVdb() turns every OpenVDB/Boost failure into a one-line canopy::Error.
+// give the same bytes. readVdb() turns every OpenVDB/Boost failure into a one-line canopy::Error and
+// refuses a file format version newer than the OpenVDB it was built with (OpenVDB would read on).
 #pragma once
 #include <cstdint>
 #include <string>

@@ -203,9 +203,16 @@ TEST(HaarTool, CliCommandsReportsAndDeterministicBytes) {
   ASSERT_EQ(run("decode " + a + " -o " + dec2), 0);
   EXPECT_EQ(slurp(dec), slurp(dec2));
 
-  // --max-error from the command line.
+  // --max-error from the command line, in the default precision (fp16), which keeps the bound and
+  // is smaller than fp32 at the same bound.
   ASSERT_EQ(run(smoothFile() + " -o " + b + " --max-error 0.02 --json", &out), 0) << lastStderr();
+  const nlohmann::json byDefault = nlohmann::json::parse(out);
+  EXPECT_EQ(byDefault["precision"], "fp16");
+  EXPECT_LE(byDefault["overall"]["max_error"].get<double>(), 0.02);
+  const std::string b32 = (tempDir() / "c2_fp32.chaar").string();
+  ASSERT_EQ(run(smoothFile() + " -o " + b32 + " --max-error 0.02 --precision fp32 --json", &out), 0) << lastStderr();
   EXPECT_LE(nlohmann::json::parse(out)["overall"]["max_error"].get<double>(), 0.02);
+  EXPECT_LT(fs::file_size(b), fs::file_size(b32));
 }
 
 // info and verify print their report on stdout (redirectable), also under -q; logs stay on stderr.

@@ -1,5 +1,5 @@
-// fixtures.h: small density lattices for the lbsolve tests, written with formats/lattice_vdb.h in
-// the layout canopy-voxelize produces (FloatGrids `density` and `wood`, lattice metadata).
+// fixtures.h: small density lattices for the lbsolve tests, written with the one density lattice
+// writer (formats/density_lattice.h, canopy-voxelize's).
 #pragma once
 #include <cmath>
 #include <cstdint>
@@ -11,7 +11,7 @@
 
 #include <openvdb/openvdb.h>
 
-#include "formats/lattice_vdb.h"
+#include "formats/density_lattice.h"
 #include "solver.h"
 
 namespace fixtures {
@@ -53,33 +53,32 @@ inline Plant makePlant(int n, uint64_t seed = 7) {
   return p;
 }
 
-// Writes a lattice file with the given dense arrays over [0, n-1]^3 (voxel size `voxel`).
-inline void writeLattice(const std::string& path, int nx, int ny, int nz, const std::vector<float>& density,
-                         const std::vector<float>& wood, double voxel = 0.05, bool withWood = true) {
-  canopy::vdbio::initialize();
-  auto d = openvdb::FloatGrid::create(0.f), w = openvdb::FloatGrid::create(0.f);
-  d->setName("density");
-  w->setName("wood");
-  auto xf = openvdb::math::Transform::createLinearTransform(voxel);
-  d->setTransform(xf->copy());
-  w->setTransform(xf->copy());
-  auto da = d->getAccessor();
-  auto wa = w->getAccessor();
+// A density lattice over [0, n-1]^3 (voxel size `voxel`) from dense arrays, as the writer takes it
+// (formats/density_lattice.h): every node whose density is non-zero (or NaN) is a cell; albedo 0.5.
+inline canopy::vdbio::DensityLatticeData latticeData(int nx, int ny, int nz, const std::vector<float>& density,
+                                                     const std::vector<float>& wood, double voxel = 0.05) {
+  canopy::vdbio::DensityLatticeData data;
+  data.transform = openvdb::math::Transform::createLinearTransform(voxel);
+  data.meta.min = openvdb::Coord(0);
+  data.meta.max = openvdb::Coord(nx - 1, ny - 1, nz - 1);
+  data.meta.source = "fixture";
   for (int z = 0; z < nz; ++z)
     for (int y = 0; y < ny; ++y)
       for (int x = 0; x < nx; ++x) {
         const size_t i = (size_t(z) * ny + y) * nx + x;
-        if (density[i] != 0.f || std::isnan(density[i])) da.setValue(openvdb::Coord(x, y, z), density[i]);
-        if (wood[i] != 0.f) wa.setValue(openvdb::Coord(x, y, z), wood[i]);
+        if (density[i] != 0.f || std::isnan(density[i]))
+          data.cells.push_back({{x, y, z}, density[i], wood[i], {0.5f, 0.5f, 0.5f}});
       }
-  canopy::vdbio::LatticeMeta meta;
-  meta.min = openvdb::Coord(0);
-  meta.max = openvdb::Coord(nx - 1, ny - 1, nz - 1);
-  meta.source = "fixture";
-  canopy::vdbio::stampGrid(*d, meta);
-  canopy::vdbio::stampGrid(*w, meta);
-  openvdb::GridPtrVec grids{d};
-  if (withWood) grids.push_back(w);
+  return data;
+}
+
+// Writes that lattice with the one writer; withWood = false drops the wood grid (a broken file).
+inline void writeLattice(const std::string& path, int nx, int ny, int nz, const std::vector<float>& density,
+                         const std::vector<float>& wood, double voxel = 0.05, bool withWood = true) {
+  const canopy::vdbio::DensityLatticeData data = latticeData(nx, ny, nz, density, wood, voxel);
+  if (withWood) return canopy::vdbio::writeDensityLattice(path, data);
+  openvdb::GridPtrVec grids = canopy::vdbio::densityLatticeGrids(data);
+  grids.erase(grids.begin() + 1);  // density, wood, albedo
   canopy::vdbio::writeVdb(path, grids);
 }
 

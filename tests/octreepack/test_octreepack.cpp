@@ -520,8 +520,8 @@ TEST(OctreepackCli, BadInputsFailCleanlyAndLeaveNoOutput) {
   std::ofstream(dir + "/not.vdb") << "this is not a vdb";
   EXPECT_EQ(run("'" + dir + "/not.vdb' -o '" + out + "'"), 3);
   std::ofstream(dir + "/p.light.chaar") << "x";
-  // Without the chaar decoder a .chaar is unsupported (5); with it, this one is corrupt (3).
-  EXPECT_EQ(run("'" + dir + "/cli.density.vdb' '" + dir + "/p.light.chaar' -o '" + out + "'"), op::chaarSupported() ? 3 : 5);
+  // A corrupt .chaar (3).
+  EXPECT_EQ(run("'" + dir + "/cli.density.vdb' '" + dir + "/p.light.chaar' -o '" + out + "'"), 3);
   EXPECT_EQ(run("--scene '" + dir + "/not-a-scene.glb' -o '" + out + "'"), 2);  // missing glTF
   std::ofstream(dir + "/corrupt.glb") << "glTF garbage";
   EXPECT_EQ(run("--scene '" + dir + "/corrupt.glb' '" + dir + "/cli.density.vdb' -o '" + out + "'"), 3);
@@ -660,6 +660,24 @@ TEST(OctreepackCli, NonFiniteDensityIsRejected) {
   std::remove((dir + "/nan.canopy").c_str());
   EXPECT_EQ(run("'" + dir + "/nan.density.vdb' -o '" + dir + "/nan.canopy'"), 3);
   EXPECT_FALSE(exists(dir + "/nan.canopy"));
+}
+
+// The density lattice's one rule (formats/density_lattice.h), also canopy-lbsolve's: a density is a
+// biomass fraction in [0, 1]; above 1 the file is refused (before 2026-12 octreepack packed it).
+TEST(OctreepackCli, DensityAboveOneIsRejected) {
+  op::ModelSource s = syntheticPlant(16, 0, "big", 0);
+  s.cells[3].density = 1.5f;
+  const std::string dir = tmpDir();
+  writeSourceVdb(dir + "/big.density.vdb", s);
+  std::remove((dir + "/big.canopy").c_str());
+  EXPECT_EQ(run("'" + dir + "/big.density.vdb' -o '" + dir + "/big.canopy'"), 3);
+  EXPECT_FALSE(exists(dir + "/big.canopy"));
+  try {
+    op::readDensityVdb(dir + "/big.density.vdb", "big");
+    ADD_FAILURE() << "density 1.5 accepted";
+  } catch (const canopy::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("exceeds 1"), std::string::npos) << e.what();
+  }
 }
 
 // The forest path: pipelines/scatter.py -> scene JSON -> canopy-octreepack --scene -> verify.

@@ -20,7 +20,9 @@ struct CompressOptions {
   std::string input, output;
   float threshold = 0.0f;  // used unless maxError >= 0
   float maxError = -1.0f;  // >= 0: per base, search a threshold with measured max error <= this
-  Precision precision = Precision::Fp32;
+  // fp16 by default: half fp32's bytes for a measured error still within maxError (docs/haar.md,
+  // "Choosing the precision"); fp32 for threshold-0 lossless files.
+  Precision precision = Precision::Fp16;
 };
 
 nlohmann::json compressLight(const CompressOptions& o);
@@ -34,11 +36,11 @@ std::string formatVerify(const nlohmann::json& report);
 struct SweepOptions {
   std::string input, prefix;  // writes prefix.csv, prefix.json, prefix.png
   std::vector<float> thresholds;
-  Precision precision = Precision::Fp32;
+  Precision precision = Precision::Fp16;  // as CompressOptions
 };
 nlohmann::json sweepThresholds(const SweepOptions& o);
 
-// "fp32" / "fp16" <-> Precision (usageError otherwise).
+// "fp32" / "fp16" / "quant" <-> Precision (usageError otherwise).
 Precision parsePrecision(const std::string& s);
 const char* precisionName(Precision p);
 

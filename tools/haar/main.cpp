@@ -1,5 +1,5 @@
 // canopy-haar: Haar-wavelet brick compression of LB light fields (see docs/haar.md).
-//   canopy-haar IN.light.vdb -o OUT.chaar [--threshold T | --max-error E] [--precision fp32|fp16|quant]
+//   canopy-haar IN.light.vdb -o OUT.chaar [--threshold T | --max-error E] [--precision fp16|fp32|quant]
 //   canopy-haar decode IN.chaar -o OUT.vdb
 //   canopy-haar info IN.chaar
 //   canopy-haar verify IN.chaar
@@ -41,19 +41,22 @@ int main(int argc, char** argv) {
   app.require_subcommand(0, 1);
 
   CompressOptions co;
-  std::string precision = "fp32";
+  std::string precision = precisionName(co.precision);
   app.add_option("input", co.input, "lbsolve output (.light.vdb)");
   app.add_option("-o,--output", co.output, "output .chaar file");
   auto* thr = app.add_option("--threshold", co.threshold,
-                             "drop detail coefficients whose R, G and B magnitudes are all <= T (default 0: lossless); "
-                             "with --precision quant, T is the quantisation step (> 0)");
+                             "drop detail coefficients whose R, G and B magnitudes are all <= T (default 0: every "
+                             "coefficient kept, lossless with --precision fp32); with --precision quant, T is the "
+                             "quantisation step (> 0)");
   auto* me = app.add_option("--max-error", co.maxError,
                             "instead of --threshold: per base, the largest threshold whose max absolute error "
                             "(measured, every texel) is <= E");
   thr->excludes(me);
   app.add_option("--precision", precision,
-                 "coefficients: fp32, fp16, or quant (integers in steps of T, sqrt(2) T per fine-detail axis, on "
-                 "G, R-G, B-G; the smallest files, .chaar 2.x; needs T > 0 or --max-error)")
+                 "coefficients: fp16 (half fp32's bytes; --max-error still holds, fp16 rounding measured), fp32 "
+                 "(lossless at threshold 0), or quant (integers in steps of T, sqrt(2) T per fine-detail axis, on "
+                 "G, R-G, B-G; the smallest files, .chaar 2.x; needs T > 0 or --max-error; canopy-octreepack "
+                 "packs it with --no-haar-light only)")
       ->capture_default_str();
 
   std::string decIn, decOut;
@@ -70,7 +73,7 @@ int main(int argc, char** argv) {
   ver->add_option("input", verIn, "input .chaar")->required();
 
   SweepOptions so;
-  std::string sweepList = "0,0.001,0.003,0.01,0.03", sweepPrecision = "fp32";
+  std::string sweepList = "0,0.001,0.003,0.01,0.03", sweepPrecision = precisionName(so.precision);
   CLI::App* sw = app.add_subcommand("sweep", "Compress at several thresholds; write PREFIX.csv, PREFIX.json, PREFIX.png");
   sw->add_option("input", so.input, "lbsolve output (.light.vdb)")->required();
   sw->add_option("--thresholds", sweepList, "comma-separated thresholds")->capture_default_str();

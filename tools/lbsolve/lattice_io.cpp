@@ -3,25 +3,10 @@
 
 #include <unistd.h>
 
-#include <cmath>
-#include <sstream>
-
 #include "canopy/errors.h"
+#include "formats/density_lattice.h"
 
 namespace canopy::lb {
-namespace {
-std::string coordString(const openvdb::Coord& c) {
-  std::ostringstream s;
-  s << "(" << c.x() << "," << c.y() << "," << c.z() << ")";
-  return s.str();
-}
-std::string valueString(float v) {
-  std::ostringstream s;
-  s << v;
-  return s.str();
-}
-}  // namespace
-
 openvdb::Coord nodeCoord(const Dims& d, const openvdb::Coord& mn, int64_t idx) {
   const int x = int(idx % d.nx), y = int((idx / d.nx) % d.ny), z = int(idx / (int64_t(d.nx) * d.ny));
   return mn + openvdb::Coord(x, y, z);
@@ -37,59 +22,23 @@ void requireHostMemory(const Dims& d, const std::string& what) {
 }
 
 LoadedLattice loadDensityLattice(const std::string& path, double woodThreshold) {
-  const vdbio::VdbFile file = vdbio::readVdb(path);
-  auto density = file.require<openvdb::FloatGrid>("density");
-  auto wood = file.require<openvdb::FloatGrid>("wood");
+  const vdbio::DensityLattice file = vdbio::readDensityLattice(path);  // the contract: formats/density_lattice.h
   LoadedLattice L;
-  L.meta = vdbio::readLatticeMeta(*density, path);
-  const vdbio::LatticeMeta woodMeta = vdbio::readLatticeMeta(*wood, path);
-  if (woodMeta.min != L.meta.min || woodMeta.max != L.meta.max)
-    throw invalidInput(path + ": grids 'density' and 'wood' have different lattice bounds");
+  L.meta = file.meta;
   const openvdb::Coord dim = L.meta.dim();
   if (dim.x() < 3 || dim.y() < 3 || dim.z() < 3)
     throw invalidInput(path + ": lattice " + std::to_string(dim.x()) + "x" + std::to_string(dim.y()) + "x" +
                        std::to_string(dim.z()) + " is too small (the solve needs a boundary layer and an interior)");
-  if (density->background() != 0.f)
-    throw invalidInput(path + ": grid 'density' has background " + valueString(density->background()) +
-                       ", expected 0");
   Dims d{dim.x(), dim.y(), dim.z()};
   requireHostMemory(d, path);
   L.meta.source = vdbio::describeSource(path);
-  L.transform = density->transform().copy();
+  L.transform = file.transform->copy();
   L.density.assign(size_t(d.count()), 0.f);
   std::vector<float> woodFraction(size_t(d.count()), 0.f);
-  const openvdb::CoordBBox lattice(L.meta.min, L.meta.max);
-  auto indexOf = [&](const openvdb::Coord& c) {
-    const openvdb::Coord r = c - L.meta.min;
-    return d.index(r.x(), r.y(), r.z());
-  };
-
-  for (auto it = density->cbeginValueOn(); it; ++it) {
-    const float v = *it;
-    openvdb::CoordBBox box;
-    it.getBoundingBox(box);
-    if (std::isnan(v)) throw invalidInput(path + ": density is NaN at " + coordString(box.min()));
-    if (!std::isfinite(v)) throw invalidInput(path + ": density is infinite at " + coordString(box.min()));
-    if (v < 0.f)
-      throw invalidInput(path + ": negative density " + valueString(v) + " at " + coordString(box.min()));
-    if (v > 1.f)
-      throw invalidInput(path + ": density " + valueString(v) + " at " + coordString(box.min()) +
-                         " exceeds 1 (densities are biomass fractions in [0, 1])");
-    if (v == 0.f) continue;
-    if (!lattice.isInside(box))
-      throw invalidInput(path + ": non-zero density at " + coordString(box.min()) + " outside the lattice " +
-                         coordString(L.meta.min) + ".." + coordString(L.meta.max));
-    for (auto c = box.begin(); c; ++c) L.density[size_t(indexOf(*c))] = v;
-  }
-  for (auto it = wood->cbeginValueOn(); it; ++it) {
-    const float v = *it;
-    openvdb::CoordBBox box;
-    it.getBoundingBox(box);
-    if (!std::isfinite(v)) throw invalidInput(path + ": wood fraction is not finite at " + coordString(box.min()));
-    if (v == 0.f) continue;
-    box.intersect(lattice);
-    if (box.empty()) continue;
-    for (auto c = box.begin(); c; ++c) woodFraction[size_t(indexOf(*c))] = v;
+  for (const vdbio::DensityCell& c : file.cells) {
+    const size_t i = size_t(d.index(c.ijk[0] - L.meta.min.x(), c.ijk[1] - L.meta.min.y(), c.ijk[2] - L.meta.min.z()));
+    L.density[i] = c.density;
+    woodFraction[i] = c.wood;
   }
 
   L.dense.dims = d;

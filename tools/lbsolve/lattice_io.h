@@ -18,10 +18,10 @@ struct LoadedLattice {
   openvdb::math::Transform::Ptr transform;  // index -> model space
 };
 
-// Reads `density` and `wood` from a canopy-voxelize lattice and validates them: both FloatGrids
-// with the lattice metadata and the same bounds, at least 3 nodes per axis, density finite and in
-// [0, 1] with background 0, no non-zero value outside the lattice, wood finite. Throws Io or
-// InvalidInput naming the file (and the node for bad values).
+// Reads a density lattice (vdbio::readDensityLattice, formats/density_lattice.h: the file's one
+// read-and-validate contract) and checks what the solve adds: at least 3 nodes per axis and the
+// memory of a CPU solve. Throws Io, InvalidInput (naming the file, and the node for bad values) or
+// Runtime (memory).
 LoadedLattice loadDensityLattice(const std::string& path, double woodThreshold);
 
 // Node indices whose density is non-zero or one of whose 26 neighbours' is, ascending.

@@ -8,14 +8,12 @@
 
 #include "canopy/atomic_file.h"
 #include "canopy/errors.h"
+#include "formats/density_lattice.h"
 #include "formats/lattice_vdb.h"
 
-#if __has_include("formats/chaar.h")  // the chaar decoder (canopy-haar's branch) is in this tree
 #include <memory>
 
 #include "formats/chaar.h"
-#define CANOPY_OCTREEPACK_HAS_CHAAR 1
-#endif
 
 namespace canopy::octreepack {
 namespace {
@@ -38,42 +36,23 @@ std::array<double, 12> affineOf(const openvdb::math::Transform& xf, const std::s
 }  // namespace
 
 ModelSource readDensityVdb(const std::string& path, const std::string& name) {
-  vdbio::VdbFile file = vdbio::readVdb(path);
-  auto density = file.require<openvdb::FloatGrid>("density");
-  auto wood = file.require<openvdb::FloatGrid>("wood");
-  auto albedo = file.require<openvdb::Vec3SGrid>("albedo");
-  const vdbio::LatticeMeta meta = vdbio::readLatticeMeta(*density, path);
+  const vdbio::DensityLattice lattice = vdbio::readDensityLattice(path);  // the contract: formats/density_lattice.h
   ModelSource src;
   src.name = name;
   src.sourceLabel = vdbio::describeSource(path);
   for (int a = 0; a < 3; ++a) {
-    src.latticeMin[a] = meta.min[a];
-    src.latticeMax[a] = meta.max[a];
+    src.latticeMin[a] = lattice.meta.min[a];
+    src.latticeMax[a] = lattice.meta.max[a];
   }
-  src.indexToModel = affineOf(density->transform(), path);
-  auto woodAcc = wood->getConstAccessor();
-  auto albAcc = albedo->getConstAccessor();
-  auto add = [&](const openvdb::Coord& ijk, float d) {
-    if (d == 0.0f) return;
-    SourceCell c;
-    for (int a = 0; a < 3; ++a) c.ijk[a] = ijk[a];
-    c.density = d;
-    c.wood = woodAcc.getValue(ijk);
-    const openvdb::Vec3s al = albAcc.getValue(ijk);
-    for (int a = 0; a < 3; ++a) c.albedo[a] = al[a];
-    src.cells.push_back(c);
-  };
-  const openvdb::Index64 active = density->activeVoxelCount();
-  if (active > (openvdb::Index64(1) << 31)) throw invalidInput(path + ": " + std::to_string(active) + " active voxels is absurd");
-  src.cells.reserve(size_t(active));
-  for (auto it = density->cbeginValueOn(); it; ++it) {
-    if (it.isVoxelValue()) {
-      add(it.getCoord(), *it);
-    } else {
-      openvdb::CoordBBox box;
-      it.getBoundingBox(box);
-      for (auto c = box.begin(); c; ++c) add(*c, *it);
-    }
+  src.indexToModel = affineOf(*lattice.transform, path);
+  src.cells.reserve(lattice.cells.size());
+  for (const vdbio::DensityCell& c : lattice.cells) {
+    SourceCell s;
+    for (int a = 0; a < 3; ++a) s.ijk[a] = c.ijk[a];
+    s.density = c.density;
+    s.wood = c.wood;
+    for (int a = 0; a < 3; ++a) s.albedo[a] = c.albedo[a];
+    src.cells.push_back(s);
   }
   return src;
 }
@@ -109,16 +88,7 @@ LightVdb readLightVdb(const std::string& path, const ModelSource& model) {
   return out;
 }
 
-bool chaarSupported() {
-#ifdef CANOPY_OCTREEPACK_HAS_CHAAR
-  return true;
-#else
-  return false;
-#endif
-}
-
 LightVdb readChaarLight(const std::string& path, const ModelSource& model, bool withHaar) {
-#ifdef CANOPY_OCTREEPACK_HAS_CHAAR
   auto data = std::make_shared<haar::ChaarData>(haar::readChaar(path));
   const haar::ChaarHeader& h = data->header;
   if (h.baseCount != kCanopyLightBases)
@@ -138,37 +108,6 @@ LightVdb readChaarLight(const std::string& path, const ModelSource& model, bool 
   if (withHaar) out.haar = std::make_shared<const CanopyHaarPages>(canopyHaarPagesFromChaar(*data));
   out.fn = [data, fn = chaarLightFn(data->view())](int32_t i, int32_t j, int32_t k, float* o) { fn(i, j, k, o); };  // keeps data alive
   return out;
-#else
-  (void)model;
-  (void)withHaar;
-  throw unsupported(path + ": packing .chaar lighting needs the chaar decoder, which this build does not have yet; "
-                    "pass PLANT.light.vdb (canopy-lbsolve) instead, or --ignore-light to pack density only");
-#endif
-}
-
-LatticeOrigin readLatticeOrigin(const std::string& path) {
-  vdbio::initialize();
-  requireReadableFile(path);
-  openvdb::GridBase::Ptr density;
-  openvdb::MetaMap::Ptr fileMeta;
-  try {
-    openvdb::io::File file(path);
-    file.open(false);
-    if (file.hasGrid("density")) density = file.readGridMetadata("density");
-    fileMeta = file.getMetadata();
-    file.close();
-  } catch (const std::exception& e) {
-    std::string what = e.what();
-    throw invalidInput(path + ": not a readable OpenVDB file (" + what.substr(0, what.find('\n')) + ")");
-  }
-  if (!density) throw invalidInput(path + ": no grid named 'density'");
-  LatticeOrigin o;
-  o.source = vdbio::readLatticeMeta(*density, path).source;
-  if (auto mesh = fileMeta ? fileMeta->getMetadata<openvdb::Int32Metadata>("canopy_mesh_index") : nullptr) {
-    o.hasMeshIndex = true;
-    o.meshIndex = mesh->value();
-  }
-  return o;
 }
 
 SceneLightSource readSceneLightVdb(const std::string& path, const std::string& gridName) {

@@ -1,6 +1,5 @@
 // inputs.h: canopy-octreepack's inputs -> plain structures (the only OpenVDB code of the tool).
-//   readDensityVdb:     a canopy-voxelize lattice (grids density, wood, albedo; §0 metadata)
-//   readLatticeOrigin:  which mesh (file hash, glTF mesh index) a lattice was voxelised from
+//   readDensityVdb:     a density lattice (formats/density_lattice.h reads and validates it)
 //   readSceneLightVdb:  the coarse scene lighting lattice (lbsolve --scene): its 19 bases, or one grid
 // Every failure is a canopy::Error naming the file.
 #pragma once
@@ -34,20 +33,8 @@ LightVdb readLightVdb(const std::string& path, const ModelSource& model);
 
 // Compressed lighting from canopy-haar (.chaar, 19 bases): fn samples it through the chaar decoder
 // at every lattice cell (0 outside the lattice; chaarLightFn) for the float16 light items, and with
-// withHaar its bricks become Haar pages. Its lattice must equal `model`'s. Throws
-// Unsupported when this build has no chaar decoder (chaarSupported() == false).
-bool chaarSupported();
+// withHaar its bricks become Haar pages. Its lattice must equal `model`'s.
 LightVdb readChaarLight(const std::string& path, const ModelSource& model, bool withHaar = true);
-
-// Where a canopy-voxelize lattice came from, read from its metadata only (no voxels): the
-// density grid's canopy_source ("<mesh file> xxh64:<hash>") and the file's canopy_mesh_index
-// (-1: the whole file was voxelised; absent: not written by canopy-voxelize).
-struct LatticeOrigin {
-  std::string source;
-  bool hasMeshIndex = false;
-  int meshIndex = -1;
-};
-LatticeOrigin readLatticeOrigin(const std::string& path);
 
 struct SceneLightSource {
   CanopySceneLight header{};

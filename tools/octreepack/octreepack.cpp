@@ -11,6 +11,7 @@
 #include "canopy/cli.h"
 #include "canopy/errors.h"
 #include "formats/canopy_write.h"
+#include "formats/density_lattice.h"
 #include "formats/scene_json.h"
 #include "gltf_scene.h"
 #include "tools/octreepack/inputs.h"
@@ -91,7 +92,7 @@ Scene gltfScene(const std::string& glb, const std::vector<std::string>& inputs) 
       last->light = in;
       continue;
     }
-    const LatticeOrigin origin = readLatticeOrigin(in);
+    const vdbio::DensityLatticeOrigin origin = vdbio::readDensityLatticeOrigin(in);
     if (contentHashOf(origin.source) != sceneHash)
       throw invalidInput(in + ": voxelised from '" + origin.source + "', not from the scene " + scene.source);
     if (!origin.hasMeshIndex || origin.meshIndex < 0)
@@ -130,12 +131,7 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
   if (o.output.empty()) throw usageError("no output: give -o OUT.canopy");
   for (const SceneModel& m : scene.models) {
     requireReadableFile(m.density);
-    if (!m.light.empty() && !o.ignoreLight) {
-      requireReadableFile(m.light);
-      if (endsWith(m.light, ".chaar") && !chaarSupported())  // fail before any work
-        throw unsupported(m.light + ": packing .chaar lighting needs the chaar decoder, which this build does not have yet; "
-                          "pass PLANT.light.vdb (canopy-lbsolve) instead, or --ignore-light to pack density only");
-    }
+    if (!m.light.empty() && !o.ignoreLight) requireReadableFile(m.light);
   }
 
   CanopyWriteInput w;

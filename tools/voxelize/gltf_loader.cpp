@@ -8,6 +8,8 @@
 #include <sys/stat.h>
 #include <tiny_gltf.h>
 
+#include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstring>
 #include <functional>
@@ -495,6 +497,16 @@ std::string dirOf(const std::string& path) {
 Mesh loadGltfFromMemory(const uint8_t* data, size_t size, bool binary, const std::string& baseDir,
                         const std::string& name, const LoadOptions& options) {
   return buildMesh(parseModel(data, size, binary, baseDir, name), name, options);
+}
+
+// Here rather than with the other loaders: the glTF reader (canopy_gltf) stands alone.
+std::string extensionOf(const std::string& path) {
+  const auto slash = path.find_last_of('/');
+  const auto dot = path.find_last_of('.');
+  if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return "";
+  std::string e = path.substr(dot + 1);
+  std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  return e;
 }
 
 Mesh loadGltfFile(const std::string& path, const LoadOptions& options) {

@@ -1,11 +1,9 @@
 // lattice_io.cpp: the voxeliser's OpenVDB side (the only OpenVDB translation unit of the tool):
-// writes a VoxelizeResult as density/wood/albedo grids, and checks and summarises such a file.
+// a VoxelizeResult as a density lattice file, and `info`'s summary of one; the file's grids,
+// metadata and checks are formats/density_lattice.h's.
 #include <openvdb/openvdb.h>
 
-#include <cmath>
-
-#include "canopy/cli.h"
-#include "formats/lattice_vdb.h"
+#include "formats/density_lattice.h"
 #include "voxelize.h"
 
 namespace canopy {
@@ -19,46 +17,18 @@ openvdb::math::Transform::Ptr latticeTransform(const LatticeFrame& f) {
   return xf;
 }
 
-std::string coordStr(const openvdb::Coord& c) {
-  return "(" + std::to_string(c.x()) + "," + std::to_string(c.y()) + "," + std::to_string(c.z()) + ")";
-}
-
 }  // namespace
 
 void writeLattice(const VoxelizeResult& r, const VoxelizeOptions& o, const std::string& source) {
-  vdbio::initialize();
-  auto density = openvdb::FloatGrid::create(0.0f);
-  auto wood = openvdb::FloatGrid::create(0.0f);
-  auto albedo = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
-  density->setName("density");
-  wood->setName("wood");
-  albedo->setName("albedo");
-  density->setGridClass(openvdb::GRID_FOG_VOLUME);  // renderers treat it as a participating medium
-  {
-    auto da = density->getAccessor();
-    auto wa = wood->getAccessor();
-    auto aa = albedo->getAccessor();
-    for (const LatticeCell& c : r.cells) {
-      const openvdb::Coord ijk(c.i, c.j, c.k);
-      da.setValue(ijk, c.density);
-      wa.setValue(ijk, c.wood);
-      aa.setValue(ijk, openvdb::Vec3s(c.albedo[0], c.albedo[1], c.albedo[2]));
-    }
-  }
-  vdbio::LatticeMeta meta;
-  meta.min = openvdb::Coord(0);
-  meta.max = openvdb::Coord(r.frame.resolution - 1);
-  meta.source = source;
-  const auto xf = latticeTransform(r.frame);
-  for (openvdb::GridBase::Ptr g : {openvdb::GridBase::Ptr(density), openvdb::GridBase::Ptr(wood),
-                                   openvdb::GridBase::Ptr(albedo)}) {
-    g->setTransform(xf->copy());
-    vdbio::stampGrid(*g, meta);
-  }
-  albedo->insertMeta("canopy_color_space", openvdb::StringMetadata("linear sRGB"));
-  wood->insertMeta("canopy_meaning", openvdb::StringMetadata("fraction of the cell's biomass that is wood"));
-
-  openvdb::MetaMap fileMeta;
+  vdbio::DensityLatticeData data;
+  data.meta.min = openvdb::Coord(0);
+  data.meta.max = openvdb::Coord(r.frame.resolution - 1);
+  data.meta.source = source;
+  data.transform = latticeTransform(r.frame);
+  data.cells.reserve(r.cells.size());
+  for (const LatticeCell& c : r.cells)
+    data.cells.push_back({{c.i, c.j, c.k}, c.density, c.wood, {c.albedo[0], c.albedo[1], c.albedo[2]}});
+  openvdb::MetaMap& fileMeta = data.fileMeta;
   fileMeta.insertMeta("canopy_tool", openvdb::StringMetadata("canopy-voxelize"));
   fileMeta.insertMeta("canopy_resolution", openvdb::Int32Metadata(o.resolution));
   fileMeta.insertMeta("canopy_supersample", openvdb::Int32Metadata(o.supersample));
@@ -67,64 +37,34 @@ void writeLattice(const VoxelizeResult& r, const VoxelizeOptions& o, const std::
   fileMeta.insertMeta("canopy_clean", openvdb::BoolMetadata(o.clean));
   fileMeta.insertMeta("canopy_voxel_size", openvdb::DoubleMetadata(r.frame.voxelSize));
   fileMeta.insertMeta("canopy_triangles", openvdb::Int64Metadata(int64_t(r.stats.triangles)));
-  vdbio::writeVdb(o.output, {density, wood, albedo}, fileMeta);
+  vdbio::writeDensityLattice(o.output, data);
 }
 
 nlohmann::json latticeInfo(const std::string& path) {
-  const vdbio::VdbFile f = vdbio::readVdb(path);
-  auto density = f.require<openvdb::FloatGrid>("density");
-  const vdbio::LatticeMeta meta = vdbio::readLatticeMeta(*density, path);
-  auto bad = [&](const std::string& why) { return invalidInput(path + ": " + why); };
-  // Every grid must carry the same lattice.
-  for (const auto& g : *f.grids) {
-    const vdbio::LatticeMeta m = vdbio::readLatticeMeta(*g, path);
-    if (m.min != meta.min || m.max != meta.max)
-      throw bad("grid '" + g->getName() + "' has a different lattice than 'density'");
-  }
-  if (!density->transform().isLinear()) throw bad("density grid transform is not linear");
-  // Values: finite, density in (0,1], inside the lattice, outer layer empty.
-  const openvdb::CoordBBox inner(meta.min.offsetBy(1), meta.max.offsetBy(-1));
-  uint64_t occupied = 0;
+  const vdbio::DensityLattice L = vdbio::readDensityLattice(path);  // the one contract (formats/density_lattice.h)
   double total = 0, woodSum = 0;
-  auto woodGrid = f.find("wood") ? f.require<openvdb::FloatGrid>("wood") : openvdb::FloatGrid::Ptr();
-  auto woodAcc = woodGrid ? std::make_unique<openvdb::FloatGrid::ConstAccessor>(woodGrid->getConstAccessor())
-                          : nullptr;
-  for (auto it = density->cbeginValueOn(); it; ++it) {
-    const float v = *it;
-    if (!it.isVoxelValue()) throw bad("density has an active tile (expected voxels only)");
-    if (!std::isfinite(v) || v < 0.f || v > 1.f)
-      throw bad("density " + std::to_string(v) + " at " + coordStr(it.getCoord()) + " is outside [0,1]");
-    if (!inner.isInside(it.getCoord()))
-      throw bad("occupied cell " + coordStr(it.getCoord()) + " lies on or outside the lattice boundary layer");
-    ++occupied;
-    total += v;
-    if (woodAcc) {
-      const float w = woodAcc->getValue(it.getCoord());
-      if (!std::isfinite(w) || w < 0.f || w > 1.f)
-        throw bad("wood " + std::to_string(w) + " at " + coordStr(it.getCoord()) + " is outside [0,1]");
-      woodSum += double(v) * w;
-    }
+  for (const vdbio::DensityCell& c : L.cells) {
+    total += c.density;
+    woodSum += double(c.density) * c.wood;
   }
   nlohmann::json j;
   j["file"] = path;
-  const openvdb::Coord dim = meta.dim();
-  j["lattice_min"] = {meta.min.x(), meta.min.y(), meta.min.z()};
-  j["lattice_max"] = {meta.max.x(), meta.max.y(), meta.max.z()};
+  const openvdb::Coord dim = L.meta.dim();
+  j["lattice_min"] = {L.meta.min.x(), L.meta.min.y(), L.meta.min.z()};
+  j["lattice_max"] = {L.meta.max.x(), L.meta.max.y(), L.meta.max.z()};
   j["lattice_size"] = {dim.x(), dim.y(), dim.z()};
-  j["voxel_size"] = density->voxelSize()[0];
-  const openvdb::Vec3d o = density->indexToWorld(openvdb::Vec3d(0, 0, 0));
+  j["voxel_size"] = L.transform->voxelSize()[0];
+  const openvdb::Vec3d o = L.transform->indexToWorld(openvdb::Vec3d(0, 0, 0));
   j["origin"] = {o[0], o[1], o[2]};
-  j["occupied_cells"] = occupied;
+  j["occupied_cells"] = L.cells.size();
   j["total_density"] = total;
   j["wood_fraction"] = total > 0 ? woodSum / total : 0.0;
-  j["source"] = meta.source;
+  j["source"] = L.meta.source;
   nlohmann::json grids = nlohmann::json::array();
-  for (const auto& g : *f.grids) grids.push_back({{"name", g->getName()}, {"type", g->type()},
-                                                   {"active_voxels", g->activeVoxelCount()}});
+  for (const auto& g : L.grids) grids.push_back({{"name", g.name}, {"type", g.type}, {"active_voxels", g.activeVoxels}});
   j["grids"] = grids;
   nlohmann::json m = nlohmann::json::object();
-  if (f.meta)
-    for (auto it = f.meta->beginMeta(); it != f.meta->endMeta(); ++it) m[it->first] = it->second->str();
+  for (auto it = L.fileMeta.beginMeta(); it != L.fileMeta.endMeta(); ++it) m[it->first] = it->second->str();
   j["metadata"] = m;
   return j;
 }

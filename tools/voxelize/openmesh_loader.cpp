@@ -162,15 +162,6 @@ void checkStl(const std::vector<unsigned char>& b, const std::string& path) {
 
 }  // namespace
 
-std::string extensionOf(const std::string& path) {
-  const auto slash = path.find_last_of('/');
-  const auto dot = path.find_last_of('.');
-  if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return "";
-  std::string e = path.substr(dot + 1);
-  std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return char(std::tolower(c)); });
-  return e;
-}
-
 Error nonFiniteTriangle(const std::string& name, size_t index) {
   return invalidInput(name + ": triangle " + std::to_string(index) + " has a NaN or infinite vertex coordinate");
 }
