@@ -35,6 +35,12 @@
 #   play             bench-play: the synthetic plant and 400-instance forest (orbit and walk), plus the
 #                    grove where GROVE or the bundle's grove-in/grove.canopy exists, 1920x1080, 1 GiB
 #                    cache, FRAMES frames, once per binary of PLAY_BINS.
+#   stereo           the real forest through the Make rules on the GPU (the shared plants at 128^3,
+#                    FOREST_N instances on a disk of FOREST_RADIUS m: ~8.9 m apart by default), walked
+#                    at 1.8 m eye height (120 frames, 1080p, 1 GiB cache): canopy-play mono, mono in two
+#                    bands on one GPU (--tiles 2), and bench-stereo (IPD 0.064 m: the second eye
+#                    reprojected against traced in full, its time and image error) at --stereo-spread
+#                    0.5 (default), 0.25 and 1, and on a high orbit.
 #   profile-lbsolve  Nsight Compute on one pull launch in the middle of a solve (clocks and caches
 #                    left alone): duration and DRAM bytes per lattice node against the model's 156 B.
 #   profile-play     Nsight Compute on one forest-orbit frame's pixel kernel of PROFILE_BIN (build it
@@ -95,7 +101,7 @@ OAK=$SHARED/assets/plants/oak_medium.glb
 PHASES=${PHASES:-tests lbsolve haar octreepack grove play}
 has() { [[ " $PHASES " == *" $1 "* ]]; }
 for p in $PHASES; do
-  case $p in tests|lbsolve|haar|octreepack|grove|play|profile-lbsolve|profile-play) ;;
+  case $p in tests|lbsolve|haar|octreepack|grove|play|stereo|profile-lbsolve|profile-play) ;;
     *) echo "run-gpu.sh: unknown phase '$p'" >&2; exit 1 ;;
   esac
 done
@@ -239,6 +245,30 @@ if has play; then
     run play_small_cache.md timeout 600 bench-play "$W/play-small-cache" --device cuda --size 1920x1080 --frames "${FRAMES:-120}" --cache-mb 32
     grep -E "^\| " "$O/play_small_cache.md"
   fi
+fi
+
+if has stereo && need canopy-voxelize canopy-lbsolve canopy-haar canopy-octreepack canopy-play bench-stereo; then
+  step stereo
+  f=$W/forest/forest/forest.canopy
+  run forest_make.log timeout 600 make -j8 -C pipelines forest PLANTS="$SHARED/assets/plants" BIN="$BIN" O="$W/forest" DEVICE=cuda \
+    RESOLUTION=128 FOREST_N="${FOREST_N:-400}" FOREST_RADIUS="${FOREST_RADIUS:-100}" FOREST_FRAMES=1 PLAY_SIZE=320x180
+  canopy-octreepack info "$f" 2>&1 | head -1
+  walk=$W/forest-walk.json  # eye level (1.8 m), straight through the forest, looking ahead and slightly up
+  echo '{"keyframes":[{"frame":0,"position":[-70,1.8,-8],"target":[-40,3.0,-2],"fov":60},{"frame":119,"position":[70,1.8,8],"target":[100,3.0,14],"fov":60}]}' > "$walk"
+  for tiles in 1 2; do
+    run "forest_walk_tiles$tiles.json" timeout 300 canopy-play "$f" --device cuda --size 1920x1080 --frames 120 --cache-mb 1024 \
+      --camera "$walk" --tiles "$tiles" --json -q
+    python3 -c 'import json, sys; r = json.load(open(sys.argv[1])); print("forest walk 1080p mono, bands", sys.argv[2], r["frame_ms_median"], r["frame_ms_p95"], r["first_complete_frame_s"], [b["rows"] for b in r["bands"]], [round(b["ms_median"], 2) for b in r["bands"]])' \
+      "$O/forest_walk_tiles$tiles.json" "$tiles"
+  done
+  for spread in 0.5 0.25 1; do
+    run "stereo_walk_$spread.md" timeout 600 bench-stereo "$f" --camera "$walk" --device cuda --size 1920x1080 --frames 120 --ipd 0.064 \
+      --cache-mb 1024 --error-frames 0,40,80 --stereo-spread "$spread" --png "$O/stereo-walk-$spread"
+    tail -1 "$O/stereo_walk_$spread.md"
+  done
+  run stereo_orbit.md timeout 600 bench-stereo "$f" --camera orbit:elevation=25,distance=150,turns=0.25 --device cuda --size 1920x1080 \
+    --frames 120 --ipd 0.064 --cache-mb 1024 --error-frames 0,60
+  tail -1 "$O/stereo_orbit.md"
 fi
 
 if has profile-lbsolve && need bench_lbsolve; then
