@@ -303,10 +303,10 @@ TEST(Render, ReprojectedEyeMatchesTheTracedEyeAndTracesOnlyItsHoles) {
   EXPECT_LT(traced, 0.5) << r["stereo"].dump();
   EXPECT_DOUBLE_EQ(double(rt["stereo"]["traced_fraction_mean"]), 1.0);
   // The reprojected eye against the traced one: premultiplied RGBA RMS (values in [0, 1]). Measured
-  // 2026-12-04 on this scene: see the log line; bound at about 1.5x.
+  // 2026-12-04 on this scene: 6.0 % of the pixels traced, RMS 0.0097; bound at about 1.5x.
   const double e = rms(right, rightRef);
   std::printf("reprojected right eye: traced %.3f of the pixels, RMS %.5f against the traced eye\n", traced, e);
-  EXPECT_LT(e, 0.02);
+  EXPECT_LT(e, 0.015);
   // and it is a different picture from the left eye (the reprojection moved things)
   EXPECT_GT(rms(right, left), 2.0 * e);
 }
