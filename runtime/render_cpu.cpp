@@ -78,14 +78,7 @@ class CpuBackend final : public Backend {
     const size_t pixels = size_t(right.width) * right.height;
     if (keys_.size() != pixels) keys_.resize(pixels), cover_.resize(pixels);
     if (image_[1].size() != pixels * 4) image_[1].assign(pixels * 4, 0.0f);
-    StereoView sv;
-    sv.left = image_[0].data();
-    sv.disparity = disparity_.data();
-    sv.keys = keys_.data();
-    sv.cover = cover_.data();
-    sv.right = image_[1].data();
-    sv.width = right.width;
-    sv.p = p;
+    const StereoView sv = stereoView(image_[0].data(), disparity_.data(), keys_.data(), cover_.data(), image_[1].data(), right.width, p);
     // one row per task: a row's spans land in the row (max and count, in any order: the same keys)
     std::vector<uint8_t> hole(size_t(band.rows()) * right.width);
     parallelFor(band.rows(), [&](int64_t r) {

@@ -312,14 +312,7 @@ class CudaBackend final : public Backend {
     const size_t first = size_t(band.y0) * right.width, count = size_t(band.rows()) * right.width;
     CANOPY_CUDA_CHECK(cudaMemsetAsync(keys_.data() + first, 0, count * sizeof(unsigned long long), compute_));
     CANOPY_CUDA_CHECK(cudaMemsetAsync(cover_.data() + first, 0, count * sizeof(uint32_t), compute_));
-    StereoView sv;
-    sv.left = image_[0].data();
-    sv.disparity = disparity_.data();
-    sv.keys = keys_.data();
-    sv.cover = cover_.data();
-    sv.right = image_[1].data();
-    sv.width = right.width;
-    sv.p = p;
+    const StereoView sv = stereoView(image_[0].data(), disparity_.data(), keys_.data(), cover_.data(), image_[1].data(), right.width, p);
     cuda::parallelFor(int64_t(count), StereoSplatKernel{sv, band.y0}, compute_, 256);
     const int tilesX = (right.width + tileW_ - 1) / tileW_, tilesY = (band.rows() + tileH_ - 1) / tileH_;
     const int64_t threads = int64_t(tilesX) * tilesY * tileW_ * tileH_;

@@ -51,6 +51,19 @@ struct StereoView {
   StereoParams p;
 };
 
+inline StereoView stereoView(const float* left, const float* disparity, unsigned long long* keys, uint32_t* cover, float* right, int width,
+                             const StereoParams& p) {
+  StereoView v;
+  v.left = left;
+  v.disparity = disparity;
+  v.keys = keys;
+  v.cover = cover;
+  v.right = right;
+  v.width = width;
+  v.p = p;
+  return v;
+}
+
 constexpr unsigned long long kStereoKeyValid = 1ull;
 constexpr unsigned long long kStereoKeyPair = 2ull;
 

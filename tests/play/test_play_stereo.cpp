@@ -45,14 +45,7 @@ std::vector<int> reprojectRow(const Row& row, int w, std::vector<float>& right, 
   std::vector<unsigned long long> keys(size_t(w), 0);
   std::vector<uint32_t> cover(size_t(w), 0);
   right.assign(size_t(w) * 4, -1.0f);
-  pl::StereoView v;
-  v.left = row.rgba.data();
-  v.disparity = row.disparity.data();
-  v.keys = keys.data();
-  v.cover = cover.data();
-  v.right = right.data();
-  v.width = w;
-  v.p = p;
+  const pl::StereoView v = pl::stereoView(row.rgba.data(), row.disparity.data(), keys.data(), cover.data(), right.data(), w, p);
   for (int x = 0; x < w; ++x)
     pl::stereoSplat(v, x, 0, [&](int64_t i, unsigned long long key, bool counts) {
       keys[size_t(i)] = std::max(keys[size_t(i)], key);
