@@ -67,6 +67,10 @@ int main(int argc, char** argv) {
   app.add_option("--stereo-spread", o.stereo.maxSpread,
                  "A left-eye pixel whose content spreads over more than this many pixels of disparity is traced in the right eye")
       ->capture_default_str();
+  app.add_option("--stereo-solid", o.stereo.solidAlpha,
+                 "A reprojected left-eye pixel at least this opaque hides what lies behind it in the right eye; less opaque ones are "
+                 "traced where something may lie behind them")
+      ->capture_default_str();
   app.add_option("--tiles", o.tiles,
                  "Bands of rows the frame is cut into, over the renderers in turn, each with its own cache (0: one per GPU of "
                  "--device cuda, else one); balanced every frame by the last frame's times")

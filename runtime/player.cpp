@@ -353,6 +353,7 @@ void validateOptions(const PlayOptions& o) {
   if (!(o.stereoIpd >= 0.0f && o.stereoIpd <= 1.0e3f)) throw usageError("--stereo must be an eye separation in (0, 1000] scene units");
   if (o.stereoFill != "reproject" && o.stereoFill != "trace") throw usageError("--stereo-fill must be reproject or trace, got '" + o.stereoFill + "'");
   if (!(o.stereo.maxSpread >= 0.0f && o.stereo.maxSpread <= 1.0e3f)) throw usageError("--stereo-spread must be in [0, 1000] pixels");
+  if (!(o.stereo.solidAlpha >= 0.0f && o.stereo.solidAlpha <= 1.0f)) throw usageError("--stereo-solid must be in [0, 1]");
   if (o.tiles < 0 || o.tiles > 64) throw usageError("--tiles must be 0..64");
 }
 
@@ -694,6 +695,7 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
     r["stereo"] = {{"ipd", o.stereoIpd},
                    {"fill", o.stereoFill},
                    {"max_spread_px", o.stereo.maxSpread},
+                   {"solid_alpha", o.stereo.solidAlpha},
                    {"layout", o.rightOutput.empty() ? "side-by-side" : "separate"},
                    {"traced_fraction_mean", mean(tracedFraction)},
                    {"first_eye_ms_median", percentile(firstEyeMs, 0.5)},
