@@ -27,7 +27,7 @@ struct PixelKernel {
   CameraView camera;
   float* out;
   int tilesX, tileW, tileH;
-  int y0;                    // the band's first row (tiles.h)
+  int y0, y1;                // the band's rows [y0, y1) (tiles.h)
   const int32_t* list;       // nullptr: thread j renders tile position j; else list[j] (stereo's holes)
   float* depth;              // kWithDepth: the disparity per pixel (stereo's traced eye)
   float disparityScale;
@@ -37,7 +37,7 @@ struct PixelKernel {
     const int lane = int(j % (tileW * tileH));
     const int x = int(tile % tilesX) * tileW + lane % tileW;
     const int y = y0 + int(tile / tilesX) * tileH + lane / tileW;
-    if (x >= camera.width || y >= camera.height) return;
+    if (x >= camera.width || y >= y1) return;  // a band's last tile row may reach into the next band
     renderPixelT<kWithCones, kWithLight, kWithDepth>(scene, camera, int64_t(y) * camera.width + x, out, depth, disparityScale);
   }
 };
@@ -84,15 +84,15 @@ struct StereoSplatKernel {
 
 struct StereoResolveKernel {
   StereoView view;
-  int height, tilesX, tileW, tileH, y0;
+  int tilesX, tileW, tileH, y0, y1;
   int32_t* hole;
   __device__ void operator()(int64_t j) const {
     const int64_t tile = j / (tileW * tileH);
     const int lane = int(j % (tileW * tileH));
     const int x = int(tile % tilesX) * tileW + lane % tileW;
     const int y = y0 + int(tile / tilesX) * tileH + lane / tileW;
-    const bool inFrame = x < view.width && y < height;
-    hole[j] = inFrame && !stereoResolve(view, x, y) ? int32_t(j) : -1;
+    const bool inBand = x < view.width && y < y1;  // rows past the band are the next band's
+    hole[j] = inBand && !stereoResolve(view, x, y) ? int32_t(j) : -1;
   }
 };
 
@@ -268,23 +268,23 @@ class CudaBackend final : public Backend {
     // without lit models has neither shadow-cone nor LB light code
     float* out = image_[eye].data();
     if (depth)
-      launchMode<true>(scene, shade, camera, out, band.y0, nullptr, threads, depth, disparityScale);
+      launchMode<true>(scene, shade, camera, out, band, nullptr, threads, depth, disparityScale);
     else
-      launchMode<false>(scene, shade, camera, out, band.y0, nullptr, threads, nullptr, 0.0f);
+      launchMode<false>(scene, shade, camera, out, band, nullptr, threads, nullptr, 0.0f);
     CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
   }
   // The pixel kernel of the mode (shadow path, LB light, depth) over `threads` tile positions of
-  // the band from y0 (or list[0, threads) of them), with view_.
+  // the band (or list[0, threads) of them), with view_.
   template <bool kWithDepth>
-  void launchMode(const HostScene& scene, const ShadeParams& shade, const CameraView& camera, float* out, int y0, const int32_t* list,
+  void launchMode(const HostScene& scene, const ShadeParams& shade, const CameraView& camera, float* out, Band band, const int32_t* list,
                   int64_t threads, float* depth, float disparityScale) {
     const int tilesX = (camera.width + tileW_ - 1) / tileW_;
     if (shade.shadows == kShadowsCone) {
-      launchPixels<5>(PixelKernel<true, true, kWithDepth>{view_, camera, out, tilesX, tileW_, tileH_, y0, list, depth, disparityScale}, threads, compute_);
+      launchPixels<5>(PixelKernel<true, true, kWithDepth>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, depth, disparityScale}, threads, compute_);
     } else if (scene.litModels > 0) {
-      launchMap(PixelKernel<false, true, kWithDepth>{view_, camera, out, tilesX, tileW_, tileH_, y0, list, depth, disparityScale}, threads);
+      launchMap(PixelKernel<false, true, kWithDepth>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, depth, disparityScale}, threads);
     } else {
-      launchMap(PixelKernel<false, false, kWithDepth>{view_, camera, out, tilesX, tileW_, tileH_, y0, list, depth, disparityScale}, threads);
+      launchMap(PixelKernel<false, false, kWithDepth>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, depth, disparityScale}, threads);
     }
   }
   // The map's (or no-shadow) kernel at the occupancy asked for (setPixelOccupancy); the depth
@@ -317,7 +317,7 @@ class CudaBackend final : public Backend {
     const int tilesX = (right.width + tileW_ - 1) / tileW_, tilesY = (band.rows() + tileH_ - 1) / tileH_;
     const int64_t threads = int64_t(tilesX) * tilesY * tileW_ * tileH_;
     if (hole_.size() < size_t(threads)) hole_.resize(size_t(threads)), holeList_.resize(size_t(threads));
-    cuda::parallelFor(threads, StereoResolveKernel{sv, right.height, tilesX, tileW_, tileH_, band.y0, hole_.data()}, compute_, 256);
+    cuda::parallelFor(threads, StereoResolveKernel{sv, tilesX, tileW_, tileH_, band.y0, band.y1, hole_.data()}, compute_, 256);
     size_t tempBytes = 0;
     CANOPY_CUDA_CHECK(cub::DeviceSelect::If(nullptr, tempBytes, hole_.data(), holeList_.data(), holeCount_.data(), threads, IsHole{}, compute_));
     if (selectTemp_.size() < tempBytes) selectTemp_.resize(tempBytes);
@@ -326,7 +326,7 @@ class CudaBackend final : public Backend {
     int64_t holes = 0;
     CANOPY_CUDA_CHECK(cudaMemcpyAsync(&holes, holeCount_.data(), sizeof holes, cudaMemcpyDeviceToHost, compute_));
     CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
-    launchMode<false>(scene, view_.shade, right, image_[1].data(), band.y0, holeList_.data(), holes, nullptr, 0.0f);
+    launchMode<false>(scene, view_.shade, right, image_[1].data(), band, holeList_.data(), holes, nullptr, 0.0f);
     CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
     return uint64_t(holes);
   }

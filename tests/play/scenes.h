@@ -46,6 +46,13 @@ inline CanopyInstance instanceAt(uint32_t model, float x, float y, float z, floa
   return in;
 }
 
+// RMS difference of two images (all their floats: RGBA).
+inline double imageRms(const std::vector<float>& a, const std::vector<float>& b) {
+  double s = 0;
+  for (size_t i = 0; i < a.size(); ++i) s += double(a[i] - b[i]) * (a[i] - b[i]);
+  return std::sqrt(s / double(a.size()));
+}
+
 // Builds every model and writes `path`.
 inline void writeScene(const std::string& path, const std::vector<octreepack::ModelSource>& sources,
                        const std::vector<CanopyInstance>& instances) {

@@ -91,12 +91,6 @@ const std::string& closeForestFile() {
   return path;
 }
 
-double rms(const std::vector<float>& a, const std::vector<float>& b) {
-  double s = 0;
-  for (size_t i = 0; i < a.size(); ++i) s += double(a[i] - b[i]) * (a[i] - b[i]);
-  return std::sqrt(s / double(a.size()));
-}
-
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
@@ -509,7 +503,7 @@ TEST(Render, EmptyCellSkipMovesOnlyTheSamplePhase) {
     o.skipEmptyBlocks = false;
     const std::vector<float> b = render(o, &marched);
     ASSERT_EQ(a.size(), b.size());
-    const double difference = rms(a, b);
+    const double difference = pt::imageRms(a, b);
     const double samples = double(skipped["work"]["brick_samples"]), samplesBefore = double(marched["work"]["brick_samples"]);
     std::printf("%s: RMS %.2e, brick samples %.0f -> %.0f, skips %.0f\n", camera, difference, samplesBefore, samples,
                 double(skipped["work"]["empty_block_skips"]));
@@ -758,7 +752,7 @@ TEST(Render, SmallCacheStreamsAForestAndConvergesToTheFullCacheImage) {
   nlohmann::json full;
   const std::vector<float> want = render(ref, &full);
   EXPECT_EQ(int(full["evictions"]), 0);
-  EXPECT_LT(rms(last, want), 1e-6) << small.dump();
+  EXPECT_LT(pt::imageRms(last, want), 1e-6) << small.dump();
 }
 
 // ---------------------------------------------------------------------------------------------

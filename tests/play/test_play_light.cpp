@@ -47,12 +47,6 @@ std::vector<float> render(const pl::PlayOptions& o, nlohmann::json* report = nul
   return img;
 }
 
-double rms(const std::vector<float>& a, const std::vector<float>& b) {
-  double s = 0;
-  for (size_t i = 0; i < a.size(); ++i) s += double(a[i] - b[i]) * (a[i] - b[i]);
-  return std::sqrt(s / double(a.size()));
-}
-
 // A ball (24^3 lattice, radius 10 cells, density 0.3) with constant light bases, and the same
 // ball density-only.
 const std::string& litSphere() {
@@ -285,7 +279,7 @@ TEST(Light, InstanceRotationTakesTheSunIntoModelSpace) {
   const std::vector<float> control = render(o);
   size_t within = 0;
   for (size_t i = 0; i < ref.size(); ++i) within += std::fabs(ref[i] - rot[i]) <= 1e-3f;
-  const double e = rms(ref, rot), ec = rms(ref, control);
+  const double e = pt::imageRms(ref, rot), ec = pt::imageRms(ref, control);
   std::printf("rotated instance + sun: RMS %.3g (control, sun not rotated: %.3g)\n", e, ec);
   EXPECT_LT(e, 1e-4);
   EXPECT_GT(double(within) / double(ref.size()), 0.99);
@@ -329,7 +323,7 @@ TEST(Light, SmallCacheStreamsLightPagesWithBrickPagesAndConverges) {
   double peak = 0;
   for (size_t i = 3; i < want.size(); i += 4) peak = std::max(peak, double(want[i]));
   EXPECT_GT(peak, 0.2);  // the view shows the forest
-  EXPECT_LT(rms(last, want), 1e-6) << r.dump();
+  EXPECT_LT(pt::imageRms(last, want), 1e-6) << r.dump();
 }
 
 // ---- Haar light (format 1.1: the .chaar's bricks, the finest level's exact light) -----------------
@@ -406,7 +400,7 @@ TEST(Light, ExactHaarLightIsSampledAtTheSamplesLatticePoint) {
   const std::vector<float> off = render(o);
   double peak = 0;
   for (float v : ref) peak = std::max(peak, double(v));
-  const double e = rms(haar, ref), eOff = rms(off, ref);
+  const double e = pt::imageRms(haar, ref), eOff = pt::imageRms(off, ref);
   std::printf("Haar vs float16 items on a ramp: RMS %.3g (one cell off: %.3g), peak %.3g\n", e, eOff, peak);
   EXPECT_GT(peak, 0.1);
   EXPECT_LT(e, 1e-3 * peak);

@@ -56,12 +56,6 @@ std::vector<int> reprojectRow(const Row& row, int w, std::vector<float>& right, 
   return hole;
 }
 
-double rms(const std::vector<float>& a, const std::vector<float>& b) {
-  double s = 0;
-  for (size_t i = 0; i < a.size(); ++i) s += double(a[i] - b[i]) * (a[i] - b[i]);
-  return std::sqrt(s / double(a.size()));
-}
-
 // 12 synthetic plants on a 4 x 3 grid, 2.5 apart: crowns at several depths, sky between them.
 const std::string& groveFile() {
   static const std::string path = [] {
@@ -158,7 +152,7 @@ TEST(Render, BandsOnSeveralRenderersGiveTheSameImageAsOne) {
   const nlohmann::json r3 = pl::play(o, Device{}, &three);
   ASSERT_EQ(r3["bands"].size(), 3u) << r3.dump();
   ASSERT_EQ(one.size(), three.size());
-  EXPECT_EQ(std::memcmp(one.data(), three.data(), one.size() * sizeof(float)), 0) << "rms " << rms(one, three);
+  EXPECT_EQ(std::memcmp(one.data(), three.data(), one.size() * sizeof(float)), 0) << "rms " << pt::imageRms(one, three);
   int rows = 0;
   for (const auto& b : r3["bands"]) rows += int(b["rows"][1]) - int(b["rows"][0]);
   EXPECT_EQ(rows, 45);
@@ -297,11 +291,11 @@ TEST(Render, ReprojectedEyeMatchesTheTracedEyeAndTracesOnlyItsHoles) {
   EXPECT_DOUBLE_EQ(double(rt["stereo"]["traced_fraction_mean"]), 1.0);
   // The reprojected eye against the traced one: premultiplied RGBA RMS (values in [0, 1]). Measured
   // 2026-12-04 on this scene: 6.0 % of the pixels traced, RMS 0.0097; bound at about 1.5x.
-  const double e = rms(right, rightRef);
+  const double e = pt::imageRms(right, rightRef);
   std::printf("reprojected right eye: traced %.3f of the pixels, RMS %.5f against the traced eye\n", traced, e);
   EXPECT_LT(e, 0.015);
   // and it is a different picture from the left eye (the reprojection moved things)
-  EXPECT_GT(rms(right, left), 2.0 * e);
+  EXPECT_GT(pt::imageRms(right, left), 2.0 * e);
 }
 
 TEST(Render, StereoSideBySideAndSeparateOutputs) {
