@@ -41,6 +41,17 @@
 #                    bands on one GPU (--tiles 2), and bench-stereo (IPD 0.064 m: the second eye
 #                    reprojected against traced in full, its time and image error) at --stereo-spread
 #                    0.5 (default), 0.25 and 1, and on a high orbit.
+#   forest           canopy-play on real-plant forests built by the Make rules (the stereo phase's build
+#                    and walk), each run 120 frames, 1 GiB cache, --json: one table in $OUT/forest.md,
+#                    the reports forest_*.json, each camera's last frame as forest-*.png (480x270):
+#                    - the 400-instance forest, high orbit (elevation 25 deg, 300 m: the whole forest
+#                      in view; a quarter turn), 1920x1080 and 3840x2160
+#                    - the same, low orbit (elevation 10 deg, 90 m, a quarter turn), both sizes
+#                    - the same, the eye-level walk of the stereo phase, both sizes
+#                    - FOREST_BIG_N (4000) instances on ten times the area (FOREST_BIG_RADIUS 316 m), the
+#                      same plants and walk, 1920x1080; the ratio of its median to the 400 walk's
+#                    - the 400 walk at 1920x1080 with a 256 MiB cache (a quarter), then 64 MiB (FOREST_CACHES
+#                      "256 64": the 400 forest's pages, ~216 MB at 128^3, fit in 256): medians and ratios
 #   profile-lbsolve  Nsight Compute on one pull launch in the middle of a solve (clocks and caches
 #                    left alone): duration and DRAM bytes per lattice node against the model's 156 B.
 #   profile-play     Nsight Compute on one forest-orbit frame's pixel kernel of PROFILE_BIN (build it
@@ -68,6 +79,16 @@
 #   PNGS=1            keep the first play run's last frames as $OUT/play-*.png
 #   SMALL_CACHE=1     the play phase again with a 32 MiB cache (less than the forest's file)
 #   PROFILE_BIN       default canopy-play;  GTEST_TIMEOUT per CUDA test binary, default 300 s
+#   FOREST_N, FOREST_RADIUS  the stereo and forest phases' forest (default 400 instances on 100 m)
+#   FOREST_BIG_N, FOREST_BIG_RADIUS  the forest phase's large forest (default 4000 on 316 m)
+#   FOREST_RESOLUTION the forests' plants, cells per axis (default 128)
+#   FOREST_SIZES      the forest phase's frame sizes, default "1920x1080 3840x2160" (the first is the
+#                     size of the large forest and small-cache runs); FRAMES (120) frames per run;
+#                     FOREST_CACHES: the small-cache runs' budgets in MiB (default "256 64")
+#   BENCH_DEVICE      default cuda; cpu builds the forests and runs the forest phase on the CPU, to
+#                     check the phase end to end on a machine without a GPU, at tiny settings:
+#                     BENCH_DEVICE=cpu FOREST_RESOLUTION=32 FOREST_N=40 FOREST_BIG_N=400 \
+#                     FOREST_SIZES="160x90 320x180" FRAMES=3 BIN=build/bin PHASES=forest bash bench/run-gpu.sh
 set -uo pipefail
 here=$(pwd)
 O=${OUT:-/tmp/canopy-gpu}
@@ -101,7 +122,7 @@ OAK=$SHARED/assets/plants/oak_medium.glb
 PHASES=${PHASES:-tests lbsolve haar octreepack grove play}
 has() { [[ " $PHASES " == *" $1 "* ]]; }
 for p in $PHASES; do
-  case $p in tests|lbsolve|haar|octreepack|grove|play|stereo|profile-lbsolve|profile-play) ;;
+  case $p in tests|lbsolve|haar|octreepack|grove|play|stereo|forest|profile-lbsolve|profile-play) ;;
     *) echo "run-gpu.sh: unknown phase '$p'" >&2; exit 1 ;;
   esac
 done
@@ -134,6 +155,24 @@ oak() {  # oak N: oak_medium voxelised at N^3 and lit on the GPU, once per run: 
   fi
 }
 seconds() { python3 -c 'import json, sys; print(round(json.load(open(sys.argv[1]))["seconds"], 3))' "$1"; }
+dev=${BENCH_DEVICE:-cuda}
+walk=$W/forest-walk.json  # the forests' walk: eye level (1.8 m), straight through the middle, looking ahead and slightly up
+forest_canopy() {  # forest_canopy N RADIUS: the path of forest_build's forest
+  echo "$W/forest${FOREST_RESOLUTION:-128}/forest/forest-n$1-r$2.canopy"
+}
+forest_build() {  # forest_build N RADIUS: N instances of the shared plants on a disk of RADIUS m, through the
+  # Make rules on BENCH_DEVICE, at $(forest_canopy N RADIUS) (one folder per plant resolution: its forests
+  # share the plants); writes $walk; false (and the run failed) when the build fails
+  local t0=$SECONDS res=${FOREST_RESOLUTION:-128} name=forest-n$1-r$2
+  echo '{"keyframes":[{"frame":0,"position":[-70,1.8,-8],"target":[-40,3.0,-2],"fov":60},{"frame":119,"position":[70,1.8,8],"target":[100,3.0,14],"fov":60}]}' > "$walk"
+  if ! timeout 600 make -j8 -C pipelines forest PLANTS="$SHARED/assets/plants" BIN="$BIN" O="$W/forest$res" DEVICE="$dev" \
+      RESOLUTION="$res" FOREST_NAME="$name" FOREST_N="$1" FOREST_RADIUS="$2" FOREST_FRAMES=1 PLAY_SIZE=320x180 \
+      > "$O/${name}_make.log" 2>&1; then
+    fail "make forest $name (see $O/${name}_make.log)"; return 1
+  fi
+  echo "forest of $1 instances on $2 m (plants at $res^3, $dev): make $((SECONDS - t0)) s;" \
+    "$(canopy-octreepack info "$(forest_canopy "$1" "$2")" 2>&1 | head -1)"
+}
 
 { nvidia-smi -L; date -u; echo "commit $(git rev-parse --short HEAD 2>/dev/null || echo unknown)"; } | tee "$O/device.txt"
 
@@ -249,12 +288,8 @@ fi
 
 if has stereo && need canopy-voxelize canopy-lbsolve canopy-haar canopy-octreepack canopy-play bench-stereo; then
   step stereo
-  f=$W/forest/forest/forest.canopy
-  run forest_make.log timeout 600 make -j8 -C pipelines forest PLANTS="$SHARED/assets/plants" BIN="$BIN" O="$W/forest" DEVICE=cuda \
-    RESOLUTION=128 FOREST_N="${FOREST_N:-400}" FOREST_RADIUS="${FOREST_RADIUS:-100}" FOREST_FRAMES=1 PLAY_SIZE=320x180
-  canopy-octreepack info "$f" 2>&1 | head -1
-  walk=$W/forest-walk.json  # eye level (1.8 m), straight through the forest, looking ahead and slightly up
-  echo '{"keyframes":[{"frame":0,"position":[-70,1.8,-8],"target":[-40,3.0,-2],"fov":60},{"frame":119,"position":[70,1.8,8],"target":[100,3.0,14],"fov":60}]}' > "$walk"
+  f=$(forest_canopy "${FOREST_N:-400}" "${FOREST_RADIUS:-100}")
+  forest_build "${FOREST_N:-400}" "${FOREST_RADIUS:-100}"
   for tiles in 1 2; do
     run "forest_walk_tiles$tiles.json" timeout 300 canopy-play "$f" --device cuda --size 1920x1080 --frames 120 --cache-mb 1024 \
       --camera "$walk" --tiles "$tiles" --json -q
@@ -269,6 +304,102 @@ if has stereo && need canopy-voxelize canopy-lbsolve canopy-haar canopy-octreepa
   run stereo_orbit.md timeout 600 bench-stereo "$f" --camera orbit:elevation=25,distance=150,turns=0.25 --device cuda --size 1920x1080 \
     --frames 120 --ipd 0.064 --cache-mb 1024 --error-frames 0,60
   tail -1 "$O/stereo_orbit.md"
+fi
+
+forest_play() {  # forest_play ID SCENE CAMERA SIZE CACHE_MB: one timed canopy-play run, its report in $O/forest_ID.json
+  run "forest_$1.json" timeout 300 canopy-play "$2" --device "$dev" --size "$4" --frames "${FRAMES:-120}" --cache-mb "$5" \
+    --camera "$3" --json -q
+}
+forest_row() {  # forest_row ID SCENE CAMERA SIZE FRAME: the table row of $O/forest_ID.json
+  python3 - "$O/forest_$1.json" "$2" "$3" "$4" "$5" <<'PY'
+import json, sys
+path, scene, camera, size, png = sys.argv[1:]
+try:
+    r = json.load(open(path))
+    first = r["first_complete_frame_s"]  # -1: no frame was complete
+    cells = [f"{r['frame_ms_median']:.2f}", f"{r['frame_ms_p95']:.2f}", f"{first:.2f}" if first >= 0 else "none"]
+except (OSError, ValueError, KeyError, TypeError):
+    cells = ["failed"] * 3
+print(f"| {scene} | {camera} | {size} | " + " | ".join(cells) + f" | {png} |")
+PY
+}
+forest_png() {  # forest_png NAME SCENE CAMERA: the camera's last frame at 480x270 (a run of its own) -> $O/forest-NAME.png
+  local d=$W/forest-png/$1 last
+  rm -rf "$d" && mkdir -p "$d"
+  printf -v last 'f_%04d.png' $((${FRAMES:-120} - 1))
+  run "forest-$1.png.log" timeout 300 canopy-play "$2" --device "$dev" --size 480x270 --frames "${FRAMES:-120}" --cache-mb 1024 \
+    --camera "$3" -o "$d/f_%04d.png" -q
+  if [[ -f $d/$last ]]; then cp "$d/$last" "$O/forest-$1.png"; else fail "no last frame $d/$last"; fi
+  rm -rf "$d"
+  [[ -s $O/forest-$1.png.log ]] || rm -f "$O/forest-$1.png.log"
+}
+
+if has forest && need canopy-voxelize canopy-lbsolve canopy-haar canopy-octreepack canopy-play; then
+  step forest
+  t0=$SECONDS
+  n=${FOREST_N:-400} r=${FOREST_RADIUS:-100} bn=${FOREST_BIG_N:-4000} br=${FOREST_BIG_RADIUS:-316}
+  read -ra sizes <<< "${FOREST_SIZES:-1920x1080 3840x2160}"
+  f=$(forest_canopy "$n" "$r") big=$(forest_canopy "$bn" "$br")
+  forest_build "$n" "$r"
+  forest_build "$bn" "$br"
+  high=orbit:elevation=25,distance=300,turns=0.25  # the whole forest in view (at 150 m its near edge and sides are cut)
+  low=orbit:elevation=10,distance=90,turns=0.25
+  t=$O/forest.md
+  { echo "| scene | camera | size | median ms | p95 ms | first complete frame s | last frame |"
+    echo "|---|---|---|---|---|---|---|"; } > "$t"
+  for cam in high low walk; do
+    case $cam in
+      high) spec=$high label="high orbit (25°, 300 m)" ;;
+      low) spec=$low label="low orbit (10°, 90 m)" ;;
+      walk) spec=$walk label="eye-level walk" ;;
+    esac
+    forest_png "n$n-$cam" "$f" "$spec"
+    for size in "${sizes[@]}"; do
+      forest_play "n$n-$cam-$size" "$f" "$spec" "$size" 1024
+      forest_row "n$n-$cam-$size" "$n trees, $r m" "$label" "$size" "forest-n$n-$cam.png" >> "$t"
+    done
+  done
+  forest_png "n$bn-walk" "$big" "$walk"
+  forest_play "n$bn-walk-${sizes[0]}" "$big" "$walk" "${sizes[0]}" 1024
+  forest_row "n$bn-walk-${sizes[0]}" "$bn trees, ${br} m" "eye-level walk" "${sizes[0]}" "forest-n$bn-walk.png" >> "$t"
+  caches=${FOREST_CACHES:-256 64}
+  for mb in $caches; do
+    forest_play "n$n-walk-${sizes[0]}-cache$mb" "$f" "$walk" "${sizes[0]}" "$mb"
+    forest_row "n$n-walk-${sizes[0]}-cache$mb" "$n trees, $r m" "eye-level walk, $mb MiB cache" "${sizes[0]}" "forest-n$n-walk.png" >> "$t"
+  done
+  python3 - "$O" "$n" "$bn" "${sizes[0]}" "${FRAMES:-120}" "$high" "$low" "$caches" "$dev" >> "$t" <<'PY'
+import json, sys
+out, n, bn, size, frames, high, low, caches, dev = sys.argv[1:]
+def report(run):
+    try:
+        return json.load(open(f"{out}/forest_{run}.json"))
+    except (OSError, ValueError):
+        return None
+walk, bigwalk = report(f"n{n}-walk-{size}"), report(f"n{bn}-walk-{size}")
+print()
+if walk and bigwalk:
+    print(f"- {bn} / {n} trees, walk at {size}, median: {bigwalk['frame_ms_median']:.2f} / {walk['frame_ms_median']:.2f} ms "
+          f"= **{bigwalk['frame_ms_median'] / walk['frame_ms_median']:.2f}x**")
+for mb in caches.split():
+    small = report(f"n{n}-walk-{size}-cache{mb}")
+    if walk and small:  # the cache holds at most the file's pages: cache_mb is what it got
+        print(f"- {n} trees, walk at {size}, {mb} MiB / 1 GiB cache (cache {small['cache_mb']:.0f} / {walk['cache_mb']:.0f} "
+              f"MiB, the forest's pages {walk['scene_page_mb']:.0f} MiB), median: {small['frame_ms_median']:.2f} / "
+              f"{walk['frame_ms_median']:.2f} ms = **{small['frame_ms_median'] / walk['frame_ms_median']:.2f}x**; hit rate "
+              f"{100 * small['cache_hit_rate']:.1f} / {100 * walk['cache_hit_rate']:.1f} %, evictions {small['evictions']} / "
+              f"{walk['evictions']}, {small['mb_streamed']:.0f} / {walk['mb_streamed']:.0f} MiB streamed")
+if bigwalk:
+    print(f"- the {bn}-tree forest's pages: {bigwalk['scene_page_mb']:.0f} MiB")
+if walk:
+    print(f"- LB-lit models {walk['lit_models']}, coarse scene light bases {walk['scene_light_bases']}"
+          + (" (the forest rule packs no `canopy-lbsolve --scene` light)" if walk['scene_light_bases'] == 0 else ""))
+print(f"\n{frames} frames a run, `canopy-play FOREST --device {dev} --size WxH --frames {frames} "
+      f"--cache-mb 1024 --camera CAMERA --json`; cameras: high `{high}`, low `{low}`, walk `forest-walk.json` "
+      "(1.8 m eye height, x -70 to 70 m through the middle, 60° field of view). The last frames: 480x270, "
+      "a run of their own of the same camera (1 GiB cache), not the timed run's image.")
+PY
+  cat "$t"
+  echo "forest phase: $((SECONDS - t0)) s"
 fi
 
 if has profile-lbsolve && need bench_lbsolve; then

@@ -73,16 +73,21 @@ FOREST_SEED ?= 1
 FOREST_RADIUS ?= 450
 FOREST_PLANTS ?= $(filter-out %.draco,$(PLANT_NAMES))
 FOREST_FRAMES ?= 24
-forest: forest/f_0000.png
-forest.scene.json: $(PIPELINES)/scatter.py
+# The forest's files: NAME.scene.json, NAME.canopy and the flight NAME/f_*.png. Forests of other
+# names share the plants' files of the same directory (e.g. FOREST_NAME=forest4000 FOREST_N=4000).
+# The scatter is remade only when scatter.py changes: a forest of another FOREST_N, FOREST_RADIUS or
+# FOREST_SEED needs a name of its own (or the old NAME.scene.json removed).
+FOREST_NAME ?= forest
+forest: $(FOREST_NAME)/f_0000.png
+$(FOREST_NAME).scene.json: $(PIPELINES)/scatter.py
 	python3 $(PIPELINES)/scatter.py -o $@ --count $(FOREST_N) --seed $(FOREST_SEED) --radius $(FOREST_RADIUS) \
 	  $(foreach p,$(FOREST_PLANTS),--model $(p)=$(p).density.vdb:$(p).light.chaar)
-forest.canopy: forest.scene.json $(foreach p,$(FOREST_PLANTS),$(p).density.vdb $(p).light.chaar)
+$(FOREST_NAME).canopy: $(FOREST_NAME).scene.json $(foreach p,$(FOREST_PLANTS),$(p).density.vdb $(p).light.chaar)
 	$(LAUNCH) $(CANOPY_OCTREEPACK) $(CANOPY_QUIET) $(PACK_FLAGS) --scene $< -o $@
-forest/f_0000.png: forest.canopy
-	@mkdir -p forest
+$(FOREST_NAME)/f_0000.png: $(FOREST_NAME).canopy
+	@mkdir -p $(FOREST_NAME)
 	$(LAUNCH_GPU) $(CANOPY_PLAY) $(CANOPY_QUIET) --device $(DEVICE) $(PLAY_FLAGS) --frames $(FOREST_FRAMES) \
-	  --camera orbit:elevation=15,distance=$(FOREST_RADIUS),turns=0.25 $< -o forest/f_%04d.png
+	  --camera orbit:elevation=15,distance=$(FOREST_RADIUS),turns=0.25 $< -o $(FOREST_NAME)/f_%04d.png
 
 # --- sweep: compression threshold comparison for one plant --------------------------------------
 SWEEP_PLANT ?= $(firstword $(PLANT_NAMES))
