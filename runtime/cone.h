@@ -233,6 +233,11 @@ struct ShadeParams {
   int holdEmpty;            // 1: a primary ray keeps an instance's empty leaf segment to its end (EmptyHold)
   int skipEmptyBlocks;      // 1: a brick step in an empty cell goes to the end of the cell run (emptyRunEnd)
   int exactLight;           // 1 (--light exact): the finest level of Haar-lit models samples the Haar pages
+  // The ground (groundRadiance): a horizontal plane y = groundY (world, +Y up) that ends every ray
+  // from above it that reaches it; 0 (ShadeParams{}): none, rays leave the scene to the sky.
+  int ground;
+  float groundY;
+  float groundAlbedo[3];    // linear RGB
 };
 
 // How a sample's sun transmittance Tshadow is found (ShadeParams::shadows).
@@ -1232,11 +1237,44 @@ CANOPY_HD inline float shadowTransmittance(const SceneView& s, V3 p, float footp
   return T;
 }
 
+// The ground's radiance at its point p, in the units of the foliage's shading (sampleShade: albedo x
+// (sun x Tshadow + indirect)): a Lambertian plane with normal +Y,
+//   albedo x (direct sun x max(0, toSun.y) x Tshadow(p) + ambient x the scene lattice's ambient factor at p).
+// Tshadow as the foliage's (the frame's shadow map, a shadow cone with kWithCones, or 1 without
+// shadows), so crowns cast their shadows on it; the scene lattice (lbsolve --scene, 1 = open sky)
+// darkens the sky light under crowns; without one that factor is 1. The light that foliage
+// scatters down onto the ground is not modelled.
+template <bool kWithCones>
+CANOPY_HD inline void groundRadiance(const SceneView& s, V3 p, float footprint, float out[3]) {
+  const float cosSun = s.shade.toSun.y > 0.0f ? s.shade.toSun.y : 0.0f;
+  float sunT = 1.0f;
+  if (cosSun > 0.0f) {
+    if (s.shade.shadows == kShadowsMap) {
+      sunT = shadowMapLookup(s.shadowMap, p);
+      CANOPY_PLAY_COUNT(s, shadowMapLookups, 1);
+    } else if (kWithCones && s.shade.shadows == kShadowsCone) {
+      sunT = shadowTransmittance(s, p, footprint);
+    }
+  }
+  const float sky = s.shade.ambient * sceneLightFactors(s.light, p).ambient;
+  for (int c = 0; c < 3; ++c) out[c] = s.shade.groundAlbedo[c] * (s.shade.direct[c] * cosSun * sunT + sky);
+}
+
+// Where the ray o + t d (t > 0) meets the ground from above; 3e38 where it does not (no ground, a ray
+// level or rising, an eye on or below the plane: the ground is seen from above only).
+CANOPY_HD inline float groundHit(const ShadeParams& shade, V3 o, V3 d) {
+  if (!shade.ground || !(d.y < 0.0f) || !(o.y > shade.groundY)) return 3.0e38f;
+  return (shade.groundY - o.y) / d.y;
+}
+
 // One primary cone: origin o, unit direction d, footprint(t) = footprint0 + t * pixelAngle.
 // kWithCones: compiled with the shadow-cone path (kShadowsCone); without it that mode is treated
 // as kShadowsOff, so the CUDA kernel of the other modes carries neither the shadow cone's instance
 // walk (its hit list and descent caches in local memory) nor its registers. Same code otherwise.
 // kWithDepth: also sums the inverse-depth moments of the shaded samples (ConeResult::depthSums).
+// A ray that meets the ground (groundHit) before tMax is marched up to it (the parts of instances
+// below the plane are cut) and ends there: what is left of its transmittance shows the ground
+// (groundRadiance), and the result is opaque.
 template <bool kWithCones, bool kWithLight = true, bool kWithDepth = false>
 CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixelAngle, float tMax) {
   ConeResult r;
@@ -1244,6 +1282,9 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
   r.transmittance = 1.0f;
   r.depthSums[0] = r.depthSums[1] = r.depthSums[2] = 0.0f;
   CANOPY_PLAY_COUNT(s, cones, 1);
+  const float tGround = groundHit(s.shade, o, d);
+  const bool ground = tGround < tMax;
+  if (ground) tMax = tGround;
   InstanceWalk w;
   walkBegin(s, w, o, d, 0.0f, tMax);
   float t = 0.0f;
@@ -1354,6 +1395,18 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
     t = next;
     if (T < s.shade.stopT || t >= tMax) break;
     while (!w.done && t >= w.tCellExit) walkAdvance(s, w, o, d, t);
+  }
+  if (ground) {
+    float g[3];
+    groundRadiance<kWithCones>(s, o + d * tGround, tGround * pixelAngle, g);
+    for (int c = 0; c < 3; ++c) r.rgb[c] += T * g[c];
+    if (kWithDepth) {
+      const float inv = 1.0f / tGround;
+      r.depthSums[0] += T;
+      r.depthSums[1] += T * inv;
+      r.depthSums[2] += T * inv * inv;
+    }
+    T = 0.0f;
   }
   r.transmittance = T;
   return r;

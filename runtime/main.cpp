@@ -53,6 +53,12 @@ int main(int argc, char** argv) {
                  "bricks where the file has them (the .chaar's own samples; a little slower, docs/play.md)")
       ->check(CLI::IsMember({"fast", "exact"}))
       ->capture_default_str();
+  app.add_option("--ground", o.ground,
+                 "none, auto (a plane at the lowest instance base: the bottom of its lowest occupied cell) or a height Y; it takes the "
+                 "sun's shadow and the scene light's sky occlusion")
+      ->capture_default_str();
+  std::string groundAlbedo = "0.2,0.17,0.13";
+  app.add_option("--ground-albedo", groundAlbedo, "The ground's albedo: R,G,B or one value, linear, in [0, 1]")->capture_default_str();
   app.add_flag("--converge", o.converge, "Per frame, render passes until no loadable page is missing (reference quality)");
   bool coldStart = false;
   app.add_flag("--no-warm-start", coldStart, "Render the first frame in real-time mode too (node means until pages arrive)");
@@ -91,6 +97,14 @@ int main(int argc, char** argv) {
     o.skipEmptyBlocks = !noEmptySkip;
     o.warmStart = !coldStart;
     o.exactLight = lightMode == "exact";
+    {
+      float a[3];
+      char tail;
+      const int n = std::sscanf(groundAlbedo.c_str(), "%f,%f,%f%c", &a[0], &a[1], &a[2], &tail);
+      if (n == 1) a[1] = a[2] = a[0];
+      else if (n != 3) throw canopy::usageError("--ground-albedo '" + groundAlbedo + "': expected R,G,B or one value in [0, 1]");
+      for (int c = 0; c < 3; ++c) o.groundAlbedo[c] = a[c];
+    }
     tool.report() = canopy::play::play(o, tool.device());
   });
 }

@@ -19,6 +19,7 @@
 #include "canopy/errors.h"
 #include "canopy/json_file.h"
 #include "formats/canopy_file.h"
+#include "formats/scene_json.h"
 #include "runtime/backend.h"
 #include "runtime/image_io.h"
 #include "runtime/streaming.h"
@@ -326,6 +327,27 @@ ShadeParams shadeParams(const PlayOptions& o) {
   return shade;
 }
 
+// --ground: 0 none, 1 auto, 2 the height in y.
+static int parseGround(const std::string& spec, float& y) {
+  if (spec == "none") return 0;
+  if (spec == "auto") return 1;
+  double v = 0;
+  char tail;
+  if (std::sscanf(spec.c_str(), "%lf%c", &v, &tail) != 1 || !(std::fabs(v) <= double(kMaxWorldCoordinate)))
+    throw usageError("--ground '" + spec + "': expected none, auto or a height (world units, |Y| <= 1e9)");
+  y = float(v);
+  return 2;
+}
+
+void setGround(const PlayOptions& o, const HostScene& scene, ShadeParams& shade) {
+  float y = 0.0f;
+  const int mode = parseGround(o.ground, y);
+  if (mode == 1) y = scene.groundBase;
+  shade.ground = mode != 0 && std::isfinite(y) ? 1 : 0;
+  shade.groundY = shade.ground ? y : 0.0f;
+  for (int c = 0; c < 3; ++c) shade.groundAlbedo[c] = o.groundAlbedo[c];
+}
+
 namespace {
 
 void validateOptions(const PlayOptions& o) {
@@ -355,6 +377,10 @@ void validateOptions(const PlayOptions& o) {
   if (!(o.stereo.maxSpread >= 0.0f && o.stereo.maxSpread <= 1.0e3f)) throw usageError("--stereo-spread must be in [0, 1000] pixels");
   if (!(o.stereo.solidAlpha >= 0.0f && o.stereo.solidAlpha <= 1.0f)) throw usageError("--stereo-solid must be in [0, 1]");
   if (o.tiles < 0 || o.tiles > 64) throw usageError("--tiles must be 0..64");
+  float groundY;
+  parseGround(o.ground, groundY);
+  for (float a : o.groundAlbedo)
+    if (!(a >= 0.0f && a <= 1.0f)) throw usageError("--ground-albedo must be R,G,B (or one value) in [0, 1]");
 }
 
 // The renderers a run uses: the CPU, one GPU, or every GPU for a plain "cuda".
@@ -558,6 +584,10 @@ nlohmann::json playReport(const PlayOptions& o, const CanopyFile& file, const Ho
   r["corrupt_pages"] = st.corruptPages;
   r["seconds"] = total;
   r["shadows"] = shade.shadows == kShadowsOff ? "off" : o.shadowMethod;
+  if (shade.ground)
+    r["ground"] = {{"y", shade.groundY}, {"from", o.ground == "auto" ? "auto" : "option"}, {"albedo", {shade.groundAlbedo[0], shade.groundAlbedo[1], shade.groundAlbedo[2]}}};
+  else
+    r["ground"] = nullptr;
   if (shade.shadows == kShadowsMap) {
     const ShadowMapView& m = tiles[0].backend->lastShadowMap();
     r["shadow_map"] = {{"dim", {m.dim[0], m.dim[1], m.dim[2]}}, {"voxel", m.voxel}};
@@ -623,6 +653,7 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
           (tiles.size() > 1 ? " x " + std::to_string(tiles.size()) + " bands, a cache each" : ""));
 
   ShadeParams shade = shadeParams(o);
+  setGround(o, scene, shade);
   WorkCounters work{};
   for (Tile& t : tiles) {
     if (o.countWork && tiles.size() == 1) t.backend->countWork(&work);

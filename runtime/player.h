@@ -49,6 +49,10 @@ struct PlayOptions {
   int warpTileWidth = 8;             // CUDA: a warp renders a warpTileWidth x (32 / warpTileWidth) tile
   bool countWork = false;            // CPU only: count cones, steps, samples, shadow work (report "work")
   float background[3] = {0.60f, 0.72f, 0.85f};  // linear RGB behind the scene (PNG only)
+  // The ground plane (cone.h groundRadiance): "none", "auto" (at the lowest instance base,
+  // HostScene::groundBase) or a world height Y; its albedo (linear RGB, each in [0, 1]).
+  std::string ground = "auto";
+  float groundAlbedo[3] = {0.20f, 0.17f, 0.13f};
   bool converge = false;             // per frame, render passes until no loadable page is missing
   bool warmStart = true;             // the first frame converges (a complete first image), the
                                      // rest are real-time (one pass, loads land in later frames)
@@ -90,7 +94,12 @@ std::string frameFileName(const std::string& pattern, int frame, int frames);
 nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<float>* lastImage = nullptr,
                     std::vector<float>* lastRight = nullptr);
 
-// The per-sample parameters of the options (everything but the frame's sun direction, toSun).
+// The per-sample parameters of the options (everything but the frame's sun direction, toSun, and
+// the ground, setGround).
 ShadeParams shadeParams(const PlayOptions& o);
+
+// The ground of --ground over this scene into shade (ground, groundY, groundAlbedo); "auto" on a
+// scene without matter is no ground. Throws Usage for a bad spelling.
+void setGround(const PlayOptions& o, const HostScene& scene, ShadeParams& shade);
 
 }  // namespace canopy::play

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 
 #include "canopy/cli.h"
 #include "canopy/errors.h"
@@ -30,6 +31,65 @@ void gridRange(const HostScene& s, uint32_t i, int c0[3], int c1[3]) {
     c0[a] = std::clamp(int(std::floor((s.instances[i].boundsLo[a] - s.gridLo[a]) / s.gridCell[a])), 0, s.gridDim[a] - 1);
     c1[a] = std::clamp(int(std::floor((s.instances[i].boundsHi[a] - s.gridLo[a]) / s.gridCell[a])), 0, s.gridDim[a] - 1);
   }
+}
+
+// The lattice index height of model m's lowest matter: the bottom face (index y - 0.5) of its lowest
+// cell of non-zero density; +inf for a model without matter. From the resident node tiles, plus the
+// bricks of the lowest leaves (a few page reads): leaves are visited bottom first until none can
+// lie lower. A brick page that cannot be read counts its node's bottom face (never higher than the
+// truth).
+double modelBaseIndexY(const CanopyFile& f, uint32_t m) {
+  const CanopyModel& M = f.model(m);
+  const CanopyNode* tiles = f.tiles(m);
+  struct Node {
+    CanopyNode node;
+    uint32_t level;
+    int64_t y0;  // the node's first cell row
+  };
+  std::vector<Node> leaves, stack{{M.root, 0, M.octreeOrigin[1]}};
+  while (!stack.empty()) {
+    const Node n = stack.back();
+    stack.pop_back();
+    if (n.node.child != kCanopyNone && n.node.child < M.tileCount && n.level < M.depth) {
+      const int64_t half = int64_t(M.rootCells >> (n.level + 1));
+      for (uint32_t c = 0; c < 8; ++c) stack.push_back({tiles[size_t(n.node.child) * 8 + c], n.level + 1, n.y0 + ((c >> 1) & 1) * half});
+    } else if (n.node.brick != kCanopyNone || n.node.density > 0.0f) {
+      leaves.push_back(n);
+    }
+  }
+  std::sort(leaves.begin(), leaves.end(), [](const Node& a, const Node& b) { return a.y0 < b.y0; });
+  const uint32_t perPage = f.header().bricksPerPage;
+  double best = std::numeric_limits<double>::infinity();
+  std::vector<unsigned char> page(f.header().pageBytes);
+  uint32_t loaded = kCanopyNone;
+  for (const Node& n : leaves) {
+    const double bottom = double(n.y0) - 0.5;
+    if (bottom >= best) break;
+    if (n.node.brick == kCanopyNone || n.node.brick >= M.brickCount) {
+      best = bottom;
+      continue;
+    }
+    const uint32_t pageIndex = canopyBrickPage(M, n.node.brick, perPage);
+    try {
+      if (pageIndex != loaded) f.readPage(pageIndex, page.data());
+      loaded = pageIndex;
+    } catch (const std::exception&) {
+      best = bottom;
+      continue;
+    }
+    const CanopyBrickView b = canopyBrickInPage(page.data(), canopyBrickSlot(n.node.brick, perPage));
+    const double voxelCells = double(M.rootCells >> n.level) / kCanopyBrickSize;
+    for (uint32_t y = 1; y <= kCanopyBrickSize; ++y) {
+      bool any = false;
+      for (uint32_t z = 1; z <= kCanopyBrickSize && !any; ++z)
+        for (uint32_t x = 1; x <= kCanopyBrickSize && !any; ++x) any = b.density[canopyVoxelIndex(x, y, z)] > 0.0f;
+      if (any) {
+        best = std::min(best, bottom + double(y - 1) * voxelCells);
+        break;
+      }
+    }
+  }
+  return best;
 }
 
 }  // namespace
@@ -84,6 +144,8 @@ HostScene buildScene(const CanopyFile& f) {
                                  inv, (0.5 - M.octreeOrigin[2]) * inv},
                              invert(i2m, f.path() + ": model " + std::to_string(m) + " indexToModel"));
   }
+  std::vector<double> baseIndexY(f.modelCount(), 0.0);
+  for (uint32_t m = 0; m < f.modelCount(); ++m) baseIndexY[m] = modelBaseIndexY(f, m);
   double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
   for (uint32_t i = 0; i < f.instanceCount(); ++i) {
     const CanopyInstance& I = f.instance(i);
@@ -118,6 +180,11 @@ HostScene buildScene(const CanopyFile& f) {
         throw invalidInput(what + ": its world bounds reach beyond +-1e9 m (too far for single-precision rendering)");
       lo[a] = std::min(lo[a], double(v.boundsLo[a]));
       hi[a] = std::max(hi[a], double(v.boundsHi[a]));
+    }
+    if (std::isfinite(baseIndexY[I.model])) {  // the instance's base: its model's lowest matter, below the lattice's centre
+      std::array<double, 3> p;
+      apply(l2w, 0.5 * (M.latticeMin[0] + M.latticeMax[0]), baseIndexY[I.model], 0.5 * (M.latticeMin[2] + M.latticeMax[2]), p);
+      s.groundBase = std::min(s.groundBase, float(p[1]));
     }
     s.instances.push_back(v);
     Affine lin = toAffine(w2l);

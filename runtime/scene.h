@@ -8,6 +8,7 @@
 // brick pages' cache (page table, pool, LRU, loader): see cone.h, 7.
 #pragma once
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -29,6 +30,10 @@ struct HostScene {
   float gridLo[3] = {0, 0, 0}, gridCell[3] = {1, 1, 1};
   float boundsLo[3] = {0, 0, 0}, boundsHi[3] = {0, 0, 0};  // world bounds of every instance
   bool empty = true;                      // no instance
+  // The world height of the lowest instance base (--ground auto): min over instances of the world y
+  // of their model's lowest matter (the bottom of its lowest occupied cell), taken below the centre
+  // of the model's lattice (exact for upright instances); +inf without matter.
+  float groundBase = std::numeric_limits<float>::infinity();
   bool hasSceneLight = false;
   SceneLightView light{};                 // values == nullptr; backends point it at lightPairs
   uint32_t lightBases = 0;                // the scene lattice's bases: 0 (none), 1 (B00) or 19 (B00..B18)

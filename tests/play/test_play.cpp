@@ -298,6 +298,7 @@ TEST(PageCache, EvictsTheLeastRecentlyUsedButNeverAPageUsedThisFrame) {
 TEST(Render, SphereHasTheAnalyticSilhouetteAndBeerLambertOpacity) {
   pl::PlayOptions o = smallView(sphereFile(), 65, 65);
   o.camera = "orbit:azimuth=0,elevation=0,distance=6,fov=40,turns=0";
+  o.ground = "none";  // the sphere's own opacity, with nothing behind it
   o.sigma = 1.0f;
   const std::vector<float> img = render(o);
   const canopy::CanopyFile f = canopy::CanopyFile::open(sphereFile());
@@ -666,6 +667,7 @@ TEST(Render, CorruptPageIsReportedOnceAndRenderedFromCoarserData) {
   canopy::writeFileAtomic(bad, bytes.data(), bytes.size());
   pl::PlayOptions o = smallView(good, 48, 48);
   o.frames = 3;
+  o.ground = "none";  // the coverage compared below is the volume's
   o.camera = "orbit:azimuth=30,elevation=15,fov=40,turns=0.02";
   nlohmann::json rg, rb;
   const std::vector<float> intact = render(o, &rg);

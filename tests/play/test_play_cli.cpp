@@ -196,6 +196,11 @@ TEST(PlayCli, ErrorsHaveDocumentedExitCodesAndLeaveNoOutput) {
       {"'" + sceneFile() + "' -o '" + out + "' --camera orbit:distance=1e39 --device cpu", 1, "bad number '1e39'"},
       {"'" + sceneFile() + "' -o '" + out + "' --sun 1e999,0,0 --device cpu", 1, "--sun '1e999,0,0'"},
       {"'" + sceneFile() + "' -o '" + out + "' --sun '" + sunPath + "' --device cpu", 3, "zero or overflowing sun direction"},
+      {"'" + sceneFile() + "' -o '" + out + "' --ground grass --device cpu", 1, "--ground 'grass': expected none, auto or a height"},
+      {"'" + sceneFile() + "' -o '" + out + "' --ground 1e12 --device cpu", 1, "--ground '1e12'"},
+      {"'" + sceneFile() + "' -o '" + out + "' --ground nan --device cpu", 1, "--ground 'nan'"},
+      {"'" + sceneFile() + "' -o '" + out + "' --ground-albedo 1.5 --device cpu", 1, "--ground-albedo must be"},
+      {"'" + sceneFile() + "' -o '" + out + "' --ground-albedo 0.1,0.2 --device cpu", 1, "--ground-albedo '0.1,0.2'"},
   };
   for (const Case& c : cases) {
     std::remove(out.c_str());

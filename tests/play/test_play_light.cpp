@@ -152,6 +152,7 @@ TEST(Light, IndirectIsTheLookupWeightedSunBasesPlusAmbientB0) {
   const std::pair<const char*, float> cases[] = {{"0,1,0", 1.0f}, {"0,1,0", 2.5f}, {"0.3,0.8,-0.52", 1.0f}, {"0.3,0.8,-0.52", 2.5f}};
   for (const auto& [sun, intensity] : cases) {
     pl::PlayOptions o = view(litSphere(), 21, 21);
+    o.ground = "none";  // the volume's shading alone
     o.sun = sun;
     o.sunIntensity = intensity;
     o.directSun = false;
@@ -431,6 +432,7 @@ TEST(Light, NineteenBaseSceneLightScalesTheSunTermByTheSunsBasesAndTheAmbientTer
                         canopy::haar::Precision::Fp32, &L);
   const float intensity = 1.5f;
   pl::PlayOptions o = view(plainSphere(), 21, 21);
+  o.ground = "none";  // the volume's shading alone
   o.sun = "0.3,0.8,-0.52";
   o.sunIntensity = intensity;
   o.directSun = false;

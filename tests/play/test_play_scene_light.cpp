@@ -82,6 +82,7 @@ std::vector<float> render(const std::string& file, const std::string& camera, co
   o.sun = sun;
   o.directSun = false;  // the indirect light alone (--no-direct-sun)
   o.ambient = 0.0f;     // and of it the scattered sun alone, the term the sun's scene bases weight
+  o.ground = "none";    // the crowns' own pixels (their masks are where they are opaque)
   std::vector<float> img;
   const nlohmann::json r = pl::play(o, canopy::Device{}, &img);
   if (report) *report = r;

@@ -196,6 +196,7 @@ CaseResult compareCase(const PreparedScene& scene, const CaseOptions& o) {
   po.sigma = scene.medium.sigma;
   po.shadowMethod = o.shadows;
   po.converge = true;
+  po.ground = "none";  // the path tracer's medium has no ground
   po.sunIntensity = o.playerSunScale;
   if (o.directOnly) po.ambient = 0.0f;
   if (o.indirectOnly) po.directSun = false;

@@ -1,0 +1,195 @@
+// test_play_ground.cpp: the ground plane (cone.h groundHit/groundRadiance, --ground): where auto
+// puts it, its shading against the closed form, the crowns' shadow on it (map and cones), and that
+// it cuts the scene without changing anything a ray meets before it.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "canopy/device.h"
+#include "formats/canopy_file.h"
+#include "runtime/player.h"
+#include "runtime/scene.h"
+#include "tests/play/scenes.h"
+
+namespace pl = canopy::play;
+namespace pt = canopy::play::testing;
+
+namespace {
+
+// The ball of test_play: 48^3 lattice, 0.1 m cells, radius 18 cells, density 0.05, centred on the
+// model origin.
+constexpr int kEdge = 48;
+constexpr float kRadius = 18.0f, kDensity = 0.05f, kCell = 0.1f;
+
+const canopy::octreepack::ModelSource& ball() {
+  static const canopy::octreepack::ModelSource s = pt::sphereModel(kEdge, kRadius, kDensity, kCell);
+  return s;
+}
+
+// The model-space height of the ball's lowest matter: the bottom face of its lowest occupied cell.
+double ballBaseModelY() {
+  int minJ = kEdge;
+  for (const auto& c : ball().cells) minJ = std::min(minJ, c.ijk[1]);
+  return (double(minJ) - 0.5 - 0.5 * (kEdge - 1)) * kCell;
+}
+
+const std::string& oneBall() {
+  static const std::string p = [] {
+    const std::string f = pt::tmpDir("ground") + "/ball.canopy";
+    pt::writeScene(f, {ball()}, {pt::instanceAt(0, 0, 0, 0)});
+    return f;
+  }();
+  return p;
+}
+
+// One keyframe: a fixed camera.
+std::string cameraFile(const char* name, const float pos[3], const float target[3], float fov) {
+  const std::string p = pt::tmpDir("ground") + "/" + name + ".json";
+  char buf[256];
+  std::snprintf(buf, sizeof buf, R"({"keyframes":[{"frame":0,"position":[%.9g,%.9g,%.9g],"target":[%.9g,%.9g,%.9g],"fov":%g}]})",
+                pos[0], pos[1], pos[2], target[0], target[1], target[2], fov);
+  std::ofstream(p) << buf;
+  return p;
+}
+
+pl::PlayOptions view(const std::string& file, const std::string& camera, int w, int h) {
+  pl::PlayOptions o;
+  o.input = file;
+  o.camera = camera;
+  o.width = w;
+  o.height = h;
+  o.converge = true;
+  return o;
+}
+
+std::vector<float> render(const pl::PlayOptions& o, nlohmann::json* report = nullptr) {
+  std::vector<float> img;
+  const nlohmann::json r = pl::play(o, canopy::Device{}, &img);
+  if (report) *report = r;
+  return img;
+}
+
+// albedo x (sun x cos + ambient x 1): the open ground without a scene light.
+float openGround(const pl::PlayOptions& o, int c, float cosSun, float sunT = 1.0f) {
+  return o.groundAlbedo[c] * (o.sunIntensity * cosSun * sunT + o.ambient);
+}
+
+}  // namespace
+
+// auto: the lowest instance base, i.e. the world height of the bottom face of the lowest occupied
+// cell over instances (found in the ball's bricks: its lowest cell row lies inside a finest node),
+// with a scaled and turned instance lowest.
+TEST(Ground, AutoSitsAtTheLowestInstanceBase) {
+  const std::string f = pt::tmpDir("ground") + "/three.canopy";
+  pt::writeScene(f, {ball()}, {pt::instanceAt(0, 0, 0, 0), pt::instanceAt(0, 5, 2, 0), pt::instanceAt(0, -5, 1, 0, 2.0f, 0.7f)});
+  const double base = ballBaseModelY();
+  EXPECT_NEAR(base, -1.8, 1e-6);  // row 6 of 48: (6 - 0.5 - 23.5) x 0.1
+  const double want = std::min({0.0 + base, 2.0 + base, 1.0 + 2.0 * base});
+  const pl::HostScene scene = pl::buildScene(canopy::CanopyFile::open(f));
+  EXPECT_NEAR(scene.groundBase, want, 1e-5);
+  nlohmann::json r;
+  const float pos[3] = {0, 6, -12}, target[3] = {0, 0, 0};
+  render(view(f, cameraFile("three", pos, target, 50), 8, 8), &r);
+  ASSERT_TRUE(r["ground"].is_object()) << r.dump();
+  EXPECT_NEAR(double(r["ground"]["y"]), want, 1e-5);
+  EXPECT_EQ(r["ground"]["from"], "auto");
+  pl::PlayOptions o = view(f, cameraFile("three", pos, target, 50), 8, 8);
+  o.ground = "none";
+  render(o, &r);
+  EXPECT_TRUE(r["ground"].is_null());
+  o.ground = "-0.25";
+  render(o, &r);
+  EXPECT_FLOAT_EQ(float(r["ground"]["y"]), -0.25f);
+  EXPECT_EQ(r["ground"]["from"], "option");
+}
+
+// Open ground far from the ball: every pixel is opaque and equals albedo x (sun x cos + ambient),
+// with the shadow map, with shadow cones and without shadows (nothing lies between it and the sun).
+TEST(Ground, OpenGroundIsAlbedoTimesSunCosinePlusAmbient) {
+  const float base = float(ballBaseModelY());
+  const float pos[3] = {30, 3, 0}, target[3] = {34, base, 0.5f};
+  const std::string cam = cameraFile("open", pos, target, 10);
+  for (const char* shadows : {"map", "cone", "off"}) {
+    pl::PlayOptions o = view(oneBall(), cam, 12, 9);
+    o.sun = "0.5,1,0.3";
+    if (std::string(shadows) == "off") o.shadows = false;
+    else o.shadowMethod = shadows;
+    o.groundAlbedo[0] = 0.3f, o.groundAlbedo[1] = 0.25f, o.groundAlbedo[2] = 0.1f;
+    const float cosSun = float(1.0 / std::sqrt(0.25 + 1.0 + 0.09));
+    const std::vector<float> img = render(o);
+    for (size_t p = 0; p < img.size() / 4; ++p) {
+      ASSERT_EQ(img[4 * p + 3], 1.0f) << shadows << " pixel " << p;
+      for (int c = 0; c < 3; ++c) ASSERT_NEAR(img[4 * p + size_t(c)], openGround(o, c, cosSun), 2e-6f) << shadows << " pixel " << p;
+    }
+  }
+}
+
+// The ball's shadow on the ground: the sun at 45 degrees along +x, so the shadow lies on the -x
+// side; the view is of the ground at x = -3 (its sun line passes 1.2 m from the ball's centre, an
+// optical depth of about 5.4). Shadowed pixels keep the sky term and lose nearly all of the direct
+// one, with the map as with shadow cones (the reference), which agree at the view's centre.
+TEST(Ground, TakesTheCrownsShadowFromTheMapAndFromShadowCones) {
+  const float base = float(ballBaseModelY());
+  const float pos[3] = {-6, 3, 0.0f}, target[3] = {-3, base, 0.0f};
+  const std::string cam = cameraFile("shadow", pos, target, 12);
+  const int w = 9, h = 9, centre = 4 * (h / 2 * w + w / 2);
+  const float cosSun = float(std::sqrt(0.5));
+  std::vector<float> byMethod[2];
+  for (int k = 0; k < 2; ++k) {
+    pl::PlayOptions o = view(oneBall(), cam, w, h);
+    o.sun = "1,1,0";
+    o.shadowMethod = k == 0 ? "map" : "cone";
+    byMethod[k] = render(o);
+    for (int c = 0; c < 3; ++c) {
+      const float v = byMethod[k][size_t(centre + c)];
+      EXPECT_GE(v, openGround(o, c, cosSun, 0.0f) - 1e-6f) << o.shadowMethod;  // the sky term stays
+      EXPECT_LE(v, openGround(o, c, cosSun, 0.05f)) << o.shadowMethod;        // >= 95 % of the sun is blocked
+    }
+  }
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(byMethod[0][size_t(centre + c)], byMethod[1][size_t(centre + c)], 0.01f);
+  pl::PlayOptions o = view(oneBall(), cam, w, h);
+  o.sun = "1,1,0";
+  o.shadows = false;
+  const std::vector<float> lit = render(o);
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(lit[size_t(centre + c)], openGround(o, c, cosSun), 2e-6f);
+}
+
+// A ground through the ball's centre, seen from just above it: every ray that goes down ends on it
+// (opaque); the rays that go up never reach it and are bit for bit those of the frame without a
+// ground, the ball's upper half included. From below the plane the ground is not seen at all.
+TEST(Ground, CutsTheSceneAndChangesNothingBeforeIt) {
+  const float pos[3] = {0, 0.3f, -8}, target[3] = {0, 0.3f, 0};
+  const std::string cam = cameraFile("level", pos, target, 40);
+  const int w = 32, h = 24;
+  pl::PlayOptions o = view(oneBall(), cam, w, h);
+  o.ground = "0";
+  const std::vector<float> cut = render(o);
+  o.ground = "none";
+  const std::vector<float> none = render(o);
+  int below = 0, ballRows = 0;
+  for (int y = 0; y < h; ++y) {
+    const bool down = y >= h / 2;  // the rows below the view axis (which is level)
+    for (int x = 0; x < w; ++x) {
+      const size_t p = size_t(4 * (y * w + x));
+      if (down) {
+        ASSERT_EQ(cut[p + 3], 1.0f) << x << "," << y;
+        ++below;
+      } else {
+        for (int c = 0; c < 4; ++c) ASSERT_EQ(cut[p + size_t(c)], none[p + size_t(c)]) << x << "," << y;
+        ballRows += none[p + 3] > 0.5f;
+      }
+    }
+  }
+  EXPECT_GT(below, 0);
+  EXPECT_GT(ballRows, 10);  // the ball's upper half is in view
+  o.ground = "5";           // above the eye: not seen
+  const std::vector<float> above = render(o);
+  EXPECT_EQ(above, none);
+}
