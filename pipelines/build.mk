@@ -82,8 +82,14 @@ forest: $(FOREST_NAME)/f_0000.png
 $(FOREST_NAME).scene.json: $(PIPELINES)/scatter.py
 	python3 $(PIPELINES)/scatter.py -o $@ --count $(FOREST_N) --seed $(FOREST_SEED) --radius $(FOREST_RADIUS) \
 	  $(foreach p,$(FOREST_PLANTS),--model $(p)=$(p).density.vdb:$(p).light.chaar)
-$(FOREST_NAME).canopy: $(FOREST_NAME).scene.json $(foreach p,$(FOREST_PLANTS),$(p).density.vdb $(p).light.chaar)
-	$(LAUNCH) $(CANOPY_OCTREEPACK) $(CANOPY_QUIET) $(PACK_FLAGS) --scene $< -o $@
+# The coarse scene lattice over the whole forest (lbsolve --scene, B00..B18): crowns in their
+# neighbours' shade lose scattered sun, and the ground under the crowns loses sky light.
+# FOREST_SCENE_RESOLUTION cells along the forest's longest side.
+FOREST_SCENE_RESOLUTION ?= 64
+$(FOREST_NAME).scenelight.vdb: $(FOREST_NAME).scene.json $(foreach p,$(FOREST_PLANTS),$(p).density.vdb)
+	$(LAUNCH_GPU) $(CANOPY_LBSOLVE) $(CANOPY_QUIET) --device $(DEVICE) --scene $< --scene-resolution $(FOREST_SCENE_RESOLUTION) -o $@
+$(FOREST_NAME).canopy: $(FOREST_NAME).scene.json $(foreach p,$(FOREST_PLANTS),$(p).density.vdb $(p).light.chaar) $(FOREST_NAME).scenelight.vdb
+	$(LAUNCH) $(CANOPY_OCTREEPACK) $(CANOPY_QUIET) $(PACK_FLAGS) --scene $< --scene-light $(FOREST_NAME).scenelight.vdb -o $@
 $(FOREST_NAME)/f_0000.png: $(FOREST_NAME).canopy
 	@mkdir -p $(FOREST_NAME)
 	$(LAUNCH_GPU) $(CANOPY_PLAY) $(CANOPY_QUIET) --device $(DEVICE) $(PLAY_FLAGS) --frames $(FOREST_FRAMES) \
