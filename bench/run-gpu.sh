@@ -114,8 +114,9 @@ built=${CANOPY_BUILT_AT:-/work/main}  # the tests carry absolute paths of the ch
 if [[ $built != "$here" ]]; then
   mkdir -p "$(dirname "$built")"
   [[ -e $built ]] || ln -s "$here" "$built"
-  [[ -e $(dirname "$built")/shared ]] || ln -s "$SHARED" "$(dirname "$built")/shared"
 fi
+# (also where this tree is the checkout itself: its ../shared may be missing on the GPU machine)
+[[ -e $(dirname "$built")/shared ]] || ln -s "$SHARED" "$(dirname "$built")/shared"
 mkdir -p build && { [[ -e build/bin ]] || ln -s "$BIN" build/bin; }
 OAK=$SHARED/assets/plants/oak_medium.glb
 
