@@ -193,8 +193,8 @@ struct ModelView {
 struct InstanceView {
   Affine worldToUnit;       // world -> this instance's model octree unit space
   float cellWorld;          // mean world length of one lattice cell (footprint -> cells)
-  float unitLo[3], unitHi[3];      // the lattice box in unit space (the instance's exact extent)
-  float boundsLo[3], boundsHi[3];  // world AABB of the lattice box (for the instance grid)
+  float unitLo[3], unitHi[3];      // the box of the model's leaves with matter in unit space (the march's extent; every leaf outside is empty)
+  float boundsLo[3], boundsHi[3];  // world AABB of that box (for the instance grid)
   uint32_t model;
   sun::Weights sunWeights;  // the sun in this instance's model space -> LB bases (per frame)
 };
@@ -934,8 +934,8 @@ CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 
       if (present) continue;
     }
     const InstanceView& inst = s.instances[id];
-    // the exact interval: the ray against the lattice box in the instance's unit space (an
-    // oriented box in world space; t is the same parameter in both spaces)
+    // the exact interval: the ray against the box of the model's matter in the instance's unit
+    // space (an oriented box in world space; t is the same parameter in both spaces)
     float t0, t1;
     rayBox(applyPoint(inst.worldToUnit, o), applyVector(inst.worldToUnit, d), v3(inst.unitLo[0], inst.unitLo[1], inst.unitLo[2]),
            v3(inst.unitHi[0], inst.unitHi[1], inst.unitHi[2]), t0, t1);

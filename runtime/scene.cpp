@@ -33,37 +33,45 @@ void gridRange(const HostScene& s, uint32_t i, int c0[3], int c1[3]) {
   }
 }
 
-// The lattice index height of model m's lowest matter: the bottom face (index y - 0.5) of its lowest
-// cell of non-zero density; +inf for a model without matter. From the resident node tiles, plus the
-// bricks of the lowest leaves (a few page reads): leaves are visited bottom first until none can
-// lie lower. A brick page that cannot be read counts its node's bottom face (never higher than the
-// truth).
-double modelBaseIndexY(const CanopyFile& f, uint32_t m) {
+// Model m's leaves with matter (no child tile; a brick, or a uniform non-zero density), each with
+// its level and first lattice cell, from the resident node tiles.
+struct Leaf {
+  CanopyNode node;
+  uint32_t level;
+  int64_t cell0[3];
+};
+std::vector<Leaf> modelLeaves(const CanopyFile& f, uint32_t m) {
   const CanopyModel& M = f.model(m);
   const CanopyNode* tiles = f.tiles(m);
-  struct Node {
-    CanopyNode node;
-    uint32_t level;
-    int64_t y0;  // the node's first cell row
-  };
-  std::vector<Node> leaves, stack{{M.root, 0, M.octreeOrigin[1]}};
+  std::vector<Leaf> leaves, stack{{M.root, 0, {M.octreeOrigin[0], M.octreeOrigin[1], M.octreeOrigin[2]}}};
   while (!stack.empty()) {
-    const Node n = stack.back();
+    const Leaf n = stack.back();
     stack.pop_back();
     if (n.node.child != kCanopyNone && n.node.child < M.tileCount && n.level < M.depth) {
       const int64_t half = int64_t(M.rootCells >> (n.level + 1));
-      for (uint32_t c = 0; c < 8; ++c) stack.push_back({tiles[size_t(n.node.child) * 8 + c], n.level + 1, n.y0 + ((c >> 1) & 1) * half});
+      for (uint32_t c = 0; c < 8; ++c)
+        stack.push_back({tiles[size_t(n.node.child) * 8 + c], n.level + 1,
+                         {n.cell0[0] + (c & 1) * half, n.cell0[1] + ((c >> 1) & 1) * half, n.cell0[2] + ((c >> 2) & 1) * half}});
     } else if (n.node.brick != kCanopyNone || n.node.density > 0.0f) {
       leaves.push_back(n);
     }
   }
-  std::sort(leaves.begin(), leaves.end(), [](const Node& a, const Node& b) { return a.y0 < b.y0; });
+  return leaves;
+}
+
+// The lattice index height of model m's lowest matter: the bottom face (index y - 0.5) of its lowest
+// cell of non-zero density; +inf for a model without matter. The leaves are visited bottom first
+// until none can lie lower, reading the bricks of the lowest (a few page reads). A brick page that
+// cannot be read counts its node's bottom face (never higher than the truth).
+double modelBaseIndexY(const CanopyFile& f, uint32_t m, std::vector<Leaf> leaves) {
+  const CanopyModel& M = f.model(m);
+  std::sort(leaves.begin(), leaves.end(), [](const Leaf& a, const Leaf& b) { return a.cell0[1] < b.cell0[1]; });
   const uint32_t perPage = f.header().bricksPerPage;
   double best = std::numeric_limits<double>::infinity();
   std::vector<unsigned char> page(f.header().pageBytes);
   uint32_t loaded = kCanopyNone;
-  for (const Node& n : leaves) {
-    const double bottom = double(n.y0) - 0.5;
+  for (const Leaf& n : leaves) {
+    const double bottom = double(n.cell0[1]) - 0.5;
     if (bottom >= best) break;
     if (n.node.brick == kCanopyNone || n.node.brick >= M.brickCount) {
       best = bottom;
@@ -90,6 +98,22 @@ double modelBaseIndexY(const CanopyFile& f, uint32_t m) {
     }
   }
   return best;
+}
+
+// The cells [lo, hi) per axis that hold model m's leaves with matter, within its lattice; the whole
+// lattice for a model without matter.
+void modelMatterBox(const CanopyModel& M, const std::vector<Leaf>& leaves, int64_t lo[3], int64_t hi[3]) {
+  for (int a = 0; a < 3; ++a) lo[a] = INT64_MAX, hi[a] = INT64_MIN;
+  for (const Leaf& n : leaves)
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], n.cell0[a]);
+      hi[a] = std::max(hi[a], n.cell0[a] + int64_t(M.rootCells >> n.level));
+    }
+  for (int a = 0; a < 3; ++a) {
+    if (leaves.empty()) lo[a] = M.latticeMin[a], hi[a] = int64_t(M.latticeMax[a]) + 1;
+    lo[a] = std::max(lo[a], int64_t(M.latticeMin[a]));
+    hi[a] = std::min(hi[a], int64_t(M.latticeMax[a]) + 1);
+  }
 }
 
 }  // namespace
@@ -145,7 +169,12 @@ HostScene buildScene(const CanopyFile& f) {
                              invert(i2m, f.path() + ": model " + std::to_string(m) + " indexToModel"));
   }
   std::vector<double> baseIndexY(f.modelCount(), 0.0);
-  for (uint32_t m = 0; m < f.modelCount(); ++m) baseIndexY[m] = modelBaseIndexY(f, m);
+  std::vector<std::array<int64_t, 6>> matterBox(f.modelCount());  // cells [lo, hi) per axis
+  for (uint32_t m = 0; m < f.modelCount(); ++m) {
+    const std::vector<Leaf> leaves = modelLeaves(f, m);
+    modelMatterBox(f.model(m), leaves, matterBox[m].data(), matterBox[m].data() + 3);
+    baseIndexY[m] = modelBaseIndexY(f, m, leaves);
+  }
   double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
   for (uint32_t i = 0; i < f.instanceCount(); ++i) {
     const CanopyInstance& I = f.instance(i);
@@ -159,27 +188,37 @@ HostScene buildScene(const CanopyFile& f) {
     v.worldToUnit = toAffine(compose(modelToUnit[I.model], invert(m2w, what)));
     v.cellWorld = float(std::cbrt(std::fabs(det3(l2w))));
     v.model = I.model;
+    // The instance's extent for the march: the box of its model's leaves with matter (a tree's
+    // lattice is a cube around its height; the leaves' box is its crown and trunk, a fraction of
+    // that in a forest where neighbours' cubes overlap), in unit space and as a world AABB. Outside
+    // it every leaf is empty (density 0), so the march only stops evaluating empty nodes there.
+    // The scene's bounds (framing, shadow map, grid extent) stay those of the lattice boxes.
+    const int64_t* box = matterBox[I.model].data();
+    float latLo[3], latHi[3];
     for (int a = 0; a < 3; ++a) {
-      v.unitLo[a] = float(double(M.latticeMin[a] - M.octreeOrigin[a]) / M.rootCells);
-      v.unitHi[a] = float(double(M.latticeMax[a] + 1 - M.octreeOrigin[a]) / M.rootCells);
-      v.boundsLo[a] = 3e38f;
-      v.boundsHi[a] = -3e38f;
+      v.unitLo[a] = float(double(box[a] - M.octreeOrigin[a]) / M.rootCells);
+      v.unitHi[a] = float(double(box[3 + a] - M.octreeOrigin[a]) / M.rootCells);
+      v.boundsLo[a] = latLo[a] = 3e38f;
+      v.boundsHi[a] = latHi[a] = -3e38f;
     }
-    for (int c = 0; c < 8; ++c) {  // the lattice box's corners (cells centred at integers)
-      std::array<double, 3> p;
+    for (int c = 0; c < 8; ++c) {  // the boxes' corners (cells centred at integers)
+      std::array<double, 3> p, q;
       apply(l2w, (c & 1) ? M.latticeMax[0] + 0.5 : M.latticeMin[0] - 0.5, (c & 2) ? M.latticeMax[1] + 0.5 : M.latticeMin[1] - 0.5,
             (c & 4) ? M.latticeMax[2] + 0.5 : M.latticeMin[2] - 0.5, p);
+      apply(l2w, double((c & 1) ? box[3] : box[0]) - 0.5, double((c & 2) ? box[4] : box[1]) - 0.5, double((c & 4) ? box[5] : box[2]) - 0.5, q);
       for (int a = 0; a < 3; ++a) {
-        v.boundsLo[a] = std::min(v.boundsLo[a], float(p[size_t(a)]));
-        v.boundsHi[a] = std::max(v.boundsHi[a], float(p[size_t(a)]));
+        latLo[a] = std::min(latLo[a], float(p[size_t(a)]));
+        latHi[a] = std::max(latHi[a], float(p[size_t(a)]));
+        v.boundsLo[a] = std::min(v.boundsLo[a], float(q[size_t(a)]));
+        v.boundsHi[a] = std::max(v.boundsHi[a], float(q[size_t(a)]));
       }
     }
     for (int a = 0; a < 3; ++a) {
       // (a NaN ray position from farther crashed the descent)
-      if (!(std::fabs(v.boundsLo[a]) <= kMaxWorldCoordinate && std::fabs(v.boundsHi[a]) <= kMaxWorldCoordinate))
+      if (!(std::fabs(latLo[a]) <= kMaxWorldCoordinate && std::fabs(latHi[a]) <= kMaxWorldCoordinate))
         throw invalidInput(what + ": its world bounds reach beyond +-1e9 m (too far for single-precision rendering)");
-      lo[a] = std::min(lo[a], double(v.boundsLo[a]));
-      hi[a] = std::max(hi[a], double(v.boundsHi[a]));
+      lo[a] = std::min(lo[a], double(latLo[a]));
+      hi[a] = std::max(hi[a], double(latHi[a]));
     }
     if (std::isfinite(baseIndexY[I.model])) {  // the instance's base: its model's lowest matter, below the lattice's centre
       std::array<double, 3> p;

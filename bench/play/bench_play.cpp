@@ -21,6 +21,7 @@
 #include <nlohmann/json.hpp>
 
 #include "bench/play/forest.h"
+#include "bench/play/image_error.h"
 #include "canopy/cli.h"
 #include "canopy/device.h"
 #include "formats/canopy_write.h"
@@ -139,15 +140,9 @@ int main(int argc, char** argv) {
       if (!firstFrames.count(s.name)) {
         firstFrames[s.name] = last;
       } else if (firstFrames[s.name].size() == last.size()) {
-        const std::vector<float>& ref = firstFrames[s.name];
-        double se = 0, mean = 0;
-        size_t covered = 0;
-        for (size_t i = 0; i < last.size(); ++i) se += double(last[i] - ref[i]) * (last[i] - ref[i]);
-        for (size_t p = 0; p + 3 < ref.size(); p += 4)
-          if (ref[p + 3] > 0.5f) mean += double(ref[p]) + ref[p + 1] + ref[p + 2], covered += 3;
-        const double rms = std::sqrt(se / double(last.size())), meanRgb = covered ? mean / double(covered) : 0.0;
-        r["rms_vs_first_method"] = rms;
-        r["rms_vs_first_method_relative"] = meanRgb > 0 ? rms / meanRgb : 0.0;
+        const canopy::play::bench::ImageError e = canopy::play::bench::imageError(last, firstFrames[s.name]);
+        r["rms_vs_first_method"] = e.rms;
+        r["rms_vs_first_method_relative"] = e.relative;
       }
       results.push_back(r);
       const double med = r["frame_ms_median"], fc = r["first_complete_frame_s"];

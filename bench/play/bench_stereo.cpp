@@ -20,31 +20,15 @@
 
 #include <nlohmann/json.hpp>
 
+#include "bench/play/image_error.h"
 #include "canopy/cli.h"
 #include "runtime/image_io.h"
 #include "runtime/player.h"
 
 namespace pl = canopy::play;
 
-namespace {
-
-struct ImageError {
-  double rms = 0.0, relative = 0.0;
-};
-
-ImageError imageError(const std::vector<float>& got, const std::vector<float>& ref) {
-  double se = 0.0, mean = 0.0;
-  size_t covered = 0;
-  for (size_t i = 0; i < got.size(); ++i) se += double(got[i] - ref[i]) * (got[i] - ref[i]);
-  for (size_t p = 0; p + 3 < ref.size(); p += 4)
-    if (ref[p + 3] > 0.5f) mean += double(ref[p]) + ref[p + 1] + ref[p + 2], covered += 3;
-  ImageError e;
-  e.rms = std::sqrt(se / double(std::max<size_t>(got.size(), 1)));
-  e.relative = covered ? e.rms / (mean / double(covered)) : 0.0;
-  return e;
-}
-
-}  // namespace
+using canopy::play::bench::ImageError;
+using canopy::play::bench::imageError;
 
 int main(int argc, char** argv) {
   canopy::Tool tool("bench-stereo", "Stereo by reprojection against a fully traced second eye: frame times, traced fraction, image error");
