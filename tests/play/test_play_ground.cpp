@@ -1,6 +1,7 @@
 // test_play_ground.cpp: the ground plane (cone.h groundHit/groundRadiance, --ground): where auto
 // puts it, its shading against the closed form, the crowns' shadow on it (map and cones), and that
-// it cuts the scene without changing anything a ray meets before it.
+// it cuts the scene without changing anything a ray meets before it. And the scene's other
+// start-up geometry: an instance's march extent (the box of its model's leaves with matter).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -192,4 +193,30 @@ TEST(Ground, CutsTheSceneAndChangesNothingBeforeIt) {
   o.ground = "5";           // above the eye: not seen
   const std::vector<float> above = render(o);
   EXPECT_EQ(above, none);
+}
+
+// The march's extent of an instance is the box of its model's leaves with matter, not the lattice
+// (a crown's lattice is a cube around the tree's height): a small block of matter in one corner of a
+// 48^3 lattice (cells 10..13, inside the finest node [8, 16)) gives the unit box [8, 16) / 64 and
+// the world box of those cells, while the scene's bounds stay the lattice's (framing, shadow map).
+TEST(Scene, MarchExtentIsTheBoxOfTheLeavesWithMatter) {
+  canopy::octreepack::ModelSource corner = pt::sphereModel(kEdge, 0.0f, kDensity, kCell);  // the lattice, no cell
+  for (int k = 10; k <= 13; ++k)
+    for (int j = 10; j <= 13; ++j)
+      for (int i = 10; i <= 13; ++i) corner.cells.push_back({{i, j, k}, 0.3f, 0.0f, {0.5f, 0.5f, 0.5f}});
+  const std::string f = pt::tmpDir("ground") + "/corner.canopy";
+  pt::writeScene(f, {corner}, {pt::instanceAt(0, 1, 2, 3)});
+  const pl::HostScene scene = pl::buildScene(canopy::CanopyFile::open(f));
+  ASSERT_EQ(scene.instances.size(), 1u);
+  const pl::InstanceView& v = scene.instances[0];
+  const double c = 0.5 * (kEdge - 1);
+  for (int a = 0; a < 3; ++a) {
+    EXPECT_FLOAT_EQ(v.unitLo[a], 8.0f / 64.0f) << a;
+    EXPECT_FLOAT_EQ(v.unitHi[a], 16.0f / 64.0f) << a;
+    const double at = a == 0 ? 1.0 : (a == 1 ? 2.0 : 3.0);
+    EXPECT_NEAR(v.boundsLo[a], at + (7.5 - c) * kCell, 1e-5) << a;    // cell 8's low face
+    EXPECT_NEAR(v.boundsHi[a], at + (15.5 - c) * kCell, 1e-5) << a;   // cell 15's high face
+    EXPECT_NEAR(scene.boundsLo[a], at - (c + 0.5) * kCell, 1e-5) << a;  // the lattice's
+    EXPECT_NEAR(scene.boundsHi[a], at + (c + 0.5) * kCell, 1e-5) << a;
+  }
 }
