@@ -4,7 +4,7 @@
 // against the 2 s target, and the streaming rate; saves the last frame of each scene as PNG.
 //
 //   bench-play OUTDIR [--device cuda] [--size 1920x1080] [--frames 120] [--cache-mb 1024]
-//                     [--instances 400] [--extra NAME=FILE.canopy ...]
+//                     [--instances 400] [--extra NAME=FILE.canopy[@CAMERA] ...]
 //
 // The scenes are built in-process from synthetic plants (bench/play/forest.h); --extra adds packed
 // scenes from the pipeline (e.g. the grove, or pipelines/scatter.py's forest packed by
@@ -65,7 +65,7 @@ int main(int argc, char** argv) {
   app.add_option("--frames", frames, "Frames per scene")->capture_default_str();
   app.add_option("--cache-mb", cacheMb, "Cache budget (MiB)")->capture_default_str();
   app.add_option("--instances", instances, "Forest instances")->capture_default_str();
-  app.add_option("--extra", extra, "NAME=FILE.canopy: more packed scenes (orbit camera)");
+  app.add_option("--extra", extra, "NAME=FILE.canopy[@CAMERA]: more packed scenes (default camera orbit:elevation=20; CAMERA as canopy-play --camera)");
   app.add_option("--shadows", shadowMethods, "Shadow methods to run, each scene with each (map, cone, off; a -nocache suffix turns off the descent cache, -nohold the held empty segments, -noskip the empty-cell skip, -occ6/-occ8/-occfree the CUDA pixel kernel for 6/8 blocks per SM or unconstrained (default: 6 without LB light, unconstrained with it), -rows puts a warp on 32 pixels of a row, -tile4/-tile16 on 4x8/16x2 pixels, -exact the finest level's light from Haar pages (--light exact); quality dials: -stop99 stops cones at opacity 0.99 (--stop-opacity), -step1 marches bricks in steps of one voxel (--step 1), -lod1 one level coarser (--lod-bias -1); each scene's last frame is compared with the first method's (RMS)")->capture_default_str();
   app.add_flag("--count-work", countWork, "CPU only: count cones, steps, samples and shadow work per frame (results.json \"work\")");
   app.add_flag("--only-extra", skipSynthetic, "Play only the --extra scenes (the synthetic ones are still written)");
@@ -95,8 +95,10 @@ int main(int argc, char** argv) {
     }
     for (const std::string& e : extra) {
       const size_t eq = e.find('=');
-      if (eq == std::string::npos) throw canopy::usageError("--extra NAME=FILE.canopy");
-      scenes.push_back({e.substr(0, eq), e.substr(eq + 1), "orbit:elevation=20"});
+      if (eq == std::string::npos) throw canopy::usageError("--extra NAME=FILE.canopy[@CAMERA]");
+      const size_t at = e.find('@', eq);  // an optional camera (an orbit spelling or a path file)
+      scenes.push_back({e.substr(0, eq), e.substr(eq + 1, at == std::string::npos ? std::string::npos : at - eq - 1),
+                        at == std::string::npos ? "orbit:elevation=20" : e.substr(at + 1)});
     }
     nlohmann::json results = nlohmann::json::array();
     std::map<std::string, std::vector<float>> firstFrames;  // per scene: the first method's last frame
