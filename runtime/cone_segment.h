@@ -1,0 +1,428 @@
+// cone_segment.h: one instance's segment at a ray position: the footprint's level, the octree
+// descent and its cache, held empty segments, runs of empty cells, the segment's light. Part of
+// runtime/cone.h.
+#pragma once
+#include "runtime/cone_light.h"
+
+namespace canopy::play {
+
+// ------------------------------------------------------------------------------------------------
+// One instance's segment at ray position t
+// ------------------------------------------------------------------------------------------------
+struct Segment {
+  float k;          // extinction per world unit
+  float albedo[3];
+  float tEnd;       // the value holds on [t, tEnd)
+  // shading segments with matter only: where the indirect light is sampled
+  const uint16_t* lightItem;  // the light item (nullptr: density-only indirect term)
+  float light[3];             // the sample's node-local coordinates in the light item's node (Haar: fx, fy, fz)
+  float tSample;              // the sample's world ray parameter (scene factor)
+  // Haar light (kHaarNone: not used): the item (nullptr: no light stored there) and the packed
+  // footprint lx | ly << 2 | lz << 4 | fp16 << 6; light[] then holds the fractions.
+  const unsigned char* haarItem;
+  uint32_t haarLocal;
+};
+constexpr uint32_t kHaarNone = 0xFFFFFFFFu;
+
+// Finest level whose voxel (2^(depth - L) lattice cells) is no larger than the footprint.
+CANOPY_HD inline uint32_t levelForFootprint(uint32_t depth, float footprintCells, float lodBias) {
+  const float fp = footprintCells > 1.0f ? footprintCells : 1.0f;
+  float L = float(depth) - floorf(log2f(fp)) + lodBias;
+  L = L < 0.0f ? 0.0f : (L > float(depth) ? float(depth) : L);
+  return uint32_t(L);
+}
+
+// World t at which o + t d (unit space) leaves the node box [lo, lo + size).
+CANOPY_HD inline float nodeExit(V3 uo, V3 ud, const float lo[3], float size) {
+  float t = 3.0e38f;
+  for (int a = 0; a < 3; ++a) {
+    const float da = comp(ud, a);
+    if (fabsf(da) < 1e-30f) continue;
+    const float bound = da > 0.0f ? lo[a] + size : lo[a];
+    const float ta = (bound - comp(uo, a)) / da;
+    t = ta < t ? ta : t;
+  }
+  return t;
+}
+
+// Descends instance `inst` at unit point u to `maxLevel`, noting the deepest resident brick on the
+// way (within kFallbackLevels of maxLevel). Returns the node reached.
+//
+// Compact (56 bytes): a ray keeps one per pending instance in local memory (DescentCache), where
+// the GPU's L1 holds a warp's words of it beside the bricks and nodes it samples; a box on the
+// descent path is stored as its level alone (levelBox: the box of that level that holds the node,
+// exact since boxes are dyadic). Against the 120 bytes of pointers, boxes and sizes before it, it
+// is the same descent, field for field.
+constexpr uint8_t kNoLevel = 0xFF;
+struct alignas(16) Descent {
+  float lo[3];                 // its box: [lo, lo + levelSize(level))   (descentCovers reads these 16 bytes at once)
+  uint8_t level;               // its level
+  uint8_t maxLevel;            // the level asked for (kNoLevel: an empty DescentCache)
+  uint8_t brickLevel;          // the brick to sample: the node's own if resident, else a resident ancestor's (level)
+  uint8_t lightLevel;          // LB light (wantLight only): the deepest brick on the path whose light page is resident
+  CanopyNode node;             // the node reached
+  int32_t brickPoolSlot;       // its page's pool slot; -1: no brick resident
+  uint32_t missingPage;        // the node's own page when it was missing, else kCanopyNone
+  int32_t lightPoolSlot;       // -1: no light page resident on the path
+  uint32_t missingLightPage;   // the deepest brick's light page when it was missing, else kCanopyNone
+  uint32_t coarsestLightPage;  // the shallowest brick's light page (asked for on a cold start)
+  uint16_t brickSlotInPage;    // the brick's slot in its page (< bricksPerPage)
+  uint16_t lightSlotInPage;    // the light item's slot in its page (< lightItemsPerPage)
+};
+// The reader admits pages of at most 64 MiB (canopy_file.cpp), so slots in a page fit 16 bits.
+static_assert(offsetof(Descent, level) == 12 && offsetof(Descent, maxLevel) == 13, "descentCovers' layout");
+static_assert((1u << 26) / kCanopyBrickBytes <= 0xFFFFu && (1u << 26) / kCanopyLightItemBytes <= 0xFFFFu,
+              "Descent's slots in a page are 16 bits");
+
+// 2^e for |e| < 127, exact, from its exponent bits.
+CANOPY_HD CANOPY_FORCEINLINE float pow2i(int e) { return canopyFloatFromBits(uint32_t(127 + e) << 23); }
+
+// The edge of a node of `level` (unit space): 2^-level, as the descent's halvings make it.
+CANOPY_HD CANOPY_FORCEINLINE float levelSize(uint32_t level) { return pow2i(-int(level)); }
+
+// The box of `level` (<= d.level) on d's descent path: [lo, lo + size). Every box is dyadic, so
+// this is exact: the same bits as the descent's own lo at that level.
+CANOPY_HD CANOPY_FORCEINLINE float levelBox(const Descent& d, uint32_t level, float lo[3]) {
+  const float size = levelSize(level), scale = pow2i(int(level));
+  for (int a = 0; a < 3; ++a) lo[a] = floorf(d.lo[a] * scale) * size;
+  return size;
+}
+
+// The brick page of d (nullptr: no brick resident), and its light item (nullptr: none resident).
+CANOPY_HD CANOPY_FORCEINLINE const unsigned char* descentBrickPage(const SceneView& s, const Descent& d) {
+  return d.brickPoolSlot >= 0 ? s.pool + size_t(d.brickPoolSlot) * s.pageBytes : nullptr;
+}
+CANOPY_HD CANOPY_FORCEINLINE const uint16_t* descentLightItem(const SceneView& s, const Descent& d) {
+  return d.lightPoolSlot >= 0 ? canopyLightInPage(s.pool + size_t(d.lightPoolSlot) * s.pageBytes, d.lightSlotInPage) : nullptr;
+}
+
+// The pool slot of brick `brick`'s page (-1: not resident); its page and slot in the page.
+CANOPY_HD inline int32_t residentSlot(const SceneView& s, const ModelView& m, uint32_t brick, uint32_t& page, uint32_t& inPage) {
+  page = m.firstBrickPage + divide(s.bricksPerPage, brick, inPage);
+  return s.pageSlot[page];
+}
+
+// A node of a tile array, by load16 (on the device every node is 16-byte aligned: the backend's
+// tile arrays are device allocations of 16-byte nodes; the host's copy needs no alignment).
+CANOPY_HD CANOPY_FORCEINLINE CanopyNode loadNode(const CanopyNode* p) {
+  const Words4 v = load16(p);
+  CanopyNode n;
+  n.child = v.w[0], n.brick = v.w[1], n.density = canopyFloatFromBits(v.w[2]), n.material = v.w[3];
+  return n;
+}
+
+CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m, V3 u, uint32_t maxLevel, bool wantLight) {
+  float x[3] = {u.x, u.y, u.z};
+  for (int a = 0; a < 3; ++a) x[a] = x[a] < 0.0f ? 0.0f : (x[a] >= 1.0f ? 0.99999994f : x[a]);
+  Descent d;
+  d.node = m.root;
+  d.lo[0] = d.lo[1] = d.lo[2] = 0.0f;
+  d.maxLevel = uint8_t(maxLevel);
+  d.brickLevel = d.lightLevel = 0;
+  d.brickPoolSlot = -1;
+  d.brickSlotInPage = 0;
+  d.missingPage = kCanopyNone;
+  d.lightPoolSlot = -1;
+  d.lightSlotInPage = 0;
+  d.missingLightPage = kCanopyNone;
+  d.coarsestLightPage = kCanopyNone;
+  wantLight = wantLight && m.hasLight;
+  const uint32_t firstFallback = maxLevel > kFallbackLevels ? maxLevel - kFallbackLevels : 0;
+  float size = 1.0f;
+  uint32_t level = 0;
+  for (;;) {
+    const bool last = !(level < maxLevel && d.node.child != kCanopyNone && d.node.child < m.tileCount);
+    if (wantLight && d.node.brick != kCanopyNone) {
+      uint32_t inPage;
+      const uint32_t lpage = m.firstLightPage + divide(s.lightItemsPerPage, d.node.brick, inPage);
+      const int32_t lslot = s.pageSlot[lpage];
+      if (d.coarsestLightPage == kCanopyNone) d.coarsestLightPage = lpage;
+      if (lslot >= 0) {
+        d.lightPoolSlot = lslot;
+        d.lightSlotInPage = uint16_t(inPage);
+        d.lightLevel = uint8_t(level);
+        d.missingLightPage = kCanopyNone;
+      } else {
+        d.missingLightPage = lpage;
+      }
+    }
+    if (d.node.brick != kCanopyNone && (level >= firstFallback || last)) {
+      uint32_t page, inPage;
+      const int32_t slot = residentSlot(s, m, d.node.brick, page, inPage);
+      if (slot >= 0) {
+        d.brickPoolSlot = slot;
+        d.brickSlotInPage = uint16_t(inPage);
+        d.brickLevel = uint8_t(level);
+      } else if (last) {
+        d.missingPage = page;
+      }
+    }
+    if (last) break;
+    const uint32_t c = canopyStepDown(x, d.lo, size);
+    d.node = loadNode(m.tiles + size_t(d.node.child) * 8 + c);
+    ++level;
+  }
+  d.level = uint8_t(level);
+  return d;
+}
+
+// The last descent of one instance along one ray: a later point inside the node reached, with the
+// same level asked for, reaches the same node with the same resident bricks (the page table does
+// not change during a pass), so instanceSegment() reuses it instead of descending from the root
+// again: a brick node is crossed in about 2 x 8 steps of half a voxel, one descent instead of ~16.
+// The result is exactly that of a fresh descent (same node, same brick, same light item).
+struct DescentCache {
+  Descent d;  // d.maxLevel == kNoLevel: empty (a new hit)
+};
+
+// The point u (unit space, clamped as descendResident clamps it) is inside the cached node.
+CANOPY_HD CANOPY_FORCEINLINE bool descentCovers(const DescentCache& c, V3 u, uint32_t maxLevel) {
+  const Words4 v = load16(&c.d);  // lo, then level and maxLevel (little-endian bytes)
+  const float lo[3] = {canopyFloatFromBits(v.w[0]), canopyFloatFromBits(v.w[1]), canopyFloatFromBits(v.w[2])};
+  const uint32_t level = v.w[3] & 0xFFu, cachedMax = (v.w[3] >> 8) & 0xFFu;
+  if (cachedMax != maxLevel) return false;  // also where empty: maxLevel <= a model's depth < kNoLevel
+  const float size = levelSize(level);
+  float x[3] = {u.x, u.y, u.z};
+  bool in = true;
+  for (int a = 0; a < 3; ++a) {
+    x[a] = x[a] < 0.0f ? 0.0f : (x[a] >= 1.0f ? 0.99999994f : x[a]);
+    in = in && x[a] >= lo[a] && x[a] < lo[a] + size;
+  }
+  return in;
+}
+
+// A shading segment's light at unit point um (world ray parameter tm): the descent's light item and
+// the node-local coordinates of um in it. Light pages are used and asked for here, only by
+// segments with matter (not by empty space).
+CANOPY_HD inline void segmentLight(const SceneView& s, const ModelView& m, const Descent& d, V3 um, float tm, Segment& g) {
+  g.haarLocal = kHaarNone;
+  g.haarItem = nullptr;
+  if (s.shade.exactLight && m.haarLight && d.level == m.depth) {
+    // --light exact, the finest level of a Haar-lit model: the chaar brick at the sample's lattice
+    // point, if its page is resident (else it is asked for and the float16 items serve).
+    const float rc = float(m.rootCells);
+    const CanopyHaarLocation at =
+        canopyHaarLocate(m.haar, um.x * rc - 0.5f + float(m.origin[0]), um.y * rc - 0.5f + float(m.origin[1]), um.z * rc - 0.5f + float(m.origin[2]));
+    const int32_t slot = at.page != kCanopyNone ? s.pageSlot[at.page] : -1;
+    if (at.page == kCanopyNone || slot >= 0) {
+      if (slot >= 0) {
+        writeStamp(s.slotUsed + slot, s.stamp);
+        g.haarItem = canopyHaarItemInPage(s.pool + size_t(slot) * s.pageBytes, at.item);
+      }
+      g.haarLocal = uint32_t(at.at.lx) | uint32_t(at.at.ly) << 2 | uint32_t(at.at.lz) << 4 | m.haar.fp16 << 6;
+      g.light[0] = at.at.fx, g.light[1] = at.at.fy, g.light[2] = at.at.fz;
+      g.lightItem = nullptr;
+      g.tSample = tm;
+      return;
+    }
+    writeStamp(s.pageWanted + at.page, s.stamp);
+  }
+  if (d.missingLightPage != kCanopyNone) writeStamp(s.pageWanted + d.missingLightPage, s.stamp);
+  g.lightItem = descentLightItem(s, d);
+  g.tSample = tm;
+  if (g.lightItem) {
+    writeStamp(s.slotUsed + d.lightPoolSlot, s.stamp);
+    float lo[3];
+    const float inv = 1.0f / levelBox(d, d.lightLevel, lo);
+    g.light[0] = (um.x - lo[0]) * inv;
+    g.light[1] = (um.y - lo[1]) * inv;
+    g.light[2] = (um.z - lo[2]) * inv;
+  } else {
+    if (d.coarsestLightPage != kCanopyNone) writeStamp(s.pageWanted + d.coarsestLightPage, s.stamp);
+    g.light[0] = g.light[1] = g.light[2] = 0.0f;
+  }
+}
+
+// The indirect light of a shading segment of instance `inst` on the ray o + t dir: the LB light of
+// its light item, else the density-only ambient term; each term times its scene factor at its sample.
+// kWithLight = false: compiled without the LB light code, for scenes without lit models (where no
+// segment has a light item, so the result is the same).
+template <bool kWithLight = true>
+CANOPY_HD inline void segmentIndirect(const SceneView& s, const InstanceView& inst, const Segment& g, V3 o, V3 dir, float out[3]) {
+  const SceneLightPair factor = sceneLightFactors(s.light, o + dir * g.tSample);
+  if (kWithLight && g.haarLocal != kHaarNone) {
+    haar::BrickLookup at;
+    at.slot = 0;
+    at.lx = int(g.haarLocal & 3u), at.ly = int((g.haarLocal >> 2) & 3u), at.lz = int((g.haarLocal >> 4) & 3u);
+    at.fx = g.light[0], at.fy = g.light[1], at.fz = g.light[2];
+    const haar::Rgb sun = {s.shade.sun[0], s.shade.sun[1], s.shade.sun[2]};
+    sampleHaarLbLight(g.haarItem, (g.haarLocal >> 6) & 1u, at, inst.sunWeights, sun, s.shade.ambient, factor.sun, factor.ambient, out);
+    return;
+  }
+  if (!kWithLight || !g.lightItem) {
+    ambientOnly(s, factor, out);
+    return;
+  }
+  sampleLbLight(g.lightItem, inst.sunWeights, g.light[0], g.light[1], g.light[2], s.shade.sun, s.shade.ambient, factor, out);
+}
+
+// An instance's segment that stays what it is (k = 0, the same end) over later steps: the primary
+// march keeps it instead of evaluating the instance again at each step of its neighbours (another
+// instance's brick steps, while this one crosses an empty node). instanceSegment() fills it for an
+// EMPTY LEAF (no children, no brick, density 0), and for a run of empty cells of a brick (the
+// argument is at that code, emptyRunEnd's use): evaluating the instance again at any t' with
+//   t' < until   and   the footprint's level at t' >= level (the leaf's level)
+// descends to the same leaf (the point is inside it, and a leaf ends every descent that reaches its
+// level) and returns k = 0 with the same end, bit for bit: `until` stops 3 epsilons (instanceSegment's
+// eps at the segment's end, which bounds the eps at t') short of the end, far more than the float
+// rounding of the point (a few ulps of unit coordinates, < 1e-3 cell) and of the exit. Everything
+// else (bricks, uniform nodes, misses, shadow cones) is evaluated at every step as before. The
+// primary march then folds the level condition into `until` (levelHoldsUntil: the footprint only
+// grows along the ray, so the level condition holds below some t), and a held hit costs one
+// comparison per step.
+struct EmptyHold {
+  float until;     // -inf: nothing held
+  float end;       // the held segment's end (its tEnd)
+  uint32_t level;  // the leaf's level
+};
+
+// The end of the run of empty cells (formats/canopy_file.h, empty-cell masks) of a brick that
+// the ray o + t d (unit space) crosses from unit point u on: false when u's cell is not empty, else
+// true and tEnd = where the ray enters the first cell that is not, or leaves the brick ([brickLo,
+// brickLo + brickSize), inv = 1 / brickSize). A 3D-DDA over the brick's n^3 cells; each plane's
+// crossing is computed from the plane alone (as nodeExit does), so a walk that starts in a later
+// cell of the same run ends at the same value.
+CANOPY_HD inline bool emptyRunEnd(const uint64_t* mask, V3 uo, V3 ud, V3 u, const float brickLo[3], float brickSize, float inv, float& tEnd) {
+  constexpr int n = int(kCanopyEmptyCells);
+  const auto empty = [mask](int x, int y, int z) {
+    const uint32_t i = uint32_t(x + n * (y + n * z));
+    return ((mask[i / 64] >> (i % 64)) & 1u) != 0;
+  };
+  int j[3];
+  for (int a = 0; a < 3; ++a) {
+    const float q = floorf((comp(u, a) - brickLo[a]) * inv * float(n));
+    j[a] = q < 0.0f ? 0 : (q > float(n - 1) ? n - 1 : int(q));
+  }
+  if (!empty(j[0], j[1], j[2])) return false;
+  const float q = brickSize / float(n);
+  float tn[3];
+  int st[3];
+  for (int a = 0; a < 3; ++a) {
+    const float da = comp(ud, a);
+    st[a] = fabsf(da) < 1e-30f ? 0 : (da > 0.0f ? 1 : -1);
+    tn[a] = st[a] == 0 ? 3.0e38f : (brickLo[a] + float(j[a] + (st[a] > 0)) * q - comp(uo, a)) / da;
+  }
+  for (;;) {
+    int a = tn[1] < tn[0] ? 1 : 0;
+    a = tn[2] < tn[a] ? 2 : a;
+    tEnd = tn[a];
+    j[a] += st[a];
+    if (st[a] == 0 || j[a] < 0 || j[a] > n - 1 || !empty(j[0], j[1], j[2])) return true;
+    tn[a] = (brickLo[a] + float(j[a] + (st[a] > 0)) * q - comp(uo, a)) / comp(ud, a);
+  }
+}
+
+// The octree level instanceSegment() picks for footprint (world) at instance `inst`.
+CANOPY_HD CANOPY_FORCEINLINE uint32_t segmentLevel(const SceneView& s, const InstanceView& inst, uint32_t depth, float footprint) {
+  return levelForFootprint(depth, footprint / inst.cellWorld, s.shade.lodBias);
+}
+
+// A ray parameter T such that the level of a primary cone (segmentLevel at footprint t *
+// pixelAngle) is >= `level` at every t < T, so that a held segment's level condition (EmptyHold)
+// can be folded into its `until` once, instead of being evaluated at every step. levelForFootprint
+// gives depth - floor(log2 fp) + lodBias (fp = max(footprint / cellWorld, 1), clamped, truncated),
+// which is >= level (level >= 1) exactly where floor(log2 fp) <= depth + lodBias - level, i.e.
+// fp < 2^k with k = floor(depth + lodBias - level) + 1. T stops 1e-5 short of that relatively: far
+// more than the rounding of t * pixelAngle / cellWorld and of log2f near 2^k (a few 1e-7), so
+// every t < T has fp < 2^k in floats too. (k >= 1 wherever the hold was made: its level is at most
+// the level at that t.) Level 0 holds everywhere.
+CANOPY_HD inline float levelHoldsUntil(const SceneView& s, const InstanceView& inst, uint32_t depth, float pixelAngle, uint32_t level) {
+  if (level == 0) return 3.0e38f;
+  const float k = floorf(float(depth) + s.shade.lodBias - float(level)) + 1.0f;
+  return ldexpf(inst.cellWorld / pixelAngle, int(k)) * 0.99999f;
+}
+
+// The segment of instance `inst` at ray position t (world), the cone footprint there being
+// `footprint` (world units). tout is the end of the instance's box interval. `hold` (optional): set
+// for an empty leaf's segment, else cleared (see EmptyHold).
+CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView& inst, V3 o, V3 dir, float t,
+                                         float tout, float footprint, bool shading, DescentCache& cache,
+                                         EmptyHold* hold = nullptr) {
+  const ModelView& m = s.models[inst.model];
+  const V3 uo = applyPoint(inst.worldToUnit, o);
+  const V3 ud = applyVector(inst.worldToUnit, dir);
+  const float cellsPerWorld = length(ud) * float(m.rootCells);
+  // a thousandth of a cell, but at least a few float ulps of t (progress far from the origin)
+  const float eps = fmaxf(1e-3f / cellsPerWorld, fabsf(t) * 1e-6f);
+  const uint32_t level = segmentLevel(s, inst, m.depth, footprint);
+  const V3 up = uo + ud * (t + eps);
+  if (hold) hold->until = -3.0e38f;
+  CANOPY_PLAY_COUNT(s, segments, 1);
+  if (!s.shade.descentCache || !descentCovers(cache, up, level)) {
+    cache.d = descendResident(s, m, up, level, shading);
+    CANOPY_PLAY_COUNT(s, descents, 1);
+  }
+  const Descent& d = cache.d;
+  Segment g;
+  float tExit = nodeExit(uo, ud, d.lo, levelSize(d.level));
+  if (tExit < t + eps) tExit = t + eps;
+  if (d.missingPage != kCanopyNone) writeStamp(s.pageWanted + d.missingPage, s.stamp);
+  const unsigned char* brickPage = descentBrickPage(s, d);
+  const bool useBrick = d.node.brick != kCanopyNone && brickPage != nullptr;
+  if (!useBrick) {
+    // constant node, or a missing brick without a close resident ancestor: the node's mean
+    const CanopySample c = canopyUnpack(d.node.density, d.node.material);
+    g.k = s.shade.sigma * c.density * cellsPerWorld;
+    g.albedo[0] = c.albedo[0], g.albedo[1] = c.albedo[1], g.albedo[2] = c.albedo[2];
+    float tEnd = tExit;
+    if (shading && c.density > 0.0f) {  // a shadow cone integrates it in one go
+      const float maxLen = kMaxConstantCells / cellsPerWorld;
+      tEnd = tEnd < t + maxLen ? tEnd : t + maxLen;
+    }
+    g.tEnd = tEnd < tout ? tEnd : tout;
+    if (shading && g.k > 0.0f) segmentLight(s, m, d, uo + ud * (0.5f * (t + g.tEnd)), 0.5f * (t + g.tEnd), g);
+    if (hold && c.density == 0.0f && d.node.brick == kCanopyNone && !(d.node.child != kCanopyNone && d.node.child < m.tileCount)) {
+      const float epsEnd = fmaxf(1e-3f / cellsPerWorld, fabsf(g.tEnd) * 1e-6f);
+      hold->until = g.tEnd - 3.0f * epsEnd;
+      hold->end = g.tEnd;
+      hold->level = d.level;
+    }
+    return g;
+  }
+  writeStamp(s.slotUsed + d.brickPoolSlot, s.stamp);
+  float brickLo[3];
+  const float brickSize = levelBox(d, d.brickLevel, brickLo);
+  const float inv = 1.0f / brickSize;
+  if (s.shade.skipEmptyBlocks && s.brickMaskOffset != 0) {
+    const uint64_t* mask = reinterpret_cast<const uint64_t*>(brickPage + s.brickMaskOffset) + kCanopyEmptyWords * d.brickSlotInPage;
+    float tEnd;
+    if (emptyRunEnd(mask, uo, ud, up, brickLo, brickSize, inv, tEnd)) {
+      // k = 0 up to the empty run's end: the samples a march would take there all read 0
+      CANOPY_PLAY_COUNT(s, emptyBlockSkips, 1);
+      tEnd = tEnd > t + eps ? tEnd : t + eps;
+      tEnd = tEnd < tExit ? tEnd : tExit;
+      g.tEnd = tEnd < tout ? tEnd : tout;
+      g.k = 0.0f;
+      g.albedo[0] = g.albedo[1] = g.albedo[2] = 0.0f;
+      if (hold) {
+        // Evaluated again at t' < until with the footprint's level still >= d.level (so equal to it
+        // where the node has children: the level only gets coarser along the ray), the descent
+        // reaches the same node and brick, the point lies in a later cell of the same run, and
+        // the walk from there ends at the same plane, computed alike (the argument of EmptyHold;
+        // where the ray grazes a cell edge within float rounding, the point's cell may
+        // be the diagonal neighbour of the walk's, and the two could differ).
+        const float epsEnd = fmaxf(1e-3f / cellsPerWorld, fabsf(g.tEnd) * 1e-6f);
+        hold->until = g.tEnd - 3.0f * epsEnd;
+        hold->end = g.tEnd;
+        hold->level = d.level;
+      }
+      return g;
+    }
+  }
+  CANOPY_PLAY_COUNT(s, brickSamples, 1);
+  const float voxelCells = float(m.rootCells >> 3) * levelSize(d.level);  // this level's voxel, in cells
+  float tEnd = t + s.shade.stepFactor * voxelCells / cellsPerWorld;
+  tEnd = tEnd < tExit ? tEnd : tExit;
+  tEnd = tEnd < tout ? tEnd : tout;
+  const V3 um = uo + ud * (0.5f * (t + tEnd));
+  const CanopySample c = canopySampleBrick(canopyBrickInPage(brickPage, d.brickSlotInPage), (um.x - brickLo[0]) * inv,
+                                           (um.y - brickLo[1]) * inv, (um.z - brickLo[2]) * inv);
+  g.k = s.shade.sigma * c.density * cellsPerWorld;
+  if (c.density == 0.0f) CANOPY_PLAY_COUNT(s, zeroBrickSamples, 1);
+  g.albedo[0] = c.albedo[0], g.albedo[1] = c.albedo[1], g.albedo[2] = c.albedo[2];
+  g.tEnd = tEnd;
+  if (shading && g.k > 0.0f) segmentLight(s, m, d, um, 0.5f * (t + tEnd), g);
+  return g;
+}
+
+}  // namespace canopy::play

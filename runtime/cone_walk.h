@@ -1,0 +1,191 @@
+// cone_walk.h: the instances along a ray: the 3D-DDA over the instance grid and the hit list of the
+// lock-step march. Part of runtime/cone.h.
+#pragma once
+#include "runtime/cone_segment.h"
+
+namespace canopy::play {
+
+// ------------------------------------------------------------------------------------------------
+// The lock-step march over every instance along a ray
+// ------------------------------------------------------------------------------------------------
+// The first 16 bytes are what every step reads of every hit (tin, hold.until, hold.end): one
+// 16-byte load on the GPU (hitHead).
+struct alignas(16) Hit {
+  float tin;
+  EmptyHold hold;  // primary march: its current empty leaf segment (until = -inf: none)
+  uint32_t instance;
+  float tout;
+};
+static_assert(offsetof(Hit, hold) == 4 && offsetof(EmptyHold, until) == 0 && offsetof(EmptyHold, end) == 4, "hitHead's layout");
+
+// tin, hold.until and hold.end of a hit.
+CANOPY_HD CANOPY_FORCEINLINE void hitHead(const Hit& h, float& tin, float& until, float& end) {
+  const Words4 v = load16(&h);
+  tin = canopyFloatFromBits(v.w[0]), until = canopyFloatFromBits(v.w[1]), end = canopyFloatFromBits(v.w[2]);
+}
+
+// 3D-DDA over the instance grid plus the hit list. The hits live in fixed slots (a bit of `live`
+// each, visited in ascending slot order): a hit never moves, its descent cache sits beside it at
+// the same index, and retiring one clears a bit instead of shifting the hits after it (local
+// memory on the GPU). Retiring runs only once the march reaches the nearest exit (`minTout`), not
+// at every step.
+// A cell entered through a face adds only the instances that the cell behind the face does not
+// list (SceneView::gridFaceItems): every other one was met in an earlier cell of the walk, and its
+// interval along the ray, tested there, was added then or rejected for good (a rejection at an
+// earlier, smaller tNow holds at a later one). An instance's cells form a box of cells and the
+// walk's cells move monotonically along each axis, so an instance met in any earlier cell is
+// listed by the cell just behind. So no membership scan is needed, except after a hit was dropped
+// from a full list (`dropped`): from then on each cell's whole list is scanned against the hits,
+// as a dropped instance is found again from a later cell it overlaps.
+struct InstanceWalk {
+  Hit hits[kHitCapacity];
+  DescentCache caches[kHitCapacity];  // caches[i]: hits[i]'s last descent along the ray (empty when added)
+  uint32_t live;                      // bit i: hits[i] is pending or active
+  float minTout;                      // <= every live hit's tout
+  int cell[3];
+  int stepDir[3];
+  float tNext[3], tDelta[3];
+  float tCellExit;  // the march may advance up to here with the current list
+  float tGridExit;
+  bool done;
+  bool dropped;  // a hit was dropped from a full list: cells add their whole lists with a membership scan
+};
+constexpr uint32_t kAllHitSlots = kHitCapacity >= 32 ? 0xFFFFFFFFu : (1u << kHitCapacity) - 1u;
+
+// Index of the lowest set bit of a non-zero mask.
+CANOPY_HD CANOPY_FORCEINLINE uint32_t lowestSetBit(uint32_t m) {
+#if defined(__CUDA_ARCH__)
+  return uint32_t(__ffs(int(m)) - 1);
+#else
+  return uint32_t(__builtin_ctz(m));
+#endif
+}
+
+// Adds the instances of the current cell, entered through `face` (2 a for a step along +a, 2 a + 1
+// along -a; -1: the walk's first cell).
+CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 d, float tNow, int face) {
+  const int c = w.cell[0] + s.gridDim[0] * (w.cell[1] + s.gridDim[1] * w.cell[2]);
+  const bool scan = face < 0 || w.dropped;
+  const uint32_t* items = scan ? s.gridItems : s.gridFaceItems;
+  const uint32_t list = scan ? uint32_t(c) : uint32_t(6 * c + face);
+  const uint32_t* start = scan ? s.gridStart : s.gridFaceStart;
+  const uint32_t kEnd = start[list + 1];
+  for (uint32_t k = start[list]; k < kEnd; ++k) {
+    const uint32_t id = items[k];
+    if (scan) {
+      bool present = false;
+      for (uint32_t m = w.live; m != 0; m &= m - 1u) present |= w.hits[lowestSetBit(m)].instance == id;
+      if (present) continue;
+    }
+    const InstanceView& inst = s.instances[id];
+    // the exact interval: the ray against the box of the model's matter in the instance's unit
+    // space (an oriented box in world space; t is the same parameter in both spaces)
+    float t0, t1;
+    rayBox(applyPoint(inst.worldToUnit, o), applyVector(inst.worldToUnit, d), v3(inst.unitLo[0], inst.unitLo[1], inst.unitLo[2]),
+           v3(inst.unitHi[0], inst.unitHi[1], inst.unitHi[2]), t0, t1);
+    if (t0 < tNow) t0 = tNow;
+    if (!(t1 > t0)) continue;
+    uint32_t slot;
+    if (w.live == kAllHitSlots) {  // full: replace the farthest pending hit if this one is nearer
+      slot = 0;
+      for (uint32_t m = w.live & (w.live - 1u); m != 0; m &= m - 1u) {
+        const uint32_t h = lowestSetBit(m);
+        slot = w.hits[h].tin > w.hits[slot].tin ? h : slot;
+      }
+      w.dropped = true;  // this one or the farthest: found again from a later cell it overlaps
+      CANOPY_PLAY_COUNT(s, hitDrops, 1);
+      if (w.hits[slot].tin <= t0) continue;
+    } else {
+      slot = lowestSetBit(~w.live & kAllHitSlots);
+      w.live |= 1u << slot;
+    }
+    w.hits[slot] = Hit{t0, EmptyHold{-3.0e38f, 0.0f, 0u}, id, t1};
+    w.caches[slot].d.maxLevel = kNoLevel;
+    w.minTout = t1 < w.minTout ? t1 : w.minTout;
+  }
+}
+
+// Starts the walk for the ray o + t d, t in [tStart, tEnd].
+CANOPY_HD inline void walkBegin(const SceneView& s, InstanceWalk& w, V3 o, V3 d, float tStart, float tEnd) {
+  w.live = 0;
+  w.minTout = 3.0e38f;
+  w.done = true;
+  w.dropped = false;
+  w.tCellExit = tEnd;
+  if (s.instanceCount == 0) return;
+  const V3 lo = v3(s.gridLo[0], s.gridLo[1], s.gridLo[2]);
+  const V3 hi = v3(s.gridLo[0] + s.gridCell[0] * float(s.gridDim[0]), s.gridLo[1] + s.gridCell[1] * float(s.gridDim[1]),
+                   s.gridLo[2] + s.gridCell[2] * float(s.gridDim[2]));
+  float t0, t1;
+  rayBox(o, d, lo, hi, t0, t1);
+  t0 = t0 > tStart ? t0 : tStart;
+  t1 = t1 < tEnd ? t1 : tEnd;
+  if (!(t1 > t0)) return;
+  w.done = false;
+  w.tGridExit = t1;
+  const V3 p = o + d * t0;
+  for (int a = 0; a < 3; ++a) {
+    const float cs = s.gridCell[a];
+    int c = int(floorf((comp(p, a) - s.gridLo[a]) / cs));
+    c = c < 0 ? 0 : (c >= s.gridDim[a] ? s.gridDim[a] - 1 : c);
+    w.cell[a] = c;
+    const float da = comp(d, a);
+    if (da > 0.0f) {
+      w.stepDir[a] = 1;
+      w.tNext[a] = (s.gridLo[a] + float(c + 1) * cs - comp(o, a)) / da;
+      w.tDelta[a] = cs / da;
+    } else if (da < 0.0f) {
+      w.stepDir[a] = -1;
+      w.tNext[a] = (s.gridLo[a] + float(c) * cs - comp(o, a)) / da;
+      w.tDelta[a] = -cs / da;
+    } else {
+      w.stepDir[a] = 0;
+      w.tNext[a] = 3.0e38f;
+      w.tDelta[a] = 3.0e38f;
+    }
+  }
+  walkAddCell(s, w, o, d, t0, -1);
+  float tx = w.tNext[0] < w.tNext[1] ? w.tNext[0] : w.tNext[1];
+  tx = tx < w.tNext[2] ? tx : w.tNext[2];
+  w.tCellExit = tx < t1 ? tx : t1;
+}
+
+// Advances the DDA one cell (when the march reached tCellExit).
+CANOPY_HD inline void walkAdvance(const SceneView& s, InstanceWalk& w, V3 o, V3 d, float tNow) {
+  if (w.done) return;
+  if (w.tCellExit >= w.tGridExit) {
+    w.done = true;
+    return;
+  }
+  int a = 0;
+  if (w.tNext[1] < w.tNext[a]) a = 1;
+  if (w.tNext[2] < w.tNext[a]) a = 2;
+  w.cell[a] += w.stepDir[a];
+  w.tNext[a] += w.tDelta[a];
+  if (w.cell[a] < 0 || w.cell[a] >= s.gridDim[a]) {
+    w.done = true;
+    w.tCellExit = w.tGridExit;
+    return;
+  }
+  walkAddCell(s, w, o, d, tNow, 2 * a + (w.stepDir[a] > 0 ? 0 : 1));
+  float tx = w.tNext[0] < w.tNext[1] ? w.tNext[0] : w.tNext[1];
+  tx = tx < w.tNext[2] ? tx : w.tNext[2];
+  w.tCellExit = tx < w.tGridExit ? tx : w.tGridExit;
+}
+
+// Drops hits that ended before t (tout <= t); nothing to do before the nearest exit.
+CANOPY_HD inline void walkRetire(InstanceWalk& w, float t) {
+  if (t < w.minTout) return;
+  w.minTout = 3.0e38f;
+  for (uint32_t m = w.live; m != 0; m &= m - 1u) {
+    const uint32_t h = lowestSetBit(m);
+    const float tout = w.hits[h].tout;
+    if (!(tout > t)) {
+      w.live &= ~(1u << h);
+      continue;
+    }
+    w.minTout = tout < w.minTout ? tout : w.minTout;
+  }
+}
+
+}  // namespace canopy::play

@@ -1,0 +1,155 @@
+// shadow_map.h: the sun transmittance map (kShadowsMap): the scene's extinction grid and the
+// frame's map, built by the backends and read per sample. Part of runtime/cone.h.
+#pragma once
+#include "runtime/cone_walk.h"
+
+namespace canopy::play {
+
+// ------------------------------------------------------------------------------------------------
+// The sun transmittance map (kShadowsMap)
+// ------------------------------------------------------------------------------------------------
+// Two grids. (1) The scene's EXTINCTION GRID (world axes, built once per scene by the backend):
+// at each voxel centre the sum, over the instances whose lattice box holds the point (found
+// through the instance grid), of sigma x the node mean density / the instance's cell, the node
+// being the one of edge <= 2 voxels on the descent (node tiles are always resident, so the grid
+// needs no page, is the same for every cache state and is ready at the first frame). (2) The
+// frame's TRANSMITTANCE MAP (light space, per render pass): each column is a ray from the sun,
+// marched front to back through the extinction grid (trilinear, steps of at most one extinction
+// voxel); T at a voxel centre = exp(-optical depth from the sun). A sample reads T trilinearly.
+// The cost per frame is one march per map column (independent of the image and of the number of
+// samples) and 8 reads per shaded sample, instead of a shadow cone through every instance per
+// shadow interval. Shadows are resolved to about one finest node (8 lattice cells) and the map
+// voxel; the cone mode (kShadowsCone) keeps the brick-resolution reference.
+struct ExtinctionGridView {
+  float* k;           // dim[0] * dim[1] * dim[2] values, x fastest (extinction per world unit)
+  float lo[3];        // world position of voxel (0, 0, 0)'s centre
+  float voxel;        // voxel edge (world)
+  int32_t dim[3];
+};
+
+// The node-mean extinction of every instance at world point x (per world unit), nodes of edge at
+// most `maxNode` (world).
+CANOPY_HD inline float sceneMeanExtinctionAt(const SceneView& s, V3 x, float maxNode) {
+  if (s.instanceCount == 0) return 0.0f;
+  int c[3];
+  for (int a = 0; a < 3; ++a) {
+    const float g = (comp(x, a) - s.gridLo[a]) / s.gridCell[a];
+    if (!(g >= 0.0f) || g >= float(s.gridDim[a])) return 0.0f;  // outside every instance box
+    c[a] = int(g);
+  }
+  const int cell = c[0] + s.gridDim[0] * (c[1] + s.gridDim[1] * c[2]);
+  float k = 0.0f;
+  for (uint32_t it = s.gridStart[cell]; it < s.gridStart[cell + 1]; ++it) {
+    const InstanceView& inst = s.instances[s.gridItems[it]];
+    const V3 u = applyPoint(inst.worldToUnit, x);
+    if (u.x < inst.unitLo[0] || u.y < inst.unitLo[1] || u.z < inst.unitLo[2] || !(u.x < inst.unitHi[0]) ||
+        !(u.y < inst.unitHi[1]) || !(u.z < inst.unitHi[2]))
+      continue;
+    const ModelView& m = s.models[inst.model];
+    // the finest level whose node edge (rootCells 2^-L cells) is at most maxNode
+    const float rootWorld = float(m.rootCells) * inst.cellWorld;
+    const float L = ceilf(log2f(rootWorld / maxNode));
+    const uint32_t level = L <= 0.0f ? 0u : (L >= float(m.depth) ? m.depth : uint32_t(L));
+    const CanopyLookup n = canopyDescend(m.tiles, m.tileCount, m.root, m.depth, u.x, u.y, u.z, level);
+    k += s.shade.sigma * canopyUnpack(n.node.density, n.node.material).density / inst.cellWorld;
+  }
+  return k;
+}
+
+// The extinction grid's voxel i (x fastest): the mean of 2x2x2 samples at +-voxel/4 about its
+// centre (a box filter, so that a face of matter that falls on a voxel centre keeps its mass once
+// the grid is read trilinearly).
+CANOPY_HD inline void buildExtinctionVoxel(const SceneView& s, const ExtinctionGridView& g, int64_t i) {
+  const int x = int(i % g.dim[0]);
+  const int y = int((i / g.dim[0]) % g.dim[1]);
+  const int z = int(i / (int64_t(g.dim[0]) * g.dim[1]));
+  const V3 c = v3(g.lo[0] + float(x) * g.voxel, g.lo[1] + float(y) * g.voxel, g.lo[2] + float(z) * g.voxel);
+  const float q = 0.25f * g.voxel;
+  float k = 0.0f;
+  for (int j = 0; j < 8; ++j)
+    k += sceneMeanExtinctionAt(s, c + v3((j & 1) ? q : -q, (j & 2) ? q : -q, (j & 4) ? q : -q), 2.0f * g.voxel);
+  g.k[i] = 0.125f * k;
+}
+
+// Trilinear extinction at world point p (0 outside the grid, whose border voxels are empty).
+CANOPY_HD inline float extinctionAt(const ExtinctionGridView& g, V3 p) {
+  const float inv = 1.0f / g.voxel;
+  int i0[3];
+  float f[3];
+  for (int a = 0; a < 3; ++a) {
+    const float x = (comp(p, a) - g.lo[a]) * inv;
+    if (!(x >= 0.0f) || !(x < float(g.dim[a] - 1))) return 0.0f;
+    const float fl = floorf(x);
+    i0[a] = int(fl);
+    f[a] = x - fl;
+  }
+  const int64_t sy = g.dim[0], sz = int64_t(g.dim[0]) * g.dim[1];
+  const float* b = g.k + i0[0] + sy * i0[1] + sz * i0[2];
+  const float c00 = b[0] + (b[1] - b[0]) * f[0];
+  const float c10 = b[sy] + (b[sy + 1] - b[sy]) * f[0];
+  const float c01 = b[sz] + (b[sz + 1] - b[sz]) * f[0];
+  const float c11 = b[sz + sy] + (b[sz + sy + 1] - b[sz + sy]) * f[0];
+  const float c0 = c00 + (c10 - c00) * f[1];
+  const float c1 = c01 + (c11 - c01) * f[1];
+  return c0 + (c1 - c0) * f[2];
+}
+
+// The world point of map voxel (u, v, w)'s centre.
+CANOPY_HD CANOPY_FORCEINLINE V3 shadowMapPoint(const ShadowMapView& m, float u, float v, float w) {
+  return m.origin + m.axis[0] * (u * m.voxel) + m.axis[1] * (v * m.voxel) + m.axis[2] * (w * m.voxel);
+}
+
+// Map column c = u + dim0 v: marched front to back from the sun through the extinction grid, T
+// stored at each voxel centre; between two centres `sub` midpoint steps (voxel 0 lies outside the
+// scene's box, so its T is 1).
+CANOPY_HD inline void buildShadowMapColumn(const ShadowMapView& m, const ExtinctionGridView& g, int sub, int64_t c) {
+  const int u = int(c % m.dim[0]), v = int(c / m.dim[0]);
+  const int64_t stride = int64_t(m.dim[0]) * m.dim[1];
+  const float ds = m.voxel / float(sub);
+  const V3 step = m.axis[2] * ds;
+  V3 p = shadowMapPoint(m, float(u), float(v), 0.0f) + step * 0.5f;
+  float tau = 0.0f;  // optical depth from the sun to the current voxel centre
+  for (int w = 0; w < m.dim[2]; ++w) {
+    m.T[c + stride * w] = expf(-tau);
+    for (int j = 0; j < sub; ++j, p = p + step) tau += extinctionAt(g, p) * ds;
+  }
+}
+
+// Tshadow at world point p: trilinear in the map (clamped to its box, whose border voxels are
+// empty: outside it the value is 1), read at p moved `bias` towards the sun. The map spreads each
+// node's matter over about a node and a voxel in every direction, so without the bias a sample
+// near a crown's sunlit surface would be shadowed by matter that lies behind it (away from the
+// sun), by an amount that depends on where the sample falls between the map's voxel centres:
+// banding ("shadow acne"). The price is that matter within `bias` of the sample towards the sun
+// does not shadow it.
+CANOPY_HD inline float shadowMapLookup(const ShadowMapView& m, V3 p) {
+  const V3 q = p - m.axis[2] * m.bias - m.origin;
+  const float inv = 1.0f / m.voxel;
+  int i0[3];
+  float f[3];
+  for (int a = 0; a < 3; ++a) {
+    float x = dot(q, m.axis[a]) * inv;
+    const float hi = float(m.dim[a] - 1);
+    x = x > 0.0f ? x : 0.0f;
+    x = x < hi ? x : hi;
+    const float fl = floorf(x);
+    i0[a] = int(fl);
+    f[a] = x - fl;
+    if (i0[a] >= m.dim[a] - 1) {
+      i0[a] = m.dim[a] > 1 ? m.dim[a] - 2 : 0;
+      f[a] = m.dim[a] > 1 ? 1.0f : 0.0f;
+    }
+  }
+  const int64_t sx = 1, sy = m.dim[0], sz = int64_t(m.dim[0]) * m.dim[1];
+  const float* b = m.T + i0[0] + sy * i0[1] + sz * i0[2];
+  const int64_t dx = m.dim[0] > 1 ? sx : 0, dy = m.dim[1] > 1 ? sy : 0, dz = m.dim[2] > 1 ? sz : 0;
+  const float c00 = b[0] + (b[dx] - b[0]) * f[0];
+  const float c10 = b[dy] + (b[dy + dx] - b[dy]) * f[0];
+  const float c01 = b[dz] + (b[dz + dx] - b[dz]) * f[0];
+  const float c11 = b[dz + dy] + (b[dz + dy + dx] - b[dz + dy]) * f[0];
+  const float c0 = c00 + (c10 - c00) * f[1];
+  const float c1 = c01 + (c11 - c01) * f[1];
+  return c0 + (c1 - c0) * f[2];
+}
+
+}  // namespace canopy::play
