@@ -142,6 +142,31 @@ CANOPY_HD inline float groundHit(const ShadeParams& shade, V3 o, V3 d) {
   return (shade.groundY - o.y) / d.y;
 }
 
+// Host only (--count-work): a shading segment of `inst` at a cone footprint `footprint` (world: one
+// pixel's width there) counted by the width of the voxel its level has, in pixels (WorkCounters::
+// voxelPixels). The level is the rule's (segmentLevel: the coarsest whose voxel is no wider than
+// the footprint, never finer than the finest), so the ratio is at most 1 wherever the finest voxel
+// is narrower than the footprint, and above 1 only where the model's finest voxel is wider than a
+// pixel (a close view of a coarse lattice). Not counted on the GPU.
+CANOPY_HD inline void countVoxelFootprint(const SceneView& s, const InstanceView& inst, float footprint) {
+#if !defined(__CUDA_ARCH__)
+  if (!s.work || !(footprint > 0.0f)) return;
+  const uint32_t depth = s.models[inst.model].depth;
+  const uint32_t level = segmentLevel(s, inst, depth, footprint);
+  const float ratio = float(1u << (depth - level)) * inst.cellWorld / footprint;
+  const int bin = ratio <= 1.0f ? 0 : (ratio <= 1.5f ? 1 : (ratio <= 4.0f ? 2 : 3));
+  __atomic_fetch_add(&s.work->voxelPixels[bin], uint64_t(1), __ATOMIC_RELAXED);
+  uint32_t bits;
+  memcpy(&bits, &ratio, sizeof bits);  // a positive float's bits order as its value
+  uint64_t cur = __atomic_load_n(&s.work->maxVoxelPixelsBits, __ATOMIC_RELAXED);
+  while (bits > cur && !__atomic_compare_exchange_n(&s.work->maxVoxelPixelsBits, &cur, uint64_t(bits), true, __ATOMIC_RELAXED,
+                                                    __ATOMIC_RELAXED)) {
+  }
+#else
+  (void)s, (void)inst, (void)footprint;
+#endif
+}
+
 // One primary cone: origin o, unit direction d, footprint(t) = footprint0 + t * pixelAngle.
 // kWithCones: compiled with the shadow-cone path (kShadowsCone); without it that mode is treated
 // as kShadowsOff, so the CUDA kernel of the other modes carries neither the shadow cone's instance
@@ -217,6 +242,7 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
       }
       next = g.tEnd < next ? g.tEnd : next;
       if (g.k <= 0.0f) continue;
+      countVoxelFootprint(s, inst, footprint);
       k += g.k;
       float ind[3];
       segmentIndirect<kWithLight>(s, inst, g, o, d, ind);

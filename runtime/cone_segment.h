@@ -24,7 +24,8 @@ struct Segment {
 };
 constexpr uint32_t kHaarNone = 0xFFFFFFFFu;
 
-// Finest level whose voxel (2^(depth - L) lattice cells) is no larger than the footprint.
+// The coarsest level whose voxel (2^(depth - L) lattice cells) is no wider than the footprint (the
+// finest where even its voxel is wider), shifted by lodBias (docs/play.md, "Level of detail").
 CANOPY_HD inline uint32_t levelForFootprint(uint32_t depth, float footprintCells, float lodBias) {
   const float fp = footprintCells > 1.0f ? footprintCells : 1.0f;
   float L = float(depth) - floorf(log2f(fp)) + lodBias;

@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <exception>
 #include <fstream>
 #include <limits>
@@ -517,6 +518,23 @@ double mean(const std::vector<double>& v) {
   return v.empty() ? 0.0 : s / double(v.size());
 }
 
+// The level of detail statistic (cone.h countVoxelFootprint): shading segments by their voxel's
+// width in pixels, and the largest.
+nlohmann::json voxelPixelsReport(const WorkCounters& work) {
+  float maxRatio = 0.0f;
+  const uint32_t bits = uint32_t(work.maxVoxelPixelsBits);
+  std::memcpy(&maxRatio, &bits, sizeof maxRatio);
+  uint64_t n = 0;
+  for (uint64_t c : work.voxelPixels) n += c;
+  return {{"segments", n},
+          {"at_most_1", work.voxelPixels[0]},
+          {"at_most_1_5", work.voxelPixels[1]},
+          {"at_most_4", work.voxelPixels[2]},
+          {"above_4", work.voxelPixels[3]},
+          {"fraction_above_1_5", n ? double(work.voxelPixels[2] + work.voxelPixels[3]) / double(n) : 0.0},
+          {"max", maxRatio}};
+}
+
 nlohmann::json workReport(const WorkCounters& work, uint64_t passes) {
   return {{"passes", passes},
           {"cones", work.cones},
@@ -533,7 +551,8 @@ nlohmann::json workReport(const WorkCounters& work, uint64_t passes) {
           {"empty_steps", work.emptySteps},
           {"zero_brick_samples", work.zeroBrickSamples},
           {"empty_block_skips", work.emptyBlockSkips},
-          {"hit_drops", work.hitDrops}};
+          {"hit_drops", work.hitDrops},
+          {"voxel_px", voxelPixelsReport(work)}};
 }
 
 // The report of a run (frame times, cache and streaming statistics, the scene's light, the bands).

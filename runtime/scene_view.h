@@ -105,6 +105,10 @@ struct WorkCounters {
   uint64_t cones, primarySteps, shadedSamples, segments, descents, brickSamples, shadowCones, shadowSteps, shadowMapLookups,
       shadowMapSteps, heldSegments, emptySteps, zeroBrickSamples, emptyBlockSkips,
       hitDrops;  // hits dropped from a full hit list (InstanceWalk)
+  // The level of detail rule at work (countVoxelFootprint): shading segments by the width of the
+  // chosen level's voxel over the pixel's footprint there (in pixels): <= 1, <= 1.5, <= 4, above;
+  // and the largest ratio (its float's bits).
+  uint64_t voxelPixels[4], maxVoxelPixelsBits;
 };
 
 struct SceneView {

@@ -220,3 +220,35 @@ TEST(Scene, MarchExtentIsTheBoxOfTheLeavesWithMatter) {
     EXPECT_NEAR(scene.boundsHi[a], at + (c + 0.5) * kCell, 1e-5) << a;
   }
 }
+
+// The level of detail rule (docs/play.md, "Level of detail"): a shading segment samples the
+// coarsest level whose voxel is no wider than the pixel's footprint there, and never finer than the
+// finest. Seen from far (a pixel wider than the ball's 0.1 m cells at every sample), every voxel is
+// at most a pixel wide (measured max 0.61); seen close (0.4 m from its front, 64 px over 40 degrees:
+// a pixel is 4.5 mm there), the finest level is the limit and its voxels cover up to ~22 pixels
+// (measured max 25.5 over the ball's depth), which the statistic reports (countVoxelFootprint; the
+// CPU's --count-work).
+TEST(LevelOfDetail, VoxelIsNoWiderThanThePixelWhereTheLatticeAllows) {
+  const double pixelAngle = 2.0 * std::tan(20.0 * M_PI / 180.0) / 64.0;
+  for (const double distance : {60.0, 2.2}) {
+    pl::PlayOptions o = view(oneBall(), "orbit:azimuth=0,elevation=0,fov=40,turns=0,distance=" + std::to_string(distance), 64, 64);
+    o.ground = "none";
+    o.countWork = true;
+    nlohmann::json r;
+    render(o, &r);
+    const nlohmann::json& v = r["work"]["voxel_px"];
+    std::printf("distance %.1f: %s\n", distance, v.dump().c_str());
+    ASSERT_GT(uint64_t(v["segments"]), 100u);
+    if (distance > 10.0) {
+      EXPECT_EQ(uint64_t(v["segments"]), uint64_t(v["at_most_1"]));
+      EXPECT_LE(double(v["max"]), 1.0);
+    } else {
+      // the front of the ball is 2.2 - 1.8 = 0.4 m away: a 0.1 m cell over 0.4 x pixelAngle, at most
+      const double most = kCell / ((distance - kRadius * kCell - kCell) * pixelAngle);
+      EXPECT_GT(double(v["fraction_above_1_5"]), 0.5);
+      EXPECT_GT(double(v["max"]), 0.5 * most);
+      EXPECT_LE(double(v["max"]), most * 1.01);
+      EXPECT_EQ(uint64_t(v["at_most_1"]), 0u);  // every sample is closer than 0.1 / pixelAngle = 18 m
+    }
+  }
+}
