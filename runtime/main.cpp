@@ -40,12 +40,15 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--shadow-map-cells", o.shadowMapCells, "Shadow extinction grid voxel in lattice cells of the finest instance")->capture_default_str();
   app.add_option("--shadow-map-bias", o.shadowMapBias, "Shadow map lookups move this many blur widths (the larger of a map voxel and a finest node) towards the sun")->capture_default_str();
-  app.add_option("--warp-tile", o.warpTileWidth, "CUDA: a warp renders a W x (32/W) pixel tile")->capture_default_str();
+  // Timing knobs for the benchmarks (same image, or the images before a change): hidden from --help,
+  // documented in docs/play.md.
+  app.add_option("--warp-tile", o.warpTileWidth, "CUDA: a warp renders a W x (32/W) pixel tile")->capture_default_str()->group("");
   bool noDescentCache = false;
-  app.add_flag("--no-descent-cache", noDescentCache, "Descend the octree from the root for every segment (same image; for timing)");
+  app.add_flag("--no-descent-cache", noDescentCache, "Descend the octree from the root for every segment (same image; for timing)")->group("");
   bool noEmptySkip = false;
   app.add_flag("--no-empty-skip", noEmptySkip,
-               "March the empty cells of bricks in half-voxel steps instead of skipping them (the sample phase changes by 0.1-0.4 % RMS; for comparison)");
+               "March the empty cells of bricks in half-voxel steps instead of skipping them (the sample phase changes by 0.1-0.4 % RMS; for comparison)")
+      ->group("");
   app.add_option("--shadow-map-voxels", o.shadowMapMaxVoxels, "Shadow map size cap (the voxel grows to fit)")->capture_default_str();
   std::string lightMode = "fast";
   app.add_option("--light", lightMode,
