@@ -30,12 +30,15 @@
 #include "tests/octreepack/synthetic.h"
 #include "bench/play/forest.h"
 #include "tests/play/scenes.h"
+#include "tests/play/views.h"
 
 namespace pl = canopy::play;
 namespace pt = canopy::play::testing;
 using canopy::Device;
 
 namespace {
+
+using pt::render;
 
 // Sphere scene: 48^3 lattice, 0.1 m cells, radius 18 cells (1.8 m), density 0.05.
 constexpr int kEdge = 48;
@@ -57,22 +60,6 @@ const std::string& plantFile() {
     return p;
   }();
   return path;
-}
-
-pl::PlayOptions smallView(const std::string& file, int w, int h) {
-  pl::PlayOptions o;
-  o.input = file;
-  o.width = w;
-  o.height = h;
-  o.converge = true;  // every frame complete: the reference
-  return o;
-}
-
-std::vector<float> render(const pl::PlayOptions& o, nlohmann::json* report = nullptr) {
-  std::vector<float> img;
-  nlohmann::json r = pl::play(o, Device{}, &img);
-  if (report) *report = r;
-  return img;
 }
 
 // 12 trees of two synthetic plants 1.2 apart (crowns overlapping along the rays, empty nodes of
@@ -296,7 +283,7 @@ TEST(PageCache, EvictsTheLeastRecentlyUsedButNeverAPageUsedThisFrame) {
 // the analytic values for chord -/+ 1.5 cells (well inside the ball) and be exactly 0 for rays that
 // pass farther than R + sqrt(3) cells from the centre (no voxel's trilinear support reaches them).
 TEST(Render, SphereHasTheAnalyticSilhouetteAndBeerLambertOpacity) {
-  pl::PlayOptions o = smallView(sphereFile(), 65, 65);
+  pl::PlayOptions o = pt::convergedView(sphereFile(), 65, 65);
   o.camera = "orbit:azimuth=0,elevation=0,distance=6,fov=40,turns=0";
   o.ground = "none";  // the sphere's own opacity, with nothing behind it
   o.sigma = 1.0f;
@@ -402,7 +389,7 @@ TEST(Render, ShadowMapIsBeerLambertThroughAUniformCube) {
 TEST(Render, ShadowMapAgreesWithShadowCones) {
   const std::string file = pt::tmpDir("scenes") + "/plant96.canopy";
   pt::writeScene(file, {canopy::octreepack::testing::syntheticPlant(96, 0, "plant", 8)}, {pt::instanceAt(0, 0, 0, 0)});
-  pl::PlayOptions o = smallView(file, 96, 96);
+  pl::PlayOptions o = pt::convergedView(file, 96, 96);
   o.camera = "orbit:azimuth=30,elevation=15,fov=40,turns=0";
   o.sun = "0.8,0.5,0.3";
   const std::vector<float> map = render(o);
@@ -441,7 +428,7 @@ TEST(Render, DescentCacheLeavesTheImageUnchanged) {
   pt::writeScene(file, {canopy::octreepack::testing::syntheticPlant(40, 0, "a", 4), canopy::octreepack::testing::syntheticPlant(32, 0, "b", 3)},
                  inst);
   for (const char* method : {"map", "cone"}) {
-    pl::PlayOptions o = smallView(file, 48, 32);
+    pl::PlayOptions o = pt::convergedView(file, 48, 32);
     o.camera = "orbit:azimuth=50,elevation=10,distance=4,turns=0";
     o.shadowMethod = method;
     const std::vector<float> cached = render(o);
@@ -464,7 +451,7 @@ TEST(Render, HeldEmptySegmentsLeaveTheImageUnchanged) {
   const std::string file = closeForestFile();
   for (const char* camera : {"orbit:azimuth=50,elevation=10,distance=4,turns=0", "orbit:azimuth=-20,elevation=30,distance=14,turns=0"})
     for (const bool cache : {true, false}) {
-      pl::PlayOptions o = smallView(file, 48, 32);
+      pl::PlayOptions o = pt::convergedView(file, 48, 32);
       o.camera = camera;
       o.descentCache = cache;
       o.countWork = true;
@@ -496,7 +483,7 @@ TEST(Render, EmptyCellSkipMovesOnlyTheSamplePhase) {
   } views[] = {{"orbit:azimuth=50,elevation=10,distance=4,turns=0", 0.5}, {"orbit:azimuth=-20,elevation=30,distance=14,turns=0", 0.99}};
   for (const auto& view : views) {
     const char* camera = view.camera;
-    pl::PlayOptions o = smallView(file, 48, 32);
+    pl::PlayOptions o = pt::convergedView(file, 48, 32);
     o.camera = camera;
     o.countWork = true;
     nlohmann::json skipped, marched;
@@ -521,7 +508,7 @@ TEST(Render, OverlappingInstancesAddTheirExtinction) {
   const std::string dbl = pt::tmpDir("scenes") + "/double-sphere.canopy";
   pt::writeScene(two, {pt::sphereModel(kEdge, kRadius, kDensity, kCell)}, {pt::instanceAt(0, 0, 0, 0), pt::instanceAt(0, 0, 0, 0)});
   pt::writeScene(dbl, {pt::sphereModel(kEdge, kRadius, 2 * kDensity, kCell)}, {pt::instanceAt(0, 0, 0, 0)});
-  pl::PlayOptions o = smallView(two, 33, 33);
+  pl::PlayOptions o = pt::convergedView(two, 33, 33);
   o.camera = "orbit:azimuth=20,elevation=10,distance=6,fov=40,turns=0";
   o.shadows = false;  // the shadows differ at the 1e-7 level only; keep the comparison about compositing
   const std::vector<float> a = render(o);
@@ -541,7 +528,7 @@ TEST(Render, NearerInstanceOccludesTheFartherOne) {
   const float dark[3] = {0.05f, 0.05f, 0.05f}, bright[3] = {1, 1, 1};
   pt::writeScene(p, {pt::sphereModel(24, 10, 1.0f, 0.1f, dark), pt::sphereModel(24, 10, 1.0f, 0.1f, bright)},
                  {pt::instanceAt(0, 0, 0, 2.0f), pt::instanceAt(1, 0, 0, -2.0f)});
-  pl::PlayOptions o = smallView(p, 17, 17);
+  pl::PlayOptions o = pt::convergedView(p, 17, 17);
   o.camera = "orbit:azimuth=0,elevation=0,distance=8,fov=20,turns=0";  // camera on +z: the dark ball is nearer
   const std::vector<float> img = render(o);
   const size_t c = size_t(4 * (8 * 17 + 8));
@@ -550,7 +537,7 @@ TEST(Render, NearerInstanceOccludesTheFartherOne) {
 }
 
 TEST(Render, ExrHoldsLinearPremultipliedRgbAndAlphaOneMinusTransmittance) {
-  pl::PlayOptions o = smallView(sphereFile(), 33, 21);
+  pl::PlayOptions o = pt::convergedView(sphereFile(), 33, 21);
   o.output = pt::tmpDir("out") + "/sphere.exr";
   const std::vector<float> img = render(o);
   int w = 0, h = 0;
@@ -569,7 +556,7 @@ TEST(Render, ExrHoldsLinearPremultipliedRgbAndAlphaOneMinusTransmittance) {
 TEST(Render, EmptySceneRendersTheBackground) {
   const std::string p = pt::tmpDir("scenes") + "/empty.canopy";
   pt::writeScene(p, {pt::sphereModel(16, 5, 0.5f)}, {});  // a model, no instance
-  pl::PlayOptions o = smallView(p, 24, 16);
+  pl::PlayOptions o = pt::convergedView(p, 24, 16);
   o.output = pt::tmpDir("out") + "/empty.png";
   const std::vector<float> img = render(o);
   for (float v : img) ASSERT_EQ(v, 0.0f);
@@ -587,7 +574,7 @@ TEST(Render, EmptySceneRendersTheBackground) {
 // discontinuity, e.g. a face switch in the sun lookup or a LOD jump in the shadow cones, shows as
 // one step far above the others).
 TEST(Render, MovingTheSunChangesTheImageSmoothly) {
-  pl::PlayOptions o = smallView(plantFile(), 48, 48);
+  pl::PlayOptions o = pt::convergedView(plantFile(), 48, 48);
   o.camera = "orbit:azimuth=30,elevation=15,fov=40,turns=0";
   std::vector<std::vector<float>> frames;
   for (int s = 0; s <= 8; ++s) {
@@ -633,7 +620,7 @@ TEST(Render, SceneLightFactorScalesTheIndirectTerm) {
   for (int a = 0; a < 3; ++a) w.sceneLight.min[a] = 0, w.sceneLight.dim[a] = 9;
   w.sceneLightValues.assign(9 * 9 * 9, 0.5f);
   canopy::writeCanopyFile(p, std::move(w));
-  pl::PlayOptions o = smallView(p, 17, 17);
+  pl::PlayOptions o = pt::convergedView(p, 17, 17);
   o.sunIntensity = 0.0f;
   const std::vector<float> lit = render(o);
   o.input = sphereFile();
@@ -665,7 +652,7 @@ TEST(Render, CorruptPageIsReportedOnceAndRenderedFromCoarserData) {
   const uint32_t page = f.pageCount() - 1;  // the finest level's last bricks
   bytes[size_t(f.header().pagesOffset) + size_t(page) * f.header().pageBytes + 100] ^= 0x40;
   canopy::writeFileAtomic(bad, bytes.data(), bytes.size());
-  pl::PlayOptions o = smallView(good, 48, 48);
+  pl::PlayOptions o = pt::convergedView(good, 48, 48);
   o.frames = 3;
   o.ground = "none";  // the coverage compared below is the volume's
   o.camera = "orbit:azimuth=30,elevation=15,fov=40,turns=0.02";
@@ -693,7 +680,7 @@ TEST(Render, TruncatedFileIsRefusedAtOpen) {
   const std::vector<unsigned char> bytes = canopy::readFile(sphereFile());
   const std::string p = pt::tmpDir("scenes") + "/truncated.canopy";
   canopy::writeFileAtomic(p, bytes.data(), bytes.size() - 4096);
-  pl::PlayOptions o = smallView(p, 8, 8);
+  pl::PlayOptions o = pt::convergedView(p, 8, 8);
   try {
     render(o);
     FAIL() << "a truncated file was accepted";
@@ -709,7 +696,7 @@ TEST(Render, InstanceBeyondSinglePrecisionReachIsRefused) {
   const std::string p = pt::tmpDir("scenes") + "/far.canopy";
   pt::writeScene(p, {pt::sphereModel(kEdge, kRadius, kDensity, kCell)}, {pt::instanceAt(0, 0, 0, 0), pt::instanceAt(0, 1e20f, 0, 0)});
   try {
-    render(smallView(p, 8, 8));
+    render(pt::convergedView(p, 8, 8));
     FAIL() << "an instance at 1e20 m was accepted";
   } catch (const canopy::Error& e) {
     EXPECT_EQ(e.code(), canopy::ExitCode::InvalidInput);
@@ -738,7 +725,7 @@ TEST(Render, SmallCacheStreamsAForestAndConvergesToTheFullCacheImage) {
                       << R"({"frame":3,"position":[-2.5,0.5,1.2],"target":[3,0,-2.5],"fov":50},)"
                       << R"({"frame":5,"position":[2.5,0.5,1.2],"target":[-3,0,-2.5],"fov":50},)"
                       << R"({"frame":8,"position":[12,4,12],"target":[0,0,0],"fov":50}]})";
-  pl::PlayOptions o = smallView(p, 40, 30);
+  pl::PlayOptions o = pt::convergedView(p, 40, 30);
   o.camera = path;
   o.frames = 14;
   o.converge = false;
@@ -887,7 +874,7 @@ TEST(PlayBench, A400InstanceForestRendersWithEveryInstanceInTheGrid) {
   std::vector<int> seen(400, 0);
   for (uint32_t id : scene.gridItems) seen[id] = 1;
   for (int v : seen) EXPECT_EQ(v, 1);
-  pl::PlayOptions o = smallView(p, 48, 27);
+  pl::PlayOptions o = pt::convergedView(p, 48, 27);
   o.camera = "orbit:elevation=35,turns=0";
   const std::vector<float> img = render(o);
   int covered = 0;

@@ -18,11 +18,14 @@
 #include "runtime/player.h"
 #include "runtime/scene.h"
 #include "tests/play/scenes.h"
+#include "tests/play/views.h"
 
 namespace pl = canopy::play;
 namespace pt = canopy::play::testing;
 
 namespace {
+
+using pt::render;
 
 // The ball of test_play: 48^3 lattice, 0.1 m cells, radius 18 cells, density 0.05, centred on the
 // model origin.
@@ -60,23 +63,6 @@ std::string cameraFile(const char* name, const float pos[3], const float target[
   return p;
 }
 
-pl::PlayOptions view(const std::string& file, const std::string& camera, int w, int h) {
-  pl::PlayOptions o;
-  o.input = file;
-  o.camera = camera;
-  o.width = w;
-  o.height = h;
-  o.converge = true;
-  return o;
-}
-
-std::vector<float> render(const pl::PlayOptions& o, nlohmann::json* report = nullptr) {
-  std::vector<float> img;
-  const nlohmann::json r = pl::play(o, canopy::Device{}, &img);
-  if (report) *report = r;
-  return img;
-}
-
 // albedo x (sun x cos + ambient x 1): the open ground without a scene light.
 float openGround(const pl::PlayOptions& o, int c, float cosSun, float sunT = 1.0f) {
   return o.groundAlbedo[c] * (o.sunIntensity * cosSun * sunT + o.ambient);
@@ -97,11 +83,11 @@ TEST(Ground, AutoSitsAtTheLowestInstanceBase) {
   EXPECT_NEAR(scene.groundBase, want, 1e-5);
   nlohmann::json r;
   const float pos[3] = {0, 6, -12}, target[3] = {0, 0, 0};
-  render(view(f, cameraFile("three", pos, target, 50), 8, 8), &r);
+  render(pt::convergedView(f, 8, 8, cameraFile("three", pos, target, 50)), &r);
   ASSERT_TRUE(r["ground"].is_object()) << r.dump();
   EXPECT_NEAR(double(r["ground"]["y"]), want, 1e-5);
   EXPECT_EQ(r["ground"]["from"], "auto");
-  pl::PlayOptions o = view(f, cameraFile("three", pos, target, 50), 8, 8);
+  pl::PlayOptions o = pt::convergedView(f, 8, 8, cameraFile("three", pos, target, 50));
   o.ground = "none";
   render(o, &r);
   EXPECT_TRUE(r["ground"].is_null());
@@ -118,7 +104,7 @@ TEST(Ground, OpenGroundIsAlbedoTimesSunCosinePlusAmbient) {
   const float pos[3] = {30, 3, 0}, target[3] = {34, base, 0.5f};
   const std::string cam = cameraFile("open", pos, target, 10);
   for (const char* shadows : {"map", "cone", "off"}) {
-    pl::PlayOptions o = view(oneBall(), cam, 12, 9);
+    pl::PlayOptions o = pt::convergedView(oneBall(), 12, 9, cam);
     o.sun = "0.5,1,0.3";
     if (std::string(shadows) == "off") o.shadows = false;
     else o.shadowMethod = shadows;
@@ -144,7 +130,7 @@ TEST(Ground, TakesTheCrownsShadowFromTheMapAndFromShadowCones) {
   const float cosSun = float(std::sqrt(0.5));
   std::vector<float> byMethod[2];
   for (int k = 0; k < 2; ++k) {
-    pl::PlayOptions o = view(oneBall(), cam, w, h);
+    pl::PlayOptions o = pt::convergedView(oneBall(), w, h, cam);
     o.sun = "1,1,0";
     o.shadowMethod = k == 0 ? "map" : "cone";
     byMethod[k] = render(o);
@@ -155,7 +141,7 @@ TEST(Ground, TakesTheCrownsShadowFromTheMapAndFromShadowCones) {
     }
   }
   for (int c = 0; c < 3; ++c) EXPECT_NEAR(byMethod[0][size_t(centre + c)], byMethod[1][size_t(centre + c)], 0.01f);
-  pl::PlayOptions o = view(oneBall(), cam, w, h);
+  pl::PlayOptions o = pt::convergedView(oneBall(), w, h, cam);
   o.sun = "1,1,0";
   o.shadows = false;
   const std::vector<float> lit = render(o);
@@ -169,7 +155,7 @@ TEST(Ground, CutsTheSceneAndChangesNothingBeforeIt) {
   const float pos[3] = {0, 0.3f, -8}, target[3] = {0, 0.3f, 0};
   const std::string cam = cameraFile("level", pos, target, 40);
   const int w = 32, h = 24;
-  pl::PlayOptions o = view(oneBall(), cam, w, h);
+  pl::PlayOptions o = pt::convergedView(oneBall(), w, h, cam);
   o.ground = "0";
   const std::vector<float> cut = render(o);
   o.ground = "none";
@@ -231,7 +217,7 @@ TEST(Scene, MarchExtentIsTheBoxOfTheLeavesWithMatter) {
 TEST(LevelOfDetail, VoxelIsNoWiderThanThePixelWhereTheLatticeAllows) {
   const double pixelAngle = 2.0 * std::tan(20.0 * M_PI / 180.0) / 64.0;
   for (const double distance : {60.0, 2.2}) {
-    pl::PlayOptions o = view(oneBall(), "orbit:azimuth=0,elevation=0,fov=40,turns=0,distance=" + std::to_string(distance), 64, 64);
+    pl::PlayOptions o = pt::convergedView(oneBall(), 64, 64, "orbit:azimuth=0,elevation=0,fov=40,turns=0,distance=" + std::to_string(distance));
     o.ground = "none";
     o.countWork = true;
     nlohmann::json r;

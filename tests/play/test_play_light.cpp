@@ -22,6 +22,7 @@
 #include "runtime/player.h"
 #include "tests/octreepack/synthetic.h"
 #include "tests/play/scenes.h"
+#include "tests/play/views.h"
 
 namespace pl = canopy::play;
 namespace pt = canopy::play::testing;
@@ -29,23 +30,9 @@ using canopy::Device;
 
 namespace {
 
+using pt::render;
+
 constexpr float kRgb[3] = {1.0f, 0.5f, 0.25f};  // base j = (j + 1) * kRgb: exact in fp16
-
-pl::PlayOptions view(const std::string& file, int w, int h) {
-  pl::PlayOptions o;
-  o.input = file;
-  o.width = w;
-  o.height = h;
-  o.converge = true;
-  return o;
-}
-
-std::vector<float> render(const pl::PlayOptions& o, nlohmann::json* report = nullptr) {
-  std::vector<float> img;
-  nlohmann::json r = pl::play(o, Device{}, &img);
-  if (report) *report = r;
-  return img;
-}
 
 // A ball (24^3 lattice, radius 10 cells, density 0.3) with constant light bases, and the same
 // ball density-only.
@@ -86,7 +73,7 @@ void expectCorruptPageIsLitFromElsewhere(const std::string& good, uint32_t page,
   const canopy::CanopyFile f = canopy::CanopyFile::open(good);
   bytes[size_t(f.header().pagesOffset) + size_t(page) * f.header().pageBytes + byteInPage] ^= 0x40;
   canopy::writeFileAtomic(bad, bytes.data(), bytes.size());
-  pl::PlayOptions o = view(good, 33, 33);
+  pl::PlayOptions o = pt::convergedView(good, 33, 33);
   o.frames = 2;
   o.camera = "orbit:azimuth=30,elevation=15,distance=3.5,turns=0.05";
   o.directSun = false;
@@ -151,7 +138,7 @@ TEST(Light, SampleLbLightIsLbIndirectOfTheTrilinearBases) {
 TEST(Light, IndirectIsTheLookupWeightedSunBasesPlusAmbientB0) {
   const std::pair<const char*, float> cases[] = {{"0,1,0", 1.0f}, {"0,1,0", 2.5f}, {"0.3,0.8,-0.52", 1.0f}, {"0.3,0.8,-0.52", 2.5f}};
   for (const auto& [sun, intensity] : cases) {
-    pl::PlayOptions o = view(litSphere(), 21, 21);
+    pl::PlayOptions o = pt::convergedView(litSphere(), 21, 21);
     o.ground = "none";  // the volume's shading alone
     o.sun = sun;
     o.sunIntensity = intensity;
@@ -194,9 +181,9 @@ TEST(Light, SunBasesWithTheirBeamAreReported) {
   EXPECT_EQ(canopy::CanopyFile::open(f).header().minor, 0);  // no 1.1 feature used
   EXPECT_EQ(canopy::CanopyFile::open(litSphere()).header().minor, 1);
   nlohmann::json r;
-  render(view(f, 9, 9), &r);
+  render(pt::convergedView(f, 9, 9), &r);
   EXPECT_EQ(r["sun_bases"], "total");
-  render(view(plainSphere(), 9, 9), &r);
+  render(pt::convergedView(plainSphere(), 9, 9), &r);
   EXPECT_EQ(r["sun_bases"], "none");
 }
 
@@ -208,7 +195,7 @@ TEST(Light, MovingTheSunChangesTheLitImageSmoothly) {
   const std::string p = pt::tmpDir("light") + "/plant-lit.canopy";
   pt::writeLitScene(p, {canopy::octreepack::testing::syntheticPlant(40, 0, "plant", 4)}, {pt::rampLight(kRgb, 1.0f, 40, 0.03f)},
                     {pt::instanceAt(0, 0, 0, 0)});
-  pl::PlayOptions o = view(p, 48, 48);
+  pl::PlayOptions o = pt::convergedView(p, 48, 48);
   o.camera = "orbit:azimuth=30,elevation=15,fov=40,turns=0";
   std::vector<std::vector<float>> frames;
   // azimuth 40..48 at elevation 35 crosses from one lookup face to its neighbours
@@ -267,7 +254,7 @@ TEST(Light, InstanceRotationTakesTheSunIntoModelSpace) {
   const float half = float(M_PI / 2);
   pt::writeLitScene(a, {pt::sphereModel(24, 10, 0.3f)}, {light}, {pt::instanceAt(0, 0, 0, 0)});
   pt::writeLitScene(b, {pt::sphereModel(24, 10, 0.3f)}, {light}, {pt::instanceAt(0, 0, 0, 0, 1.0f, half)});
-  pl::PlayOptions o = view(a, 33, 33);
+  pl::PlayOptions o = pt::convergedView(a, 33, 33);
   o.directSun = false;  // the indirect term alone (shadows rotate with the sun in any case)
   o.camera = "orbit:azimuth=30,elevation=20,turns=0";
   o.sun = "orbit:azimuth=40,elevation=35";
@@ -305,7 +292,7 @@ TEST(Light, SmallCacheStreamsLightPagesWithBrickPagesAndConverges) {
                       << R"({"frame":3,"position":[-2.5,0.5,1.2],"target":[3,0,-2.5],"fov":50},)"
                       << R"({"frame":5,"position":[2.5,0.5,1.2],"target":[-3,0,-2.5],"fov":50},)"
                       << R"({"frame":8,"position":[12,4,12],"target":[0,0,0],"fov":50}]})";
-  pl::PlayOptions o = view(p, 40, 30);
+  pl::PlayOptions o = pt::convergedView(p, 40, 30);
   o.camera = path;
   o.frames = 16;
   o.converge = false;
@@ -350,7 +337,7 @@ TEST(Light, ExactHaarLightRendersLikeTheSameLightInFloat16Items) {
   ASSERT_TRUE(f.model(0).flags & canopy::kCanopyModelHaarLight);
   const std::pair<const char*, float> cases[] = {{"0,1,0", 1.0f}, {"0.3,0.8,-0.52", 1.0f}, {"0.3,0.8,-0.52", 2.5f}};
   for (const auto& [sun, intensity] : cases) {
-    pl::PlayOptions o = view(litSphere(), 21, 21);
+    pl::PlayOptions o = pt::convergedView(litSphere(), 21, 21);
     o.sun = sun;
     o.sunIntensity = intensity;
     o.directSun = false;
@@ -378,7 +365,7 @@ TEST(Light, ExactHaarLightRendersLikeTheSameLightInFloat16Items) {
 // light shifted by one cell, differs by more than 3e-3 of the peak (measured 4.8e-3). The default
 // (--light fast) reads the float16 items of the same file and never asks for a Haar page.
 TEST(Light, ExactHaarLightIsSampledAtTheSamplesLatticePoint) {
-  pl::PlayOptions o = view("", 33, 33);
+  pl::PlayOptions o = pt::convergedView("", 33, 33);
   o.sun = "0.3,0.8,-0.52";
   o.directSun = false;
   o.camera = "orbit:azimuth=30,elevation=20,turns=0";
@@ -431,7 +418,7 @@ TEST(Light, NineteenBaseSceneLightScalesTheSunTermByTheSunsBasesAndTheAmbientTer
   pt::writeHaarLitScene(haar, {pt::sphereModel(24, 10, 0.3f)}, {pt::rampLight(kRgb)}, {pt::instanceAt(0, 0, 0, 0)}, 0.0f,
                         canopy::haar::Precision::Fp32, &L);
   const float intensity = 1.5f;
-  pl::PlayOptions o = view(plainSphere(), 21, 21);
+  pl::PlayOptions o = pt::convergedView(plainSphere(), 21, 21);
   o.ground = "none";  // the volume's shading alone
   o.sun = "0.3,0.8,-0.52";
   o.sunIntensity = intensity;
