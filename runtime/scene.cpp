@@ -116,17 +116,12 @@ void modelMatterBox(const CanopyModel& M, const std::vector<Leaf>& leaves, int64
   }
 }
 
-}  // namespace
-
-HostScene buildScene(const CanopyFile& f) {
-  HostScene s;
+// The models' views and the maps each instance's transform is composed with: lattice index ->
+// model space (indexToModel) and model space -> octree unit space.
+void addModels(const CanopyFile& f, HostScene& s, std::vector<M34>& latticeToModel, std::vector<M34>& modelToUnit) {
   const CanopyFileHeader& h = f.header();
-  s.pageCount = h.pageCount;
-  s.pageBytes = h.pageBytes;
-  s.bricksPerPage = h.bricksPerPage;
-  s.lightItemsPerPage = h.lightItemsPerPage;
-  s.haarIndex = &f.haarIndex();
-  std::vector<M34> latticeToModel(f.modelCount()), modelToUnit(f.modelCount());
+  latticeToModel.resize(f.modelCount());
+  modelToUnit.resize(f.modelCount());
   for (uint32_t m = 0; m < f.modelCount(); ++m) {
     const CanopyModel& M = f.model(m);
     ModelView v{};
@@ -168,6 +163,12 @@ HostScene buildScene(const CanopyFile& f) {
                                  inv, (0.5 - M.octreeOrigin[2]) * inv},
                              invert(i2m, f.path() + ": model " + std::to_string(m) + " indexToModel"));
   }
+}
+
+// The instances' views (transforms, march extents, world boxes), the ground's base, and the world
+// bounds of their lattice boxes in lo/hi.
+void addInstances(const CanopyFile& f, HostScene& s, const std::vector<M34>& latticeToModel, const std::vector<M34>& modelToUnit,
+                  double lo[3], double hi[3]) {
   std::vector<double> baseIndexY(f.modelCount(), 0.0);
   std::vector<std::array<int64_t, 6>> matterBox(f.modelCount());  // cells [lo, hi) per axis
   for (uint32_t m = 0; m < f.modelCount(); ++m) {
@@ -175,7 +176,6 @@ HostScene buildScene(const CanopyFile& f) {
     modelMatterBox(f.model(m), leaves, matterBox[m].data(), matterBox[m].data() + 3);
     baseIndexY[m] = modelBaseIndexY(f, m, leaves);
   }
-  double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
   for (uint32_t i = 0; i < f.instanceCount(); ++i) {
     const CanopyInstance& I = f.instance(i);
     const CanopyModel& M = f.model(I.model);
@@ -230,6 +230,10 @@ HostScene buildScene(const CanopyFile& f) {
     lin.m[3] = lin.m[7] = lin.m[11] = 0.0f;
     s.worldToLatticeLinear.push_back(lin);
   }
+}
+
+// The uniform grid of instance boxes over the scene's bounds lo/hi (SceneView::grid*).
+void buildInstanceGrid(HostScene& s, const double lo[3], const double hi[3]) {
   s.empty = s.instances.empty();
   if (!s.empty) {
     // Uniform grid: about one instance per cell, at most 64 cells per axis.
@@ -291,26 +295,47 @@ HostScene buildScene(const CanopyFile& f) {
     s.gridStart.assign(2, 0);
     s.gridFaceStart.assign(7, 0);
   }
-  if (f.hasSceneLight()) {
-    const CanopySceneLight& L = f.sceneLight();
-    M34 i2w;
-    for (int k = 0; k < 12; ++k) i2w[size_t(k)] = L.indexToWorld[k];
-    s.hasSceneLight = true;
-    s.lightBases = f.sceneLightBases();
-    s.lightBaseValues = f.sceneLightValues();
-    const M34 w2i = invert(i2w, f.path() + ": scene light indexToWorld");
-    s.light.worldToIndex = toAffine(w2i);
-    s.worldToSceneLinear = toAffine(w2i);
-    s.worldToSceneLinear.m[3] = s.worldToSceneLinear.m[7] = s.worldToSceneLinear.m[11] = 0.0f;
-    for (int a = 0; a < 3; ++a) {
-      s.light.min[a] = L.min[a];
-      s.light.dim[a] = L.dim[a];
-    }
-    // B00 alone: one factor for both terms, built once. With the sun bases: B00 and no sun (until setSun).
-    s.lightSun = sun::Weights();
-    buildSceneLightPairs(s.lightBaseValues, s.lightBases, size_t(L.dim[0]) * size_t(L.dim[1]) * size_t(L.dim[2]), s.lightSun, s.lightPairs);
-    ++s.lightVersion;
+}
+
+// The coarse scene lattice (lbsolve --scene) of the file, if it has one.
+void addSceneLight(const CanopyFile& f, HostScene& s) {
+  if (!f.hasSceneLight()) return;
+  const CanopySceneLight& L = f.sceneLight();
+  M34 i2w;
+  for (int k = 0; k < 12; ++k) i2w[size_t(k)] = L.indexToWorld[k];
+  s.hasSceneLight = true;
+  s.lightBases = f.sceneLightBases();
+  s.lightBaseValues = f.sceneLightValues();
+  const M34 w2i = invert(i2w, f.path() + ": scene light indexToWorld");
+  s.light.worldToIndex = toAffine(w2i);
+  s.worldToSceneLinear = toAffine(w2i);
+  s.worldToSceneLinear.m[3] = s.worldToSceneLinear.m[7] = s.worldToSceneLinear.m[11] = 0.0f;
+  for (int a = 0; a < 3; ++a) {
+    s.light.min[a] = L.min[a];
+    s.light.dim[a] = L.dim[a];
   }
+  // B00 alone: one factor for both terms, built once. With the sun bases: B00 and no sun (until setSun).
+  s.lightSun = sun::Weights();
+  buildSceneLightPairs(s.lightBaseValues, s.lightBases, size_t(L.dim[0]) * size_t(L.dim[1]) * size_t(L.dim[2]), s.lightSun, s.lightPairs);
+  ++s.lightVersion;
+}
+
+}  // namespace
+
+HostScene buildScene(const CanopyFile& f) {
+  HostScene s;
+  const CanopyFileHeader& h = f.header();
+  s.pageCount = h.pageCount;
+  s.pageBytes = h.pageBytes;
+  s.bricksPerPage = h.bricksPerPage;
+  s.lightItemsPerPage = h.lightItemsPerPage;
+  s.haarIndex = &f.haarIndex();
+  std::vector<M34> latticeToModel, modelToUnit;
+  addModels(f, s, latticeToModel, modelToUnit);
+  double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
+  addInstances(f, s, latticeToModel, modelToUnit, lo, hi);
+  buildInstanceGrid(s, lo, hi);
+  addSceneLight(f, s);
   return s;
 }
 
