@@ -104,7 +104,7 @@ int main(int argc, char** argv) {
       float a[3];
       char tail;
       const int n = std::sscanf(groundAlbedo.c_str(), "%f,%f,%f%c", &a[0], &a[1], &a[2], &tail);
-      if (n == 1) a[1] = a[2] = a[0];
+      if (n == 1 && std::sscanf(groundAlbedo.c_str(), "%f%c", &a[0], &tail) == 1) a[1] = a[2] = a[0];  // one value, nothing after it
       else if (n != 3) throw canopy::usageError("--ground-albedo '" + groundAlbedo + "': expected R,G,B or one value in [0, 1]");
       for (int c = 0; c < 3; ++c) o.groundAlbedo[c] = a[c];
     }

@@ -79,8 +79,11 @@ double modelBaseIndexY(const CanopyFile& f, uint32_t m, std::vector<Leaf> leaves
     }
     const uint32_t pageIndex = canopyBrickPage(M, n.node.brick, perPage);
     try {
-      if (pageIndex != loaded) f.readPage(pageIndex, page.data());
-      loaded = pageIndex;
+      if (pageIndex != loaded) {
+        loaded = kCanopyNone;  // the buffer holds no valid page until the read has passed its checks
+        f.readPage(pageIndex, page.data());
+        loaded = pageIndex;
+      }
     } catch (const std::exception&) {
       best = bottom;
       continue;
@@ -191,8 +194,11 @@ void addInstances(const CanopyFile& f, HostScene& s, const std::vector<M34>& lat
     // The instance's extent for the march: the box of its model's leaves with matter (a tree's
     // lattice is a cube around its height; the leaves' box is its crown and trunk, a fraction of
     // that in a forest where neighbours' cubes overlap), in unit space and as a world AABB. Outside
-    // it every leaf is empty (density 0), so the march only stops evaluating empty nodes there.
-    // The scene's bounds (framing, shadow map, grid extent) stay those of the lattice boxes.
+    // it every leaf is empty (density 0), so at the finest level the march only stops evaluating
+    // empty nodes there; a coarser level's brick, whose MIP spreads matter up to one of its voxels
+    // past the box (a pixel's footprint or less, by the level rule), is cut at the box, and so is
+    // the shadow map's node-mean extinction (the image moved by 0.11-0.29 % of the covered mean on
+    // the real forest). The scene's bounds (framing, shadow map, grid extent) stay the lattices'.
     const int64_t* box = matterBox[I.model].data();
     float latLo[3], latHi[3];
     for (int a = 0; a < 3; ++a) {

@@ -201,6 +201,8 @@ TEST(PlayCli, ErrorsHaveDocumentedExitCodesAndLeaveNoOutput) {
       {"'" + sceneFile() + "' -o '" + out + "' --ground nan --device cpu", 1, "--ground 'nan'"},
       {"'" + sceneFile() + "' -o '" + out + "' --ground-albedo 1.5 --device cpu", 1, "--ground-albedo must be"},
       {"'" + sceneFile() + "' -o '" + out + "' --ground-albedo 0.1,0.2 --device cpu", 1, "--ground-albedo '0.1,0.2'"},
+      {"'" + sceneFile() + "' -o '" + out + "' --ground-albedo '0.2 0.3 0.4' --device cpu", 1, "--ground-albedo '0.2 0.3 0.4'"},
+      {"'" + sceneFile() + "' -o '" + out + "' --ground-albedo 0.5x --device cpu", 1, "--ground-albedo '0.5x'"},
   };
   for (const Case& c : cases) {
     std::remove(out.c_str());
