@@ -32,12 +32,8 @@ struct PixelKernel {
   float* depth;              // kWithDepth: the disparity per pixel (stereo's traced eye)
   float disparityScale;
   __device__ void operator()(int64_t k) const {
-    const int64_t j = list ? int64_t(list[k]) : k;
-    const int64_t tile = j / (tileW * tileH);
-    const int lane = int(j % (tileW * tileH));
-    const int x = int(tile % tilesX) * tileW + lane % tileW;
-    const int y = y0 + int(tile / tilesX) * tileH + lane / tileW;
-    if (x >= camera.width || y >= y1) return;  // a band's last tile row may reach into the next band
+    int x, y;
+    if (!bandTilePixel(list ? int64_t(list[k]) : k, tilesX, tileW, tileH, camera.width, y0, y1, x, y)) return;
     renderPixelT<kWithCones, kWithLight, kWithDepth>(scene, camera, int64_t(y) * camera.width + x, out, depth, disparityScale);
   }
 };
@@ -87,11 +83,8 @@ struct StereoResolveKernel {
   int tilesX, tileW, tileH, y0, y1;
   int32_t* hole;
   __device__ void operator()(int64_t j) const {
-    const int64_t tile = j / (tileW * tileH);
-    const int lane = int(j % (tileW * tileH));
-    const int x = int(tile % tilesX) * tileW + lane % tileW;
-    const int y = y0 + int(tile / tilesX) * tileH + lane / tileW;
-    const bool inBand = x < view.width && y < y1;  // rows past the band are the next band's
+    int x, y;
+    const bool inBand = bandTilePixel(j, tilesX, tileW, tileH, view.width, y0, y1, x, y);
     hole[j] = inBand && !stereoResolve(view, x, y) ? int32_t(j) : -1;
   }
 };

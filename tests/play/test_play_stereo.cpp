@@ -104,6 +104,28 @@ TEST(Tiles, EqualBandsCoverTheFrameOnAlignedRows) {
   EXPECT_EQ(pl::equalBands(3, 8, 4).size(), 3u);  // never more bands than rows
 }
 
+// The CUDA kernels' launch positions over a band (tiles.h bandTilePixel): every pixel of the band
+// exactly once, none outside it, for warp tiles of 8x4, 4x8 and 32x1 over bands whose last tile row
+// reaches past the band (3 rows, 10 rows starting inside a tile row's span) and a width that is not
+// a multiple of the tile's.
+TEST(Tiles, WarpTilePositionsCoverTheBandOnce) {
+  const int width = 37;
+  for (const auto& [tw, th] : {std::pair<int, int>{8, 4}, {4, 8}, {32, 1}})
+    for (const pl::Band band : {pl::Band{0, 3}, pl::Band{3, 13}, pl::Band{13, 40}}) {
+      const int tilesX = (width + tw - 1) / tw, tilesY = (band.rows() + th - 1) / th;
+      std::vector<int> hits(size_t(width) * 40, 0);
+      for (int64_t j = 0; j < int64_t(tilesX) * tilesY * tw * th; ++j) {
+        int x = -1, y = -1;
+        if (!pl::bandTilePixel(j, tilesX, tw, th, width, band.y0, band.y1, x, y)) continue;
+        ASSERT_TRUE(x >= 0 && x < width && y >= band.y0 && y < band.y1) << x << "," << y;
+        ++hits[size_t(y) * width + x];
+      }
+      for (int y = 0; y < 40; ++y)
+        for (int x = 0; x < width; ++x)
+          ASSERT_EQ(hits[size_t(y) * width + x], y >= band.y0 && y < band.y1 ? 1 : 0) << tw << "x" << th << " " << x << "," << y;
+    }
+}
+
 TEST(Tiles, BalancingConvergesToEqualSharesOfAnUnevenCost) {
   // A frame whose top 200 rows cost 10x the rest per row (sky below a crown, say); 3 renderers.
   const int height = 1080;
