@@ -52,6 +52,11 @@ openvdb::GridPtrVec densityLatticeGrids(const DensityLatticeData& data) {
     g->setTransform(data.transform->copy());
     stampGrid(*g, data.meta);
   }
+  if (data.detailFactor != 1) {
+    density->insertMeta(kDetailFactorMeta, openvdb::Int32Metadata(data.detailFactor));
+    density->insertMeta(kLightLatticeMinMeta, openvdb::Vec3IMetadata(data.lightMin.asVec3i()));
+    density->insertMeta(kLightLatticeMaxMeta, openvdb::Vec3IMetadata(data.lightMax.asVec3i()));
+  }
   albedo->insertMeta("canopy_color_space", openvdb::StringMetadata("linear sRGB"));
   wood->insertMeta("canopy_meaning", openvdb::StringMetadata("fraction of the cell's biomass that is wood"));
   return {density, wood, albedo};
@@ -83,6 +88,22 @@ DensityLattice readDensityLattice(const std::string& path) {
   if (active > kMaxActiveVoxels)
     throw bad("grid 'density' has " + std::to_string(active) + " active voxels, more than the 2^31 Canopy reads");
   L.transform = density->transform().copy();
+  if (auto k = density->getMetadata<openvdb::Int32Metadata>(kDetailFactorMeta)) {
+    const int f = k->value();
+    if (f < 2 || f > kMaxDetailFactor || (f & (f - 1)) != 0)
+      throw bad(std::string(kDetailFactorMeta) + " is " + std::to_string(f) + ", expected 2, 4, 8 or 16");
+    auto lo = density->getMetadata<openvdb::Vec3IMetadata>(kLightLatticeMinMeta);
+    auto hi = density->getMetadata<openvdb::Vec3IMetadata>(kLightLatticeMaxMeta);
+    if (!lo || !hi) throw bad("a detail lattice without " + std::string(kLightLatticeMinMeta) + "/" + kLightLatticeMaxMeta);
+    L.detailFactor = f;
+    L.lightMin = openvdb::Coord(lo->value());
+    L.lightMax = openvdb::Coord(hi->value());
+    for (int a = 0; a < 3; ++a)
+      if (L.lightMin[a] > L.lightMax[a] || int64_t(L.lightMin[a]) * f != L.meta.min[a] ||
+          int64_t(L.lightMax[a]) * f + f - 1 != L.meta.max[a])
+        throw bad("its light lattice " + coordString(L.lightMin) + ".." + coordString(L.lightMax) + " x " +
+                  std::to_string(f) + " is not its lattice " + coordString(L.meta.min) + ".." + coordString(L.meta.max));
+  }
   if (file.meta) L.fileMeta = *file.meta;
   for (const auto& g : *file.grids) L.grids.push_back({g->getName(), g->type(), g->activeVoxelCount()});
 

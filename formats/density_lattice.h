@@ -10,6 +10,15 @@
 // ("<mesh file> xxh64:<hash>"), and a linear index -> model transform (metres, +Y up). File-level
 // metadata: the writer's options (canopy_tool, canopy_resolution, ..., canopy_mesh_index).
 //
+// A **detail lattice** (canopy-voxelize --detail) is the same file on a finer lattice nested in a
+// light lattice: its density grid also carries canopy_detail_factor (int32 k: 2, 4, 8 or 16) and
+// canopy_light_lattice_min / canopy_light_lattice_max (vec3i, inclusive), with light cell c covering
+// the detail cells [k c, k c + k) per axis (so min = k lightMin, max = k lightMax + k - 1) and the
+// light lattice's transform = this one's scaled by k about the box corner: light cell c is centred at
+// this transform's index point k c + (k - 1) / 2. canopy-lbsolve solves on the light lattice (the
+// same mesh voxelised at the light resolution); canopy-octreepack packs the detail lattice with
+// that light (docs/octreepack.md).
+//
 // readDensityLattice checks all of it: every active density value finite and in [0, 1] (the
 // spec's rule, one for every reader), every non-zero one inside the lattice bounds, wood in [0, 1]
 // and albedo finite at every occupied cell. Failures are one-line canopy::Errors naming the file:
@@ -40,7 +49,15 @@ struct DensityLatticeData {
   openvdb::math::Transform::Ptr transform;   // index -> model space, linear
   std::vector<DensityCell> cells;            // written: every cell as given; read: density > 0 only
   openvdb::MetaMap fileMeta;                 // the writer's options (canopy_tool, canopy_mesh_index ...)
+  int detailFactor = 1;                      // > 1: a detail lattice nested in [lightMin, lightMax]
+  openvdb::Coord lightMin{0}, lightMax{0};   // the light lattice (inclusive); only with detailFactor > 1
 };
+
+// The detail relation's metadata names (on the density grid).
+constexpr const char* kDetailFactorMeta = "canopy_detail_factor";
+constexpr const char* kLightLatticeMinMeta = "canopy_light_lattice_min";
+constexpr const char* kLightLatticeMaxMeta = "canopy_light_lattice_max";
+constexpr int kMaxDetailFactor = 16;
 
 // The three grids of `data` (names, class, values, transform, §0 metadata), in file order
 // density, wood, albedo. Every cell is written to all three grids, as given (no checks: tests
