@@ -202,7 +202,7 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
   if (h.major < 1) bad(P, "invalid format version " + std::to_string(h.major) + "." + std::to_string(h.minor));
   // Everything in a file of an older major, or of this major up to this minor, is known to this
   // reader; a newer minor may add section and page kinds that are skipped.
-  const bool knownMinor = h.major < kCanopyMajor || h.minor <= kCanopyMinor;
+  const bool knownMinor = h.major == 1 ? h.minor <= kCanopyMinor1 : h.minor <= kCanopyMinor;
   if (crc32(0, &h, offsetof(CanopyFileHeader, headerCrc)) != h.headerCrc) bad(P, "header checksum mismatch");
   if (h.headerBytes != sizeof(CanopyFileHeader)) bad(P, "header size " + u64s(h.headerBytes) + " != 128");
   if (h.fileBytes != fileBytes)
@@ -340,7 +340,19 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
     const uint64_t lpp = h.lightItemsPerPage;
     const bool lit = (M.flags & kCanopyModelHasLight) != 0;
     const bool haar = (M.flags & kCanopyModelHaarLight) != 0;
-    if ((lit ? M.lightCount != M.brickCount : M.lightCount != 0) || M.lightPageCount != (uint64_t(M.lightCount) + lpp - 1) / lpp ||
+    if (M.detailLevels != 0 && h.major < 2) bad(P, name + " has detail levels in a 1." + std::to_string(h.minor) + " file");
+    if (M.detailLevels > M.depth) bad(P, name + " has more detail levels (" + u64s(M.detailLevels) + ") than levels");
+    for (int a = 0; a < 3; ++a)  // the light lattice's cells are whole blocks of the lattice
+      if (M.detailLevels != 0 && (((M.latticeMin[a] | (M.latticeMax[a] + 1)) & ((1 << M.detailLevels) - 1)) != 0))
+        bad(P, name + " lattice bounds are not whole light cells");
+    // Light items: one per brick of levels 0..depth - detailLevels (every brick without detail).
+    uint64_t lightBricks = 0, levelSum = 0;
+    for (uint32_t l = 0; l <= M.depth; ++l) {
+      levelSum += M.levelBricks[l];
+      if (l <= canopyLightDepth(M)) lightBricks += M.levelBricks[l];
+    }
+    if (levelSum != M.brickCount) bad(P, name + " level brick counts do not add up to its bricks");
+    if ((lit ? M.lightCount != lightBricks : M.lightCount != 0) || M.lightPageCount != (uint64_t(M.lightCount) + lpp - 1) / lpp ||
         uint64_t(M.firstLightPage) + M.lightPageCount > h.pageCount)
       bad(P, name + " light items or pages out of range");
     if (M.flags & kCanopyModelScatteredSun) {
@@ -353,7 +365,7 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
       if (M.haarPrecision > 1) bad(P, name + " Haar coefficient precision " + u64s(M.haarPrecision) + " is unknown");
       uint64_t groups = 1;
       for (int a = 0; a < 3; ++a) {
-        const int64_t dim = int64_t(M.latticeMax[a]) - M.latticeMin[a] + 1;
+        const int64_t dim = (int64_t(M.latticeMax[a]) - M.latticeMin[a] + 1) >> M.detailLevels;  // the light lattice's
         if (M.haarBrickDims[a] != (dim + 2) / 3 || M.haarGroupDims[a] != (uint64_t(M.haarBrickDims[a]) + 3) / 4)
           bad(P, name + " Haar brick geometry does not match its lattice");
         groups *= M.haarGroupDims[a];
@@ -376,9 +388,9 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
         if (!used[b]) bad(P, name + " Haar block " + u64s(b) + " is not in the group table");
     } else {
       // Without the flag every Haar field is zero (1.0's reserved bytes).
-      static_assert(offsetof(CanopyModel, reserved) - offsetof(CanopyModel, haarPrecision) == 56, "the Haar fields of CanopyModel");
+      static_assert(offsetof(CanopyModel, detailLevels) - offsetof(CanopyModel, haarPrecision) == 56, "the Haar fields of CanopyModel");
       const unsigned char* f = reinterpret_cast<const unsigned char*>(&M) + offsetof(CanopyModel, haarPrecision);
-      for (size_t b = 0; b < offsetof(CanopyModel, reserved) - offsetof(CanopyModel, haarPrecision); ++b)
+      for (size_t b = 0; b < offsetof(CanopyModel, detailLevels) - offsetof(CanopyModel, haarPrecision); ++b)
         if (f[b] != 0) bad(P, name + " has Haar fields but no Haar light flag");
     }
     // Every tile must be reached exactly once from the root, at a level < depth: no cycles, no
@@ -387,6 +399,9 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
     std::vector<std::pair<uint32_t, uint32_t>> stack;  // (tile, level of its nodes)
     auto checkNode = [&](const CanopyNode& n, uint32_t level) {
       if (n.brick != kCanopyNone && n.brick >= M.brickCount) bad(P, name + ": brick id " + u64s(n.brick) + " out of range");
+      // a player takes the light of a brick at a light level from light item `brick`
+      if (lit && n.brick != kCanopyNone && level <= canopyLightDepth(M) && n.brick >= M.lightCount)
+        bad(P, name + ": brick " + u64s(n.brick) + " of light level " + u64s(level) + " has no light item");
       if (!(n.density >= 0.0f) || n.density > 3.0e38f) bad(P, name + ": node density is negative or not finite");
       if (n.child == kCanopyNone) return;
       if (n.child >= M.tileCount) bad(P, name + ": child tile " + u64s(n.child) + " out of range");
@@ -488,8 +503,8 @@ CanopyHaarView CanopyFile::haarView(uint32_t m) const {
   CanopyHaarView v{};
   v.index = haarIndex_.data() + M.firstHaarIndex;
   for (int a = 0; a < 3; ++a) {
-    v.latticeMin[a] = M.latticeMin[a];
-    v.latticeMax[a] = M.latticeMax[a];
+    v.latticeMin[a] = M.latticeMin[a] >> M.detailLevels;  // the light lattice (detailLevels: 2.0)
+    v.latticeMax[a] = M.latticeMax[a] >> M.detailLevels;
     v.groupDims[a] = M.haarGroupDims[a];
   }
   v.firstPage = M.firstHaarPage;

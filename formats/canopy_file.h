@@ -96,7 +96,10 @@
 // model has Haar light, so such files are byte-identical to 1.0 ones. 1.2 added the scene lattice's
 // sun bases (the SceneSunLight section, beside SceneLight's B00, which keeps its 1.0 layout): a 1.1
 // reader skips the unknown section and lights the scene with B00 alone, as before; the writer
-// writes 1.2 only for a file with that section.
+// writes 1.2 only for a file with that section. 2.0 added detail levels (CanopyModel.detailLevels):
+// octree levels finer than the model's light lattice, whose bricks have no light items (their light
+// is their light-level ancestor's); a 1.x reader could not play them, so the writer writes 2.0 only
+// for a file with a detail model, and 1.x (as before, byte for byte) otherwise.
 #pragma once
 #include <math.h>
 #include <string.h>
@@ -117,9 +120,11 @@ namespace canopy {
 // Constants
 // ------------------------------------------------------------------------------------------------
 constexpr char kCanopyMagic[8] = {'C', 'A', 'N', 'O', 'P', 'Y', 'P', 'K'};
-constexpr uint16_t kCanopyMajor = 1;
-constexpr uint16_t kCanopyMinor = 2;  // 1.1: Haar light pages (optional; a 1.0 reader skips them), kCanopyModelScatteredSun;
-                                      // 1.2: the scene lattice's sun bases (SceneSunLight; a 1.1 reader skips it)
+constexpr uint16_t kCanopyMajor = 2;  // 2.0: detail levels (a model's levels finer than its light lattice)
+constexpr uint16_t kCanopyMinor = 0;
+// The 1.x minors this reader knows: 1.1: Haar light pages (optional; a 1.0 reader skips them),
+// kCanopyModelScatteredSun; 1.2: the scene lattice's sun bases (SceneSunLight; a 1.1 reader skips it)
+constexpr uint16_t kCanopyMinor1 = 2;
 constexpr uint32_t kCanopyPageBytes = 65536;   // page size written (readers accept powers of two >= 32 KiB)
 constexpr uint32_t kCanopySectionAlign = 64;   // every section starts on a 64-byte boundary
 constexpr uint32_t kCanopyBrickSize = 8;       // interior voxels per axis
@@ -244,7 +249,15 @@ struct CanopyModel {               // offset
   uint32_t firstHaarPage;          // 436
   uint32_t haarPageCount;          // 440
   float haarThreshold;             // 444  the .chaar's threshold (informative; -1 under --max-error)
-  uint32_t reserved[16];           // 448  zero
+  // (2.0) Levels finer than the light lattice (0: the light lattice is the density lattice). With
+  // n = detailLevels > 0 the density lattice is a detail lattice (canopy-voxelize --detail): light
+  // cell c covers lattice cells [2^n c, 2^n c + 2^n) per axis, the light lattice is
+  // [latticeMin >> n, latticeMax >> n], light items exist for the bricks of levels
+  // 0..depth - n only (lightCount = their number: breadth-first ids make them the first ones),
+  // a brick below takes the light of its level depth - n ancestor, and the Haar light's lattice is
+  // the light lattice. Extinction (sigma per cell) is per light cell.
+  uint32_t detailLevels;           // 448
+  uint32_t reserved[15];           // 452  zero
 };
 static_assert(sizeof(CanopyModel) == 512, "CanopyModel layout");
 
@@ -591,6 +604,8 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyBrickPage(const CanopyModel& m, uint
 CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyBrickSlot(uint32_t brick, uint32_t bricksPerPage) {
   return brick % bricksPerPage;
 }
+// The finest level with light items: depth - detailLevels (canopyLightDepth <= depth).
+CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyLightDepth(const CanopyModel& m) { return m.depth - m.detailLevels; }
 // Which page holds light item `item` (== the brick id) of a model (model.lightCount > 0).
 CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyLightPage(const CanopyModel& m, uint32_t item, uint32_t lightItemsPerPage) {
   return m.firstLightPage + item / lightItemsPerPage;

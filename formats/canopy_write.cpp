@@ -34,6 +34,7 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
   std::vector<CanopyNode> tiles;
   std::vector<uint32_t> haarIndex;
   bool scatteredSun = false;  // a model flagged kCanopyModelScatteredSun (1.1)
+  bool detail = false;        // a model with detail levels (2.0)
   uint32_t page = 0;
   for (CanopyWriteModel& wm : in.models) {
     CanopyModel m = wm.record;
@@ -47,7 +48,10 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
     page += m.brickPageCount;
     const bool lit = wm.light && !wm.light->empty();
     const bool haar = wm.haar != nullptr;
-    if (lit && (m.lightCount != m.brickCount || wm.light->size() * 2 != size_t(m.lightCount) * kCanopyLightItemBytes))
+    uint32_t lightBricks = 0;  // bricks of levels 0..depth - detailLevels: the ones with light items
+    for (uint32_t l = 0; l <= canopyLightDepth(m) && l < 16; ++l) lightBricks += m.levelBricks[l];
+    detail = detail || m.detailLevels != 0;
+    if (lit && (m.lightCount != lightBricks || wm.light->size() * 2 != size_t(m.lightCount) * kCanopyLightItemBytes))
       throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has inconsistent light items");
     if (haar && !lit) throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has Haar light but no light items");
     m.lightCount = lit ? m.lightCount : 0;
@@ -192,11 +196,12 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
 
   CanopyFileHeader h{};
   std::memcpy(h.magic, kCanopyMagic, 8);
-  h.major = kCanopyMajor;
-  // Without a 1.1 feature (Haar light, scattered-only sun bases) a file is a 1.0 file, byte for byte;
-  // with one but no 1.2 feature (the scene lattice's sun bases) a 1.1 file.
-  h.minor = sceneSun ? 2 : haarIndex.empty() && !scatteredSun ? 0 : 1;
-  static_assert(kCanopyMinor == 2, "the writer's minor versions");
+  // A file with a detail model is 2.0. Otherwise: without a 1.1 feature (Haar light, scattered-only
+  // sun bases) a 1.0 file, byte for byte; with one but no 1.2 feature (the scene lattice's sun bases)
+  // a 1.1 file; else 1.2.
+  h.major = detail ? 2 : 1;
+  h.minor = detail ? 0 : sceneSun ? 2 : haarIndex.empty() && !scatteredSun ? 0 : 1;
+  static_assert(kCanopyMajor == 2 && kCanopyMinor == 0 && kCanopyMinor1 == 2, "the writer's versions");
   h.headerBytes = sizeof(CanopyFileHeader);
   h.pageBytes = pageBytes;
   h.pageCount = uint32_t(L.pages.size());

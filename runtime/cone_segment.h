@@ -133,7 +133,7 @@ CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m,
   uint32_t level = 0;
   for (;;) {
     const bool last = !(level < maxLevel && d.node.child != kCanopyNone && d.node.child < m.tileCount);
-    if (wantLight && d.node.brick != kCanopyNone) {
+    if (wantLight && d.node.brick != kCanopyNone && level <= m.lightDepth) {
       uint32_t inPage;
       const uint32_t lpage = m.firstLightPage + divide(s.lightItemsPerPage, d.node.brick, inPage);
       const int32_t lslot = s.pageSlot[lpage];
@@ -198,10 +198,11 @@ CANOPY_HD CANOPY_FORCEINLINE bool descentCovers(const DescentCache& c, V3 u, uin
 CANOPY_HD inline void segmentLight(const SceneView& s, const ModelView& m, const Descent& d, V3 um, float tm, Segment& g) {
   g.haarLocal = kHaarNone;
   g.haarItem = nullptr;
-  if (s.shade.exactLight && m.haarLight && d.level == m.depth) {
-    // --light exact, the finest level of a Haar-lit model: the chaar brick at the sample's lattice
-    // point, if its page is resident (else it is asked for and the float16 items serve).
-    const float rc = float(m.rootCells);
+  if (s.shade.exactLight && m.haarLight && d.level >= m.lightDepth) {
+    // --light exact, the light lattice's level and the detail levels below it of a Haar-lit model:
+    // the chaar brick at the sample's light lattice point, if its page is resident (else it is
+    // asked for and the float16 items serve).
+    const float rc = float(m.lightRootCells);
     const CanopyHaarLocation at =
         canopyHaarLocate(m.haar, um.x * rc - 0.5f + float(m.origin[0]), um.y * rc - 0.5f + float(m.origin[1]), um.z * rc - 0.5f + float(m.origin[2]));
     const int32_t slot = at.page != kCanopyNone ? s.pageSlot[at.page] : -1;
@@ -363,7 +364,7 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
   if (!useBrick) {
     // constant node, or a missing brick without a close resident ancestor: the node's mean
     const CanopySample c = canopyUnpack(d.node.density, d.node.material);
-    g.k = s.shade.sigma * c.density * cellsPerWorld;
+    g.k = s.shade.sigma * c.density * (cellsPerWorld * m.extinctionScale);
     g.albedo[0] = c.albedo[0], g.albedo[1] = c.albedo[1], g.albedo[2] = c.albedo[2];
     float tEnd = tExit;
     if (shading && c.density > 0.0f) {  // a shadow cone integrates it in one go
@@ -418,7 +419,7 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
   const V3 um = uo + ud * (0.5f * (t + tEnd));
   const CanopySample c = canopySampleBrick(canopyBrickInPage(brickPage, d.brickSlotInPage), (um.x - brickLo[0]) * inv,
                                            (um.y - brickLo[1]) * inv, (um.z - brickLo[2]) * inv);
-  g.k = s.shade.sigma * c.density * cellsPerWorld;
+  g.k = s.shade.sigma * c.density * (cellsPerWorld * m.extinctionScale);
   if (c.density == 0.0f) CANOPY_PLAY_COUNT(s, zeroBrickSamples, 1);
   g.albedo[0] = c.albedo[0], g.albedo[1] = c.albedo[1], g.albedo[2] = c.albedo[2];
   g.tEnd = tEnd;

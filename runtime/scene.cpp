@@ -134,12 +134,15 @@ void addModels(const CanopyFile& f, HostScene& s, std::vector<M34>& latticeToMod
     v.depth = M.depth;
     v.rootCells = M.rootCells;
     v.firstBrickPage = M.firstBrickPage;
-    // The reader has checked the light pages' range; a model flagged lit must have one item per
-    // brick, and may have Haar light too (the finest level's exact light).
-    v.hasLight = (M.flags & kCanopyModelHasLight) && M.lightCount > 0 && M.lightCount == M.brickCount && h.lightItemsPerPage > 0 ? 1u : 0u;
+    // The reader has checked the light pages' range and that every brick of levels 0..lightDepth
+    // has its item; a model flagged lit may have Haar light too (the light lattice's exact light).
+    v.hasLight = (M.flags & kCanopyModelHasLight) && M.lightCount > 0 && h.lightItemsPerPage > 0 ? 1u : 0u;
     v.haarLight = v.hasLight && (M.flags & kCanopyModelHaarLight) ? 1u : 0u;
     v.firstLightPage = M.firstLightPage;
-    for (int a = 0; a < 3; ++a) v.origin[a] = M.octreeOrigin[a];
+    v.lightDepth = canopyLightDepth(M);
+    v.lightRootCells = M.rootCells >> M.detailLevels;
+    v.extinctionScale = std::ldexp(1.0f, -int(M.detailLevels));
+    for (int a = 0; a < 3; ++a) v.origin[a] = M.octreeOrigin[a] >> M.detailLevels;
     if (v.haarLight) v.haar = f.haarView(m);
     if ((M.flags & kCanopyModelHasLight) && !v.hasLight)
       logWarn(f.path() + ": model '" + std::string(M.name, strnlen(M.name, sizeof(M.name))) +

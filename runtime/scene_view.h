@@ -24,10 +24,13 @@ struct ModelView {
   uint32_t depth;
   uint32_t rootCells;
   uint32_t firstBrickPage;
-  uint32_t hasLight;        // light items present (kCanopyModelHasLight, lightCount == brickCount)
+  uint32_t hasLight;        // light items present (kCanopyModelHasLight, one per brick of levels 0..lightDepth)
   uint32_t firstLightPage;  // light item b is in page firstLightPage + b / lightItemsPerPage
-  uint32_t haarLight;       // also Haar light (kCanopyModelHaarLight): the finest level's exact light, `haar` below
-  int32_t origin[3];        // octreeOrigin: unit space -> lattice index space (for the Haar lookup)
+  uint32_t haarLight;       // also Haar light (kCanopyModelHaarLight): the light lattice's exact light, `haar` below
+  uint32_t lightDepth;      // the finest level with light items: depth - detailLevels (a detail brick takes its ancestor's)
+  uint32_t lightRootCells;  // light lattice cells per axis under the root: rootCells >> detailLevels
+  float extinctionScale;    // light cells per lattice cell, 2^-detailLevels: sigma is per light cell
+  int32_t origin[3];        // octreeOrigin >> detailLevels: unit space -> light lattice index space (the Haar lookup)
   CanopyHaarView haar;
 };
 

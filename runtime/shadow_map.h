@@ -51,7 +51,7 @@ CANOPY_HD inline float sceneMeanExtinctionAt(const SceneView& s, V3 x, float max
     const float L = ceilf(log2f(rootWorld / maxNode));
     const uint32_t level = L <= 0.0f ? 0u : (L >= float(m.depth) ? m.depth : uint32_t(L));
     const CanopyLookup n = canopyDescend(m.tiles, m.tileCount, m.root, m.depth, u.x, u.y, u.z, level);
-    k += s.shade.sigma * canopyUnpack(n.node.density, n.node.material).density / inst.cellWorld;
+    k += s.shade.sigma * canopyUnpack(n.node.density, n.node.material).density / (inst.cellWorld / m.extinctionScale);  // per light cell
   }
   return k;
 }

@@ -334,7 +334,7 @@ TEST(CanopyFile, NewerMajorVersionIsRejectedClearly) {
   // A newer minor version of the same major reads.
   bytes = readFile(kFrozen);
   std::memcpy(&h, bytes.data(), sizeof h);
-  h.minor = kCanopyMinor + 1;
+  h.minor = (h.major == 1 ? kCanopyMinor1 : kCanopyMinor) + 1;
   h.headerCrc = crc32(0, &h, offsetof(CanopyFileHeader, headerCrc));
   std::memcpy(bytes.data(), &h, sizeof h);
   EXPECT_NO_THROW(CanopyFile::fromMemory(bytes.data(), bytes.size(), "minor.canopy"));

@@ -1,6 +1,7 @@
 // inputs.cpp: see inputs.h.
 #include "tools/octreepack/inputs.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 
@@ -33,6 +34,37 @@ std::array<double, 12> affineOf(const openvdb::math::Transform& xf, const std::s
   return m;
 }
 
+// The lighting's lattice (bounds, index -> model transform) must be `model`'s light lattice: its
+// density lattice, or, for a detail lattice (2^n finer), the lattice it nests in: light cell c
+// covers cells [2^n c, 2^n c + 2^n), so its centre is the density lattice's index point
+// 2^n c + (2^n - 1) / 2. The transform is compared for detail lattices (the bounds alone for
+// ordinary ones, as before): relative to the light voxel, within 1e-6.
+void checkLightLattice(const std::string& path, const ModelSource& model, const int32_t lo[3], const int32_t hi[3],
+                       const std::array<double, 12>* lightToModel) {
+  const uint32_t n = model.detailLevels;
+  const std::string which = n == 0 ? "the density lattice" : "the light lattice (the density lattice is a detail lattice, " +
+                                                                 std::to_string(1 << n) + "x finer)";
+  for (int a = 0; a < 3; ++a)
+    if (lo[a] != (model.latticeMin[a] >> n) || hi[a] != (model.latticeMax[a] >> n))
+      throw invalidInput(path + ": its lattice differs from " + which + " of model '" + model.name + "'");
+  if (n == 0 || !lightToModel) return;
+  const double k = double(1 << n), c0 = 0.5 * (k - 1);
+  const std::array<double, 12>& L = *lightToModel;
+  const std::array<double, 12>& D = model.indexToModel;
+  double voxel = 0, err = 0;
+  for (int r = 0; r < 3; ++r) {
+    for (int a = 0; a < 3; ++a) {
+      voxel = std::max(voxel, std::fabs(L[size_t(r * 4 + a)]));
+      err = std::max(err, std::fabs(L[size_t(r * 4 + a)] - k * D[size_t(r * 4 + a)]));
+    }
+    const double d0 = D[size_t(r * 4)] * c0 + D[size_t(r * 4 + 1)] * c0 + D[size_t(r * 4 + 2)] * c0 + D[size_t(r * 4 + 3)];
+    err = std::max(err, std::fabs(L[size_t(r * 4 + 3)] - d0));
+  }
+  if (!(err <= 1e-6 * voxel))
+    throw invalidInput(path + ": its lattice's box differs from the density box of model '" + model.name + "' (" + which +
+                       " must cover the same box)");
+}
+
 }  // namespace
 
 ModelSource readDensityVdb(const std::string& path, const std::string& name) {
@@ -45,6 +77,7 @@ ModelSource readDensityVdb(const std::string& path, const std::string& name) {
     src.latticeMax[a] = lattice.meta.max[a];
   }
   src.indexToModel = affineOf(*lattice.transform, path);
+  while ((1 << src.detailLevels) < lattice.detailFactor) ++src.detailLevels;  // a power of two (the reader checks)
   src.cells.reserve(lattice.cells.size());
   for (const vdbio::DensityCell& c : lattice.cells) {
     SourceCell s;
@@ -67,9 +100,11 @@ LightVdb readLightVdb(const std::string& path, const ModelSource& model) {
   }
   if (grids[0]->getMetadata<openvdb::Vec3IMetadata>("canopy_lattice_min")) {
     const vdbio::LatticeMeta meta = vdbio::readLatticeMeta(*grids[0], path);
-    for (int a = 0; a < 3; ++a)
-      if (meta.min[a] != model.latticeMin[a] || meta.max[a] != model.latticeMax[a])
-        throw invalidInput(path + ": its lattice differs from the density lattice of model '" + model.name + "'");
+    const int32_t lo[3] = {meta.min[0], meta.min[1], meta.min[2]}, hi[3] = {meta.max[0], meta.max[1], meta.max[2]};
+    const std::array<double, 12> xf = affineOf(grids[0]->transform(), path);
+    checkLightLattice(path, model, lo, hi, &xf);
+  } else if (model.detailLevels != 0) {
+    throw invalidInput(path + ": lighting without lattice metadata cannot be matched to a detail lattice");
   }
   LightVdb out;
   out.sourceLabel = vdbio::describeSource(path);
@@ -94,9 +129,12 @@ LightVdb readChaarLight(const std::string& path, const ModelSource& model, bool 
   if (h.baseCount != kCanopyLightBases)
     throw invalidInput(path + ": has " + std::to_string(h.baseCount) + " bases, a plant's lighting has " +
                        std::to_string(kCanopyLightBases));
-  for (int a = 0; a < 3; ++a)
-    if (h.latticeMin[a] != model.latticeMin[a] || h.latticeMax[a] != model.latticeMax[a])
-      throw invalidInput(path + ": its lattice differs from the density lattice of model '" + model.name + "'");
+  std::array<double, 12> xf{};  // the chaar's row-vector Mat4d as a 3x4 row-major matrix
+  for (int r = 0; r < 3; ++r) {
+    for (int a = 0; a < 3; ++a) xf[size_t(r * 4 + a)] = h.indexToModel[a * 4 + r];
+    xf[size_t(r * 4 + 3)] = h.indexToModel[12 + r];
+  }
+  checkLightLattice(path, model, h.latticeMin, h.latticeMax, &xf);
   LightVdb out;
   out.sourceLabel = vdbio::describeSource(path);
   std::vector<bool> beam;

@@ -77,6 +77,11 @@ void checkSource(const ModelSource& src, const std::string& what) {
                        std::to_string(kCanopyBrickSize << kCanopyMaxDepth));
   for (double v : src.indexToModel)
     if (!std::isfinite(v)) throw invalidInput(what + ": transform is not finite");
+  if (src.detailLevels > 4) throw invalidInput(what + ": detail factor 2^" + std::to_string(src.detailLevels) + " exceeds 16");
+  const int32_t cellMask = (1 << src.detailLevels) - 1;
+  for (int a = 0; a < 3; ++a)
+    if (((src.latticeMin[a] | (src.latticeMax[a] + 1)) & cellMask) != 0)
+      throw invalidInput(what + ": the detail lattice's bounds are not whole light cells");
   if (src.cells.empty()) throw invalidInput(what + ": density grid has no occupied cells (empty model)");
   for (const SourceCell& c : src.cells) {
     for (int a = 0; a < 3; ++a)
@@ -202,11 +207,14 @@ void fillUnavailable(LightBlock& b) {
 
 // Light levels aligned with the density levels (lights[d].blocks[i] belongs to levels[d].keys[i]),
 // then one light item per brick.
+// `levels` are the light levels (0..depth - detailLevels); `bricks` the bricks that get items.
 void buildLight(const ModelSource& src, const std::string& what, const LightFn& light, const std::vector<Level>& levels,
                 const std::vector<std::pair<uint32_t, uint64_t>>& bricks, std::vector<uint16_t>& out) {
   const size_t depth = levels.size() - 1;
   std::vector<std::vector<LightBlock>> lights(levels.size());
-  // Finest: the mean of the source over each light voxel's 2x2x2 lattice cells.
+  int32_t lightMin[3];  // the light lattice's first cell
+  for (int a = 0; a < 3; ++a) lightMin[a] = src.latticeMin[a] >> src.detailLevels;
+  // Finest: the mean of the source over each light voxel's 2x2x2 light lattice cells.
   lights[depth].resize(levels[depth].keys.size());
   parallelFor(int64_t(levels[depth].keys.size()), [&](int64_t bi) {
     uint32_t k[3];
@@ -218,9 +226,9 @@ void buildLight(const ModelSource& src, const std::string& what, const LightFn& 
         for (int x = 0; x < kL; ++x) {
           double sum[kCh] = {};
           for (int s = 0; s < 8; ++s) {
-            const int32_t i = src.latticeMin[0] + int32_t(kB * k[0]) + 2 * x + (s & 1);
-            const int32_t j = src.latticeMin[1] + int32_t(kB * k[1]) + 2 * y + ((s >> 1) & 1);
-            const int32_t kk = src.latticeMin[2] + int32_t(kB * k[2]) + 2 * z + (s >> 2);
+            const int32_t i = lightMin[0] + int32_t(kB * k[0]) + 2 * x + (s & 1);
+            const int32_t j = lightMin[1] + int32_t(kB * k[1]) + 2 * y + ((s >> 1) & 1);
+            const int32_t kk = lightMin[2] + int32_t(kB * k[2]) + 2 * z + (s >> 2);
             light(i, j, kk, tmp);
             for (int c = 0; c < kCh; ++c) {
               if (!std::isfinite(tmp[c]))
@@ -334,6 +342,7 @@ BuiltModel buildOctree(const ModelSource& src, const std::string& what, const Li
   int64_t maxDim = 0;
   for (int a = 0; a < 3; ++a) maxDim = std::max<int64_t>(maxDim, int64_t(src.latticeMax[a]) - src.latticeMin[a] + 1);
   const uint32_t depth = depthForCells(maxDim);
+  if (src.detailLevels > depth) throw invalidInput(what + ": more detail levels than the octree has levels");
 
   // Levels, finest first; levels[d] is level d.
   std::vector<Level> levels(depth + 1);
@@ -354,6 +363,7 @@ BuiltModel buildOctree(const ModelSource& src, const std::string& what, const Li
     M.octreeOrigin[a] = src.latticeMin[a];
   }
   M.depth = depth;
+  M.detailLevels = src.detailLevels;
   M.rootCells = kCanopyBrickSize << depth;
   M.brickSize = kCanopyBrickSize;
   M.brickBorder = kCanopyBrickBorder;
@@ -436,11 +446,14 @@ BuiltModel buildOctree(const ModelSource& src, const std::string& what, const Li
         }
   });
   if (light) {
+    // Items for the light levels' bricks: the first ones (breadth-first ids, coarse to fine).
+    const uint32_t lightDepth = depth - src.detailLevels;
     std::vector<std::pair<uint32_t, uint64_t>> refs;
-    refs.reserve(bricks.size());
-    for (const BrickRef& b : bricks) refs.emplace_back(b.level, b.key);
+    for (const BrickRef& b : bricks)
+      if (b.level <= lightDepth) refs.emplace_back(b.level, b.key);
+    levels.resize(lightDepth + 1);  // the detail levels' blocks are written: free them
     buildLight(src, what, light, levels, refs, out.light);
-    M.lightCount = M.brickCount;
+    M.lightCount = uint32_t(refs.size());
     M.flags |= kCanopyModelHasLight;
   }
   return out;

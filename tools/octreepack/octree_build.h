@@ -38,9 +38,14 @@ struct ModelSource {
   int32_t latticeMax[3] = {0, 0, 0};
   std::array<double, 12> indexToModel{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
   std::vector<SourceCell> cells;                // occupied cells, any order, inside the lattice
+  // > 0: a detail lattice (canopy-voxelize --detail) 2^detailLevels times finer than the light
+  // lattice [latticeMin >> n, latticeMax >> n], whose bounds must be whole light cells. The light
+  // (LightFn) is then called at light lattice cells, and only the bricks of levels up to
+  // depth - detailLevels get light items (CanopyModel.detailLevels, format 2.0).
+  uint32_t detailLevels = 0;
 };
 
-// A model's lighting at one lattice cell (cell centre): 19 bases x RGB, out[3 * base + channel].
+// A model's lighting at one light lattice cell (cell centre): 19 bases x RGB, out[3 * base + channel].
 // Called concurrently from several threads.
 using LightFn = std::function<void(int32_t i, int32_t j, int32_t k, float* out)>;
 

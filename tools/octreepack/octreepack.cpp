@@ -242,6 +242,10 @@ nlohmann::json canopyInfo(const CanopyFile& f) {
     models.push_back({{"name", std::string(M.name)},
                       {"lattice_min", {M.latticeMin[0], M.latticeMin[1], M.latticeMin[2]}},
                       {"lattice_max", {M.latticeMax[0], M.latticeMax[1], M.latticeMax[2]}},
+                      {"light_lattice_min", {M.latticeMin[0] >> M.detailLevels, M.latticeMin[1] >> M.detailLevels, M.latticeMin[2] >> M.detailLevels}},
+                      {"light_lattice_max", {M.latticeMax[0] >> M.detailLevels, M.latticeMax[1] >> M.detailLevels, M.latticeMax[2] >> M.detailLevels}},
+                      {"detail_levels", M.detailLevels},
+                      {"light_depth", canopyLightDepth(M)},
                       {"depth", M.depth},
                       {"root_cells", M.rootCells},
                       {"tiles", M.tileCount},
@@ -295,6 +299,19 @@ std::string formatInfo(const nlohmann::json& j) {
                                                                         : std::string()) +
                                            "; sun bases " + m["sun_bases"].get<std::string>() + ")"
                                      : std::string("no"))
+      << "\n";
+    auto box = [](const nlohmann::json& lo, const nlohmann::json& hi) {
+      std::ostringstream b;
+      for (int a = 0; a < 3; ++a) b << (a ? "x" : "") << hi[a].get<int64_t>() - lo[a].get<int64_t>() + 1;
+      return b.str();
+    };
+    const uint32_t detail = m["detail_levels"].get<uint32_t>();
+    o << "  density lattice " << box(m["lattice_min"], m["lattice_max"]) << ", light lattice "
+      << box(m["light_lattice_min"], m["light_lattice_max"])
+      << (detail ? " (detail x" + std::to_string(1u << detail) + ": levels " + std::to_string(m["light_depth"].get<uint32_t>() + 1) +
+                       ".." + std::to_string(m["depth"].get<uint32_t>()) + " take the light of level " +
+                       std::to_string(m["light_depth"].get<uint32_t>()) + ")"
+                 : std::string(" (the same)"))
       << "\n";
     for (const auto& l : m["levels"])
       o << "  level " << l["level"].get<uint32_t>() << " (voxel = " << l["voxel_cells"].get<uint32_t>() << " cells): "
