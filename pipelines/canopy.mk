@@ -29,6 +29,9 @@ LAUNCH_GPU ?= $(LAUNCH)$(if $(strip $(LAUNCH)), $(GPU_LAUNCH_FLAGS))
 # lattice cells per axis, and fine sub-cells per lattice cell per axis (voxelize)
 RESOLUTION ?= 128
 SUPERSAMPLE ?= 8
+# empty, or the detail lattice's cells per axis (RESOLUTION x 2, 4, 8 or 16): the plants' .canopy
+# then holds geometry that fine, lit from the RESOLUTION lattice (docs/voxelize.md, "Detail lattice")
+DETAIL ?=
 # auto | cpu | cuda | cuda:N (lbsolve, play)
 DEVICE ?= auto
 VOXELIZE_FLAGS ?=
@@ -52,6 +55,7 @@ CANOPY_QUIET ?= --quiet
 canopy_voxelize_cmd = $(LAUNCH) $(CANOPY_VOXELIZE) $(CANOPY_QUIET) --resolution $(RESOLUTION) \
   --supersample $(SUPERSAMPLE) $(VOXELIZE_FLAGS) $< -o $@
 
+ifeq ($(strip $(DETAIL)),)
 %.density.vdb: %.glb
 	$(canopy_voxelize_cmd)
 %.density.vdb: %.gltf
@@ -60,6 +64,20 @@ canopy_voxelize_cmd = $(LAUNCH) $(CANOPY_VOXELIZE) $(CANOPY_QUIET) --resolution 
 	$(canopy_voxelize_cmd)
 %.density.vdb: %.ply
 	$(canopy_voxelize_cmd)
+else
+# DETAIL=N (e.g. 1024): one voxelize run writes the light lattice (RESOLUTION, what lbsolve solves)
+# and the detail lattice (N, what the player shows), nested in the same box (docs/voxelize.md).
+canopy_voxelize_detail_cmd = $(LAUNCH) $(CANOPY_VOXELIZE) $(CANOPY_QUIET) --resolution $(RESOLUTION) \
+  --supersample $(SUPERSAMPLE) --detail $(DETAIL) $(VOXELIZE_FLAGS) $< -o $*.density.vdb --detail-output $*.detail.vdb
+%.density.vdb %.detail.vdb: %.glb
+	$(canopy_voxelize_detail_cmd)
+%.density.vdb %.detail.vdb: %.gltf
+	$(canopy_voxelize_detail_cmd)
+%.density.vdb %.detail.vdb: %.obj
+	$(canopy_voxelize_detail_cmd)
+%.density.vdb %.detail.vdb: %.ply
+	$(canopy_voxelize_detail_cmd)
+endif
 
 %.light.vdb: %.density.vdb
 	$(LAUNCH_GPU) $(CANOPY_LBSOLVE) $(CANOPY_QUIET) --device $(DEVICE) $(LBSOLVE_FLAGS) $< -o $@
@@ -67,8 +85,9 @@ canopy_voxelize_cmd = $(LAUNCH) $(CANOPY_VOXELIZE) $(CANOPY_QUIET) --resolution 
 %.light.chaar: %.light.vdb
 	$(LAUNCH) $(CANOPY_HAAR) $(CANOPY_QUIET) $(HAAR_ERROR) $(HAAR_FLAGS) $< -o $@
 
-# One plant: its lattice and its compressed lighting in one streamable file.
-%.canopy: %.density.vdb %.light.chaar
+# One plant: its lattice (with DETAIL, the detail lattice) and its compressed lighting in one
+# streamable file.
+%.canopy: %.$(if $(strip $(DETAIL)),detail,density).vdb %.light.chaar
 	$(LAUNCH) $(CANOPY_OCTREEPACK) $(CANOPY_QUIET) $(PACK_FLAGS) $^ -o $@
 
 # A still of a packed plant or scene.
@@ -76,4 +95,4 @@ canopy_voxelize_cmd = $(LAUNCH) $(CANOPY_VOXELIZE) $(CANOPY_QUIET) --resolution 
 	$(LAUNCH_GPU) $(CANOPY_PLAY) $(CANOPY_QUIET) --device $(DEVICE) $(PLAY_FLAGS) $< -o $@
 
 # Keep the intermediate files of the chain (make would otherwise delete them).
-.PRECIOUS: %.density.vdb %.light.vdb %.light.chaar %.canopy
+.PRECIOUS: %.density.vdb %.detail.vdb %.light.vdb %.light.chaar %.canopy

@@ -31,6 +31,7 @@ namespace {
 
 // The current format's frozen file (1.2) and the previous ones (1.1, 1.0), which must still read.
 const std::string kFrozen = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v1.2.canopy";
+const std::string kFrozenV20 = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v2.0.canopy";
 const std::string kFrozenV11 = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v1.1.canopy";
 const std::string kFrozenV1 = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v1.0.canopy";
 const std::string kFrozenChaar = std::string(CANOPY_SOURCE_DIR) + "/tests/haar/data/small_v1_0.chaar";
@@ -57,7 +58,7 @@ float sceneLightValue(uint32_t base, uint32_t node) { return 0.01f * float(node 
 // analytic float16 lighting (depth 0) and three instances (1.0); 1.1 adds a fourth instance of a
 // third model lit by the frozen .chaar (float16 items of its decoded values and its Haar pages);
 // 1.2 adds a coarse scene light with its 19 bases (SceneLight's B00, SceneSunLight's B01..B18).
-std::vector<unsigned char> smallFileBytes(int minor = 2) {
+std::vector<unsigned char> smallFileBytes(int minor = 2, bool detail = false) {
   const bool withHaar = minor >= 1;
   const op::ModelSource src = op::testing::syntheticPlant(20, 2, "frozen", 0);
   const op::BuiltModel m = op::buildOctree(src, "frozen");
@@ -69,6 +70,11 @@ std::vector<unsigned char> smallFileBytes(int minor = 2) {
   in.models.push_back({m.record, &m.tiles, &m.bricks, nullptr});
   in.models.push_back({lit.record, &lit.tiles, &lit.bricks, &lit.light});
   if (withHaar) in.models.push_back({haarLit.record, &haarLit.tiles, &haarLit.bricks, &haarLit.light, &haarPages});
+  // 2.0: a detail model, a 16-cell plant on a lattice twice as fine as its 8-cell light lattice
+  op::ModelSource fine = op::testing::syntheticPlant(16, 4, "detail", 0);
+  fine.detailLevels = 1;
+  const op::BuiltModel detailModel = op::buildOctree(fine, "detail", op::testing::analyticLight);
+  if (detail) in.models.push_back({detailModel.record, &detailModel.tiles, &detailModel.bricks, &detailModel.light});
   CanopyInstance a{}, b{};
   a.modelToWorld[0] = a.modelToWorld[5] = a.modelToWorld[10] = 1.0f;
   b = a;
@@ -80,7 +86,12 @@ std::vector<unsigned char> smallFileBytes(int minor = 2) {
   d.modelToWorld[11] = -6.0f;
   in.instances = {a, b, c};
   if (withHaar) in.instances.push_back(d);
-  in.metadata = R"({"tool":"test_canopy_file","note":"frozen .canopy 1.)" + std::to_string(minor) + R"("})";
+  CanopyInstance e = a;
+  e.model = 3;
+  e.modelToWorld[7] = 5.0f;
+  if (detail) in.instances.push_back(e);
+  in.metadata = detail ? std::string(R"({"tool":"test_canopy_file","note":"frozen .canopy 2.0"})")
+                       : R"({"tool":"test_canopy_file","note":"frozen .canopy 1.)" + std::to_string(minor) + R"("})";
   if (minor >= 2) {
     in.hasSceneLight = true;
     const double m[12] = {0.5, 0, 0, -1.0, 0, 0.5, 0, -0.25, 0, 0, 0.5, -7.0};
@@ -197,6 +208,59 @@ TEST(CanopyFile, FrozenSmallFileStillReads) {
   EXPECT_EQ(readFile(kFrozen), smallFileBytes()) << "the .canopy layout changed: bump the version";
 }
 
+// The 2.0 file: the 1.2 content plus a detail model (CanopyModel.detailLevels): light items for its
+// light levels only; it reads, and the writer still produces it byte for byte. Without the detail
+// model the same content is the 1.2 file (above).
+TEST(CanopyFile, FrozenVersion20FileStillReadsAndIsStillWritten) {
+  if (std::getenv("CANOPY_WRITE_FROZEN")) {
+    const auto bytes = smallFileBytes(2, true);
+    writeFileAtomic(kFrozenV20, bytes.data(), bytes.size());
+  }
+  CanopyFile f = CanopyFile::open(kFrozenV20);
+  EXPECT_EQ(f.header().major, 2);
+  EXPECT_EQ(f.header().minor, 0);
+  checkFrozenV11Content(f);
+  ASSERT_EQ(f.modelCount(), 4u);
+  const CanopyModel& D = f.model(3);
+  EXPECT_EQ(D.detailLevels, 1u);
+  EXPECT_EQ(D.latticeMin[0], 4);
+  EXPECT_EQ(D.latticeMax[0], 19);
+  uint32_t lightBricks = 0;
+  for (uint32_t l = 0; l <= canopyLightDepth(D); ++l) lightBricks += D.levelBricks[l];
+  EXPECT_EQ(D.lightCount, lightBricks);
+  EXPECT_LT(D.lightCount, D.brickCount);
+  for (uint32_t i = 0; i < f.pageCount(); ++i) EXPECT_NO_THROW(f.readPage(i));
+  EXPECT_EQ(readFile(kFrozenV20), smallFileBytes(2, true)) << "the .canopy layout changed: bump the version";
+}
+
+// A detail model's record is checked (valid CRCs): detail levels in a 1.x file, more detail levels
+// than levels, bounds that are not whole light cells, a light count that is not its light levels'
+// bricks (detail levels edited: a light-level brick would have no item, or a detail brick one).
+TEST(CanopyFile, DetailModelRecordIsChecked) {
+  const std::vector<unsigned char> good = readFile(kFrozenV20);
+  CanopyFile f = CanopyFile::fromMemory(good.data(), good.size(), "ok.canopy");
+  const CanopySection* models = f.findSection(CanopySectionKind::Models);
+  ASSERT_NE(models, nullptr);
+  const size_t rec = models->offset + 3 * sizeof(CanopyModel);
+  auto edited = [&](auto field, uint32_t value) {
+    std::vector<unsigned char> bad = good;
+    std::memcpy(bad.data() + rec + field, &value, 4);
+    reseal(bad);
+    return expectRejected(bad, false);
+  };
+  EXPECT_NE(edited(offsetof(CanopyModel, detailLevels), 0).find("light items or pages out of range"), std::string::npos);
+  EXPECT_NE(edited(offsetof(CanopyModel, latticeMin), 5).find("not whole light cells"), std::string::npos);
+  EXPECT_NE(edited(offsetof(CanopyModel, detailLevels), 9).find("more detail levels"), std::string::npos);
+  std::vector<unsigned char> v1 = good;  // the same file claiming 1.2
+  CanopyFileHeader h;
+  std::memcpy(&h, v1.data(), sizeof h);
+  h.major = 1;
+  h.minor = 2;
+  std::memcpy(v1.data(), &h, sizeof h);
+  reseal(v1);
+  EXPECT_NE(expectRejected(v1, false).find("has detail levels in a 1.2 file"), std::string::npos);
+}
+
 // The 1.1 file (before the scene light's sun bases) still reads, and a file without them is still
 // written as exactly that 1.1 file.
 TEST(CanopyFile, FrozenVersion11FileStillReadsAndIsStillWritten) {
@@ -211,8 +275,8 @@ TEST(CanopyFile, FrozenVersion11FileStillReadsAndIsStillWritten) {
 }
 
 void checkFrozenV11Content(CanopyFile& f) {
-  ASSERT_EQ(f.modelCount(), 3u);
-  ASSERT_EQ(f.instanceCount(), 4u);
+  ASSERT_GE(f.modelCount(), 3u);
+  ASSERT_GE(f.instanceCount(), 4u);
   checkDensityAndFloat16Models(f);
   // The Haar-lit model: its Haar light at any point equals the .chaar sampler's value, bit for bit.
   const CanopyModel& H = f.model(2);
