@@ -14,6 +14,7 @@ namespace canopy::octreepack::testing {
 // A lattice as canopy-voxelize writes it; `source` is its canopy_source ("<mesh file> xxh64:<hash>")
 // and meshIndex (>= -1) its file's canopy_mesh_index (none where kNoMesh).
 inline constexpr int kNoMesh = -2;
+// A source with detailLevels > 0 is written as a detail lattice (canopy-voxelize --detail).
 inline void writeSourceVdb(const std::string& path, const ModelSource& s, const std::string& source = "test",
                            int meshIndex = kNoMesh) {
   canopy::vdbio::DensityLatticeData data;
@@ -26,6 +27,11 @@ inline void writeSourceVdb(const std::string& path, const ModelSource& s, const 
   data.meta.min = openvdb::Coord(s.latticeMin[0], s.latticeMin[1], s.latticeMin[2]);
   data.meta.max = openvdb::Coord(s.latticeMax[0], s.latticeMax[1], s.latticeMax[2]);
   data.meta.source = source;
+  if (s.detailLevels > 0) {
+    data.detailFactor = 1 << s.detailLevels;
+    data.lightMin = openvdb::Coord(s.latticeMin[0] >> s.detailLevels, s.latticeMin[1] >> s.detailLevels, s.latticeMin[2] >> s.detailLevels);
+    data.lightMax = openvdb::Coord(s.latticeMax[0] >> s.detailLevels, s.latticeMax[1] >> s.detailLevels, s.latticeMax[2] >> s.detailLevels);
+  }
   if (meshIndex != kNoMesh) data.fileMeta.insertMeta("canopy_mesh_index", openvdb::Int32Metadata(meshIndex));
   canopy::vdbio::writeDensityLattice(path, data);
 }

@@ -812,6 +812,86 @@ TEST(OctreepackLight, LbsolveLightVdbPacksThroughTheCli) {
 // The mark of lbsolve's scattered-only sun bases (canopy_direct_beam = false on B01..B18) becomes
 // the model flag kCanopyModelScatteredSun (format 1.1), shown by info; without the mark the file
 // stays 1.0 and info says "total"; bases that disagree are refused with no output.
+// A detail lattice (2x finer than its 16-cell light lattice) packs with lbsolve-style light on its
+// light lattice: a 2.0 file whose model has one detail level, light items for the light levels,
+// and info showing both lattices. Light whose lattice bounds or box differ, or that carries no
+// lattice metadata, is refused (exit 3, nothing written).
+TEST(OctreepackDetail, DetailLatticePacksWithItsLightLatticesLight) {
+  const std::string dir = tmpDir();
+  op::ModelSource fine = op::testing::syntheticPlant(32, 0, "leafy", 0);
+  fine.detailLevels = 1;
+  op::testing::writeSourceVdb(dir + "/leafy.detail.vdb", fine);
+  // light lattice: cell c centred at the detail index point 2c + 0.5
+  auto writeLight = [&](const std::string& path, int edge, double shift, bool meta) {
+    openvdb::Mat4d m = openvdb::Mat4d::identity();
+    for (int r = 0; r < 3; ++r) {
+      const double* D = &fine.indexToModel[size_t(r * 4)];
+      for (int c = 0; c < 3; ++c) m(c, r) = 2.0 * D[c];
+      m(3, r) = D[0] * 0.5 + D[1] * 0.5 + D[2] * 0.5 + D[3] + shift;
+    }
+    openvdb::GridPtrVec grids;
+    float tmp[canopy::kCanopyLightChannels];
+    for (uint32_t b = 0; b < canopy::kCanopyLightBases; ++b) {
+      auto g = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
+      char name[8];
+      std::snprintf(name, sizeof name, "B%02u", b);
+      g->setName(name);
+      g->setTransform(openvdb::math::Transform::createLinearTransform(m));
+      auto acc = g->getAccessor();
+      for (int k = 0; k < edge; ++k)
+        for (int j = 0; j < edge; ++j)
+          for (int i = 0; i < edge; ++i) {
+            op::testing::analyticLight(i, j, k, tmp);
+            acc.setValue(openvdb::Coord(i, j, k), openvdb::Vec3s(tmp[3 * b], tmp[3 * b + 1], tmp[3 * b + 2]));
+          }
+      if (meta) {
+        canopy::vdbio::LatticeMeta lm;
+        lm.min = openvdb::Coord(0);
+        lm.max = openvdb::Coord(edge - 1);
+        lm.source = "test";
+        canopy::vdbio::stampGrid(*g, lm);
+      }
+      grids.push_back(g);
+    }
+    canopy::vdbio::writeVdb(path, grids);
+  };
+  writeLight(dir + "/leafy.light.vdb", 16, 0.0, true);
+  const std::string out = dir + "/leafy-detail.canopy";
+  std::remove(out.c_str());
+  ASSERT_EQ(run("'" + dir + "/leafy.detail.vdb' '" + dir + "/leafy.light.vdb' -o '" + out + "'"), 0);
+  const canopy::CanopyFile f = canopy::CanopyFile::open(out);
+  EXPECT_EQ(f.header().major, 2);
+  const canopy::CanopyModel& M = f.model(0);
+  EXPECT_EQ(M.detailLevels, 1u);
+  EXPECT_EQ(M.latticeMax[0], 31);
+  EXPECT_GT(M.lightCount, 0u);
+  EXPECT_LT(M.lightCount, M.brickCount);
+  const op::BuiltModel built = op::buildOctree(fine, "leafy", op::testing::analyticLight);
+  EXPECT_EQ(M.lightCount, built.record.lightCount);
+  // info: both lattices
+  const std::string cmd = std::string(CANOPY_BINARY_DIR) + "/bin/canopy-octreepack info '" + out + "' --json";
+  FILE* p = popen(cmd.c_str(), "r");
+  ASSERT_NE(p, nullptr);
+  std::string text;
+  char buf[4096];
+  for (size_t n; (n = fread(buf, 1, sizeof buf, p)) > 0;) text.append(buf, n);
+  EXPECT_EQ(pclose(p), 0);
+  const nlohmann::json info = nlohmann::json::parse(text);
+  EXPECT_EQ(info["models"][0]["detail_levels"], 1);
+  EXPECT_EQ(info["models"][0]["light_lattice_max"][0], 15);
+  EXPECT_EQ(info["models"][0]["lattice_max"][0], 31);
+  // refused: another lattice, another box, no lattice metadata
+  writeLight(dir + "/bounds.light.vdb", 15, 0.0, true);
+  writeLight(dir + "/shifted.light.vdb", 16, 0.01, true);
+  writeLight(dir + "/nometa.light.vdb", 16, 0.0, false);
+  for (const char* bad : {"bounds", "shifted", "nometa"}) {
+    const std::string o = dir + "/" + bad + ".canopy";
+    std::remove(o.c_str());
+    EXPECT_EQ(run("'" + dir + "/leafy.detail.vdb' '" + dir + "/" + bad + ".light.vdb' -o '" + o + "'"), 3) << bad;
+    EXPECT_FALSE(exists(o)) << bad;
+  }
+}
+
 TEST(OctreepackLight, ScatteredSunBasesAreFlagged) {
   const std::string dir = tmpDir();
   writeSourceVdb(dir + "/sunflag.density.vdb", syntheticPlant(16, 0, "sunflag", 0));
