@@ -130,19 +130,43 @@ inline haar::ChaarData chaarOf(const octreepack::ModelSource& src, const octreep
   return haar::assembleChaar(a);
 }
 
+// The model on a detail lattice 2^levels times finer (canopy-voxelize --detail's nesting): every
+// cell becomes 2^levels per axis with the same values, the transform scaled about the box corner
+// (light cell c centred at the detail index point 2^n c + (2^n - 1) / 2).
+inline octreepack::ModelSource detailOf(const octreepack::ModelSource& src, uint32_t levels) {
+  octreepack::ModelSource d = src;
+  const int f = 1 << levels;
+  d.detailLevels = levels;
+  for (int a = 0; a < 3; ++a) d.latticeMin[a] = src.latticeMin[a] * f, d.latticeMax[a] = src.latticeMax[a] * f + f - 1;
+  const double c0 = -0.5 * (f - 1) / f;  // D(p) = L(p / f + c0)
+  for (int r = 0; r < 3; ++r) {
+    const double* L = &src.indexToModel[size_t(r * 4)];
+    d.indexToModel[size_t(r * 4 + 3)] = L[3] + c0 * (L[0] + L[1] + L[2]);
+    for (int a = 0; a < 3; ++a) d.indexToModel[size_t(r * 4 + a)] = L[a] / f;
+  }
+  d.cells.clear();
+  for (const auto& c : src.cells)
+    for (int z = 0; z < f; ++z)
+      for (int y = 0; y < f; ++y)
+        for (int x = 0; x < f; ++x) d.cells.push_back({{c.ijk[0] * f + x, c.ijk[1] * f + y, c.ijk[2] * f + z}, c.density, c.wood, {c.albedo[0], c.albedo[1], c.albedo[2]}});
+  return d;
+}
+
 // writeLitScene with each model's lighting Haar-compressed first (chaarOf), as canopy-octreepack
 // packs PLANT.light.chaar: float16 light items of its decoded values on every level, and its bricks
 // as Haar pages (the finest level's exact light, canopy-play --light exact).
 inline void writeHaarLitScene(const std::string& path, const std::vector<octreepack::ModelSource>& sources,
                               const std::vector<octreepack::LightFn>& lights, const std::vector<CanopyInstance>& instances, float T,
-                              haar::Precision precision, const SceneLightData* sceneLight = nullptr) {
+                              haar::Precision precision, const SceneLightData* sceneLight = nullptr, uint32_t detailLevels = 0) {
   std::vector<octreepack::BuiltModel> built;
   std::vector<CanopyHaarPages> pages(sources.size());
   built.reserve(sources.size());
   for (size_t m = 0; m < sources.size(); ++m) {
     const haar::ChaarData chaar = chaarOf(sources[m], lights[m], T, precision);
     pages[m] = canopyHaarPagesFromChaar(chaar);
-    built.push_back(octreepack::buildOctree(sources[m], sources[m].name, octreepack::chaarLightFn(chaar.view())));
+    // detailLevels > 0: the geometry on a detail lattice (detailOf), lit from this light lattice
+    built.push_back(octreepack::buildOctree(detailLevels ? detailOf(sources[m], detailLevels) : sources[m], sources[m].name,
+                                            octreepack::chaarLightFn(chaar.view())));
     built.back().record.flags |= kCanopyModelScatteredSun;
   }
   CanopyWriteInput w;

@@ -74,6 +74,15 @@ std::string haarForestFile() {
   return p;
 }
 
+// The Haar-lit forest with its geometry on detail lattices twice as fine (format 2.0): the descent
+// to detail levels, their light from the light level (items, and Haar light at the light lattice
+// point with --light exact), extinction per light cell.
+std::string detailForestFile() {
+  const std::string p = pt::tmpDir("cuda") + "/forest-detail.canopy";
+  pt::writeHaarLitScene(p, forestModels(), forestLights(), forestInstances(), 0.01f, canopy::haar::Precision::Fp16, nullptr, 1);
+  return p;
+}
+
 // The lit forest with a 19-base coarse scene light (format 1.2) over it: smooth synthetic bases,
 // each its own pattern, so that the sun's lookup on them (rebuilt and uploaded per frame as the
 // sun moves) selects different factors than B00.
@@ -102,8 +111,9 @@ std::string sceneLitForestFile() {
 // code; the lit file also with the sun off, so that the indirect term alone is compared), then
 // Haar-lit with --light exact (the finest level's light from Haar pages, canopyHaarSampleAt on the
 // device), then lit with a 19-base scene light (format 1.2: the sun factor rebuilt on the host and
-// uploaded per frame as the sun moves over three frames; the last frame is compared), all in one
-// test case.
+// uploaded per frame as the sun moves over three frames; the last frame is compared), then the
+// Haar-lit forest on detail lattices (format 2.0: fast light and map, exact light and cones), all
+// in one test case.
 TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
   if (canopy::cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA device";
   struct Case {
@@ -114,10 +124,11 @@ TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
     bool exact = false;   // --light exact (the Haar-lit file's Haar pages)
     bool movingSun = false;  // three frames, the sun orbiting (the scene light's sun factor changes per frame)
   };
-  const std::string lit = litForestFile(), unlit = forestFile(), haar = haarForestFile(), sceneLit = sceneLitForestFile();
+  const std::string lit = litForestFile(), unlit = forestFile(), haar = haarForestFile(), sceneLit = sceneLitForestFile(),
+                    detail = detailForestFile();
   for (const Case& k : {Case{unlit, true, 0, "map"}, Case{unlit, true, 0, "cone"}, Case{lit, true, 2, "map"}, Case{lit, false, 2, "map"},
                         Case{haar, true, 2, "map", true}, Case{haar, false, 2, "map", true}, Case{sceneLit, true, 2, "map", false, true},
-                        Case{sceneLit, false, 2, "map", false, true}}) {
+                        Case{sceneLit, false, 2, "map", false, true}, Case{detail, true, 2, "map", false}, Case{detail, true, 2, "cone", true}}) {
     pl::PlayOptions o;
     o.input = k.file;
     o.shadowMethod = k.shadows;
