@@ -8,6 +8,8 @@ int main(int argc, char** argv) {
   canopy::Tool tool("canopy-octreepack",
                     "Packs density lattices (and scene instances) into one streamable .canopy file.\n"
                     "  canopy-octreepack PLANT.density.vdb [PLANT.light.chaar|PLANT.light.vdb] -o PLANT.canopy\n"
+                    "  canopy-octreepack PLANT.detail.vdb PLANT.light.chaar -o PLANT.canopy   (a detail lattice of\n"
+                    "    canopy-voxelize --detail, lit from the lattice it nests in)\n"
                     "  canopy-octreepack --scene SCENE.json -o SCENE.canopy\n"
                     "  canopy-octreepack --scene SCENE.glb MESH.density.vdb [MESH.light.chaar] ... -o SCENE.canopy\n"
                     "    (one lattice per mesh the scene uses, from canopy-voxelize SCENE.glb --mesh N; matched to\n"

@@ -26,7 +26,7 @@ bool endsWith(const std::string& s, const std::string& suf) {
 
 std::string stemOf(const std::string& path) {
   std::string base = path.substr(path.find_last_of('/') == std::string::npos ? 0 : path.find_last_of('/') + 1);
-  for (const char* suf : {".density.vdb", ".vdb"})
+  for (const char* suf : {".density.vdb", ".detail.vdb", ".vdb"})
     if (endsWith(base, suf)) return base.substr(0, base.size() - std::strlen(suf));
   return base;
 }
