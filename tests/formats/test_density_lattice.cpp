@@ -1,9 +1,10 @@
 // The density lattice file's one contract (formats/density_lattice.h), in one place: the writer and
-// the reader round trip; every truncated prefix and flipped byte, a newer OpenVDB file version and
-// every bad grid or value fails with a one-line canopy::Error naming the file, never a crash (this
-// test compiles density_lattice.cpp and lattice_vdb.cpp itself, under ASan/UBSan). canopy-lbsolve,
-// canopy-octreepack and canopy-voxelize info all read lattices through readDensityLattice, so
-// their own tests only check how they report its errors.
+// the reader round trip (the detail relation's too); every truncated prefix and flipped byte, a newer
+// OpenVDB file version, every bad grid or value and every bad detail relation fails with a one-line
+// canopy::Error naming the file, never a crash (this test compiles density_lattice.cpp and
+// lattice_vdb.cpp itself, under ASan/UBSan). canopy-lbsolve, canopy-octreepack and canopy-voxelize
+// info all read lattices through readDensityLattice, so their own tests only check how they report
+// its errors.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -281,5 +282,91 @@ TEST(DensityLattice, MissingOrMismatchedGridsAreRefused) {
     vdbio::stampGrid(*density, d.meta);
     g[0] = density;
     expectInvalid(dir + "/background.vdb", g, "grid 'density' has background 0.5, expected 0");
+  }
+}
+
+// ---- The detail relation (canopy-voxelize --detail) ----------------------------------------------
+
+namespace {
+
+// plant()'s 10^3 lattice as the detail lattice of a 5^3 light lattice (k = 2).
+DensityLatticeData detailPlant(int factor = 2, openvdb::Coord lightMin = openvdb::Coord(0),
+                               openvdb::Coord lightMax = openvdb::Coord(4)) {
+  DensityLatticeData d = plant();
+  d.detailFactor = factor;
+  d.lightMin = lightMin;
+  d.lightMax = lightMax;
+  return d;
+}
+
+}  // namespace
+
+TEST(DensityLattice, DetailRelationRoundTrip) {
+  const std::string dir = scratch("detail");
+  vdbio::writeDensityLattice(dir + "/d.vdb", detailPlant());
+  const vdbio::DensityLattice L = vdbio::readDensityLattice(dir + "/d.vdb");
+  EXPECT_EQ(L.detailFactor, 2);
+  EXPECT_EQ(L.lightMin, openvdb::Coord(0));
+  EXPECT_EQ(L.lightMax, openvdb::Coord(4));
+  EXPECT_EQ(L.cells.size(), plant().cells.size());
+  // On the density grid only, as the int32 and vec3i any OpenVDB client reads.
+  const vdbio::VdbFile f = vdbio::readVdb(dir + "/d.vdb");
+  const openvdb::GridBase::Ptr density = f.find("density");
+  EXPECT_EQ(density->metaValue<int32_t>(vdbio::kDetailFactorMeta), 2);
+  EXPECT_EQ(density->metaValue<openvdb::Vec3i>(vdbio::kLightLatticeMaxMeta), openvdb::Vec3i(4, 4, 4));
+  for (const char* name : {"wood", "albedo"}) EXPECT_FALSE(f.find(name)->getMetadata<openvdb::Int32Metadata>(vdbio::kDetailFactorMeta));
+
+  // A lattice that is not a detail lattice: factor 1, no metadata; the bytes are those it always had.
+  vdbio::writeDensityLattice(dir + "/plain.vdb", plant());
+  const vdbio::DensityLattice P = vdbio::readDensityLattice(dir + "/plain.vdb");
+  EXPECT_EQ(P.detailFactor, 1);
+  EXPECT_FALSE(vdbio::readVdb(dir + "/plain.vdb").find("density")->getMetadata<openvdb::Int32Metadata>(vdbio::kDetailFactorMeta));
+  DensityLatticeData one = plant();
+  one.detailFactor = 1;
+  one.lightMax = openvdb::Coord(7);  // ignored at factor 1
+  vdbio::writeDensityLattice(dir + "/one.vdb", one);
+  EXPECT_EQ(slurp(dir + "/one.vdb"), slurp(dir + "/plain.vdb"));
+
+  // A lattice that does not start at 0: light cells [1, 3] x 2 = detail cells [2, 7].
+  DensityLatticeData shifted = detailPlant(2, openvdb::Coord(1), openvdb::Coord(3));
+  shifted.meta.min = openvdb::Coord(2);
+  shifted.meta.max = openvdb::Coord(7);
+  shifted.cells.erase(std::remove_if(shifted.cells.begin(), shifted.cells.end(),
+                                     [](const DensityCell& c) {
+                                       return *std::min_element(c.ijk, c.ijk + 3) < 2 || *std::max_element(c.ijk, c.ijk + 3) > 7;
+                                     }),
+                      shifted.cells.end());
+  vdbio::writeDensityLattice(dir + "/shifted.vdb", shifted);
+  const vdbio::DensityLattice S = vdbio::readDensityLattice(dir + "/shifted.vdb");
+  EXPECT_EQ(S.lightMin, openvdb::Coord(1));
+  EXPECT_EQ(S.lightMax, openvdb::Coord(3));
+  // k = 16 over a 32^3 lattice.
+  DensityLatticeData big = detailPlant(16, openvdb::Coord(0), openvdb::Coord(1));
+  big.meta.max = openvdb::Coord(31);
+  vdbio::writeDensityLattice(dir + "/k16.vdb", big);
+  EXPECT_EQ(vdbio::readDensityLattice(dir + "/k16.vdb").detailFactor, 16);
+}
+
+TEST(DensityLattice, DetailRelationIsChecked) {
+  const std::string dir = scratch("detailbad");
+  auto grids = [](const DensityLatticeData& d) { return vdbio::densityLatticeGrids(d); };
+  expectInvalid(dir + "/k3.vdb", grids(detailPlant(3)), "canopy_detail_factor is 3, expected 2, 4, 8 or 16");
+  expectInvalid(dir + "/k32.vdb", grids(detailPlant(32)), "canopy_detail_factor is 32, expected 2, 4, 8 or 16");
+  expectInvalid(dir + "/k0.vdb", grids(detailPlant(0)), "canopy_detail_factor is 0, expected 2, 4, 8 or 16");
+  expectInvalid(dir + "/kneg.vdb", grids(detailPlant(-2)), "canopy_detail_factor is -2, expected 2, 4, 8 or 16");
+  // The light lattice x k must be the lattice: one cell short, one cell off, the wrong factor.
+  expectInvalid(dir + "/short.vdb", grids(detailPlant(2, openvdb::Coord(0), openvdb::Coord(3))),
+                "its light lattice (0,0,0)..(3,3,3) x 2 is not its lattice (0,0,0)..(9,9,9)");
+  expectInvalid(dir + "/off.vdb", grids(detailPlant(2, openvdb::Coord(1), openvdb::Coord(5))),
+                "its light lattice (1,1,1)..(5,5,5) x 2 is not its lattice (0,0,0)..(9,9,9)");
+  expectInvalid(dir + "/onlyx.vdb", grids(detailPlant(2, openvdb::Coord(0), openvdb::Coord(4, 4, 3))),
+                "its light lattice (0,0,0)..(4,4,3) x 2 is not its lattice");
+  expectInvalid(dir + "/k4.vdb", grids(detailPlant(4)), "its light lattice (0,0,0)..(4,4,4) x 4 is not its lattice");
+  expectInvalid(dir + "/inverted.vdb", grids(detailPlant(2, openvdb::Coord(4), openvdb::Coord(0))),
+                "its light lattice (4,4,4)..(0,0,0) x 2");
+  for (const char* name : {vdbio::kLightLatticeMinMeta, vdbio::kLightLatticeMaxMeta}) {
+    openvdb::GridPtrVec g = grids(detailPlant());
+    g[0]->removeMeta(name);
+    expectInvalid(dir + "/no" + std::string(name) + ".vdb", g, "a detail lattice without canopy_light_lattice_min/");
   }
 }

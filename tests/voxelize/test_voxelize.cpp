@@ -12,6 +12,7 @@
 
 #include <tbb/task_arena.h>
 
+#include "canopy/errors.h"
 #include "overlap.h"
 #include "test_helpers.h"
 #include "voxelize.h"
@@ -101,28 +102,34 @@ TEST(VoxelizeAnalytic, SphereSurfaceTouchesExpectedCells) {
   }
 }
 
+namespace {
+
 // An axis-aligned cube whose faces fall at generic fine-grid positions: each face touches exactly
-// the fine sub-cells whose closed box meets the face rectangle, computable per axis. Every
-// lattice cell's density must equal (its such sub-cells) / S^3 exactly. (The lattice frame puts
-// the extremes of the largest axis on fine-cell faces by construction, so two tiny triangles at far
-// corners define the frame and the cube's faces stay generic.)
-TEST(VoxelizeAnalytic, CubeSurfaceDensityIsExact) {
+// the fine sub-cells whose closed box meets the face rectangle, computable per axis. (The lattice
+// frame puts the extremes of the largest axis on fine-cell faces by construction, so two tiny
+// triangles at far corners define the frame and the cube's faces stay generic.)
+const mesh::Vec3 kCubeLo{-0.71, -0.53, -0.37}, kCubeHi{0.64, 0.58, 0.49};
+
+mesh::Mesh cubeMesh() {
   mesh::Mesh m = emptyMesh();
-  const mesh::Vec3 lo{-0.71, -0.53, -0.37}, hi{0.64, 0.58, 0.49};
-  addBox(m, lo, hi);
+  addBox(m, kCubeLo, kCubeHi);
   addTriangle(m, {-1.5, -1.5, -1.5}, {-1.49, -1.5, -1.5}, {-1.5, -1.49, -1.5});
   addTriangle(m, {1.5, 1.5, 1.5}, {1.49, 1.5, 1.5}, {1.5, 1.49, 1.5});
-  const int N = 24, S = 4;
-  const VoxelizeResult res = voxelizeMesh(m, opts(N, S), "cube");
-  const Frame f(res.frame);
+  return m;
+}
+
+// The cube's touched sub-cells per block of m^3 of them (m = S: lattice cells; S / k: detail
+// cells), from the lattice frame of an N^3, supersample S run; blocks of the frame triangles are
+// left out. Fails the test if a face falls on a fine boundary.
+std::map<Key, int> expectedCubeCounts(const LatticeFrame& frame, int N, int S, int m) {
+  const Frame f(frame);
   const double hf = f.h / S;
-  // Fine coordinates of the faces.
   double flo[3], fhi[3];
   for (int a = 0; a < 3; ++a) {
-    flo[a] = (lo[a] - f.corner[a]) / hf;
-    fhi[a] = (hi[a] - f.corner[a]) / hf;
-    ASSERT_GT(std::fabs(flo[a] - std::round(flo[a])), 1e-3) << "face on a fine boundary: pick other numbers";
-    ASSERT_GT(std::fabs(fhi[a] - std::round(fhi[a])), 1e-3);
+    flo[a] = (kCubeLo[a] - f.corner[a]) / hf;
+    fhi[a] = (kCubeHi[a] - f.corner[a]) / hf;
+    EXPECT_GT(std::fabs(flo[a] - std::round(flo[a])), 1e-3) << "face on a fine boundary: pick other numbers";
+    EXPECT_GT(std::fabs(fhi[a] - std::round(fhi[a])), 1e-3);
   }
   // Sub-cell x is touched iff it meets the box surface: it overlaps the solid box's closed range
   // on every axis and contains a face plane on at least one axis.
@@ -138,16 +145,35 @@ TEST(VoxelizeAnalytic, CubeSurfaceDensityIsExact) {
       if (!overlaps(y, 1)) continue;
       for (int z = 0; z < F; ++z) {
         if (!overlaps(z, 2)) continue;
-        if (holdsFace(x, 0) || holdsFace(y, 1) || holdsFace(z, 2)) ++expected[{x / S, y / S, z / S}];
+        if (holdsFace(x, 0) || holdsFace(y, 1) || holdsFace(z, 2)) ++expected[{x / m, y / m, z / m}];
       }
     }
   }
-  auto got = byCell(res);
-  // Drop the cells of the two frame triangles (far from the cube).
-  for (auto it = got.begin(); it != got.end();) {
-    const int i = std::get<0>(it->first);
-    it = (i < int(flo[0] / S) - 1 || i > int(fhi[0] / S) + 1) ? got.erase(it) : std::next(it);
+  return expected;
+}
+
+// Cells of `cells` near the cube (drops the frame triangles' cells), by (i, j, k). cellsPerLattice
+// = 1 for lattice cells, k for detail cells.
+std::map<Key, LatticeCell> cubeCells(const std::vector<LatticeCell>& cells, const LatticeFrame& frame, int S,
+                                     int cellsPerLattice) {
+  const Frame f(frame);
+  const double lo = (kCubeLo[0] - f.corner[0]) / (f.h / S) / S, hi = (kCubeHi[0] - f.corner[0]) / (f.h / S) / S;
+  std::map<Key, LatticeCell> out;
+  for (const auto& c : cells) {
+    const int i = c.i / cellsPerLattice;
+    if (i >= int(lo) - 1 && i <= int(hi) + 1) out[{c.i, c.j, c.k}] = c;
   }
+  return out;
+}
+
+}  // namespace
+
+// Every lattice cell's density must equal (its touched sub-cells) / S^3 exactly.
+TEST(VoxelizeAnalytic, CubeSurfaceDensityIsExact) {
+  const int N = 24, S = 4;
+  const VoxelizeResult res = voxelizeMesh(cubeMesh(), opts(N, S), "cube");
+  const std::map<Key, int> expected = expectedCubeCounts(res.frame, N, S, S);
+  const auto got = cubeCells(res.cells, res.frame, S, 1);
   ASSERT_GT(expected.size(), 50u);
   ASSERT_EQ(got.size(), expected.size());
   for (const auto& [key, n] : expected) {
@@ -157,6 +183,30 @@ TEST(VoxelizeAnalytic, CubeSurfaceDensityIsExact) {
   }
   // The cube is leaf material (no wood pattern match): wood fraction 0.
   EXPECT_EQ(res.stats.woodFraction, 0.0);
+}
+
+// The same for the detail lattice: every detail cell's density is (its touched sub-cells) /
+// (S/k)^3, exactly, at k = 2 (2^3 sub-cells per detail cell) and k = 4 (one).
+TEST(VoxelizeDetail, CubeSurfaceDetailDensityIsExact) {
+  const int N = 24, S = 4;
+  for (int k : {2, 4}) {
+    SCOPED_TRACE("k = " + std::to_string(k));
+    VoxelizeOptions o = opts(N, S);
+    o.detail = N * k;
+    const VoxelizeResult res = voxelizeMesh(cubeMesh(), o, "cube");
+    ASSERT_EQ(res.detailFactor, k);
+    const int m = S / k;
+    const std::map<Key, int> expected = expectedCubeCounts(res.frame, N, S, m);
+    const auto got = cubeCells(res.detailCells, res.frame, S, k);
+    ASSERT_GT(expected.size(), 50u * size_t(k));
+    ASSERT_EQ(got.size(), expected.size());
+    for (const auto& [key, n] : expected) {
+      auto it = got.find(key);
+      ASSERT_NE(it, got.end());
+      EXPECT_EQ(it->second.density, float(n) / float(m * m * m));
+      EXPECT_EQ(it->second.wood, 0.f);
+    }
+  }
 }
 
 // A reference triangle/box test written differently (Akenine-Möller's 13 SAT axes, naive): returns
@@ -335,6 +385,164 @@ TEST(VoxelizeAnalytic, ResultIsIndependentOfThreadCount) {
   for (size_t i = 0; i < a.cells.size(); ++i) {
     EXPECT_EQ(a.cells[i].density, b.cells[i].density);
     EXPECT_EQ(a.cells[i].albedo[0], b.cells[i].albedo[0]);
+  }
+}
+
+// ---- The detail lattice (--detail) -------------------------------------------------------------
+
+namespace {
+
+// A leaf sphere and a bark box crossing it: cells of leaf only, bark only and both.
+constexpr float kLeafColour[3] = {0.1f, 0.6f, 0.2f}, kBarkColour[3] = {0.5f, 0.3f, 0.1f};
+mesh::Mesh mixedPlant() {
+  mesh::Mesh m = emptyMesh();
+  mesh::Material bark;
+  bark.name = "bark";
+  for (int c = 0; c < 3; ++c) {
+    m.materials[0].baseColorFactor[size_t(c)] = kLeafColour[c];
+    bark.baseColorFactor[size_t(c)] = kBarkColour[c];
+  }
+  m.materials.push_back(bark);
+  addSphere(m, {0, 0, 0}, 1, 12, 24);
+  const size_t leaves = m.triangles.size();
+  addBox(m, {-0.15, -1.3, -0.2}, {0.2, 1.1, 0.15});
+  for (size_t t = leaves; t < m.triangles.size(); ++t) m.triangles[t].material = 1;
+  return m;
+}
+
+bool sameCell(const LatticeCell& a, const LatticeCell& b) {
+  return a.i == b.i && a.j == b.j && a.k == b.k && a.density == b.density && a.wood == b.wood &&
+         a.albedo[0] == b.albedo[0] && a.albedo[1] == b.albedo[1] && a.albedo[2] == b.albedo[2];
+}
+
+}  // namespace
+
+// The detail lattice box-filtered by k is the lattice: the k^3 detail cells of a lattice cell hold
+// its touched sub-cells between them, so their mean density is its density exactly (both are
+// integer counts over powers of two), their density-weighted wood is its wood, and a lattice cell
+// is occupied iff one of its detail cells is. The lattice itself does not change with --detail.
+TEST(VoxelizeDetail, BoxFilteredDetailIsTheLattice) {
+  const mesh::Mesh m = mixedPlant();
+  const int N = 16, S = 8;
+  const VoxelizeResult plain = voxelizeMesh(m, opts(N, S), "plant");
+  ASSERT_GT(plain.cells.size(), 100u);
+  EXPECT_EQ(plain.detailFactor, 1);
+  EXPECT_TRUE(plain.detailCells.empty());
+  for (int k : {2, 4, 8}) {
+    SCOPED_TRACE("k = " + std::to_string(k));
+    VoxelizeOptions o = opts(N, S);
+    o.detail = N * k;
+    const VoxelizeResult r = voxelizeMesh(m, o, "plant");
+    ASSERT_EQ(r.cells.size(), plain.cells.size());
+    for (size_t i = 0; i < r.cells.size(); ++i) ASSERT_TRUE(sameCell(r.cells[i], plain.cells[i])) << i;
+    EXPECT_EQ(r.stats.totalDensity, plain.stats.totalDensity);
+    ASSERT_EQ(r.detailFactor, k);
+    EXPECT_EQ(r.detailFrame.resolution, N * k);
+    EXPECT_EQ(r.detailFrame.voxelSize, r.frame.voxelSize / k);
+    for (int a = 0; a < 3; ++a)  // lattice cell c's centre is the detail index point k c + (k - 1) / 2
+      EXPECT_NEAR(r.detailFrame.origin[a] + r.detailFrame.voxelSize * 0.5 * (k - 1), r.frame.origin[a], 1e-12);
+    EXPECT_EQ(r.stats.detailOccupiedCells, r.detailCells.size());
+
+    struct Sum { double density = 0, woodDensity = 0; };
+    std::map<Key, Sum> sums;
+    const int m3 = (S / k) * (S / k) * (S / k);
+    for (size_t i = 0; i < r.detailCells.size(); ++i) {
+      const LatticeCell& d = r.detailCells[i];
+      if (i > 0) {
+        const LatticeCell& p = r.detailCells[i - 1];
+        ASSERT_LT(std::tie(p.i, p.j, p.k), std::tie(d.i, d.j, d.k));  // sorted, each cell once
+      }
+      ASSERT_GT(d.density, 0.f);
+      ASSERT_LE(d.density, 1.f);
+      ASSERT_EQ(d.density * float(m3), std::round(d.density * float(m3)));  // a count over (S/k)^3
+      ASSERT_GE(d.wood, 0.f);
+      ASSERT_LE(d.wood, 1.f);
+      for (int c = 0; c < 3; ++c) {  // a mix of the two colours; one of them in a cell without wood
+        EXPECT_GE(d.albedo[c], std::min(kLeafColour[c], kBarkColour[c]) * 0.9999f);
+        EXPECT_LE(d.albedo[c], std::max(kLeafColour[c], kBarkColour[c]) * 1.0001f);
+        if (d.wood == 0.f) {
+          EXPECT_NEAR(d.albedo[c], kLeafColour[c], 1e-6);
+        }
+      }
+      Sum& s = sums[{d.i / k, d.j / k, d.k / k}];
+      s.density += d.density;
+      s.woodDensity += double(d.density) * d.wood;
+    }
+    ASSERT_EQ(sums.size(), r.cells.size());  // occupied lattice cell <=> an occupied detail cell inside
+    const double k3 = double(k) * k * k;
+    double total = 0;
+    for (const LatticeCell& c : r.cells) {
+      const auto it = sums.find({c.i, c.j, c.k});
+      ASSERT_NE(it, sums.end()) << c.i << "," << c.j << "," << c.k;
+      EXPECT_EQ(it->second.density / k3, double(c.density)) << c.i << "," << c.j << "," << c.k;
+      EXPECT_NEAR(it->second.woodDensity / k3, double(c.density) * c.wood, 1e-6);
+      total += it->second.density;
+    }
+    EXPECT_NEAR(r.stats.detailTotalDensity, total, 1e-9 * total);
+    EXPECT_NEAR(r.stats.detailTotalDensity, k3 * r.stats.totalDensity, 1e-9 * total);
+  }
+}
+
+TEST(VoxelizeDetail, DetailIsIndependentOfThreadCount) {
+  const mesh::Mesh m = mixedPlant();
+  VoxelizeOptions o = opts(24, 4);
+  o.detail = 48;
+  const VoxelizeResult a = voxelizeMesh(m, o, "plant");
+  VoxelizeResult b;
+  {
+    tbb::task_arena one(1);
+    one.execute([&] { b = voxelizeMesh(m, o, "plant"); });
+  }
+  ASSERT_GT(a.detailCells.size(), 1000u);
+  ASSERT_EQ(a.detailCells.size(), b.detailCells.size());
+  for (size_t i = 0; i < a.detailCells.size(); ++i) ASSERT_TRUE(sameCell(a.detailCells[i], b.detailCells[i])) << i;
+}
+
+// The option rules, each a usage error naming the option.
+TEST(VoxelizeDetail, OptionRules) {
+  auto usage = [](int resolution, int supersample, int detail, const std::string& detailOutput = "") -> std::string {
+    VoxelizeOptions o = opts(resolution, supersample);
+    o.detail = detail;
+    o.detailOutput = detailOutput;
+    try {
+      validateOptions(o);
+      return "";
+    } catch (const Error& e) {
+      EXPECT_EQ(e.code(), ExitCode::Usage);
+      return e.what();
+    }
+  };
+  EXPECT_EQ(usage(128, 8, 1024), "");
+  EXPECT_EQ(usage(128, 16, 2048), "");
+  EXPECT_EQ(usage(128, 6, 256), "");  // S = 6, k = 2: 3^3 sub-cells per detail cell
+  EXPECT_EQ(usage(128, 8, 64), "--detail 64 is not finer than --resolution 128");
+  EXPECT_EQ(usage(128, 8, 128), "--detail 128 is not finer than --resolution 128");
+  EXPECT_EQ(usage(128, 8, -5), "--detail -5 is not finer than --resolution 128");
+  EXPECT_EQ(usage(128, 8, 384), "--detail 384 is not --resolution 128 times 2, 4, 8 or 16");
+  EXPECT_EQ(usage(100, 8, 250), "--detail 250 is not --resolution 100 times 2, 4, 8 or 16");
+  EXPECT_EQ(usage(64, 8, 4096), "--detail 4096 exceeds 2048 cells per axis (the lattice reader's limit)");
+  EXPECT_EQ(usage(64, 16, 2048), "--detail 2048 is not --resolution 64 times 2, 4, 8 or 16");  // k = 32
+  EXPECT_EQ(usage(128, 4, 1024), "--supersample 4 must be a multiple of the detail factor 8");
+  EXPECT_EQ(usage(128, 8, 0, "x.detail.vdb"), "--detail-output needs --detail");
+
+  VoxelizeOptions o = opts(128, 8);
+  o.detail = 512;
+  EXPECT_EQ(detailFactor(o), 4);
+  EXPECT_EQ(detailOutputPath(o), "");  // compute only
+  o.output = "out/plant.density.vdb";
+  EXPECT_EQ(detailOutputPath(o), "out/plant.detail.vdb");
+  o.detailOutput = "fine.vdb";
+  EXPECT_EQ(detailOutputPath(o), "fine.vdb");
+  o.detailOutput = o.output;
+  EXPECT_THROW(detailOutputPath(o), Error);
+  o.detailOutput.clear();
+  o.output = "plant.vdb";
+  try {
+    detailOutputPath(o);
+    ADD_FAILURE() << "no detail path for plant.vdb";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ExitCode::Usage);
+    EXPECT_NE(std::string(e.what()).find("--detail needs --detail-output"), std::string::npos) << e.what();
   }
 }
 

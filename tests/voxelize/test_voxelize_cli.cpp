@@ -484,3 +484,138 @@ TEST_F(VoxelizeCli, HelpVersionAndUsage) {
   EXPECT_EQ(run("--bogus-flag", dir).code, 1);
   EXPECT_EQ(run("'" + kShared + "/assets/plants/bush_2.glb' --device cuda -o '" + dir + "/x.vdb'", dir).code, 5);
 }
+
+// ---- --detail ------------------------------------------------------------------------------------
+
+namespace {
+
+// The .vdb files in dir (what a run left behind).
+std::vector<std::string> vdbFiles(const std::string& dir) {
+  std::vector<std::string> names;
+  if (DIR* d = opendir(dir.c_str())) {
+    while (dirent* e = readdir(d)) {
+      const std::string n = e->d_name;
+      if (n.size() > 4 && n.compare(n.size() - 4, 4, ".vdb") == 0) names.push_back(n);
+    }
+    closedir(d);
+  }
+  return names;
+}
+
+}  // namespace
+
+// The lattice written with --detail is byte for byte the one written without it; the detail
+// lattice lands beside it (.density.vdb -> .detail.vdb, or --detail-output), with the same bytes on
+// every run, and `info` shows the lattice it nests in.
+TEST_F(VoxelizeCli, DetailLeavesTheLatticeByteIdentical) {
+  const std::string glb = dir + "/plant.glb";
+  ASSERT_EQ(run("--write-sample '" + glb + "'", dir).code, 0);
+  ASSERT_EQ(run("'" + glb + "' -q -r 16 -s 8 -o '" + dir + "/plain.density.vdb'", dir).code, 0);
+  const RunResult r = run("'" + glb + "' -q -r 16 -s 8 --detail 64 -o '" + dir + "/plant.density.vdb' --json", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto plain = readBytes(dir + "/plain.density.vdb");
+  ASSERT_GT(plain.size(), 100u);
+  EXPECT_EQ(readBytes(dir + "/plant.density.vdb"), plain);
+  const auto detail = readBytes(dir + "/plant.detail.vdb");
+  ASSERT_GT(detail.size(), 100u);
+
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["resolution"], 16);
+  EXPECT_EQ(j["supersample"], 8);
+  ASSERT_TRUE(j["detail"].is_object());
+  EXPECT_EQ(j["detail"]["resolution"], 64);
+  EXPECT_EQ(j["detail"]["factor"], 4);
+  EXPECT_EQ(j["detail"]["supersample"], 2);
+  EXPECT_EQ(j["detail"]["output"], dir + "/plant.detail.vdb");
+  EXPECT_GT(j["detail"]["occupied_cells"].get<int>(), j["occupied_cells"].get<int>());
+  // Each detail cell is 1/64 of a lattice cell: 64 x the total density.
+  EXPECT_NEAR(j["detail"]["total_density"].get<double>(), 64 * j["total_density"].get<double>(),
+              1e-6 * j["detail"]["total_density"].get<double>());
+  const RunResult none = run("'" + glb + "' -q -r 16 -o '" + dir + "/none.vdb' --json", dir);
+  EXPECT_TRUE(nlohmann::json::parse(none.out)["detail"].is_null());
+
+  // Same bytes again, through --detail-output and with one thread's worth of work split differently.
+  const RunResult again = run("'" + glb + "' -q -r 16 -s 8 --detail 64 -o '" + dir + "/again.density.vdb' --detail-output '" +
+                                  dir + "/again.fine.vdb'",
+                              dir);
+  ASSERT_EQ(again.code, 0) << again.err;
+  EXPECT_EQ(readBytes(dir + "/again.fine.vdb"), detail);
+  EXPECT_FALSE(exists(dir + "/again.detail.vdb"));
+
+  const RunResult info = run("info '" + dir + "/plant.detail.vdb' --json", dir);
+  ASSERT_EQ(info.code, 0) << info.err;
+  const auto k = nlohmann::json::parse(info.out);
+  EXPECT_EQ(k["lattice_size"][0], 64);
+  EXPECT_EQ(k["detail_factor"], 4);
+  EXPECT_EQ(k["light_lattice_min"], nlohmann::json({0, 0, 0}));
+  EXPECT_EQ(k["light_lattice_max"], nlohmann::json({15, 15, 15}));
+  EXPECT_EQ(k["occupied_cells"], j["detail"]["occupied_cells"]);
+  EXPECT_EQ(k["metadata"]["canopy_resolution"], "64");
+  EXPECT_EQ(k["metadata"]["canopy_supersample"], "2");
+  EXPECT_EQ(k["metadata"]["canopy_light_resolution"], "16");
+  EXPECT_NEAR(std::stod(k["metadata"]["canopy_voxel_size"].get<std::string>()), j["voxel_size"].get<double>() / 4, 1e-6);
+  EXPECT_EQ(k["source"], j["source"]);
+  const RunResult text = run("info '" + dir + "/plant.detail.vdb'", dir);
+  ASSERT_EQ(text.code, 0) << text.err;
+  EXPECT_NE(text.out.find("detail of      light lattice (0,0,0)..(15,15,15), 4 x 4 x 4 cells per light cell"),
+            std::string::npos)
+      << text.out;
+  // An ordinary lattice: factor 1 and nothing more.
+  const auto plainInfo = nlohmann::json::parse(run("info '" + dir + "/plain.density.vdb' --json", dir).out);
+  EXPECT_EQ(plainInfo["detail_factor"], 1);
+  EXPECT_FALSE(plainInfo.contains("light_lattice_min"));
+  EXPECT_EQ(run("info '" + dir + "/plain.density.vdb'", dir).out.find("detail of"), std::string::npos);
+}
+
+// Without -s, --detail takes supersample max(8, k): k = 16 gives 16 (one sub-cell per detail cell).
+TEST_F(VoxelizeCli, DetailDefaultSupersample) {
+  const std::string glb = dir + "/plant.glb";
+  ASSERT_EQ(run("--write-sample '" + glb + "'", dir).code, 0);
+  RunResult r = run("'" + glb + "' -q -r 8 --detail 128 -o '" + dir + "/a.density.vdb' --json", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["supersample"], 16);
+  EXPECT_EQ(j["detail"]["supersample"], 1);
+  r = run("'" + glb + "' -q -r 8 --detail 16 -o '" + dir + "/b.density.vdb' --json", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["supersample"], 8);
+  EXPECT_EQ(j["detail"]["supersample"], 4);
+}
+
+// Every refused combination exits 1 with one line naming the option and writes no file; a lattice
+// whose write fails after the detail lattice's (here: -o names the input) takes the detail with it.
+TEST_F(VoxelizeCli, DetailUsageErrorsWriteNothing) {
+  const std::string glb = dir + "/plant.glb";
+  ASSERT_EQ(run("--write-sample '" + glb + "'", dir).code, 0);
+  const std::string in = "'" + glb + "' -q ", out = " -o '" + dir + "/p.density.vdb'";
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"-r 16 --detail 16" + out, "--detail 16 is not finer than --resolution 16"},
+      {"-r 16 --detail 8" + out, "--detail 8 is not finer than --resolution 16"},
+      {"-r 16 --detail 0" + out, "--detail 0 is not finer than --resolution 16"},
+      {"-r 16 --detail 48" + out, "--detail 48 is not --resolution 16 times 2, 4, 8 or 16"},
+      {"-r 16 --detail 512" + out, "--detail 512 is not --resolution 16 times 2, 4, 8 or 16"},
+      {"-r 256 --detail 4096" + out, "--detail 4096 exceeds 2048 cells per axis"},
+      {"-r 16 -s 4 --detail 128" + out, "--supersample 4 must be a multiple of the detail factor 8"},
+      {"-r 16 -s 8 --detail 256" + out, "--supersample 8 must be a multiple of the detail factor 16"},
+      {"-r 16 --detail 32 -o '" + dir + "/p.vdb'", "--detail needs --detail-output FILE when -o"},
+      {"-r 16 --detail-output '" + dir + "/d.vdb'" + out, "--detail-output needs --detail"},
+      {"-r 16 --detail 32 --detail-output '" + dir + "/p.density.vdb'" + out, "is the -o file"},
+      {"-r 16 --detail 32 --instances '" + dir + "/p.scene.json'", "--detail needs -o"},
+      {"-r 16 --detail 32 -o '" + glb + "' --detail-output '" + dir + "/d.vdb'",
+       glb + ": output path is the same file as an input"},
+  };
+  const auto sample = readBytes(glb);
+  for (const auto& [args, message] : cases) {
+    SCOPED_TRACE(args);
+    const RunResult r = run(in + args, dir);
+    EXPECT_EQ(r.code, 1) << r.err;
+    EXPECT_EQ(r.err.rfind("canopy-voxelize: error: ", 0), 0u) << r.err;
+    EXPECT_NE(r.err.find(message), std::string::npos) << r.err;
+    EXPECT_EQ(lines(r.err), 1) << r.err;
+    EXPECT_EQ(vdbFiles(dir), std::vector<std::string>());
+    EXPECT_FALSE(exists(dir + "/p.scene.json"));
+    EXPECT_EQ(leftovers(dir), 0);
+  }
+  EXPECT_EQ(readBytes(glb), sample);
+}

@@ -9,6 +9,7 @@
 namespace canopy {
 static_assert(int64_t(kMaxResolution) * kMaxResolution * kMaxResolution <= vdbio::kMaxLatticeCells,
               "canopy-voxelize must not write a lattice the lattice reader refuses");
+static_assert(kMaxDetailFactor == vdbio::kMaxDetailFactor, "--detail's factors are the reader's");
 namespace {
 
 openvdb::math::Transform::Ptr latticeTransform(const LatticeFrame& f) {
@@ -17,27 +18,54 @@ openvdb::math::Transform::Ptr latticeTransform(const LatticeFrame& f) {
   return xf;
 }
 
-}  // namespace
-
-void writeLattice(const VoxelizeResult& r, const VoxelizeOptions& o, const std::string& source) {
+// The file of one lattice (frame and cells), with the options as file metadata.
+vdbio::DensityLatticeData latticeData(const LatticeFrame& frame, const std::vector<LatticeCell>& cells,
+                                      const VoxelizeOptions& o, int supersample, const VoxelizeStats& st,
+                                      const std::string& source) {
   vdbio::DensityLatticeData data;
   data.meta.min = openvdb::Coord(0);
-  data.meta.max = openvdb::Coord(r.frame.resolution - 1);
+  data.meta.max = openvdb::Coord(frame.resolution - 1);
   data.meta.source = source;
-  data.transform = latticeTransform(r.frame);
-  data.cells.reserve(r.cells.size());
-  for (const LatticeCell& c : r.cells)
+  data.transform = latticeTransform(frame);
+  data.cells.reserve(cells.size());
+  for (const LatticeCell& c : cells)
     data.cells.push_back({{c.i, c.j, c.k}, c.density, c.wood, {c.albedo[0], c.albedo[1], c.albedo[2]}});
   openvdb::MetaMap& fileMeta = data.fileMeta;
   fileMeta.insertMeta("canopy_tool", openvdb::StringMetadata("canopy-voxelize"));
-  fileMeta.insertMeta("canopy_resolution", openvdb::Int32Metadata(o.resolution));
-  fileMeta.insertMeta("canopy_supersample", openvdb::Int32Metadata(o.supersample));
+  fileMeta.insertMeta("canopy_resolution", openvdb::Int32Metadata(frame.resolution));
+  fileMeta.insertMeta("canopy_supersample", openvdb::Int32Metadata(supersample));
   fileMeta.insertMeta("canopy_wood_pattern", openvdb::StringMetadata(o.woodPattern));
   fileMeta.insertMeta("canopy_mesh_index", openvdb::Int32Metadata(o.meshIndex));
   fileMeta.insertMeta("canopy_clean", openvdb::BoolMetadata(o.clean));
-  fileMeta.insertMeta("canopy_voxel_size", openvdb::DoubleMetadata(r.frame.voxelSize));
-  fileMeta.insertMeta("canopy_triangles", openvdb::Int64Metadata(int64_t(r.stats.triangles)));
-  vdbio::writeDensityLattice(o.output, data);
+  fileMeta.insertMeta("canopy_voxel_size", openvdb::DoubleMetadata(frame.voxelSize));
+  fileMeta.insertMeta("canopy_triangles", openvdb::Int64Metadata(int64_t(st.triangles)));
+  return data;
+}
+
+// vdbio::writeDensityLattice, with the cells' copy released once the grids hold them (a detail
+// lattice has millions).
+void writeData(const std::string& path, vdbio::DensityLatticeData& data) {
+  const openvdb::GridPtrVec grids = vdbio::densityLatticeGrids(data);
+  std::vector<vdbio::DensityCell>().swap(data.cells);
+  vdbio::writeVdb(path, grids, data.fileMeta);
+}
+
+}  // namespace
+
+void writeLattice(const VoxelizeResult& r, const VoxelizeOptions& o, const std::string& source) {
+  vdbio::DensityLatticeData data = latticeData(r.frame, r.cells, o, o.supersample, r.stats, source);
+  writeData(o.output, data);
+}
+
+void writeDetailLattice(const VoxelizeResult& r, const VoxelizeOptions& o, const std::string& source,
+                        const std::string& path) {
+  const int k = r.detailFactor;
+  vdbio::DensityLatticeData data = latticeData(r.detailFrame, r.detailCells, o, o.supersample / k, r.stats, source);
+  data.fileMeta.insertMeta("canopy_light_resolution", openvdb::Int32Metadata(r.frame.resolution));
+  data.detailFactor = k;
+  data.lightMin = openvdb::Coord(0);
+  data.lightMax = openvdb::Coord(r.frame.resolution - 1);
+  writeData(path, data);
 }
 
 nlohmann::json latticeInfo(const std::string& path) {
@@ -60,6 +88,11 @@ nlohmann::json latticeInfo(const std::string& path) {
   j["total_density"] = total;
   j["wood_fraction"] = total > 0 ? woodSum / total : 0.0;
   j["source"] = L.meta.source;
+  j["detail_factor"] = L.detailFactor;
+  if (L.detailFactor > 1) {
+    j["light_lattice_min"] = {L.lightMin.x(), L.lightMin.y(), L.lightMin.z()};
+    j["light_lattice_max"] = {L.lightMax.x(), L.lightMax.y(), L.lightMax.z()};
+  }
   nlohmann::json grids = nlohmann::json::array();
   for (const auto& g : L.grids) grids.push_back({{"name", g.name}, {"type", g.type}, {"active_voxels", g.activeVoxels}});
   j["grids"] = grids;

@@ -2,8 +2,10 @@
 //
 //   canopy-voxelize INPUT -o OUT.vdb [--resolution N] [--supersample S] [--wood-pattern RE]
 //                   [--mesh N] [--instances OUT.scene.json [--model-pattern P]] [--no-clean]
+//                   [--detail D [--detail-output OUT.detail.vdb]]
 //   canopy-voxelize --write-sample OUT.glb
 //   canopy-voxelize info FILE.vdb [--json]
+#include <algorithm>
 #include <cstring>
 #include <iostream>
 
@@ -35,12 +37,26 @@ int runInfo(int argc, char** argv) {
               << "  total density  " << info["total_density"].get<double>() << "\n"
               << "  wood fraction  " << info["wood_fraction"].get<double>() << "\n"
               << "  source         " << info["source"].get<std::string>() << "\n";
+    if (info["detail_factor"].get<int>() > 1) {
+      const auto &lo = info["light_lattice_min"], &hi = info["light_lattice_max"];
+      std::cout << "  detail of      light lattice (" << lo[0] << "," << lo[1] << "," << lo[2] << ")..(" << hi[0]
+                << "," << hi[1] << "," << hi[2] << "), " << info["detail_factor"] << " x " << info["detail_factor"]
+                << " x " << info["detail_factor"] << " cells per light cell\n";
+    }
     for (const auto& g : info["grids"])
       std::cout << "  grid " << g["name"].get<std::string>() << " (" << g["type"].get<std::string>()
                 << ", " << g["active_voxels"] << " active)\n";
     for (const auto& [k, v] : info["metadata"].items())
       std::cout << "  meta " << k << " = " << v.get<std::string>() << "\n";
   });
+}
+
+// --detail given: 0 is no detail lattice, and refused; without -s, S = max(8, k), so a detail cell
+// has S / k >= 1 sub-cells per axis (a factor out of range is left to validateOptions' message).
+void detailDefaults(canopy::VoxelizeOptions& o, bool supersampleGiven) {
+  if (o.detail == 0) throw canopy::usageError("--detail 0 is not finer than --resolution " + std::to_string(o.resolution));
+  if (!supersampleGiven && o.resolution > 0 && o.detail > o.resolution && o.detail / o.resolution <= canopy::kMaxDetailFactor)
+    o.supersample = std::max(o.supersample, o.detail / o.resolution);
 }
 
 }  // namespace
@@ -86,11 +102,17 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   bool noClean = false;
   app.add_flag("--no-clean", noClean, "Keep degenerate and duplicate faces");
+  auto* detail = app.add_option("--detail", o.detail,
+                                "Also write a finer detail lattice of D = resolution x 2, 4, 8 or 16 cells per "
+                                "axis, nested in the lattice (default supersample: max(8, D / resolution))");
+  app.add_option("--detail-output", o.detailOutput,
+                 "The detail lattice (.vdb; default: -o with .density.vdb replaced by .detail.vdb)");
   app.add_option("--write-sample", sample,
                  "Write Canopy's built-in procedural sample plant (.glb) and exit");
 
   return tool.run(argc, argv, [&] {
     o.clean = !noClean;
+    if (detail->count() > 0) detailDefaults(o, app.count("--supersample") > 0);
     // Voxelisation runs on CPU cores (TBB); an explicit GPU request is refused, not ignored.
     if (tool.common().device.rfind("cuda", 0) == 0)
       throw canopy::unsupported("canopy-voxelize runs on the CPU only (--device cpu or auto)");
@@ -107,6 +129,7 @@ int main(int argc, char** argv) {
     if (o.output.empty()) {
       // Only the scene list: no voxelisation.
       canopy::validateOptions(o);
+      if (o.detail != 0) throw canopy::usageError("--detail needs -o OUT.density.vdb (the lattice it nests in)");
       canopy::writeInstances(o.input, o.instancesOutput, o.modelPattern);
       tool.report()["input"] = o.input;
       tool.report()["instances"] = o.instancesOutput;

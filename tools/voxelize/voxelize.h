@@ -13,6 +13,11 @@
 // The lattice is a cube of resolution^3 cells: the mesh's bounding cube centred in cells
 // 1..resolution-2 with one fine sub-cell of margin, so the outer layer of cells is always empty.
 // Work and memory follow the occupied 8^3-cell tiles (TBB, deterministic at any thread count).
+//
+// With options.detail = D = resolution * k (k = 2, 4, 8, 16) the same pass also averages a
+// second, finer lattice of D^3 cells nested in the first (the detail lattice, formats/
+// density_lattice.h): detail cell (k c + d) is the (S/k)^3 sub-cells of lattice cell c's
+// sub-block d, with the same three values computed the same way. The lattice itself is unchanged.
 #pragma once
 #include <cstdint>
 #include <string>
@@ -34,6 +39,8 @@ struct VoxelizeOptions {
   std::string instancesOutput;   // glTF: write the scene instance list (docs/scene-json.md) here
   std::string modelPattern = "{stem}.mesh{N}.density.vdb";  // density paths in that list
   bool clean = true;             // remove degenerate and duplicate faces (CGAL)
+  int detail = 0;                // > 0: also the detail lattice of this many cells per axis
+  std::string detailOutput;      // its .vdb; empty = output with .density.vdb -> .detail.vdb
 };
 
 // The limits checked by validateOptions (usage errors outside them).
@@ -41,9 +48,18 @@ constexpr int kMinResolution = 8;
 constexpr int kMaxResolution = 2048;  // the lattice reader's limit: 2048^3 = 2^33 cells (lattice_io.cpp checks)
 constexpr int kMaxSupersample = 16;
 constexpr int64_t kMaxFineResolution = int64_t(1) << 16;  // resolution * supersample
+constexpr int kMaxDetailFactor = 16;  // detail / resolution: 2, 4, 8 or 16 (the reader's rule)
 
 // Throws usageError naming the offending option.
 void validateOptions(const VoxelizeOptions& options);
+
+// detail / resolution (1 without --detail); validateOptions has checked it.
+int detailFactor(const VoxelizeOptions& options);
+
+// Where the detail lattice goes: options.detailOutput, else options.output with its trailing
+// ".density.vdb" replaced by ".detail.vdb"; empty without --detail or without any output. Throws
+// usageError if there is no such name or it is options.output.
+std::string detailOutputPath(const VoxelizeOptions& options);
 
 // One occupied lattice cell.
 struct LatticeCell {
@@ -67,6 +83,8 @@ struct VoxelizeStats {
   uint64_t alphaRejected = 0;   // of those, dropped by the alpha test
   uint64_t exactTests = 0;      // overlap decisions handed to CGAL's exact predicate
   double totalDensity = 0, woodFraction = 0;  // woodFraction = sum(density*wood)/sum(density)
+  size_t detailOccupiedCells = 0;             // --detail: the detail lattice's
+  double detailTotalDensity = 0;              // (k^3 x totalDensity: its cells are k^3 times smaller)
   double secondsLoad = 0, secondsClean = 0, secondsVoxelize = 0, secondsWrite = 0;
 };
 
@@ -74,6 +92,11 @@ struct VoxelizeResult {
   LatticeFrame frame;
   std::vector<LatticeCell> cells;  // sorted by (i, j, k)
   VoxelizeStats stats;
+  // --detail: the detail lattice (detailFactor k > 1). Its voxel size is frame.voxelSize / k and
+  // its cell j is centred at frame.origin - voxelSize / 2 + (j + 1/2) voxelSize / k.
+  int detailFactor = 1;
+  LatticeFrame detailFrame;
+  std::vector<LatticeCell> detailCells;  // sorted by (i, j, k)
 };
 
 // Material classification: wood if the name matches the pattern (ECMAScript, icase).
@@ -90,9 +113,15 @@ VoxelizeResult voxelizeMesh(mesh::Mesh mesh, const VoxelizeOptions& options,
 // Fills `report` (the --json object) when given.
 VoxelizeResult voxelize(const VoxelizeOptions& options, nlohmann::json* report = nullptr);
 
-// Writes a result as the OpenVDB lattice file (density, wood, albedo grids + metadata).
+// Writes a result as the OpenVDB lattice file (density, wood, albedo grids + metadata) to
+// options.output.
 void writeLattice(const VoxelizeResult& result, const VoxelizeOptions& options,
                   const std::string& source);
+// Writes its detail lattice to `path`: the same file layout with canopy_resolution = D,
+// canopy_supersample = S / k, canopy_voxel_size = its voxel size, canopy_light_resolution = the
+// lattice's resolution, and the detail relation on the density grid (formats/density_lattice.h).
+void writeDetailLattice(const VoxelizeResult& result, const VoxelizeOptions& options,
+                        const std::string& source, const std::string& path);
 
 // Writes the scene instance list of a glTF scene (docs/scene-json.md). Density paths follow
 // options.modelPattern ({stem} = input file name without extension, {N} = mesh index,
@@ -100,8 +129,9 @@ void writeLattice(const VoxelizeResult& result, const VoxelizeOptions& options,
 void writeInstances(const std::string& gltfPath, const std::string& jsonPath,
                     const std::string& modelPattern);
 
-// `canopy-voxelize info`: checks a lattice file and summarises it. Throws invalidInput if the file
-// is not a valid Canopy lattice.
+// `canopy-voxelize info`: checks a lattice file and summarises it (detail_factor 1, or k with
+// light_lattice_min/max for a detail lattice). Throws invalidInput if the file is not a valid
+// Canopy lattice.
 nlohmann::json latticeInfo(const std::string& vdbPath);
 
 }  // namespace canopy
