@@ -42,6 +42,7 @@ const char* sectionName(uint32_t kind) {
     case CanopySectionKind::SceneLight: return "SceneLight";
     case CanopySectionKind::Metadata: return "Metadata";
     case CanopySectionKind::HaarIndex: return "HaarIndex";
+    case CanopySectionKind::SparseIndex: return "SparseIndex";
     case CanopySectionKind::SceneSunLight: return "SceneSunLight";
   }
   return "unknown";
@@ -130,6 +131,7 @@ CanopyFile& CanopyFile::operator=(CanopyFile&& o) noexcept {
     sceneLightValues_ = std::move(o.sceneLightValues_);
     metadata_ = std::move(o.metadata_);
     haarIndex_ = std::move(o.haarIndex_);
+    sparseIndex_ = std::move(o.sparseIndex_);
   }
   return *this;
 }
@@ -315,6 +317,11 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
     if (hi->itemBytes != sizeof(uint32_t)) bad(P, "section HaarIndex has the wrong item size");
     haarIndex_ = copyArray<uint32_t>(resident_, hi->offset, hi->itemCount);
   }
+  if (const CanopySection* si = findSection(CanopySectionKind::SparseIndex)) {
+    if (h.major < 2) bad(P, "a 1.x file has a SparseIndex section");
+    if (si->itemBytes != sizeof(uint32_t)) bad(P, "section SparseIndex has the wrong item size");
+    sparseIndex_ = copyArray<uint32_t>(resident_, si->offset, si->itemCount);
+  }
 
   // --- models: ranges and the tree ------------------------------------------------------------
   const uint64_t tileTotal = st.itemCount;
@@ -334,7 +341,16 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
     }
     if (uint64_t(M.firstTile) + M.tileCount > tileTotal) bad(P, name + " tiles lie outside NodeTiles");
     const uint64_t bpp = h.bricksPerPage;
-    if (M.brickPageCount != (uint64_t(M.brickCount) + bpp - 1) / bpp ||
+    // (2.0) the detail levels' bricks are sparse bricks: the brick pages hold the others
+    if (M.sparseBricks > M.brickCount) bad(P, name + " has more sparse bricks than bricks");
+    const uint64_t denseBricks = uint64_t(M.brickCount) - M.sparseBricks;
+    if (M.detailLevels == 0 ? (M.sparseBricks | M.firstSparsePage | M.sparsePageCount | M.firstSparseIndex) != 0
+                            : uint64_t(M.firstSparseIndex) + M.sparseBricks > sparseIndex_.size() ||
+                                  uint64_t(M.firstSparsePage) + M.sparsePageCount > h.pageCount ||
+                                  (M.sparseBricks > 0) != (M.sparsePageCount > 0) ||
+                                  M.sparseBricks > uint64_t(M.sparsePageCount) * kCanopySparseMaxItemsPerPage)
+      bad(P, name + " sparse bricks, pages or index out of range");
+    if (M.brickPageCount != (denseBricks + bpp - 1) / bpp ||
         uint64_t(M.firstBrickPage) + M.brickPageCount > h.pageCount)
       bad(P, name + " brick pages out of range");
     const uint64_t lpp = h.lightItemsPerPage;
@@ -352,6 +368,8 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
       if (l <= canopyLightDepth(M)) lightBricks += M.levelBricks[l];
     }
     if (levelSum != M.brickCount) bad(P, name + " level brick counts do not add up to its bricks");
+    if (M.detailLevels != 0 && uint64_t(M.brickCount) - M.sparseBricks != lightBricks)
+      bad(P, name + " sparse bricks are not its detail levels' bricks");
     if ((lit ? M.lightCount != lightBricks : M.lightCount != 0) || M.lightPageCount != (uint64_t(M.lightCount) + lpp - 1) / lpp ||
         uint64_t(M.firstLightPage) + M.lightPageCount > h.pageCount)
       bad(P, name + " light items or pages out of range");
@@ -402,6 +420,9 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
       // a player takes the light of a brick at a light level from light item `brick`
       if (lit && n.brick != kCanopyNone && level <= canopyLightDepth(M) && n.brick >= M.lightCount)
         bad(P, name + ": brick " + u64s(n.brick) + " of light level " + u64s(level) + " has no light item");
+      // a player finds a brick by its id (dense or sparse) and samples it by its level's form
+      if (n.brick != kCanopyNone && M.detailLevels != 0 && (level > canopyLightDepth(M)) != (n.brick >= M.brickCount - M.sparseBricks))
+        bad(P, name + ": brick " + u64s(n.brick) + " of level " + u64s(level) + " is not stored in its level's form");
       if (!(n.density >= 0.0f) || n.density > 3.0e38f) bad(P, name + ": node density is negative or not finite");
       if (n.child == kCanopyNone) return;
       if (n.child >= M.tileCount) bad(P, name + ": child tile " + u64s(n.child) + " out of range");
@@ -425,7 +446,7 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
     std::vector<unsigned char> owner(h.pageCount, 0);
     for (const CanopyModel& M : models_)
       for (auto [first, count] : {std::pair<uint32_t, uint32_t>{M.firstBrickPage, M.brickPageCount}, {M.firstLightPage, M.lightPageCount},
-                                  {M.firstHaarPage, M.haarPageCount}})
+                                  {M.firstHaarPage, M.haarPageCount}, {M.firstSparsePage, M.sparsePageCount}})
         for (uint32_t p = first; p < first + count; ++p) {
           if (owner[p]) bad(P, "page " + u64s(p) + " is claimed by two model ranges");
           owner[p] = 1;
@@ -451,7 +472,7 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
     if (e.kind == uint32_t(CanopyPageKind::Brick)) {
       if (i < M.firstBrickPage || i >= M.firstBrickPage + M.brickPageCount) bad(P, name + ": brick page outside its model's range");
       const uint32_t first = (i - M.firstBrickPage) * h.bricksPerPage;
-      const uint32_t count = std::min<uint32_t>(h.bricksPerPage, M.brickCount - first);
+      const uint32_t count = std::min<uint32_t>(h.bricksPerPage, M.brickCount - M.sparseBricks - first);
       if (e.firstItem != first || e.itemCount != count || e.payloadBytes != count * h.brickBytes)
         bad(P, name + ": brick range does not match its model");
     } else if (e.kind == uint32_t(CanopyPageKind::Light)) {
@@ -468,6 +489,15 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
           uint64_t(e.firstItem) + e.itemCount > M.haarItemCount || e.payloadBytes < 4 * (uint64_t(e.itemCount) + 1) ||
           (i + 1 == M.firstHaarPage + M.haarPageCount && e.firstItem + e.itemCount != M.haarItemCount))
         bad(P, name + ": Haar item range does not match its model");
+    } else if (e.kind == uint32_t(CanopyPageKind::SparseBrick) && h.major >= 2) {
+      if (i < M.firstSparsePage || i >= M.firstSparsePage + M.sparsePageCount) bad(P, name + ": sparse brick page outside its model's range");
+      // whole sparse bricks in id order, numbered on from the model's previous sparse page
+      const uint32_t dense = M.brickCount - M.sparseBricks;
+      const uint32_t first = i == M.firstSparsePage ? dense : pages_[i - 1].firstItem + pages_[i - 1].itemCount;
+      if (e.firstItem != first || e.itemCount == 0 || e.itemCount > kCanopySparseMaxItemsPerPage ||
+          uint64_t(e.firstItem) + e.itemCount > M.brickCount || e.payloadBytes < 4 * (uint64_t(e.itemCount) + 1) ||
+          (i + 1 == M.firstSparsePage + M.sparsePageCount && e.firstItem + e.itemCount != M.brickCount))
+        bad(P, name + ": sparse brick range does not match its model");
     } else if (knownMinor) {
       bad(P, name + ": unknown page kind " + u64s(e.kind));
     }
@@ -496,6 +526,27 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
     }
     if (stored != M.haarItemCount) bad(P, name + ": " + u64s(M.haarItemCount - stored) + " Haar items are not referenced");
   }
+  // --- sparse brick locations: detail brick i is item (id - page.firstItem) of its page ----------
+  for (uint32_t m = 0; m < models_.size(); ++m) {
+    const CanopyModel& M = models_[m];
+    const uint32_t dense = M.brickCount - M.sparseBricks;
+    for (uint32_t i = 0; i < M.sparseBricks; ++i) {
+      const uint32_t loc = sparseIndex_[size_t(M.firstSparseIndex) + i];
+      const uint32_t page = loc >> kCanopySparseItemBits, item = loc & (kCanopySparseMaxItemsPerPage - 1u);
+      if (page >= M.sparsePageCount || pages_[M.firstSparsePage + page].kind != uint32_t(CanopyPageKind::SparseBrick) ||
+          pages_[M.firstSparsePage + page].firstItem + item != dense + i || item >= pages_[M.firstSparsePage + page].itemCount)
+        bad(P, "model " + std::to_string(m) + ": sparse brick location " + u64s(i) + " is wrong");
+    }
+  }
+}
+
+CanopyFile::BrickLocation CanopyFile::brickLocation(uint32_t m, uint32_t brick) const {
+  const CanopyModel& M = models_.at(m);
+  if (brick >= M.brickCount) throw invalidInput(path_ + ": brick " + u64s(brick) + " out of range");
+  const uint32_t dense = M.brickCount - M.sparseBricks;
+  if (brick < dense) return {canopyBrickPage(M, brick, header_.bricksPerPage), canopyBrickSlot(brick, header_.bricksPerPage), false};
+  const uint32_t loc = sparseIndex_[size_t(M.firstSparseIndex) + brick - dense];
+  return {M.firstSparsePage + (loc >> kCanopySparseItemBits), loc & (kCanopySparseMaxItemsPerPage - 1u), true};
 }
 
 CanopyHaarView CanopyFile::haarView(uint32_t m) const {
@@ -555,6 +606,42 @@ std::string canopyCheckHaarPage(const void* pageImage, uint32_t pageBytes, bool 
   return "";
 }
 
+std::string canopyCheckSparsePage(const void* pageImage, uint32_t pageBytes) {
+  const auto* page = static_cast<const unsigned char*>(pageImage);
+  CanopyPageHeader ph;
+  std::memcpy(&ph, page, sizeof ph);
+  const uint64_t n = ph.itemCount, pb = ph.payloadBytes;
+  if (pb > pageBytes - sizeof(CanopyPageHeader) || n == 0 || n > kCanopySparseMaxItemsPerPage || 4 * (n + 1) > pb)
+    return "sparse brick page item count or payload size invalid";
+  const unsigned char* payload = page + sizeof(CanopyPageHeader);
+  std::vector<uint32_t> off(size_t(n) + 1);
+  std::memcpy(off.data(), payload, off.size() * sizeof(uint32_t));
+  if (off[0] != 4 * (n + 1) || off[size_t(n)] != pb) return "sparse brick page offsets do not span the payload";
+  for (size_t i = 0; i < size_t(n); ++i)
+    if (off[i + 1] <= off[i] || off[i + 1] % 4 != 0 || off[i + 1] - off[i] < kCanopySparseHeadBytes)
+      return "sparse brick " + std::to_string(i) + ": bad offset";
+  for (size_t i = 0; i < size_t(n); ++i) {
+    auto what = [i](const char* problem) { return "sparse brick " + std::to_string(i) + ": " + problem; };
+    uint32_t mask[kCanopySparseMaskWords];
+    uint16_t prefix[kCanopySparseMaskWords];
+    std::memcpy(mask, payload + off[i], sizeof mask);
+    std::memcpy(prefix, payload + off[i] + sizeof mask, sizeof prefix);
+    uint32_t set = 0;
+    for (uint32_t w = 0; w < kCanopySparseMaskWords; ++w) {
+      if (prefix[w] != set) return what("prefix counts do not match its mask");
+      set += uint32_t(__builtin_popcount(mask[w]));
+    }
+    if (mask[kCanopySparseMaskWords - 1] >> (kCanopyBrickVoxelCount % 32) != 0) return what("mask bits past the last voxel");
+    if (canopySparseItemBytes(set) != uint64_t(off[i + 1]) - off[i]) return what("size does not match its voxel count");
+    for (uint32_t v = 0; v < set; ++v) {
+      float d;
+      std::memcpy(&d, payload + off[i] + kCanopySparseHeadBytes + 4 * v, 4);
+      if (!(d > 0.0f) || d > 3.0e38f) return what("stored density not positive and finite");
+    }
+  }
+  return "";
+}
+
 CanopyLookup CanopyFile::descend(uint32_t m, float ux, float uy, float uz, uint32_t maxLevel) const {
   const CanopyModel& M = models_.at(m);
   return canopyDescend(tiles(m), M.tileCount, M.root, M.depth, ux, uy, uz, maxLevel);
@@ -569,9 +656,13 @@ void CanopyFile::readPage(uint32_t index, void* dst) const {
   const std::string name = "page " + std::to_string(index);
   if (std::memcmp(&ph, &e, sizeof ph) != 0) bad(path_, name + ": page header differs from the page table");
   if (canopyPageCrc(dst, header_.pageBytes) != ph.crc) bad(path_, name + ": checksum mismatch");
-  // A Haar page's offsets and masks index into it on the device: its structure is checked too.
+  // A Haar or sparse brick page's offsets and masks index into it on the device: its structure is
+  // checked too.
   if (ph.kind == uint32_t(CanopyPageKind::HaarLight)) {
     const std::string problem = canopyCheckHaarPage(dst, header_.pageBytes, models_[ph.model].haarPrecision != 0);
+    if (!problem.empty()) bad(path_, name + ": " + problem);
+  } else if (ph.kind == uint32_t(CanopyPageKind::SparseBrick) && header_.major >= 2) {
+    const std::string problem = canopyCheckSparsePage(dst, header_.pageBytes);
     if (!problem.empty()) bad(path_, name + ": " + problem);
   }
 }

@@ -181,6 +181,10 @@ enum class CanopySectionKind : uint32_t {
   // base, in order), each float values[dim.x * dim.y * dim.z] on SceneLight's lattice (x fastest),
   // itemBytes = 4 * dim.x * dim.y * dim.z. Finite and >= 0 (1 = unoccluded), like SceneLight's B00.
   SceneSunLight = 8,
+  // (2.0; with detail models) uint32[]: every detail model's sparse brick locations, from
+  // model.firstSparseIndex: entry i is detail brick (denseBricks + i)'s location, its sparse page
+  // within the model's sparse pages << 12 | its item in that page.
+  SparseIndex = 9,
 };
 
 struct CanopySection {             // offset
@@ -257,7 +261,16 @@ struct CanopyModel {               // offset
   // a brick below takes the light of its level depth - n ancestor, and the Haar light's lattice is
   // the light lattice. Extinction (sigma per cell) is per light cell.
   uint32_t detailLevels;           // 448
-  uint32_t reserved[15];           // 452  zero
+  // (2.0) The detail levels' bricks (ids denseBricks..brickCount-1) are sparse bricks (the occupied
+  // voxels of the 10^3 grid only, see "Sparse bricks"), in sparse pages; the brick pages hold the
+  // bricks 0..denseBricks-1 (brickPageCount = ceil(denseBricks / bricksPerPage)). denseBricks =
+  // brickCount - sparseBricks = the bricks of levels 0..depth - detailLevels; all zero without
+  // detail levels.
+  uint32_t sparseBricks;           // 452
+  uint32_t firstSparsePage;        // 456
+  uint32_t sparsePageCount;        // 460
+  uint32_t firstSparseIndex;       // 464  this model's first entry in the SparseIndex section (sparseBricks entries)
+  uint32_t reserved[11];           // 468  zero
 };
 static_assert(sizeof(CanopyModel) == 512, "CanopyModel layout");
 
@@ -269,7 +282,7 @@ struct CanopyInstance {            // offset
 };
 static_assert(sizeof(CanopyInstance) == 64, "CanopyInstance layout");
 
-enum class CanopyPageKind : uint32_t { Brick = 1, Light = 2, HaarLight = 3 };
+enum class CanopyPageKind : uint32_t { Brick = 1, Light = 2, HaarLight = 3, SparseBrick = 4 };
 
 // Both the first 32 bytes of every page and (with magic replaced by the same fields) an entry of
 // the resident page table.
@@ -417,11 +430,61 @@ inline void canopyFillBrickMasks(void* page, uint32_t pageBytes, uint32_t bricks
   }
 }
 
-// Trilinear sample of a brick at node-local coordinates l in [0,1]^3 (0 = the node's lower
-// corner). Density is interpolated; albedo and wood are density-weighted (the same weighting as the
-// MIP), so empty voxels do not darken a leaf's colour. At the centre of an interior voxel the result
-// is that voxel's stored value.
-CANOPY_HD inline CanopySample canopySampleBrick(CanopyBrickView b, float lx, float ly, float lz) {
+// ---- Sparse bricks (2.0: a detail model's detail levels) ---------------------------------------
+// The same 10^3 voxels as a brick (interior and border, index canopyVoxelIndex), with only the
+// voxels of non-zero density stored. Item: uint32 mask[32] (bit v of word v / 32: voxel v has
+// density > 0; bits 1000..1023 zero), uint16 prefix[32] (set bits in the words before), then
+// float density[n] and uint32 material[n] of the n set voxels in index order. 192 + 8 n bytes.
+// A sample reads the same voxel values as the dense brick would (canopySampleVoxels), so a
+// sparse brick samples bit for bit like its dense form.
+constexpr uint32_t kCanopySparseMaskWords = 32;
+constexpr uint32_t kCanopySparseHeadBytes = kCanopySparseMaskWords * 4 + kCanopySparseMaskWords * 2;  // 192
+constexpr uint32_t kCanopySparseItemBits = 12;  // location = page << 12 | item
+constexpr uint32_t kCanopySparseMaxItemsPerPage = 1u << kCanopySparseItemBits;
+CANOPY_HD CANOPY_FORCEINLINE uint32_t canopySparseItemBytes(uint32_t voxels) { return kCanopySparseHeadBytes + 8u * voxels; }
+
+struct CanopySparseBrickView {
+  const uint32_t* mask;
+  const uint16_t* prefix;
+  const float* density;
+  const uint32_t* material;
+  // The stored voxel idx's values (0 and 0 where not stored).
+  CANOPY_HD CANOPY_FORCEINLINE void load(uint32_t idx, float& d, uint32_t& m) const {
+    const uint32_t w = mask[idx >> 5], bit = 1u << (idx & 31u);
+    if (!(w & bit)) {
+      d = 0.0f, m = 0u;
+      return;
+    }
+    const uint32_t rank = uint32_t(prefix[idx >> 5]) + haar::popcount32(w & (bit - 1u));
+    d = density[rank], m = material[rank];
+  }
+};
+
+// Item `item` of a sparse page image: the payload starts with uint32 offset[itemCount + 1].
+CANOPY_HD CANOPY_FORCEINLINE CanopySparseBrickView canopySparseBrickInPage(const void* page, uint32_t item) {
+  const unsigned char* payload = static_cast<const unsigned char*>(page) + sizeof(CanopyPageHeader);
+  const unsigned char* p = payload + reinterpret_cast<const uint32_t*>(payload)[item];
+  CanopySparseBrickView v;
+  v.mask = reinterpret_cast<const uint32_t*>(p);
+  v.prefix = reinterpret_cast<const uint16_t*>(p + kCanopySparseMaskWords * 4);
+  const uint32_t n = uint32_t(v.prefix[kCanopySparseMaskWords - 1]) + haar::popcount32(v.mask[kCanopySparseMaskWords - 1]);
+  v.density = reinterpret_cast<const float*>(p + kCanopySparseHeadBytes);
+  v.material = reinterpret_cast<const uint32_t*>(p + kCanopySparseHeadBytes + 4u * n);
+  return v;
+}
+
+// A dense brick's voxel loads, for canopySampleVoxels.
+CANOPY_HD CANOPY_FORCEINLINE void canopyLoadVoxel(const CanopyBrickView& b, uint32_t idx, float& d, uint32_t& m) {
+  d = b.density[idx], m = b.material[idx];
+}
+CANOPY_HD CANOPY_FORCEINLINE void canopyLoadVoxel(const CanopySparseBrickView& b, uint32_t idx, float& d, uint32_t& m) { b.load(idx, d, m); }
+
+// Trilinear sample of a brick (either form) at node-local coordinates l in [0,1]^3 (0 = the node's
+// lower corner). Density is interpolated; albedo and wood are density-weighted (the same weighting
+// as the MIP), so empty voxels do not darken a leaf's colour. At the centre of an interior voxel the
+// result is that voxel's stored value.
+template <class Voxels>
+CANOPY_HD inline CanopySample canopySampleVoxels(const Voxels& b, float lx, float ly, float lz) {
   const float l[3] = {lx, ly, lz};
   int i0[3];
   float f[3];
@@ -441,8 +504,7 @@ CANOPY_HD inline CanopySample canopySampleBrick(CanopyBrickView b, float lx, flo
   uint32_t cm[8];
   for (int c = 0; c < 8; ++c) {
     const uint32_t idx = canopyVoxelIndex(uint32_t(i0[0] + (c & 1)), uint32_t(i0[1] + ((c >> 1) & 1)), uint32_t(i0[2] + ((c >> 2) & 1)));
-    cd[c] = b.density[idx];
-    cm[c] = b.material[idx];
+    canopyLoadVoxel(b, idx, cd[c], cm[c]);
   }
   float dens = 0.0f, w = 0.0f, r = 0.0f, g = 0.0f, bl = 0.0f, wsum = 0.0f;
   for (int c = 0; c < 8; ++c) {
@@ -467,6 +529,14 @@ CANOPY_HD inline CanopySample canopySampleBrick(CanopyBrickView b, float lx, flo
   s.albedo[1] = g * inv;
   s.albedo[2] = bl * inv;
   return s;
+}
+CANOPY_HD inline CanopySample canopySampleBrick(CanopyBrickView b, float lx, float ly, float lz) { return canopySampleVoxels(b, lx, ly, lz); }
+CANOPY_HD inline CanopySample canopySampleBrick(const CanopySparseBrickView& b, float lx, float ly, float lz) {
+  return canopySampleVoxels(b, lx, ly, lz);
+}
+// A brick of either form in a page image: slot (dense) or item (sparse).
+CANOPY_HD inline CanopySample canopySampleBrickInPage(const void* page, uint32_t slot, bool sparse, float lx, float ly, float lz) {
+  return sparse ? canopySampleBrick(canopySparseBrickInPage(page, slot), lx, ly, lz) : canopySampleBrick(canopyBrickInPage(page, slot), lx, ly, lz);
 }
 
 // The light item `slot` (= item id % lightItemsPerPage) of a light page image.
@@ -684,6 +754,9 @@ CANOPY_HD inline haar::Rgb canopyHaarSampleAt(const unsigned char* item, uint32_
 // the payload, every item's records consistent with its coefficient count (the running sum of the
 // masks' popcounts, as in a .chaar), every coefficient finite. Returns "" or the first problem.
 std::string canopyCheckHaarPage(const void* page, uint32_t pageBytes, bool fp16);
+// The same for a sparse brick page (2.0): offsets, every item's prefix counts against its mask, its
+// size against its voxel count, stored densities positive and finite.
+std::string canopyCheckSparsePage(const void* page, uint32_t pageBytes);
 
 // Host-side matrix helpers (double precision, then rounded to float for the device).
 // The inverse of a 3x4 affine matrix; false if it is singular.
@@ -737,6 +810,14 @@ class CanopyFile {
   const std::string& metadata() const { return metadata_; }
   // The HaarIndex section (every Haar-lit model's entries, from model.firstHaarIndex; empty if none).
   const std::vector<uint32_t>& haarIndex() const { return haarIndex_; }
+  // The SparseIndex section (every detail model's sparse brick locations, from model.firstSparseIndex).
+  const std::vector<uint32_t>& sparseIndex() const { return sparseIndex_; }
+  // Where model m's brick b lies: its page, its slot (dense) or item (sparse) in it, and its form.
+  struct BrickLocation {
+    uint32_t page, slot;
+    bool sparse;
+  };
+  BrickLocation brickLocation(uint32_t m, uint32_t brick) const;
   // Model m's Haar light view over haarIndex() (m must be flagged kCanopyModelHaarLight).
   CanopyHaarView haarView(uint32_t m) const;
   // The resident bytes [0, pagesOffset) as read (a player may upload NodeTiles from here).
@@ -772,6 +853,7 @@ class CanopyFile {
   std::vector<float> sceneLightValues_;
   std::string metadata_;
   std::vector<uint32_t> haarIndex_;
+  std::vector<uint32_t> sparseIndex_;
 };
 
 // Page check for `canopy-octreepack verify`: reads and checks every page of an opened file (whose

@@ -16,6 +16,74 @@ namespace {
 
 uint64_t alignUp(uint64_t v, uint64_t a) { return (v + a - 1) / a * a; }
 
+// A dense brick (kCanopyBrickBytes) as a sparse brick item (canopy_file.h, "Sparse bricks"): the
+// voxels of non-zero density only (the others hold density 0 and, as the builder writes them,
+// material 0: a sample reads the same values).
+void appendSparseItem(const unsigned char* dense, std::vector<unsigned char>& out) {
+  float d[kCanopyBrickVoxelCount];
+  uint32_t m[kCanopyBrickVoxelCount];
+  std::memcpy(d, dense, sizeof d);
+  std::memcpy(m, dense + sizeof d, sizeof m);
+  uint32_t mask[kCanopySparseMaskWords] = {};
+  uint16_t prefix[kCanopySparseMaskWords] = {};
+  std::vector<float> dv;
+  std::vector<uint32_t> mv;
+  for (uint32_t v = 0; v < kCanopyBrickVoxelCount; ++v) {
+    if (d[v] == 0.0f) continue;
+    mask[v >> 5] |= 1u << (v & 31u);
+    dv.push_back(d[v]);
+    mv.push_back(m[v]);
+  }
+  for (uint32_t w = 1; w < kCanopySparseMaskWords; ++w) prefix[w] = uint16_t(prefix[w - 1] + __builtin_popcount(mask[w - 1]));
+  const size_t at = out.size();
+  out.resize(at + canopySparseItemBytes(uint32_t(dv.size())));
+  unsigned char* p = out.data() + at;
+  std::memcpy(p, mask, sizeof mask);
+  std::memcpy(p + sizeof mask, prefix, sizeof prefix);
+  std::memcpy(p + kCanopySparseHeadBytes, dv.data(), dv.size() * 4);
+  std::memcpy(p + kCanopySparseHeadBytes + dv.size() * 4, mv.data(), mv.size() * 4);
+}
+
+// A detail model's sparse pages: bricks first..count-1 of `bricks` (dense), in id order, packed
+// greedily into whole-item pages (payload: uint32 offset[n + 1], then the items), and the location
+// of each (page << 12 | item).
+struct SparsePages {
+  std::vector<std::vector<unsigned char>> payloads;
+  std::vector<uint32_t> itemCounts, index;
+};
+SparsePages sparsePagesOf(const std::vector<unsigned char>& bricks, uint32_t first, uint32_t count, uint32_t pageBytes) {
+  SparsePages P;
+  const size_t room = pageBytes - sizeof(CanopyPageHeader);
+  std::vector<unsigned char> items;
+  std::vector<uint32_t> sizes;
+  auto flush = [&]() {
+    if (sizes.empty()) return;
+    const uint32_t n = uint32_t(sizes.size());
+    std::vector<unsigned char> payload(4 * (size_t(n) + 1));
+    uint32_t off = 4 * (n + 1);
+    for (uint32_t i = 0; i <= n; ++i) {
+      std::memcpy(payload.data() + 4 * size_t(i), &off, 4);
+      if (i < n) off += sizes[i];
+    }
+    payload.insert(payload.end(), items.begin(), items.end());
+    P.payloads.push_back(std::move(payload));
+    P.itemCounts.push_back(n);
+    items.clear();
+    sizes.clear();
+  };
+  std::vector<unsigned char> one;
+  for (uint32_t b = first; b < count; ++b) {
+    one.clear();
+    appendSparseItem(bricks.data() + size_t(b) * kCanopyBrickBytes, one);
+    if (!sizes.empty() && (4 * (sizes.size() + 2) + items.size() + one.size() > room || sizes.size() == kCanopySparseMaxItemsPerPage)) flush();
+    P.index.push_back(uint32_t(P.payloads.size()) << kCanopySparseItemBits | uint32_t(sizes.size()));
+    items.insert(items.end(), one.begin(), one.end());
+    sizes.push_back(uint32_t(one.size()));
+  }
+  flush();
+  return P;
+}
+
 struct Layout {
   std::vector<unsigned char> resident;   // header .. end of resident part (zero padded)
   std::vector<CanopyPageEntry> pages;
@@ -33,18 +101,28 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
   std::vector<CanopyModel> models;
   std::vector<CanopyNode> tiles;
   std::vector<uint32_t> haarIndex;
+  std::vector<uint32_t> sparseIndex;            // (2.0) detail models' sparse brick locations
+  std::vector<SparsePages> sparse(in.models.size());
   bool scatteredSun = false;  // a model flagged kCanopyModelScatteredSun (1.1)
   bool detail = false;        // a model with detail levels (2.0)
   uint32_t page = 0;
-  for (CanopyWriteModel& wm : in.models) {
+  for (size_t mi = 0; mi < in.models.size(); ++mi) {
+    CanopyWriteModel& wm = in.models[mi];
     CanopyModel m = wm.record;
     if (!wm.tiles || !wm.bricks || wm.tiles->size() != size_t(m.tileCount) * 8 ||
         wm.bricks->size() != size_t(m.brickCount) * kCanopyBrickBytes)
       throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has inconsistent tile/brick sizes");
     m.firstTile = uint32_t(tiles.size() / 8);
     tiles.insert(tiles.end(), wm.tiles->begin(), wm.tiles->end());
+    // (2.0) a detail model's detail levels go to sparse pages, after its other pages
+    uint32_t lightLevelBricks = 0;
+    for (uint32_t l = 0; l <= canopyLightDepth(m) && l < 16; ++l) lightLevelBricks += m.levelBricks[l];
+    if (m.detailLevels != 0 && lightLevelBricks > m.brickCount)
+      throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has inconsistent level brick counts");
+    const uint32_t denseBricks = m.detailLevels != 0 ? lightLevelBricks : m.brickCount;
+    m.sparseBricks = m.brickCount - denseBricks;
     m.firstBrickPage = page;
-    m.brickPageCount = (m.brickCount + perPage - 1) / perPage;
+    m.brickPageCount = (denseBricks + perPage - 1) / perPage;
     page += m.brickPageCount;
     const bool lit = wm.light && !wm.light->empty();
     const bool haar = wm.haar != nullptr;
@@ -81,6 +159,15 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
       m.haarPageCount = uint32_t(H.payloads.size());
       page += m.haarPageCount;
     }
+    m.firstSparsePage = m.sparsePageCount = m.firstSparseIndex = 0;
+    if (m.sparseBricks > 0) {
+      sparse[mi] = sparsePagesOf(*wm.bricks, denseBricks, m.brickCount, pageBytes);
+      m.firstSparseIndex = uint32_t(sparseIndex.size());
+      sparseIndex.insert(sparseIndex.end(), sparse[mi].index.begin(), sparse[mi].index.end());
+      m.firstSparsePage = page;
+      m.sparsePageCount = uint32_t(sparse[mi].payloads.size());
+      page += m.sparsePageCount;
+    }
     models.push_back(m);
   }
   for (const CanopyInstance& inst : in.instances)
@@ -110,7 +197,7 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
   for (uint32_t mi = 0; mi < models.size(); ++mi) {
     const CanopyModel& m = models[mi];
     for (uint32_t p = 0; p < m.brickPageCount; ++p) {
-      const uint32_t n = std::min(perPage, m.brickCount - p * perPage);
+      const uint32_t n = std::min(perPage, m.brickCount - m.sparseBricks - p * perPage);
       addPage(CanopyPageKind::Brick, m.firstBrickPage + p, mi, p * perPage, n,
               in.models[mi].bricks->data() + size_t(p) * perPage * kCanopyBrickBytes, n * kCanopyBrickBytes);
     }
@@ -125,6 +212,12 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
       const CanopyHaarPages& H = *in.models[mi].haar;
       addPage(CanopyPageKind::HaarLight, m.firstHaarPage + p, mi, item, H.itemCounts[p], H.payloads[p].data(), uint32_t(H.payloads[p].size()));
       item += H.itemCounts[p];
+    }
+    uint32_t brick = m.brickCount - m.sparseBricks;
+    for (uint32_t p = 0; p < m.sparsePageCount; ++p) {
+      const SparsePages& S = sparse[mi];
+      addPage(CanopyPageKind::SparseBrick, m.firstSparsePage + p, mi, brick, S.itemCounts[p], S.payloads[p].data(), uint32_t(S.payloads[p].size()));
+      brick += S.itemCounts[p];
     }
   }
 
@@ -169,6 +262,8 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
   }
   if (!haarIndex.empty())
     blobs.push_back(blobOf(CanopySectionKind::HaarIndex, haarIndex.data(), sizeof(uint32_t), uint32_t(haarIndex.size()), "haar_index"));
+  if (!sparseIndex.empty())
+    blobs.push_back(blobOf(CanopySectionKind::SparseIndex, sparseIndex.data(), sizeof(uint32_t), uint32_t(sparseIndex.size()), "sparse_index"));
   if (!in.metadata.empty()) {
     Blob b{CanopySectionKind::Metadata, 0, 1, {}, "metadata"};
     b.bytes.assign(in.metadata.begin(), in.metadata.end());

@@ -99,7 +99,13 @@ CANOPY_HD CANOPY_FORCEINLINE const uint16_t* descentLightItem(const SceneView& s
 
 // The pool slot of brick `brick`'s page (-1: not resident); its page and slot in the page.
 CANOPY_HD inline int32_t residentSlot(const SceneView& s, const ModelView& m, uint32_t brick, uint32_t& page, uint32_t& inPage) {
-  page = m.firstBrickPage + divide(s.bricksPerPage, brick, inPage);
+  if (brick < m.denseBricks) {
+    page = m.firstBrickPage + divide(s.bricksPerPage, brick, inPage);
+  } else {  // a detail level's sparse brick (the reader checked the id's level and location)
+    const uint32_t loc = m.sparseIndex[brick - m.denseBricks];
+    page = m.firstSparsePage + (loc >> kCanopySparseItemBits);
+    inPage = loc & (kCanopySparseMaxItemsPerPage - 1u);
+  }
   return s.pageSlot[page];
 }
 
@@ -284,12 +290,11 @@ struct EmptyHold {
 // brickLo + brickSize), inv = 1 / brickSize). A 3D-DDA over the brick's n^3 cells; each plane's
 // crossing is computed from the plane alone (as nodeExit does), so a walk that starts in a later
 // cell of the same run ends at the same value.
-CANOPY_HD inline bool emptyRunEnd(const uint64_t* mask, V3 uo, V3 ud, V3 u, const float brickLo[3], float brickSize, float inv, float& tEnd) {
+// `empty(x, y, z)`: cell (x, y, z) of the n^3 is empty (a dense brick's mask bit, or a sparse
+// brick's stored voxels: emptyCellsOf below).
+template <class Empty>
+CANOPY_HD inline bool emptyRunEnd(const Empty& empty, V3 uo, V3 ud, V3 u, const float brickLo[3], float brickSize, float inv, float& tEnd) {
   constexpr int n = int(kCanopyEmptyCells);
-  const auto empty = [mask](int x, int y, int z) {
-    const uint32_t i = uint32_t(x + n * (y + n * z));
-    return ((mask[i / 64] >> (i % 64)) & 1u) != 0;
-  };
   int j[3];
   for (int a = 0; a < 3; ++a) {
     const float q = floorf((comp(u, a) - brickLo[a]) * inv * float(n));
@@ -313,6 +318,32 @@ CANOPY_HD inline bool emptyRunEnd(const uint64_t* mask, V3 uo, V3 ud, V3 u, cons
     tn[a] = (brickLo[a] + float(j[a] + (st[a] > 0)) * q - comp(uo, a)) / comp(ud, a);
   }
 }
+
+// The empty cells of a dense brick: its page's mask words (canopyFillBrickMasks).
+struct MaskEmptyCells {
+  const uint64_t* mask;
+  CANOPY_HD CANOPY_FORCEINLINE bool operator()(int x, int y, int z) const {
+    const uint32_t i = uint32_t(x + int(kCanopyEmptyCells) * (y + int(kCanopyEmptyCells) * z));
+    return ((mask[i / 64] >> (i % 64)) & 1u) != 0;
+  }
+};
+// The empty cells of a sparse brick (2.0): the same cells from its occupancy mask, so that a detail
+// model marches exactly as its dense form would. With n = 8 the trilinear samples of cell j read
+// stored voxels j..j+2 per axis (canopyBrickEmptyCells): empty when none of the 27 is stored.
+static_assert(kCanopyEmptyCells == kCanopyBrickSize, "sparse bricks' empty cells are one voxel wide");
+struct SparseEmptyCells {
+  const uint32_t* mask;
+  CANOPY_HD CANOPY_FORCEINLINE bool operator()(int x, int y, int z) const {
+    uint32_t any = 0;
+    for (int dz = 0; dz < 3; ++dz)
+      for (int dy = 0; dy < 3; ++dy)
+        for (int dx = 0; dx < 3; ++dx) {
+          const uint32_t v = canopyVoxelIndex(uint32_t(x + dx), uint32_t(y + dy), uint32_t(z + dz));
+          any |= mask[v >> 5] >> (v & 31u);
+        }
+    return (any & 1u) == 0;
+  }
+};
 
 // The octree level instanceSegment() picks for footprint (world) at instance `inst`.
 CANOPY_HD CANOPY_FORCEINLINE uint32_t segmentLevel(const SceneView& s, const InstanceView& inst, uint32_t depth, float footprint) {
@@ -385,10 +416,14 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
   float brickLo[3];
   const float brickSize = levelBox(d, d.brickLevel, brickLo);
   const float inv = 1.0f / brickSize;
-  if (s.shade.skipEmptyBlocks && s.brickMaskOffset != 0) {
-    const uint64_t* mask = reinterpret_cast<const uint64_t*>(brickPage + s.brickMaskOffset) + kCanopyEmptyWords * d.brickSlotInPage;
+  const bool sparse = d.brickLevel > m.lightDepth;  // a detail level's brick (format 2.0)
+  if (s.shade.skipEmptyBlocks && (sparse || s.brickMaskOffset != 0)) {
     float tEnd;
-    if (emptyRunEnd(mask, uo, ud, up, brickLo, brickSize, inv, tEnd)) {
+    const bool run =
+        sparse ? emptyRunEnd(SparseEmptyCells{canopySparseBrickInPage(brickPage, d.brickSlotInPage).mask}, uo, ud, up, brickLo, brickSize, inv, tEnd)
+               : emptyRunEnd(MaskEmptyCells{reinterpret_cast<const uint64_t*>(brickPage + s.brickMaskOffset) + kCanopyEmptyWords * d.brickSlotInPage},
+                             uo, ud, up, brickLo, brickSize, inv, tEnd);
+    if (run) {
       // k = 0 up to the empty run's end: the samples a march would take there all read 0
       CANOPY_PLAY_COUNT(s, emptyBlockSkips, 1);
       tEnd = tEnd > t + eps ? tEnd : t + eps;
@@ -417,8 +452,8 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
   tEnd = tEnd < tExit ? tEnd : tExit;
   tEnd = tEnd < tout ? tEnd : tout;
   const V3 um = uo + ud * (0.5f * (t + tEnd));
-  const CanopySample c = canopySampleBrick(canopyBrickInPage(brickPage, d.brickSlotInPage), (um.x - brickLo[0]) * inv,
-                                           (um.y - brickLo[1]) * inv, (um.z - brickLo[2]) * inv);
+  const float lx = (um.x - brickLo[0]) * inv, ly = (um.y - brickLo[1]) * inv, lz = (um.z - brickLo[2]) * inv;
+  const CanopySample c = canopySampleBrickInPage(brickPage, d.brickSlotInPage, sparse, lx, ly, lz);
   g.k = s.shade.sigma * c.density * (cellsPerWorld * m.extinctionScale);
   if (c.density == 0.0f) CANOPY_PLAY_COUNT(s, zeroBrickSamples, 1);
   g.albedo[0] = c.albedo[0], g.albedo[1] = c.albedo[1], g.albedo[2] = c.albedo[2];

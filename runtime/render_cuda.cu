@@ -129,10 +129,12 @@ class CudaBackend final : public Backend {
       std::memcpy(allTiles.data() + size_t(scene.modelFirstTile[m]) * 8, scene.models[m].tiles, size_t(scene.models[m].tileCount) * 8 * sizeof(CanopyNode));
     uploadVector(tiles_, allTiles);
     if (scene.haarIndex) uploadVector(haarIndex_, *scene.haarIndex);
+    if (scene.sparseIndex) uploadVector(sparseIndex_, *scene.sparseIndex);
     std::vector<ModelView> models = scene.models;
     for (size_t m = 0; m < models.size(); ++m) {
       models[m].tiles = tiles_.data() + size_t(scene.modelFirstTile[m]) * 8;
       if (models[m].haarLight) models[m].haar.index = haarIndex_.data() + scene.modelFirstHaarIndex[m];
+      if (models[m].sparseIndex) models[m].sparseIndex = sparseIndex_.data() + scene.modelFirstSparseIndex[m];
     }
     uploadVector(models_, models);
     uploadVector(gridStart_, scene.gridStart);
@@ -346,6 +348,7 @@ class CudaBackend final : public Backend {
   cudaEvent_t tableCopied_[2] = {nullptr, nullptr};
   int mirror_ = 0;
   cuda::DeviceBuffer<CanopyNode> tiles_;
+  cuda::DeviceBuffer<uint32_t> sparseIndex_;  // CanopyFile::sparseIndex(): the detail models' sparse brick locations
   cuda::DeviceBuffer<uint32_t> haarIndex_;  // CanopyFile::haarIndex(): the Haar-lit models' group tables and locations
   cuda::DeviceBuffer<ModelView> models_;
   cuda::DeviceBuffer<InstanceView> instances_;

@@ -77,7 +77,11 @@ double modelBaseIndexY(const CanopyFile& f, uint32_t m, std::vector<Leaf> leaves
       best = bottom;
       continue;
     }
-    const uint32_t pageIndex = canopyBrickPage(M, n.node.brick, perPage);
+    // a dense brick, or (2.0) a detail level's sparse brick
+    const uint32_t dense = M.brickCount - M.sparseBricks;
+    const bool sparse = n.node.brick >= dense;
+    const uint32_t loc = sparse ? f.sparseIndex()[size_t(M.firstSparseIndex) + n.node.brick - dense] : 0u;
+    const uint32_t pageIndex = sparse ? M.firstSparsePage + (loc >> kCanopySparseItemBits) : canopyBrickPage(M, n.node.brick, perPage);
     try {
       if (pageIndex != loaded) {
         loaded = kCanopyNone;  // the buffer holds no valid page until the read has passed its checks
@@ -89,11 +93,19 @@ double modelBaseIndexY(const CanopyFile& f, uint32_t m, std::vector<Leaf> leaves
       continue;
     }
     const CanopyBrickView b = canopyBrickInPage(page.data(), canopyBrickSlot(n.node.brick, perPage));
+    const CanopySparseBrickView sb = sparse ? canopySparseBrickInPage(page.data(), loc & (kCanopySparseMaxItemsPerPage - 1u)) : CanopySparseBrickView{};
+    auto density = [&](uint32_t idx) {
+      float d;
+      uint32_t mat;
+      if (sparse) sb.load(idx, d, mat);
+      else canopyLoadVoxel(b, idx, d, mat);
+      return d;
+    };
     const double voxelCells = double(M.rootCells >> n.level) / kCanopyBrickSize;
     for (uint32_t y = 1; y <= kCanopyBrickSize; ++y) {
       bool any = false;
       for (uint32_t z = 1; z <= kCanopyBrickSize && !any; ++z)
-        for (uint32_t x = 1; x <= kCanopyBrickSize && !any; ++x) any = b.density[canopyVoxelIndex(x, y, z)] > 0.0f;
+        for (uint32_t x = 1; x <= kCanopyBrickSize && !any; ++x) any = density(canopyVoxelIndex(x, y, z)) > 0.0f;
       if (any) {
         best = std::min(best, bottom + double(y - 1) * voxelCells);
         break;
@@ -143,6 +155,9 @@ void addModels(const CanopyFile& f, HostScene& s, std::vector<M34>& latticeToMod
     v.lightRootCells = M.rootCells >> M.detailLevels;
     v.extinctionScale = std::ldexp(1.0f, -int(M.detailLevels));
     for (int a = 0; a < 3; ++a) v.origin[a] = M.octreeOrigin[a] >> M.detailLevels;
+    v.denseBricks = M.brickCount - M.sparseBricks;
+    v.firstSparsePage = M.firstSparsePage;
+    v.sparseIndex = M.sparseBricks > 0 ? f.sparseIndex().data() + M.firstSparseIndex : nullptr;
     if (v.haarLight) v.haar = f.haarView(m);
     if ((M.flags & kCanopyModelHasLight) && !v.hasLight)
       logWarn(f.path() + ": model '" + std::string(M.name, strnlen(M.name, sizeof(M.name))) +
@@ -157,6 +172,7 @@ void addModels(const CanopyFile& f, HostScene& s, std::vector<M34>& latticeToMod
     s.models.push_back(v);
     s.modelFirstTile.push_back(M.firstTile);
     s.modelFirstHaarIndex.push_back(M.firstHaarIndex);
+    s.modelFirstSparseIndex.push_back(M.firstSparseIndex);
     s.brickPageBytes += uint64_t(M.brickPageCount) * h.pageBytes;
     if (v.hasLight) s.lightPageBytes += uint64_t(M.lightPageCount) * h.pageBytes;
     if (v.haarLight) s.haarPageBytes += uint64_t(M.haarPageCount) * h.pageBytes;
@@ -339,6 +355,7 @@ HostScene buildScene(const CanopyFile& f) {
   s.bricksPerPage = h.bricksPerPage;
   s.lightItemsPerPage = h.lightItemsPerPage;
   s.haarIndex = &f.haarIndex();
+  s.sparseIndex = &f.sparseIndex();
   std::vector<M34> latticeToModel, modelToUnit;
   addModels(f, s, latticeToModel, modelToUnit);
   double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};

@@ -22,6 +22,8 @@ struct HostScene {
   std::vector<uint32_t> modelFirstTile;   // each model's first tile in CanopyFile::allTiles()
   std::vector<uint32_t> modelFirstHaarIndex;  // each Haar-lit model's first entry in haarIndex
   const std::vector<uint32_t>* haarIndex = nullptr;  // CanopyFile::haarIndex() (models' haar.index point into it)
+  std::vector<uint32_t> modelFirstSparseIndex;  // each model's first entry in sparseIndex
+  const std::vector<uint32_t>* sparseIndex = nullptr;  // CanopyFile::sparseIndex() (models' sparseIndex point into it)
   std::vector<InstanceView> instances;
   std::vector<Affine> worldToLatticeLinear;  // per instance: world vectors -> lattice index axes
   std::vector<uint32_t> gridStart, gridItems;

@@ -32,6 +32,11 @@ struct ModelView {
   float extinctionScale;    // light cells per lattice cell, 2^-detailLevels: sigma is per light cell
   int32_t origin[3];        // octreeOrigin >> detailLevels: unit space -> light lattice index space (the Haar lookup)
   CanopyHaarView haar;
+  // (2.0) bricks denseBricks.. are sparse bricks (the detail levels): brick b's location is
+  // sparseIndex[b - denseBricks] (page within the model's sparse pages << 12 | item)
+  uint32_t denseBricks;
+  uint32_t firstSparsePage;
+  const uint32_t* sparseIndex;
 };
 
 struct InstanceView {

@@ -30,14 +30,13 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         const float u = (float(k) + 0.5f) / 8.0f;
         const canopy::CanopyLookup r = f.descend(m, u, 1.0f - u, u * u, M.depth);
         if (r.node.brick == canopy::kCanopyNone) continue;
-        const uint32_t bpp = f.header().bricksPerPage;
+        const canopy::CanopyFile::BrickLocation at = f.brickLocation(m, r.node.brick);  // dense or (2.0) sparse
         try {
-          f.readPage(canopy::canopyBrickPage(M, r.node.brick, bpp), page.data());
+          f.readPage(at.page, page.data());
         } catch (const canopy::Error&) {
           continue;
         }
-        volatile float d = canopy::canopySampleBrick(canopy::canopyBrickInPage(page.data(), canopy::canopyBrickSlot(r.node.brick, bpp)),
-                                                     r.local[0], r.local[1], r.local[2]).density;
+        volatile float d = canopy::canopySampleBrickInPage(page.data(), at.slot, at.sparse, r.local[0], r.local[1], r.local[2]).density;
         (void)d;
         if (M.flags & canopy::kCanopyModelHaarLight) {  // the finest level's Haar light at the sample's lattice point
           const canopy::CanopyHaarView hv = f.haarView(m);

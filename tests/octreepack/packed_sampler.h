@@ -17,10 +17,9 @@ class PackedSampler {
     const CanopyLookup r = f_.descend(model, u[0], u[1], u[2], maxLevel);
     if (levelReached) *levelReached = r.level;
     if (r.node.brick == kCanopyNone) return canopyUnpack(r.node.density, r.node.material);
-    const CanopyModel& M = f_.model(model);
-    const uint32_t bpp = f_.header().bricksPerPage;
-    const std::vector<unsigned char>& page = pageData(canopyBrickPage(M, r.node.brick, bpp));
-    return canopySampleBrick(canopyBrickInPage(page.data(), canopyBrickSlot(r.node.brick, bpp)), r.local[0], r.local[1], r.local[2]);
+    const CanopyFile::BrickLocation at = f_.brickLocation(model, r.node.brick);  // dense or (2.0) sparse
+    const std::vector<unsigned char>& page = pageData(at.page);
+    return canopySampleBrickInPage(page.data(), at.slot, at.sparse, r.local[0], r.local[1], r.local[2]);
   }
   // Sample at a lattice index point (cell centres at integers) at the finest level.
   CanopySample sampleLattice(uint32_t model, float px, float py, float pz) {

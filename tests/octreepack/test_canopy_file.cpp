@@ -233,9 +233,9 @@ TEST(CanopyFile, FrozenVersion20FileStillReadsAndIsStillWritten) {
   EXPECT_EQ(readFile(kFrozenV20), smallFileBytes(2, true)) << "the .canopy layout changed: bump the version";
 }
 
-// A detail model's record is checked (valid CRCs): detail levels in a 1.x file, more detail levels
-// than levels, bounds that are not whole light cells, a light count that is not its light levels'
-// bricks (detail levels edited: a light-level brick would have no item, or a detail brick one).
+// A detail model's record is checked (valid CRCs): a 2.0 file's sections in a 1.x file, more detail
+// levels than levels, bounds that are not whole light cells, sparse brick counts and ranges that do
+// not match the detail levels.
 TEST(CanopyFile, DetailModelRecordIsChecked) {
   const std::vector<unsigned char> good = readFile(kFrozenV20);
   CanopyFile f = CanopyFile::fromMemory(good.data(), good.size(), "ok.canopy");
@@ -248,7 +248,8 @@ TEST(CanopyFile, DetailModelRecordIsChecked) {
     reseal(bad);
     return expectRejected(bad, false);
   };
-  EXPECT_NE(edited(offsetof(CanopyModel, detailLevels), 0).find("light items or pages out of range"), std::string::npos);
+  EXPECT_NE(edited(offsetof(CanopyModel, detailLevels), 0).find("sparse bricks, pages or index out of range"), std::string::npos);
+  EXPECT_NE(edited(offsetof(CanopyModel, sparseBricks), 0).find("sparse bricks, pages or index out of range"), std::string::npos);
   EXPECT_NE(edited(offsetof(CanopyModel, latticeMin), 5).find("not whole light cells"), std::string::npos);
   EXPECT_NE(edited(offsetof(CanopyModel, detailLevels), 9).find("more detail levels"), std::string::npos);
   std::vector<unsigned char> v1 = good;  // the same file claiming 1.2
@@ -258,7 +259,7 @@ TEST(CanopyFile, DetailModelRecordIsChecked) {
   h.minor = 2;
   std::memcpy(v1.data(), &h, sizeof h);
   reseal(v1);
-  EXPECT_NE(expectRejected(v1, false).find("has detail levels in a 1.2 file"), std::string::npos);
+  EXPECT_NE(expectRejected(v1, false).find("a 1.x file has a SparseIndex section"), std::string::npos);
 }
 
 // The 1.1 file (before the scene light's sun bases) still reads, and a file without them is still

@@ -160,6 +160,56 @@ TEST(DetailPack, FileVersionAndReaderChecks) {
   EXPECT_EQ(canopy::CanopyFile::open(dir + "/light.canopy").header().major, 1);
 }
 
+// The detail levels' bricks are stored sparse (format 2.0: occupied voxels only) and sample bit for
+// bit like their dense form, at voxel centres, borders and random points, with the same empty cells
+// for the march; the file holds them in fewer bytes than dense bricks.
+TEST(DetailPack, SparseBricksSampleLikeTheirDenseForm) {
+  const std::string dir = pt::tmpDir("detail");
+  const ModelSource detail = detailModel();
+  writeDetailPack(dir + "/leafy.canopy", detail);
+  const canopy::CanopyFile f = canopy::CanopyFile::open(dir + "/leafy.canopy");
+  const canopy::octreepack::BuiltModel b = canopy::octreepack::buildOctree(detail, detail.name, affineLight);
+  const canopy::CanopyModel& M = f.model(0);
+  ASSERT_EQ(M.brickCount, b.record.brickCount);
+  ASSERT_EQ(M.brickCount - M.sparseBricks, M.lightCount);
+  ASSERT_GT(M.sparseBricks, 0u);
+  uint64_t samples = 0, sparseBytes = 0;
+  uint32_t seed = 12345;
+  auto rnd = [&]() { return float((seed = seed * 1664525u + 1013904223u) >> 8) / float(1u << 24); };
+  for (uint32_t id = M.brickCount - M.sparseBricks; id < M.brickCount; ++id) {
+    const canopy::CanopyFile::BrickLocation at = f.brickLocation(0, id);
+    ASSERT_TRUE(at.sparse);
+    const std::vector<unsigned char> page = f.readPage(at.page);
+    const canopy::CanopyBrickView dense = canopy::canopyBrickAt(b.bricks.data() + size_t(id) * canopy::kCanopyBrickBytes);
+    const canopy::CanopySparseBrickView sp = canopy::canopySparseBrickInPage(page.data(), at.slot);
+    sparseBytes += canopy::canopySparseItemBytes(uint32_t(sp.prefix[31]) + uint32_t(__builtin_popcount(sp.mask[31])));
+    for (uint32_t v = 0; v < canopy::kCanopyBrickVoxelCount; ++v) {  // every stored voxel
+      float d0, d1;
+      uint32_t m0, m1;
+      canopy::canopyLoadVoxel(dense, v, d0, m0);
+      sp.load(v, d1, m1);
+      ASSERT_EQ(d0, d1) << id << " " << v;
+      if (d0 != 0.0f) ASSERT_EQ(m0, m1) << id << " " << v;
+    }
+    // the empty cells the march skips: the same as the dense brick's masks
+    uint64_t mask[canopy::kCanopyEmptyWords];
+    canopy::canopyBrickEmptyCells(dense, mask);
+    const pl::SparseEmptyCells sparseEmpty{sp.mask};
+    const pl::MaskEmptyCells denseEmpty{mask};
+    for (int c = 0; c < 512; ++c) ASSERT_EQ(sparseEmpty(c & 7, (c >> 3) & 7, c >> 6), denseEmpty(c & 7, (c >> 3) & 7, c >> 6)) << id << " " << c;
+    for (int k = 0; k < 24; ++k) {
+      const float l[3] = {k < 8 ? (float(k) + 0.5f) / 8 : rnd(), k < 8 ? 0.0f : rnd(), k < 8 ? 1.0f : rnd()};
+      const canopy::CanopySample a = canopy::canopySampleBrick(dense, l[0], l[1], l[2]);
+      const canopy::CanopySample c = canopy::canopySampleBrickInPage(page.data(), at.slot, true, l[0], l[1], l[2]);
+      ASSERT_EQ(std::memcmp(&a, &c, sizeof a), 0) << "brick " << id;
+      ++samples;
+    }
+  }
+  std::printf("%u sparse bricks: %llu samples equal to the dense form's; %.1f KB sparse against %.1f KB dense\n", M.sparseBricks,
+              (unsigned long long)samples, sparseBytes / 1024.0, M.sparseBricks * double(canopy::kCanopyBrickBytes) / 1024.0);
+  EXPECT_LT(sparseBytes, uint64_t(M.sparseBricks) * canopy::kCanopyBrickBytes / 2);
+}
+
 // The player at a detail sample takes the light lattice's light: with the fast path, the item and
 // node-local coordinates of its light-level ancestor; with --light exact, the Haar light at its
 // light lattice point, which for this affine light is the light itself to float rounding.

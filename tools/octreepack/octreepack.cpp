@@ -245,6 +245,8 @@ nlohmann::json canopyInfo(const CanopyFile& f) {
                       {"light_lattice_min", {M.latticeMin[0] >> M.detailLevels, M.latticeMin[1] >> M.detailLevels, M.latticeMin[2] >> M.detailLevels}},
                       {"light_lattice_max", {M.latticeMax[0] >> M.detailLevels, M.latticeMax[1] >> M.detailLevels, M.latticeMax[2] >> M.detailLevels}},
                       {"detail_levels", M.detailLevels},
+                      {"sparse_bricks", M.sparseBricks},
+                      {"sparse_pages", M.sparsePageCount},
                       {"light_depth", canopyLightDepth(M)},
                       {"depth", M.depth},
                       {"root_cells", M.rootCells},
@@ -310,7 +312,8 @@ std::string formatInfo(const nlohmann::json& j) {
       << box(m["light_lattice_min"], m["light_lattice_max"])
       << (detail ? " (detail x" + std::to_string(1u << detail) + ": levels " + std::to_string(m["light_depth"].get<uint32_t>() + 1) +
                        ".." + std::to_string(m["depth"].get<uint32_t>()) + " take the light of level " +
-                       std::to_string(m["light_depth"].get<uint32_t>()) + ")"
+                       std::to_string(m["light_depth"].get<uint32_t>()) + "; their " + std::to_string(m["sparse_bricks"].get<uint64_t>()) +
+                       " bricks sparse, in " + std::to_string(m["sparse_pages"].get<uint64_t>()) + " pages)"
                  : std::string(" (the same)"))
       << "\n";
     for (const auto& l : m["levels"])
