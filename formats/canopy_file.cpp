@@ -633,6 +633,11 @@ std::string canopyCheckSparsePage(const void* pageImage, uint32_t pageBytes) {
     }
     if (mask[kCanopySparseMaskWords - 1] >> (kCanopyBrickVoxelCount % 32) != 0) return what("mask bits past the last voxel");
     if (canopySparseItemBytes(set) != uint64_t(off[i + 1]) - off[i]) return what("size does not match its voxel count");
+    uint32_t empty[kCanopySparseEmptyWords];
+    std::memcpy(empty, payload + off[i] + sizeof mask + sizeof prefix, sizeof empty);
+    for (uint32_t c = 0; c < kCanopyEmptyCells * kCanopyEmptyCells * kCanopyEmptyCells; ++c)
+      if (((empty[c >> 5] >> (c & 31u)) & 1u) != uint32_t(canopySparseCellEmpty(mask, c % 8, (c / 8) % 8, c / 64)))
+        return what("empty cells do not match its voxels");
     for (uint32_t v = 0; v < set; ++v) {
       float d;
       std::memcpy(&d, payload + off[i] + kCanopySparseHeadBytes + 4 * v, 4);

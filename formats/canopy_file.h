@@ -408,6 +408,20 @@ inline void canopyBrickEmptyCells(CanopyBrickView b, uint64_t mask[kCanopyEmptyW
       }
 }
 
+// Whether cell (x, y, z) of canopyBrickEmptyCells is empty, from a sparse brick's occupancy mask
+// (n = 8: the cell's trilinear samples read stored voxels x..x+2, y..y+2, z..z+2).
+static_assert(kCanopyEmptyCells == kCanopyBrickSize, "empty cells one voxel wide");
+CANOPY_HD inline bool canopySparseCellEmpty(const uint32_t* occupancy, uint32_t x, uint32_t y, uint32_t z) {
+  uint32_t any = 0;
+  for (uint32_t dz = 0; dz < 3; ++dz)
+    for (uint32_t dy = 0; dy < 3; ++dy)
+      for (uint32_t dx = 0; dx < 3; ++dx) {
+        const uint32_t v = canopyVoxelIndex(x + dx, y + dy, z + dz);
+        any |= occupancy[v >> 5] >> (v & 31u);
+      }
+  return (any & 1u) == 0;
+}
+
 // Where a page image keeps its bricks' masks (kCanopyEmptyWords x 8 bytes per brick slot, after
 // the last brick's payload, in the page's zero padding), or 0 when the padding cannot hold them.
 inline uint32_t canopyBrickMaskOffset(uint32_t pageBytes, uint32_t bricksPerPage) {
@@ -433,12 +447,15 @@ inline void canopyFillBrickMasks(void* page, uint32_t pageBytes, uint32_t bricks
 // ---- Sparse bricks (2.0: a detail model's detail levels) ---------------------------------------
 // The same 10^3 voxels as a brick (interior and border, index canopyVoxelIndex), with only the
 // voxels of non-zero density stored. Item: uint32 mask[32] (bit v of word v / 32: voxel v has
-// density > 0; bits 1000..1023 zero), uint16 prefix[32] (set bits in the words before), then
-// float density[n] and uint32 material[n] of the n set voxels in index order. 192 + 8 n bytes.
+// density > 0; bits 1000..1023 zero), uint16 prefix[32] (set bits in the words before), uint32
+// empty[16] (the brick's empty-cell mask, bit i of word i / 32: cell i as in canopyBrickEmptyCells,
+// which the reader checks against the voxels), then float density[n] and uint32 material[n] of the
+// n set voxels in index order. 256 + 8 n bytes.
 // A sample reads the same voxel values as the dense brick would (canopySampleVoxels), so a
 // sparse brick samples bit for bit like its dense form.
 constexpr uint32_t kCanopySparseMaskWords = 32;
-constexpr uint32_t kCanopySparseHeadBytes = kCanopySparseMaskWords * 4 + kCanopySparseMaskWords * 2;  // 192
+constexpr uint32_t kCanopySparseEmptyWords = 16;  // 512 empty-cell bits
+constexpr uint32_t kCanopySparseHeadBytes = kCanopySparseMaskWords * 4 + kCanopySparseMaskWords * 2 + kCanopySparseEmptyWords * 4;  // 256
 constexpr uint32_t kCanopySparseItemBits = 12;  // location = page << 12 | item
 constexpr uint32_t kCanopySparseMaxItemsPerPage = 1u << kCanopySparseItemBits;
 CANOPY_HD CANOPY_FORCEINLINE uint32_t canopySparseItemBytes(uint32_t voxels) { return kCanopySparseHeadBytes + 8u * voxels; }
@@ -446,6 +463,7 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t canopySparseItemBytes(uint32_t voxels) { r
 struct CanopySparseBrickView {
   const uint32_t* mask;
   const uint16_t* prefix;
+  const uint32_t* empty;  // the empty-cell bits (canopyBrickEmptyCells' cells, 32 per word)
   const float* density;
   const uint32_t* material;
   // The stored voxel idx's values (0 and 0 where not stored).
@@ -467,6 +485,7 @@ CANOPY_HD CANOPY_FORCEINLINE CanopySparseBrickView canopySparseBrickInPage(const
   CanopySparseBrickView v;
   v.mask = reinterpret_cast<const uint32_t*>(p);
   v.prefix = reinterpret_cast<const uint16_t*>(p + kCanopySparseMaskWords * 4);
+  v.empty = reinterpret_cast<const uint32_t*>(p + kCanopySparseMaskWords * 6);
   const uint32_t n = uint32_t(v.prefix[kCanopySparseMaskWords - 1]) + haar::popcount32(v.mask[kCanopySparseMaskWords - 1]);
   v.density = reinterpret_cast<const float*>(p + kCanopySparseHeadBytes);
   v.material = reinterpret_cast<const uint32_t*>(p + kCanopySparseHeadBytes + 4u * n);

@@ -35,11 +35,15 @@ void appendSparseItem(const unsigned char* dense, std::vector<unsigned char>& ou
     mv.push_back(m[v]);
   }
   for (uint32_t w = 1; w < kCanopySparseMaskWords; ++w) prefix[w] = uint16_t(prefix[w - 1] + __builtin_popcount(mask[w - 1]));
+  uint64_t empty[kCanopyEmptyWords];  // the march's empty cells (as a page reader fills them for dense bricks)
+  canopyBrickEmptyCells(canopyBrickAt(dense), empty);
+  static_assert(sizeof empty == kCanopySparseEmptyWords * 4, "512 empty-cell bits");
   const size_t at = out.size();
   out.resize(at + canopySparseItemBytes(uint32_t(dv.size())));
   unsigned char* p = out.data() + at;
   std::memcpy(p, mask, sizeof mask);
   std::memcpy(p + sizeof mask, prefix, sizeof prefix);
+  std::memcpy(p + sizeof mask + sizeof prefix, empty, sizeof empty);  // little-endian: bit i in 32-bit word i / 32
   std::memcpy(p + kCanopySparseHeadBytes, dv.data(), dv.size() * 4);
   std::memcpy(p + kCanopySparseHeadBytes + dv.size() * 4, mv.data(), mv.size() * 4);
 }

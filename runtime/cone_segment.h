@@ -319,29 +319,15 @@ CANOPY_HD inline bool emptyRunEnd(const Empty& empty, V3 uo, V3 ud, V3 u, const 
   }
 }
 
-// The empty cells of a dense brick: its page's mask words (canopyFillBrickMasks).
-struct MaskEmptyCells {
-  const uint64_t* mask;
+// A brick's empty cells (formats/canopy_file.h): bit i of 32-bit word i / 32, i = x + 8 (y + 8 z):
+// a dense brick's mask in its page image (canopyFillBrickMasks, 64-bit words read as 32-bit ones:
+// little-endian, the same bits) or a sparse brick's stored empty cells (format 2.0), so that a
+// detail model marches exactly as its dense form would.
+struct EmptyCellBits {
+  const uint32_t* words;
   CANOPY_HD CANOPY_FORCEINLINE bool operator()(int x, int y, int z) const {
     const uint32_t i = uint32_t(x + int(kCanopyEmptyCells) * (y + int(kCanopyEmptyCells) * z));
-    return ((mask[i / 64] >> (i % 64)) & 1u) != 0;
-  }
-};
-// The empty cells of a sparse brick (2.0): the same cells from its occupancy mask, so that a detail
-// model marches exactly as its dense form would. With n = 8 the trilinear samples of cell j read
-// stored voxels j..j+2 per axis (canopyBrickEmptyCells): empty when none of the 27 is stored.
-static_assert(kCanopyEmptyCells == kCanopyBrickSize, "sparse bricks' empty cells are one voxel wide");
-struct SparseEmptyCells {
-  const uint32_t* mask;
-  CANOPY_HD CANOPY_FORCEINLINE bool operator()(int x, int y, int z) const {
-    uint32_t any = 0;
-    for (int dz = 0; dz < 3; ++dz)
-      for (int dy = 0; dy < 3; ++dy)
-        for (int dx = 0; dx < 3; ++dx) {
-          const uint32_t v = canopyVoxelIndex(uint32_t(x + dx), uint32_t(y + dy), uint32_t(z + dz));
-          any |= mask[v >> 5] >> (v & 31u);
-        }
-    return (any & 1u) == 0;
+    return ((words[i >> 5] >> (i & 31u)) & 1u) != 0;
   }
 };
 
@@ -419,11 +405,9 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
   const bool sparse = d.brickLevel > m.lightDepth;  // a detail level's brick (format 2.0)
   if (s.shade.skipEmptyBlocks && (sparse || s.brickMaskOffset != 0)) {
     float tEnd;
-    const bool run =
-        sparse ? emptyRunEnd(SparseEmptyCells{canopySparseBrickInPage(brickPage, d.brickSlotInPage).mask}, uo, ud, up, brickLo, brickSize, inv, tEnd)
-               : emptyRunEnd(MaskEmptyCells{reinterpret_cast<const uint64_t*>(brickPage + s.brickMaskOffset) + kCanopyEmptyWords * d.brickSlotInPage},
-                             uo, ud, up, brickLo, brickSize, inv, tEnd);
-    if (run) {
+    const uint32_t* words = sparse ? canopySparseBrickInPage(brickPage, d.brickSlotInPage).empty
+                                   : reinterpret_cast<const uint32_t*>(brickPage + s.brickMaskOffset) + 2 * kCanopyEmptyWords * d.brickSlotInPage;
+    if (emptyRunEnd(EmptyCellBits{words}, uo, ud, up, brickLo, brickSize, inv, tEnd)) {
       // k = 0 up to the empty run's end: the samples a march would take there all read 0
       CANOPY_PLAY_COUNT(s, emptyBlockSkips, 1);
       tEnd = tEnd > t + eps ? tEnd : t + eps;

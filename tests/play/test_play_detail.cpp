@@ -194,9 +194,13 @@ TEST(DetailPack, SparseBricksSampleLikeTheirDenseForm) {
     // the empty cells the march skips: the same as the dense brick's masks
     uint64_t mask[canopy::kCanopyEmptyWords];
     canopy::canopyBrickEmptyCells(dense, mask);
-    const pl::SparseEmptyCells sparseEmpty{sp.mask};
-    const pl::MaskEmptyCells denseEmpty{mask};
-    for (int c = 0; c < 512; ++c) ASSERT_EQ(sparseEmpty(c & 7, (c >> 3) & 7, c >> 6), denseEmpty(c & 7, (c >> 3) & 7, c >> 6)) << id << " " << c;
+    uint32_t words[canopy::kCanopySparseEmptyWords];
+    std::memcpy(words, mask, sizeof words);
+    const pl::EmptyCellBits sparseEmpty{sp.empty}, denseEmpty{words};
+    for (int c = 0; c < 512; ++c) {
+      ASSERT_EQ(sparseEmpty(c & 7, (c >> 3) & 7, c >> 6), denseEmpty(c & 7, (c >> 3) & 7, c >> 6)) << id << " " << c;
+      ASSERT_EQ(canopy::canopySparseCellEmpty(sp.mask, c & 7, (c >> 3) & 7, c >> 6), denseEmpty(c & 7, (c >> 3) & 7, c >> 6)) << id << " " << c;
+    }
     for (int k = 0; k < 24; ++k) {
       const float l[3] = {k < 8 ? (float(k) + 0.5f) / 8 : rnd(), k < 8 ? 0.0f : rnd(), k < 8 ? 1.0f : rnd()};
       const canopy::CanopySample a = canopy::canopySampleBrick(dense, l[0], l[1], l[2]);
