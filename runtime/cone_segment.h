@@ -291,7 +291,7 @@ struct EmptyHold {
 // crossing is computed from the plane alone (as nodeExit does), so a walk that starts in a later
 // cell of the same run ends at the same value.
 // `empty(x, y, z)`: cell (x, y, z) of the n^3 is empty (a dense brick's mask bit, or a sparse
-// brick's stored voxels: emptyCellsOf below).
+// brick's stored empty cells: EmptyCellBits below).
 template <class Empty>
 CANOPY_HD inline bool emptyRunEnd(const Empty& empty, V3 uo, V3 ud, V3 u, const float brickLo[3], float brickSize, float inv, float& tEnd) {
   constexpr int n = int(kCanopyEmptyCells);
