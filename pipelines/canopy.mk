@@ -67,8 +67,10 @@ ifeq ($(strip $(DETAIL)),)
 else
 # DETAIL=N (e.g. 1024): one voxelize run writes the light lattice (RESOLUTION, what lbsolve solves)
 # and the detail lattice (N, what the player shows), nested in the same box (docs/voxelize.md).
+# (the supersample is at least the detail factor: a detail cell holds whole sub-cells)
 canopy_voxelize_detail_cmd = $(LAUNCH) $(CANOPY_VOXELIZE) $(CANOPY_QUIET) --resolution $(RESOLUTION) \
-  --supersample $(SUPERSAMPLE) --detail $(DETAIL) $(VOXELIZE_FLAGS) $< -o $*.density.vdb --detail-output $*.detail.vdb
+  --supersample $$(( $(SUPERSAMPLE) > $(DETAIL) / $(RESOLUTION) ? $(SUPERSAMPLE) : $(DETAIL) / $(RESOLUTION) )) \
+  --detail $(DETAIL) $(VOXELIZE_FLAGS) $< -o $*.density.vdb --detail-output $*.detail.vdb
 %.density.vdb %.detail.vdb: %.glb
 	$(canopy_voxelize_detail_cmd)
 %.density.vdb %.detail.vdb: %.gltf
