@@ -10,6 +10,7 @@
 
 #include <cstdlib>
 #include <cstring>
+#include <functional>
 #include <limits>
 #include <random>
 #include <string>
@@ -260,6 +261,63 @@ TEST(CanopyFile, DetailModelRecordIsChecked) {
   std::memcpy(v1.data(), &h, sizeof h);
   reseal(v1);
   EXPECT_NE(expectRejected(v1, false).find("a 1.x file has a SparseIndex section"), std::string::npos);
+}
+
+// A detail model's sparse brick pages (2.0): a flipped byte fails the page checksum; a page edited
+// with valid checksums (as a crafted file could be) fails the structure check before anything
+// indexes into it: an offset, a prefix count, an empty-cell bit, a stored density. Truncated 2.0
+// files are refused.
+TEST(CanopyFile, SparseBrickPagesAreChecked) {
+  const std::vector<unsigned char> good = readFile(kFrozenV20);
+  CanopyFile f = CanopyFile::fromMemory(good.data(), good.size(), "ok.canopy");
+  const CanopyFileHeader& h = f.header();
+  uint32_t sp = kCanopyNone;
+  for (uint32_t i = 0; i < f.pageCount(); ++i)
+    if (f.pageEntry(i).kind == uint32_t(CanopyPageKind::SparseBrick)) sp = i;
+  ASSERT_NE(sp, kCanopyNone);
+  const size_t page = size_t(h.pagesOffset) + size_t(sp) * h.pageBytes;
+  const CanopySection* table = f.findSection(CanopySectionKind::PageTable);
+  ASSERT_NE(table, nullptr);
+  for (size_t off = 32; off < 32 + f.pageEntry(sp).payloadBytes; off += 97) {
+    std::vector<unsigned char> bad = good;
+    bad[page + off] ^= 0x04;
+    EXPECT_NE(expectRejected(bad).find("checksum mismatch"), std::string::npos) << off;
+  }
+  // edits with the page's CRC (in the page and in the page table) made valid again
+  auto forged = [&](const std::function<void(unsigned char* payload)>& edit) {
+    std::vector<unsigned char> bad = good;
+    unsigned char* p = bad.data() + page;
+    edit(p + sizeof(CanopyPageHeader));
+    CanopyPageHeader ph;
+    std::memcpy(&ph, p, sizeof ph);
+    ph.crc = 0;
+    std::memcpy(p, &ph, sizeof ph);
+    ph.crc = canopyPageCrc(p, h.pageBytes);
+    std::memcpy(p, &ph, sizeof ph);
+    std::memcpy(bad.data() + table->offset + size_t(sp) * sizeof(CanopyPageEntry), &ph, sizeof ph);
+    reseal(bad);
+    return expectRejected(bad);
+  };
+  auto u32at = [](unsigned char* p, size_t at, uint32_t xorWith) {
+    uint32_t v;
+    std::memcpy(&v, p + at, 4);
+    v ^= xorWith;
+    std::memcpy(p + at, &v, 4);
+  };
+  uint32_t first;  // the first item's offset
+  std::memcpy(&first, good.data() + page + sizeof(CanopyPageHeader), 4);
+  EXPECT_NE(forged([&](unsigned char* q) { u32at(q, 4, 8); }).find("sparse brick 0: "), std::string::npos);
+  EXPECT_NE(forged([&](unsigned char* q) { u32at(q, first + 128 + 4, 1); }).find("prefix counts"), std::string::npos);
+  EXPECT_NE(forged([&](unsigned char* q) { u32at(q, first + 192 + 8, 1u << 5); }).find("empty cells"), std::string::npos);
+  const uint32_t nan = 0x7FC00000u;
+  EXPECT_NE(forged([&](unsigned char* q) { std::memcpy(q + first + 256, &nan, 4); }).find("density"), std::string::npos);
+  for (size_t n = 0; n < good.size(); n += 4093) {
+    try {
+      CanopyFile t = CanopyFile::fromMemory(good.data(), n, "trunc.canopy");
+      ADD_FAILURE() << "a truncated 2.0 file of " << n << " bytes was accepted";
+    } catch (const Error&) {
+    }
+  }
 }
 
 // The 1.1 file (before the scene light's sun bases) still reads, and a file without them is still
