@@ -362,11 +362,9 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
       if (M.detailLevels != 0 && (((M.latticeMin[a] | (M.latticeMax[a] + 1)) & ((1 << M.detailLevels) - 1)) != 0))
         bad(P, name + " lattice bounds are not whole light cells");
     // Light items: one per brick of levels 0..depth - detailLevels (every brick without detail).
-    uint64_t lightBricks = 0, levelSum = 0;
-    for (uint32_t l = 0; l <= M.depth; ++l) {
-      levelSum += M.levelBricks[l];
-      if (l <= canopyLightDepth(M)) lightBricks += M.levelBricks[l];
-    }
+    const uint64_t lightBricks = canopyLightLevelBricks(M);
+    uint64_t levelSum = 0;
+    for (uint32_t l = 0; l <= M.depth; ++l) levelSum += M.levelBricks[l];
     if (levelSum != M.brickCount) bad(P, name + " level brick counts do not add up to its bricks");
     if (M.detailLevels != 0 && uint64_t(M.brickCount) - M.sparseBricks != lightBricks)
       bad(P, name + " sparse bricks are not its detail levels' bricks");
@@ -563,23 +561,36 @@ CanopyHaarView CanopyFile::haarView(uint32_t m) const {
   return v;
 }
 
-std::string canopyCheckHaarPage(const void* pageImage, uint32_t pageBytes, bool fp16) {
-  const auto* page = static_cast<const unsigned char*>(pageImage);
+// The offset table of a page of whole variable-size items (Haar and sparse brick pages): uint32
+// offset[n + 1] at the payload's start, offset[0] = 4 (n + 1), increasing, multiples of 4, each item
+// at least minItemBytes, offset[n] = payloadBytes; 1..maxItems items. Checked before any item is
+// read, so that every item lies inside the payload. Returns "" or the problem (`item` names an
+// item: "Haar item", "sparse brick").
+static std::string checkItemOffsets(const unsigned char* page, uint32_t pageBytes, uint32_t maxItems, uint32_t minItemBytes,
+                             const char* item, std::vector<uint32_t>& off) {
   CanopyPageHeader ph;
   std::memcpy(&ph, page, sizeof ph);
   const uint64_t n = ph.itemCount, pb = ph.payloadBytes;
-  if (pb > pageBytes - sizeof(CanopyPageHeader) || n == 0 || n > kCanopyHaarMaxItemsPerPage || 4 * (n + 1) > pb)
-    return "Haar page item count or payload size invalid";
-  const unsigned char* payload = page + sizeof(CanopyPageHeader);
-  std::vector<uint32_t> off(size_t(n) + 1);
-  std::memcpy(off.data(), payload, off.size() * sizeof(uint32_t));
-  if (off[0] != 4 * (n + 1) || off[size_t(n)] != pb) return "Haar page item offsets do not span the payload";
-  // Offsets first (so that every item lies inside the payload), then each item.
+  if (pb > pageBytes - sizeof(CanopyPageHeader) || n == 0 || n > maxItems || 4 * (n + 1) > pb)
+    return std::string(item) + " page: item count or payload size invalid";
+  off.resize(size_t(n) + 1);
+  std::memcpy(off.data(), page + sizeof(CanopyPageHeader), off.size() * sizeof(uint32_t));
+  if (off[0] != 4 * (n + 1) || off[size_t(n)] != pb) return std::string(item) + " page: item offsets do not span the payload";
   for (size_t i = 0; i < size_t(n); ++i)
-    if (off[i + 1] <= off[i] || off[i + 1] % 4 != 0 || off[i + 1] - off[i] < kCanopyHaarRecordBytes)
-      return "Haar item " + std::to_string(i) + ": bad offset";
+    if (off[i + 1] <= off[i] || off[i + 1] % 4 != 0 || off[i + 1] - off[i] < minItemBytes)
+      return std::string(item) + " " + std::to_string(i) + ": bad offset";
+  return "";
+}
+
+std::string canopyCheckHaarPage(const void* pageImage, uint32_t pageBytes, bool fp16) {
+  const auto* page = static_cast<const unsigned char*>(pageImage);
+  const unsigned char* payload = page + sizeof(CanopyPageHeader);
+  std::vector<uint32_t> off;
+  const std::string bad = checkItemOffsets(page, pageBytes, kCanopyHaarMaxItemsPerPage, kCanopyHaarRecordBytes, "Haar item", off);
+  if (!bad.empty()) return bad;
+  const size_t n = off.size() - 1;
   const uint64_t entryBytes = fp16 ? 6 : 12;
-  for (size_t i = 0; i < size_t(n); ++i) {
+  for (size_t i = 0; i < n; ++i) {
     auto what = [i](const char* problem) { return "Haar item " + std::to_string(i) + ": " + problem; };
     haar::BrickRecord rec[kCanopyLightBases];
     std::memcpy(rec, payload + off[i], sizeof rec);
@@ -608,19 +619,12 @@ std::string canopyCheckHaarPage(const void* pageImage, uint32_t pageBytes, bool 
 
 std::string canopyCheckSparsePage(const void* pageImage, uint32_t pageBytes) {
   const auto* page = static_cast<const unsigned char*>(pageImage);
-  CanopyPageHeader ph;
-  std::memcpy(&ph, page, sizeof ph);
-  const uint64_t n = ph.itemCount, pb = ph.payloadBytes;
-  if (pb > pageBytes - sizeof(CanopyPageHeader) || n == 0 || n > kCanopySparseMaxItemsPerPage || 4 * (n + 1) > pb)
-    return "sparse brick page item count or payload size invalid";
   const unsigned char* payload = page + sizeof(CanopyPageHeader);
-  std::vector<uint32_t> off(size_t(n) + 1);
-  std::memcpy(off.data(), payload, off.size() * sizeof(uint32_t));
-  if (off[0] != 4 * (n + 1) || off[size_t(n)] != pb) return "sparse brick page offsets do not span the payload";
-  for (size_t i = 0; i < size_t(n); ++i)
-    if (off[i + 1] <= off[i] || off[i + 1] % 4 != 0 || off[i + 1] - off[i] < kCanopySparseHeadBytes)
-      return "sparse brick " + std::to_string(i) + ": bad offset";
-  for (size_t i = 0; i < size_t(n); ++i) {
+  std::vector<uint32_t> off;
+  const std::string bad = checkItemOffsets(page, pageBytes, kCanopySparseMaxItemsPerPage, kCanopySparseHeadBytes, "sparse brick", off);
+  if (!bad.empty()) return bad;
+  const size_t n = off.size() - 1;
+  for (size_t i = 0; i < n; ++i) {
     auto what = [i](const char* problem) { return "sparse brick " + std::to_string(i) + ": " + problem; };
     uint32_t mask[kCanopySparseMaskWords];
     uint16_t prefix[kCanopySparseMaskWords];
@@ -629,7 +633,7 @@ std::string canopyCheckSparsePage(const void* pageImage, uint32_t pageBytes) {
     uint32_t set = 0;
     for (uint32_t w = 0; w < kCanopySparseMaskWords; ++w) {
       if (prefix[w] != set) return what("prefix counts do not match its mask");
-      set += uint32_t(__builtin_popcount(mask[w]));
+      set += haar::popcount32(mask[w]);
     }
     if (mask[kCanopySparseMaskWords - 1] >> (kCanopyBrickVoxelCount % 32) != 0) return what("mask bits past the last voxel");
     if (canopySparseItemBytes(set) != uint64_t(off[i + 1]) - off[i]) return what("size does not match its voxel count");

@@ -695,6 +695,13 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyBrickSlot(uint32_t brick, uint32_t b
 }
 // The finest level with light items: depth - detailLevels (canopyLightDepth <= depth).
 CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyLightDepth(const CanopyModel& m) { return m.depth - m.detailLevels; }
+// The bricks of levels 0..canopyLightDepth(m): the ones with light items (in a lit model) and,
+// in a detail model (2.0), the dense ones (the rest are sparse). Levels past 15 do not exist.
+inline uint64_t canopyLightLevelBricks(const CanopyModel& m) {
+  uint64_t n = 0;
+  for (uint32_t l = 0; l <= canopyLightDepth(m) && l <= kCanopyMaxDepth; ++l) n += m.levelBricks[l];
+  return n;
+}
 // Which page holds light item `item` (== the brick id) of a model (model.lightCount > 0).
 CANOPY_HD CANOPY_FORCEINLINE uint32_t canopyLightPage(const CanopyModel& m, uint32_t item, uint32_t lightItemsPerPage) {
   return m.firstLightPage + item / lightItemsPerPage;

@@ -5,6 +5,7 @@
 #include "canopy/errors.h"
 #include "formats/canopy_write.h"
 #include "formats/chaar.h"
+#include "formats/item_pages.h"
 
 namespace canopy {
 
@@ -28,26 +29,7 @@ CanopyHaarPages canopyHaarPagesFromChaar(const haar::ChaarData& d, uint32_t page
     groups *= out.groupDims[a];
   }
   out.index.assign(size_t(groups), kCanopyNone);
-  const uint32_t capacity = pageBytes - uint32_t(sizeof(CanopyPageHeader));
-
-  // Items of the page being filled; flushed into a payload (offset table, then the items).
-  std::vector<std::vector<unsigned char>> pending;
-  uint64_t pendingBytes = 0;
-  auto flush = [&]() {
-    if (pending.empty()) return;
-    const uint32_t n = uint32_t(pending.size());
-    std::vector<unsigned char> payload(4 * (size_t(n) + 1));
-    uint32_t at = uint32_t(payload.size());
-    for (uint32_t i = 0; i <= n; ++i) {
-      std::memcpy(payload.data() + 4 * i, &at, 4);
-      if (i < n) at += uint32_t(pending[i].size());
-    }
-    for (const auto& item : pending) payload.insert(payload.end(), item.begin(), item.end());
-    out.payloads.push_back(std::move(payload));
-    out.itemCounts.push_back(n);
-    pending.clear();
-    pendingBytes = 0;
-  };
+  CanopyItemPager pager(pageBytes, kCanopyHaarMaxItemsPerPage);  // items in whole-item pages
 
   const int32_t* bd = h.brickDims;
   for (uint32_t gz = 0; gz < out.groupDims[2]; ++gz)
@@ -82,17 +64,14 @@ CanopyHaarPages canopyHaarPagesFromChaar(const haar::ChaarData& d, uint32_t page
           std::memcpy(item.data(), recs, kCanopyHaarRecordBytes);
           item.insert(item.end(), coefs.begin(), coefs.end());
           item.resize((item.size() + 3) / 4 * 4, 0);
-          if (!pending.empty() &&
-              (pending.size() == kCanopyHaarMaxItemsPerPage || 4 * (pending.size() + 2) + pendingBytes + item.size() > capacity))
-            flush();
-          const uint32_t page = uint32_t(out.payloads.size()), inPage = uint32_t(pending.size());
+          const auto [page, inPage] = pager.add(std::move(item));
           out.index[size_t(groups) + size_t(block) * kCanopyHaarGroupBricks + local] = (page << kCanopyHaarItemBits) | inPage;
-          pendingBytes += item.size();
-          pending.push_back(std::move(item));
           ++out.items;
         }
       }
-  flush();
+  pager.finish();
+  out.payloads = std::move(pager.payloads);
+  out.itemCounts = std::move(pager.itemCounts);
   return out;
 }
 

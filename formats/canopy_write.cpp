@@ -1,5 +1,6 @@
 // canopy_write.cpp: see canopy_write.h.
 #include "formats/canopy_write.h"
+#include "formats/item_pages.h"
 
 #include <algorithm>
 #include <cstddef>
@@ -48,43 +49,24 @@ void appendSparseItem(const unsigned char* dense, std::vector<unsigned char>& ou
   std::memcpy(p + kCanopySparseHeadBytes + dv.size() * 4, mv.data(), mv.size() * 4);
 }
 
-// A detail model's sparse pages: bricks first..count-1 of `bricks` (dense), in id order, packed
-// greedily into whole-item pages (payload: uint32 offset[n + 1], then the items), and the location
-// of each (page << 12 | item).
+// A detail model's sparse pages: bricks first..count-1 of `bricks` (dense), in id order, in
+// whole-item pages (CanopyItemPager), and the location of each (page << 12 | item).
 struct SparsePages {
   std::vector<std::vector<unsigned char>> payloads;
   std::vector<uint32_t> itemCounts, index;
 };
 SparsePages sparsePagesOf(const std::vector<unsigned char>& bricks, uint32_t first, uint32_t count, uint32_t pageBytes) {
+  CanopyItemPager pager(pageBytes, kCanopySparseMaxItemsPerPage);
   SparsePages P;
-  const size_t room = pageBytes - sizeof(CanopyPageHeader);
-  std::vector<unsigned char> items;
-  std::vector<uint32_t> sizes;
-  auto flush = [&]() {
-    if (sizes.empty()) return;
-    const uint32_t n = uint32_t(sizes.size());
-    std::vector<unsigned char> payload(4 * (size_t(n) + 1));
-    uint32_t off = 4 * (n + 1);
-    for (uint32_t i = 0; i <= n; ++i) {
-      std::memcpy(payload.data() + 4 * size_t(i), &off, 4);
-      if (i < n) off += sizes[i];
-    }
-    payload.insert(payload.end(), items.begin(), items.end());
-    P.payloads.push_back(std::move(payload));
-    P.itemCounts.push_back(n);
-    items.clear();
-    sizes.clear();
-  };
-  std::vector<unsigned char> one;
   for (uint32_t b = first; b < count; ++b) {
-    one.clear();
-    appendSparseItem(bricks.data() + size_t(b) * kCanopyBrickBytes, one);
-    if (!sizes.empty() && (4 * (sizes.size() + 2) + items.size() + one.size() > room || sizes.size() == kCanopySparseMaxItemsPerPage)) flush();
-    P.index.push_back(uint32_t(P.payloads.size()) << kCanopySparseItemBits | uint32_t(sizes.size()));
-    items.insert(items.end(), one.begin(), one.end());
-    sizes.push_back(uint32_t(one.size()));
+    std::vector<unsigned char> item;
+    appendSparseItem(bricks.data() + size_t(b) * kCanopyBrickBytes, item);
+    const auto [page, inPage] = pager.add(std::move(item));
+    P.index.push_back(page << kCanopySparseItemBits | inPage);
   }
-  flush();
+  pager.finish();
+  P.payloads = std::move(pager.payloads);
+  P.itemCounts = std::move(pager.itemCounts);
   return P;
 }
 
@@ -119,19 +101,16 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
     m.firstTile = uint32_t(tiles.size() / 8);
     tiles.insert(tiles.end(), wm.tiles->begin(), wm.tiles->end());
     // (2.0) a detail model's detail levels go to sparse pages, after its other pages
-    uint32_t lightLevelBricks = 0;
-    for (uint32_t l = 0; l <= canopyLightDepth(m) && l < 16; ++l) lightLevelBricks += m.levelBricks[l];
-    if (m.detailLevels != 0 && lightLevelBricks > m.brickCount)
+    const uint64_t lightBricks = canopyLightLevelBricks(m);  // the ones with light items, and the dense ones
+    if (m.detailLevels > m.depth || lightBricks > m.brickCount)
       throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has inconsistent level brick counts");
-    const uint32_t denseBricks = m.detailLevels != 0 ? lightLevelBricks : m.brickCount;
+    const uint32_t denseBricks = m.detailLevels != 0 ? uint32_t(lightBricks) : m.brickCount;
     m.sparseBricks = m.brickCount - denseBricks;
     m.firstBrickPage = page;
     m.brickPageCount = (denseBricks + perPage - 1) / perPage;
     page += m.brickPageCount;
     const bool lit = wm.light && !wm.light->empty();
     const bool haar = wm.haar != nullptr;
-    uint32_t lightBricks = 0;  // bricks of levels 0..depth - detailLevels: the ones with light items
-    for (uint32_t l = 0; l <= canopyLightDepth(m) && l < 16; ++l) lightBricks += m.levelBricks[l];
     detail = detail || m.detailLevels != 0;
     if (lit && (m.lightCount != lightBricks || wm.light->size() * 2 != size_t(m.lightCount) * kCanopyLightItemBytes))
       throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has inconsistent light items");

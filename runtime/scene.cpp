@@ -66,7 +66,6 @@ std::vector<Leaf> modelLeaves(const CanopyFile& f, uint32_t m) {
 double modelBaseIndexY(const CanopyFile& f, uint32_t m, std::vector<Leaf> leaves) {
   const CanopyModel& M = f.model(m);
   std::sort(leaves.begin(), leaves.end(), [](const Leaf& a, const Leaf& b) { return a.cell0[1] < b.cell0[1]; });
-  const uint32_t perPage = f.header().bricksPerPage;
   double best = std::numeric_limits<double>::infinity();
   std::vector<unsigned char> page(f.header().pageBytes);
   uint32_t loaded = kCanopyNone;
@@ -77,11 +76,8 @@ double modelBaseIndexY(const CanopyFile& f, uint32_t m, std::vector<Leaf> leaves
       best = bottom;
       continue;
     }
-    // a dense brick, or (2.0) a detail level's sparse brick
-    const uint32_t dense = M.brickCount - M.sparseBricks;
-    const bool sparse = n.node.brick >= dense;
-    const uint32_t loc = sparse ? f.sparseIndex()[size_t(M.firstSparseIndex) + n.node.brick - dense] : 0u;
-    const uint32_t pageIndex = sparse ? M.firstSparsePage + (loc >> kCanopySparseItemBits) : canopyBrickPage(M, n.node.brick, perPage);
+    const CanopyFile::BrickLocation at = f.brickLocation(m, n.node.brick);  // dense or (2.0) sparse
+    const uint32_t pageIndex = at.page;
     try {
       if (pageIndex != loaded) {
         loaded = kCanopyNone;  // the buffer holds no valid page until the read has passed its checks
@@ -92,12 +88,12 @@ double modelBaseIndexY(const CanopyFile& f, uint32_t m, std::vector<Leaf> leaves
       best = bottom;
       continue;
     }
-    const CanopyBrickView b = canopyBrickInPage(page.data(), canopyBrickSlot(n.node.brick, perPage));
-    const CanopySparseBrickView sb = sparse ? canopySparseBrickInPage(page.data(), loc & (kCanopySparseMaxItemsPerPage - 1u)) : CanopySparseBrickView{};
+    const CanopyBrickView b = canopyBrickInPage(page.data(), at.slot);
+    const CanopySparseBrickView sb = at.sparse ? canopySparseBrickInPage(page.data(), at.slot) : CanopySparseBrickView{};
     auto density = [&](uint32_t idx) {
       float d;
       uint32_t mat;
-      if (sparse) sb.load(idx, d, mat);
+      if (at.sparse) sb.load(idx, d, mat);
       else canopyLoadVoxel(b, idx, d, mat);
       return d;
     };

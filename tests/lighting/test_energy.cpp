@@ -27,6 +27,7 @@
 #include "runtime/cone.h"
 #include "runtime/player.h"
 #include "runtime/scene.h"
+#include "tests/play/resident.h"
 #include "tests/play/scenes.h"
 
 namespace lb = canopy::lb;
@@ -115,19 +116,12 @@ struct PlayerSlab {
   pl::ShadowMapView map{};
   pl::ShadeParams shade{};
   // every page resident, for the near field's brick samples (the shadow walk reads the pool)
-  std::vector<unsigned char> pool;
-  std::vector<int32_t> pageSlot;
-  std::vector<uint32_t> slotUsed, pageWanted;
+  pt::ResidentPages pages;
   // The player's Tshadow at p for a sample of footprint `footprint` (world): the map's lookup
   // (canopy-play's default, --shadows map) or a shadow cone (--shadows cone, the reference: the
   // medium marched at brick resolution all the way to the sun).
   float sunT(pl::V3 p, float footprint, bool cone) {
-    pl::SceneView v = pl::hostSceneView(scene);
-    v.pageSlot = pageSlot.data();
-    v.pool = pool.data();
-    v.slotUsed = slotUsed.data();
-    v.pageWanted = pageWanted.data();
-    v.stamp = 1;
+    pl::SceneView v = pages.view(scene);
     v.shade = shade;
     v.shadowMap = map;
     return cone ? pl::shadowTransmittance(v, p, footprint) : pl::shadowMapLookup(map, p);
@@ -147,7 +141,7 @@ std::unique_ptr<PlayerSlab> playerSlab(float sigma, float biasBlurs) {
       for (int x = 0; x < kN; ++x)
         if (inSlab(x, y, z)) s.cells.push_back({{x, y, z}, kRho, 0.0f, {0.5f, 0.5f, 0.5f}});
   pt::writeScene(path, {s}, {pt::instanceAt(0, 0, 0, 0)});
-  auto r = std::make_unique<PlayerSlab>(PlayerSlab{canopy::CanopyFile::open(path), {}, nullptr, {}, {}, {}, {}, {}, {}});
+  auto r = std::make_unique<PlayerSlab>(PlayerSlab{canopy::CanopyFile::open(path), {}, nullptr, {}, {}, {}});
   r->scene = pl::buildScene(r->file);
   r->backend = pl::makeCpuBackend(r->scene, r->file.pageCount());
   pl::PlayOptions o;  // canopy-play's defaults (the map), but for sigma and the bias
@@ -167,14 +161,7 @@ std::unique_ptr<PlayerSlab> playerSlab(float sigma, float biasBlurs) {
   r->backend->render(r->scene, shade, cam, 1);  // builds the frame's map
   r->map = r->backend->lastShadowMap();
   r->shade = shade;
-  const uint32_t pages = r->file.pageCount(), bytes = r->file.header().pageBytes;
-  r->pool.resize(size_t(pages) * bytes);
-  for (uint32_t i = 0; i < pages; ++i) {
-    r->file.readPage(i, r->pool.data() + size_t(i) * bytes);
-    r->pageSlot.push_back(int32_t(i));
-  }
-  r->slotUsed.assign(pages, 0);
-  r->pageWanted.assign(pages, 0);
+  r->pages = pt::ResidentPages(r->file);
   return r;
 }
 

@@ -11,6 +11,7 @@
 #include <sys/stat.h>
 
 #include <algorithm>
+#include <array>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -57,8 +58,13 @@ std::string tmpDir() {
 
 // An lbsolve-style light VDB: 19 Vec3 grids B00..B18 holding analyticLight over an n^3 lattice.
 // scatteredSun: how many of the sun bases B01.. carry canopy_direct_beam = false (lbsolve's
-// default marks all 18; 0: no metadata, as light files from before it).
-void writeLightVdb(const std::string& path, int n, uint32_t scatteredSun = 0) {
+// default marks all 18; 0: no metadata, as light files from before it). indexToModel (optional):
+// the grids' transform (3x4 row-major) and the lattice metadata of [0, n)^3 (none without it).
+void writeLightVdb(const std::string& path, int n, uint32_t scatteredSun = 0, const std::array<double, 12>* indexToModel = nullptr) {
+  openvdb::Mat4d m = openvdb::Mat4d::identity();
+  if (indexToModel)
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 4; ++c) m(c, r) = (*indexToModel)[size_t(r * 4 + c)];  // OpenVDB: row vectors
   openvdb::GridPtrVec grids;
   float tmp[canopy::kCanopyLightChannels];
   for (uint32_t b = 0; b < canopy::kCanopyLightBases; ++b) {
@@ -74,6 +80,14 @@ void writeLightVdb(const std::string& path, int n, uint32_t scatteredSun = 0) {
           acc.setValue(openvdb::Coord(i, j, k), openvdb::Vec3s(tmp[3 * b], tmp[3 * b + 1], tmp[3 * b + 2]));
         }
     if (scatteredSun > 0) g->insertMeta("canopy_direct_beam", openvdb::BoolMetadata(b == 0 || b > scatteredSun));
+    if (indexToModel) {
+      g->setTransform(openvdb::math::Transform::createLinearTransform(m));
+      canopy::vdbio::LatticeMeta lm;
+      lm.min = openvdb::Coord(0);
+      lm.max = openvdb::Coord(n - 1);
+      lm.source = "test";
+      canopy::vdbio::stampGrid(*g, lm);
+    }
     grids.push_back(g);
   }
   canopy::vdbio::writeVdb(path, grids);
@@ -821,39 +835,15 @@ TEST(OctreepackDetail, DetailLatticePacksWithItsLightLatticesLight) {
   op::ModelSource fine = op::testing::syntheticPlant(32, 0, "leafy", 0);
   fine.detailLevels = 1;
   op::testing::writeSourceVdb(dir + "/leafy.detail.vdb", fine);
-  // light lattice: cell c centred at the detail index point 2c + 0.5
+  // light lattice: cell c centred at the detail index point 2c + 0.5 (shift: its box moved)
   auto writeLight = [&](const std::string& path, int edge, double shift, bool meta) {
-    openvdb::Mat4d m = openvdb::Mat4d::identity();
+    std::array<double, 12> L{};
     for (int r = 0; r < 3; ++r) {
       const double* D = &fine.indexToModel[size_t(r * 4)];
-      for (int c = 0; c < 3; ++c) m(c, r) = 2.0 * D[c];
-      m(3, r) = D[0] * 0.5 + D[1] * 0.5 + D[2] * 0.5 + D[3] + shift;
+      for (int c = 0; c < 3; ++c) L[size_t(r * 4 + c)] = 2.0 * D[c];
+      L[size_t(r * 4 + 3)] = D[0] * 0.5 + D[1] * 0.5 + D[2] * 0.5 + D[3] + shift;
     }
-    openvdb::GridPtrVec grids;
-    float tmp[canopy::kCanopyLightChannels];
-    for (uint32_t b = 0; b < canopy::kCanopyLightBases; ++b) {
-      auto g = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
-      char name[8];
-      std::snprintf(name, sizeof name, "B%02u", b);
-      g->setName(name);
-      g->setTransform(openvdb::math::Transform::createLinearTransform(m));
-      auto acc = g->getAccessor();
-      for (int k = 0; k < edge; ++k)
-        for (int j = 0; j < edge; ++j)
-          for (int i = 0; i < edge; ++i) {
-            op::testing::analyticLight(i, j, k, tmp);
-            acc.setValue(openvdb::Coord(i, j, k), openvdb::Vec3s(tmp[3 * b], tmp[3 * b + 1], tmp[3 * b + 2]));
-          }
-      if (meta) {
-        canopy::vdbio::LatticeMeta lm;
-        lm.min = openvdb::Coord(0);
-        lm.max = openvdb::Coord(edge - 1);
-        lm.source = "test";
-        canopy::vdbio::stampGrid(*g, lm);
-      }
-      grids.push_back(g);
-    }
-    canopy::vdbio::writeVdb(path, grids);
+    writeLightVdb(path, edge, 0, meta ? &L : nullptr);
   };
   writeLight(dir + "/leafy.light.vdb", 16, 0.0, true);
   const std::string out = dir + "/leafy-detail.canopy";

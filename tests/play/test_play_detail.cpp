@@ -13,6 +13,7 @@
 #include "runtime/backend.h"
 #include "runtime/cone.h"
 #include "runtime/scene.h"
+#include "tests/play/resident.h"
 #include "tests/play/scenes.h"
 #include "tests/play/views.h"
 
@@ -148,7 +149,7 @@ TEST(DetailPack, LightLevelsAreTheLightLatticesOctree) {
 }
 
 // The file: a detail model makes a 2.0 file; a file without one stays 1.x.
-TEST(DetailPack, FileVersionAndReaderChecks) {
+TEST(DetailPack, ADetailModelMakesA20File) {
   const std::string dir = pt::tmpDir("detail");
   const ModelSource detail = detailModel();
   writeDetailPack(dir + "/leafy.canopy", detail);
@@ -189,7 +190,9 @@ TEST(DetailPack, SparseBricksSampleLikeTheirDenseForm) {
       canopy::canopyLoadVoxel(dense, v, d0, m0);
       sp.load(v, d1, m1);
       ASSERT_EQ(d0, d1) << id << " " << v;
-      if (d0 != 0.0f) ASSERT_EQ(m0, m1) << id << " " << v;
+      if (d0 != 0.0f) {
+        ASSERT_EQ(m0, m1) << id << " " << v;
+      }
     }
     // the empty cells the march skips: the same as the dense brick's masks
     uint64_t mask[canopy::kCanopyEmptyWords];
@@ -223,18 +226,8 @@ TEST(DetailPack, DetailSamplesTakeTheLightLatticesLight) {
   writeDetailPack(dir + "/leafy.canopy", detail);
   const canopy::CanopyFile f = canopy::CanopyFile::open(dir + "/leafy.canopy");
   const pl::HostScene scene = pl::buildScene(f);
-  // every page resident: slot = page
-  std::vector<unsigned char> pool(size_t(f.pageCount()) * f.header().pageBytes);
-  for (uint32_t p = 0; p < f.pageCount(); ++p) f.readPage(p, pool.data() + size_t(p) * f.header().pageBytes);
-  std::vector<int32_t> table(f.pageCount());
-  for (uint32_t p = 0; p < f.pageCount(); ++p) table[p] = int32_t(p);
-  std::vector<uint32_t> used(f.pageCount(), 0), wanted(f.pageCount(), 0);
-  pl::SceneView s = pl::hostSceneView(scene);
-  s.pool = pool.data();
-  s.pageSlot = table.data();
-  s.slotUsed = used.data();
-  s.pageWanted = wanted.data();
-  s.stamp = 1;
+  pt::ResidentPages pages(f);  // every page resident
+  pl::SceneView s = pages.view(scene);
   const pl::ModelView& m = s.models[0];
   ASSERT_EQ(m.lightDepth + kDetailLevels, m.depth);
   ASSERT_EQ(m.lightRootCells * kFactor, m.rootCells);
