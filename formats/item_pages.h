@@ -7,7 +7,7 @@
 #include <utility>
 #include <vector>
 
-#include "formats/canopy_file.h"
+#include "formats/canopy_layout.h"
 
 namespace canopy {
 

@@ -52,8 +52,9 @@
 //   cone_math.h     small vector math, the ray/box test, division by a run-time constant
 //   scene_view.h    the scene as the kernel sees it, ShadeParams, the CPU's work counters
 //   cone_light.h    the LB light of a sample and the coarse scene lattice's factors (7.)
+//   grid_dda.h      the 3D-DDA that the instance grid's walk and the empty-cell runs share
 //   cone_segment.h  one instance's segment: the footprint's level, the descent, held segments (3.)
-//   cone_walk.h     the instance grid's DDA and the hit list of the lock-step march (1., 2.)
+//   cone_walk.h     the walk of the instance grid and the hit list of the lock-step march (1., 2.)
 //   shadow_map.h    the scene's extinction grid and the frame's sun transmittance map (5.)
 //   cone.h          shadow cones, the ground, the primary cone (4.-5.), the camera, a pixel
 #pragma once
@@ -167,6 +168,142 @@ CANOPY_HD inline void countVoxelFootprint(const SceneView& s, const InstanceView
 #endif
 }
 
+// The sums of one step of the primary cone over its hits: extinction, extinction x albedo (which
+// the step's sun transmittance will scale) and that times its indirect light (which depends on the
+// segment alone: its light is sampled at its own point). Each segment with matter is shaded as it is
+// found; no per-hit segment array is kept for a second pass (it was 16 x 64 bytes of local memory
+// written at every step).
+struct StepSums {
+  float next;       // the step's end: the nearest bound of its hits and of the walk's cell
+  float k, kAlbedo[3], kIndirect[3];
+  bool active;      // a hit has begun (is not pending)
+  float minCell;    // the finest lattice cell of the active hits (world; shadow cones only)
+};
+
+// The first of the step's two passes over the hits. It is cheap (pending hits and held empty
+// segments only bound the step) and returns which hits must be evaluated; the second
+// (evaluateHits) evaluates them, in the same ascending order, so the sums are the same bit for
+// bit. On the GPU this is what lets a warp run instanceSegment() once for all its lanes: in one loop
+// doing both, a lane that evaluates its first hit and a lane that evaluates its third ran the
+// evaluation at different iterations, one after the other (docs/performance.md, 'Warp-uniform
+// evaluation').
+template <bool kWithCones>
+CANOPY_HD CANOPY_FORCEINLINE uint32_t boundStep(const SceneView& s, const InstanceWalk& w, float t, StepSums& q) {
+  uint32_t evaluate = 0;
+  for (uint32_t m = w.live; m != 0; m &= m - 1u) {
+    const uint32_t h = lowestSetBit(m);
+    float tin, until, end;
+    hitHead(w.hits[h], tin, until, end);
+    // pending (tin > t): bounds the step by tin; held (the same empty segment as at the previous
+    // step, EmptyHold; `until` includes the level condition, levelHoldsUntil): k = 0 up to its
+    // end; else evaluated below. Without branches: a warp's lanes stay together here.
+    const bool pending = tin > t;
+    const bool held = !pending && t < until;
+    const float bound = pending ? tin : end;
+    q.next = (pending || held) && bound < q.next ? bound : q.next;
+    q.active = q.active || !pending;
+    evaluate |= uint32_t(!pending && !held) << h;
+    CANOPY_PLAY_COUNT(s, heldSegments, held ? 1 : 0);
+    if (kWithCones && !pending) {  // the shadow interval's length (shadeStep)
+      const float cell = s.instances[w.hits[h].instance].cellWorld;
+      q.minCell = cell < q.minCell ? cell : q.minCell;
+    }
+  }
+  return evaluate;
+}
+
+// The second pass: evaluates the hits of `evaluate` at t (instanceSegment) into the step's sums.
+template <bool kWithLight>
+CANOPY_HD CANOPY_FORCEINLINE void evaluateHits(const SceneView& s, InstanceWalk& w, V3 o, V3 d, float t, float pixelAngle,
+                                               uint32_t evaluate, StepSums& q) {
+  const float footprint = t * pixelAngle;
+  while (evaluate != 0) {
+    const uint32_t h = lowestSetBit(evaluate);
+    evaluate &= evaluate - 1u;
+    Hit& hit = w.hits[h];
+    const InstanceView& inst = s.instances[hit.instance];
+    const Segment g = instanceSegment(s, inst, o, d, t, hit.tout, footprint, true, w.caches[h],
+                                      s.shade.holdEmpty ? &hit.hold : nullptr);
+    if (hit.hold.until > t) {  // a new hold: its level condition becomes a bound on t
+      const float limit = levelHoldsUntil(s, inst, s.models[inst.model].depth, pixelAngle, hit.hold.level);
+      hit.hold.until = limit < hit.hold.until ? limit : hit.hold.until;
+    }
+    q.next = g.tEnd < q.next ? g.tEnd : q.next;
+    if (g.k <= 0.0f) continue;
+    countVoxelFootprint(s, inst, footprint);
+    q.k += g.k;
+    float ind[3];
+    segmentIndirect<kWithLight>(s, inst, g, o, d, ind);
+    for (int c = 0; c < 3; ++c) {
+      const float ka = g.k * g.albedo[c];
+      q.kAlbedo[c] += ka;
+      q.kIndirect[c] += ka * ind[c];
+    }
+  }
+}
+
+// The sun's transmittance at the primary cone's samples, and the shadow cone whose value later
+// samples reuse (kShadowsCone).
+struct SunAtSample {
+  float sunT = 1.0f;
+  float shadowT = -3.0e38f;  // the last shadow cone's origin (ray parameter)
+  float spacing = 0.0f;      // samples closer than this to it reuse its value
+  float refT = 2.0f;         // the primary cone's transmittance there
+};
+
+// Shades the step [t, next) of extinction q.k: its radiance into r (and the inverse-depth moments,
+// kWithDepth), weighted by the transmittance T before it; returns the step's alpha.
+template <bool kWithCones, bool kWithDepth>
+CANOPY_HD CANOPY_FORCEINLINE float shadeStep(const SceneView& s, V3 o, V3 d, float t, float pixelAngle, const StepSums& q, float T,
+                                             SunAtSample& sun, ConeResult& r) {
+  const float dt = q.next - t;
+  const float alpha = 1.0f - expf(-q.k * dt);
+  if (!(alpha > 0.0f && T * alpha > kMinContribution)) return alpha;
+  const float tm = t + 0.5f * dt;
+  const V3 p = o + d * tm;
+  CANOPY_PLAY_COUNT(s, shadedSamples, 1);
+  if (s.shade.shadows == kShadowsMap) {
+    sun.sunT = shadowMapLookup(s.shadowMap, p);
+    CANOPY_PLAY_COUNT(s, shadowMapLookups, 1);
+  } else if (kWithCones && s.shade.shadows == kShadowsCone && (!(tm - sun.shadowT < sun.spacing) || T < kShadowReuseT * sun.refT)) {
+    // One shadow cone per shadow interval: samples closer than about a voxel (1.5 cells of the
+    // nearest active instance, or two footprints) to the last shadow origin reuse its value,
+    // unless the primary ray has since crossed matter of optical depth 0.051 (its T fell by 5 %):
+    // a dense interval's deeper samples are darker than its first. (Reusing over the whole interval
+    // made the direct sun 25-31 % too bright on a 40^3 oak against the path tracer,
+    // docs/validation.md.)
+    const float footprint = t * pixelAngle;
+    sun.sunT = shadowTransmittance(s, p, footprint);
+    sun.shadowT = tm;
+    sun.refT = T;
+    sun.spacing = 2.0f * footprint > 1.5f * q.minCell ? 2.0f * footprint : 1.5f * q.minCell;
+  }
+  const float scale = T * alpha / q.k;
+  for (int c = 0; c < 3; ++c) r.rgb[c] += scale * (q.kAlbedo[c] * s.shade.direct[c] * sun.sunT + q.kIndirect[c]);
+  if (kWithDepth) {
+    const float w = T * alpha, inv = 1.0f / tm;
+    r.depthSums[0] += w;
+    r.depthSums[1] += w * inv;
+    r.depthSums[2] += w * inv * inv;
+  }
+  return alpha;
+}
+
+// The ground at ray parameter tGround behind what is left of the transmittance T: its radiance
+// into r (and its inverse depth, kWithDepth).
+template <bool kWithCones, bool kWithDepth>
+CANOPY_HD CANOPY_FORCEINLINE void addGround(const SceneView& s, V3 o, V3 d, float tGround, float pixelAngle, float T, ConeResult& r) {
+  float g[3];
+  groundRadiance<kWithCones>(s, o + d * tGround, tGround * pixelAngle, g);
+  for (int c = 0; c < 3; ++c) r.rgb[c] += T * g[c];
+  if (kWithDepth) {
+    const float inv = 1.0f / tGround;
+    r.depthSums[0] += T;
+    r.depthSums[1] += T * inv;
+    r.depthSums[2] += T * inv * inv;
+  }
+}
+
 // One primary cone: origin o, unit direction d, footprint(t) = footprint0 + t * pixelAngle.
 // kWithCones: compiled with the shadow-cone path (kShadowsCone); without it that mode is treated
 // as kShadowsOff, so the CUDA kernel of the other modes carries neither the shadow cone's instance
@@ -175,6 +312,8 @@ CANOPY_HD inline void countVoxelFootprint(const SceneView& s, const InstanceView
 // A ray that meets the ground (groundHit) before tMax is marched up to it (the parts of instances
 // below the plane are cut) and ends there: what is left of its transmittance shows the ground
 // (groundRadiance), and the result is opaque.
+// Each step: retire the hits that ended, bound the step and evaluate the hits that need it
+// (boundStep, evaluateHits), shade it (shadeStep), move the walk on.
 template <bool kWithCones, bool kWithLight = true, bool kWithDepth = false>
 CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixelAngle, float tMax) {
   ConeResult r;
@@ -189,124 +328,30 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
   walkBegin(s, w, o, d, 0.0f, tMax);
   float t = 0.0f;
   float T = 1.0f;
-  float sunT = 1.0f, shadowT = -3.0e38f, shadowSpacing = 0.0f, shadowRefT = 2.0f;
+  SunAtSample sun;
   while (true) {
     walkRetire(w, t);
     if (w.live == 0 && w.done) break;
-    float next = w.done ? tMax : w.tCellExit;
-    // Each segment with matter is shaded as it is found, into two sums over the segments: its
-    // extinction x albedo (which the step's sun transmittance will scale) and that times its
-    // indirect light (which depends on the segment alone: its light is sampled at its own point).
-    // No per-hit segment array is kept for a second pass (it was 16 x 64 bytes of local memory
-    // written at every step).
-    float k = 0.0f, kAlbedo[3] = {0.0f, 0.0f, 0.0f}, kIndirect[3] = {0.0f, 0.0f, 0.0f};
-    bool active = false;
-    const float footprint = t * pixelAngle;
-    float minCell = 3.0e38f;
-    // Two passes over the hits. The first is cheap (pending hits and held empty segments only bound
-    // the step) and notes which hits must be evaluated; the second evaluates them, in the same
-    // ascending order, so the sums are the same bit for bit. On the GPU this is what lets a warp
-    // run instanceSegment() once for all its lanes: in one loop doing both, a lane that evaluates
-    // its first hit and a lane that evaluates its third ran the evaluation at different iterations,
-    // one after the other (docs/performance.md, 'Warp-uniform evaluation').
-    uint32_t evaluate = 0;
-    for (uint32_t m = w.live; m != 0; m &= m - 1u) {
-      const uint32_t h = lowestSetBit(m);
-      float tin, until, end;
-      hitHead(w.hits[h], tin, until, end);
-      // pending (tin > t): bounds the step by tin; held (the same empty segment as at the previous
-      // step, EmptyHold; `until` includes the level condition, levelHoldsUntil): k = 0 up to its
-      // end; else evaluated below. Without branches: a warp's lanes stay together here.
-      const bool pending = tin > t;
-      const bool held = !pending && t < until;
-      const float bound = pending ? tin : end;
-      next = (pending || held) && bound < next ? bound : next;
-      active = active || !pending;
-      evaluate |= uint32_t(!pending && !held) << h;
-      CANOPY_PLAY_COUNT(s, heldSegments, held ? 1 : 0);
-      if (kWithCones && !pending) {  // the shadow interval's length (below)
-        const float cell = s.instances[w.hits[h].instance].cellWorld;
-        minCell = cell < minCell ? cell : minCell;
-      }
-    }
-    while (evaluate != 0) {
-      const uint32_t h = lowestSetBit(evaluate);
-      evaluate &= evaluate - 1u;
-      Hit& hit = w.hits[h];
-      const InstanceView& inst = s.instances[hit.instance];
-      const Segment g = instanceSegment(s, inst, o, d, t, hit.tout, footprint, true, w.caches[h],
-                                        s.shade.holdEmpty ? &hit.hold : nullptr);
-      if (hit.hold.until > t) {  // a new hold: its level condition becomes a bound on t
-        const float limit = levelHoldsUntil(s, inst, s.models[inst.model].depth, pixelAngle, hit.hold.level);
-        hit.hold.until = limit < hit.hold.until ? limit : hit.hold.until;
-      }
-      next = g.tEnd < next ? g.tEnd : next;
-      if (g.k <= 0.0f) continue;
-      countVoxelFootprint(s, inst, footprint);
-      k += g.k;
-      float ind[3];
-      segmentIndirect<kWithLight>(s, inst, g, o, d, ind);
-      for (int c = 0; c < 3; ++c) {
-        const float ka = g.k * g.albedo[c];
-        kAlbedo[c] += ka;
-        kIndirect[c] += ka * ind[c];
-      }
-    }
-    if (!active && w.live == 0) {
+    StepSums q = {w.done ? tMax : w.tCellExit, 0.0f, {0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}, false, 3.0e38f};
+    const uint32_t evaluate = boundStep<kWithCones>(s, w, t, q);
+    evaluateHits<kWithLight>(s, w, o, d, t, pixelAngle, evaluate, q);
+    if (!q.active && w.live == 0) {
       if (w.done) break;
       t = w.tCellExit;
       walkAdvance(s, w, o, d, t);
       continue;
     }
-    if (next > tMax) next = tMax;
+    if (q.next > tMax) q.next = tMax;
     CANOPY_PLAY_COUNT(s, primarySteps, 1);
-    if (k == 0.0f) CANOPY_PLAY_COUNT(s, emptySteps, 1);
-    const float dt = next - t;
-    const float alpha = 1.0f - expf(-k * dt);
-    if (alpha > 0.0f && T * alpha > kMinContribution) {
-      const float tm = t + 0.5f * dt;
-      const V3 p = o + d * tm;
-      CANOPY_PLAY_COUNT(s, shadedSamples, 1);
-      if (s.shade.shadows == kShadowsMap) {
-        sunT = shadowMapLookup(s.shadowMap, p);
-        CANOPY_PLAY_COUNT(s, shadowMapLookups, 1);
-      } else if (kWithCones && s.shade.shadows == kShadowsCone &&
-                 (!(tm - shadowT < shadowSpacing) || T < kShadowReuseT * shadowRefT)) {
-        // One shadow cone per shadow interval: samples closer than about a voxel (1.5 cells of the
-        // nearest active instance, or two footprints) to the last shadow origin reuse its value,
-        // unless the primary ray has since crossed matter of optical depth 0.051 (its T fell by 5 %):
-        // a dense interval's deeper samples are darker than its first. (Reusing over the whole interval
-        // made the direct sun 25-31 % too bright on a 40^3 oak against the path tracer,
-        // docs/validation.md.)
-        sunT = shadowTransmittance(s, p, footprint);
-        shadowT = tm;
-        shadowRefT = T;
-        shadowSpacing = 2.0f * footprint > 1.5f * minCell ? 2.0f * footprint : 1.5f * minCell;
-      }
-      const float scale = T * alpha / k;
-      for (int c = 0; c < 3; ++c) r.rgb[c] += scale * (kAlbedo[c] * s.shade.direct[c] * sunT + kIndirect[c]);
-      if (kWithDepth) {
-        const float w = T * alpha, inv = 1.0f / tm;
-        r.depthSums[0] += w;
-        r.depthSums[1] += w * inv;
-        r.depthSums[2] += w * inv * inv;
-      }
-    }
+    if (q.k == 0.0f) CANOPY_PLAY_COUNT(s, emptySteps, 1);
+    const float alpha = shadeStep<kWithCones, kWithDepth>(s, o, d, t, pixelAngle, q, T, sun, r);
     T *= 1.0f - alpha;
-    t = next;
+    t = q.next;
     if (T < s.shade.stopT || t >= tMax) break;
     while (!w.done && t >= w.tCellExit) walkAdvance(s, w, o, d, t);
   }
   if (ground) {
-    float g[3];
-    groundRadiance<kWithCones>(s, o + d * tGround, tGround * pixelAngle, g);
-    for (int c = 0; c < 3; ++c) r.rgb[c] += T * g[c];
-    if (kWithDepth) {
-      const float inv = 1.0f / tGround;
-      r.depthSums[0] += T;
-      r.depthSums[1] += T * inv;
-      r.depthSums[2] += T * inv * inv;
-    }
+    addGround<kWithCones, kWithDepth>(s, o, d, tGround, pixelAngle, T, r);
     T = 0.0f;
   }
   r.transmittance = T;

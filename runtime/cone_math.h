@@ -9,7 +9,7 @@
 #include "canopy/half.h"
 #include "canopy/hd.h"
 #include "canopy/sun_lookup.h"
-#include "formats/canopy_file.h"
+#include "formats/canopy_sample.h"
 
 // Out of line on the device (large per-sample code called from several places of a kernel: one
 // copy instead of one per call site); inline on the host.

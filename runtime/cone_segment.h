@@ -3,6 +3,7 @@
 // runtime/cone.h.
 #pragma once
 #include "runtime/cone_light.h"
+#include "runtime/grid_dda.h"
 
 namespace canopy::play {
 
@@ -287,7 +288,7 @@ struct EmptyHold {
 // The end of the run of empty cells (formats/canopy_file.h, empty-cell masks) of a brick that
 // the ray o + t d (unit space) crosses from unit point u on: false when u's cell is not empty, else
 // true and tEnd = where the ray enters the first cell that is not, or leaves the brick ([brickLo,
-// brickLo + brickSize), inv = 1 / brickSize). A 3D-DDA over the brick's n^3 cells; each plane's
+// brickLo + brickSize), inv = 1 / brickSize). The grid walk (grid_dda.h) over the brick's n^3 cells; each plane's
 // crossing is computed from the plane alone (as nodeExit does), so a walk that starts in a later
 // cell of the same run ends at the same value.
 // `empty(x, y, z)`: cell (x, y, z) of the n^3 is empty (a dense brick's mask bit, or a sparse
@@ -302,20 +303,15 @@ CANOPY_HD inline bool emptyRunEnd(const Empty& empty, V3 uo, V3 ud, V3 u, const 
   }
   if (!empty(j[0], j[1], j[2])) return false;
   const float q = brickSize / float(n);
-  float tn[3];
-  int st[3];
-  for (int a = 0; a < 3; ++a) {
-    const float da = comp(ud, a);
-    st[a] = fabsf(da) < 1e-30f ? 0 : (da > 0.0f ? 1 : -1);
-    tn[a] = st[a] == 0 ? 3.0e38f : (brickLo[a] + float(j[a] + (st[a] > 0)) * q - comp(uo, a)) / da;
-  }
+  const float cellSize[3] = {q, q, q};
+  GridDda w;
+  gridStart(w, j, brickLo, cellSize, uo, ud);
   for (;;) {
-    int a = tn[1] < tn[0] ? 1 : 0;
-    a = tn[2] < tn[a] ? 2 : a;
-    tEnd = tn[a];
-    j[a] += st[a];
-    if (st[a] == 0 || j[a] < 0 || j[a] > n - 1 || !empty(j[0], j[1], j[2])) return true;
-    tn[a] = (brickLo[a] + float(j[a] + (st[a] > 0)) * q - comp(uo, a)) / comp(ud, a);
+    const int a = gridAxis(w);
+    tEnd = w.tNext[a];
+    w.cell[a] += w.step[a];
+    if (w.step[a] == 0 || w.cell[a] < 0 || w.cell[a] > n - 1 || !empty(w.cell[0], w.cell[1], w.cell[2])) return true;
+    w.tNext[a] = gridCrossing(brickLo[a], q, w.cell[a], w.step[a], comp(uo, a), comp(ud, a));
   }
 }
 
@@ -351,6 +347,92 @@ CANOPY_HD inline float levelHoldsUntil(const SceneView& s, const InstanceView& i
   return ldexpf(inst.cellWorld / pixelAngle, int(k)) * 0.99999f;
 }
 
+// One instance's ray at ray position t in its octree's unit space, and the bounds of the segment
+// that starts there.
+struct SegmentRay {
+  V3 uo, ud;            // the ray's origin and direction in the instance's unit space
+  float t, tout;        // the segment's start and the end of the instance's box interval
+  float eps;            // a thousandth of a cell, but at least a few float ulps of t
+  float cellsPerWorld;  // lattice cells per world unit along the ray
+  float tExit;          // where the ray leaves the descent's node (>= t + eps)
+};
+
+// Holds an empty segment that ends at tEnd (EmptyHold): a later step before `until` keeps k = 0
+// without evaluating the instance again.
+CANOPY_HD CANOPY_FORCEINLINE void holdEmpty(EmptyHold* hold, float tEnd, float cellsPerWorld, uint32_t level) {
+  const float epsEnd = fmaxf(1e-3f / cellsPerWorld, fabsf(tEnd) * 1e-6f);
+  hold->until = tEnd - 3.0f * epsEnd;
+  hold->end = tEnd;
+  hold->level = level;
+}
+
+// The segment of a node without a usable brick (a constant node, or a missing brick without a close
+// resident ancestor): the node's mean up to the node's exit.
+CANOPY_HD CANOPY_FORCEINLINE Segment constantSegment(const SceneView& s, const ModelView& m, const Descent& d, const SegmentRay& r,
+                                                     bool shading, EmptyHold* hold) {
+  Segment g;
+  const CanopySample c = canopyUnpack(d.node.density, d.node.material);
+  g.k = s.shade.sigma * c.density * (r.cellsPerWorld * m.extinctionScale);
+  g.albedo[0] = c.albedo[0], g.albedo[1] = c.albedo[1], g.albedo[2] = c.albedo[2];
+  float tEnd = r.tExit;
+  if (shading && c.density > 0.0f) {  // a shadow cone integrates it in one go
+    const float maxLen = kMaxConstantCells / r.cellsPerWorld;
+    tEnd = tEnd < r.t + maxLen ? tEnd : r.t + maxLen;
+  }
+  g.tEnd = tEnd < r.tout ? tEnd : r.tout;
+  if (shading && g.k > 0.0f) segmentLight(s, m, d, r.uo + r.ud * (0.5f * (r.t + g.tEnd)), 0.5f * (r.t + g.tEnd), g);
+  if (hold && c.density == 0.0f && d.node.brick == kCanopyNone && !(d.node.child != kCanopyNone && d.node.child < m.tileCount))
+    holdEmpty(hold, g.tEnd, r.cellsPerWorld, d.level);
+  return g;
+}
+
+// Whether point up of the ray lies in an empty cell of the brick: then g is the empty segment up to
+// the end of the run of empty cells (emptyRunEnd) and true is returned.
+CANOPY_HD CANOPY_FORCEINLINE bool emptyCellSegment(const SceneView& s, const unsigned char* brickPage, const Descent& d, bool sparse,
+                                                   const SegmentRay& r, V3 up, const float brickLo[3], float brickSize, float inv,
+                                                   EmptyHold* hold, Segment& g) {
+  float tEnd;
+  const uint32_t* words = sparse ? canopySparseBrickInPage(brickPage, d.brickSlotInPage).empty
+                                 : reinterpret_cast<const uint32_t*>(brickPage + s.brickMaskOffset) + 2 * kCanopyEmptyWords * d.brickSlotInPage;
+  if (!emptyRunEnd(EmptyCellBits{words}, r.uo, r.ud, up, brickLo, brickSize, inv, tEnd)) return false;
+  // k = 0 up to the empty run's end: the samples a march would take there all read 0
+  CANOPY_PLAY_COUNT(s, emptyBlockSkips, 1);
+  tEnd = tEnd > r.t + r.eps ? tEnd : r.t + r.eps;
+  tEnd = tEnd < r.tExit ? tEnd : r.tExit;
+  g.tEnd = tEnd < r.tout ? tEnd : r.tout;
+  g.k = 0.0f;
+  g.albedo[0] = g.albedo[1] = g.albedo[2] = 0.0f;
+  // Evaluated again at t' < until with the footprint's level still >= d.level (so equal to it
+  // where the node has children: the level only gets coarser along the ray), the descent
+  // reaches the same node and brick, the point lies in a later cell of the same run, and
+  // the walk from there ends at the same plane, computed alike (the argument of EmptyHold;
+  // where the ray grazes a cell edge within float rounding, the point's cell may
+  // be the diagonal neighbour of the walk's, and the two could differ).
+  if (hold) holdEmpty(hold, g.tEnd, r.cellsPerWorld, d.level);
+  return true;
+}
+
+// The segment of a brick: one trilinear sample at the middle of a step of stepFactor voxels of the
+// descent's level (cut at the node's exit and the instance's end).
+CANOPY_HD CANOPY_FORCEINLINE Segment brickSegment(const SceneView& s, const ModelView& m, const Descent& d, const unsigned char* brickPage,
+                                                  bool sparse, const SegmentRay& r, const float brickLo[3], float inv, bool shading) {
+  Segment g;
+  CANOPY_PLAY_COUNT(s, brickSamples, 1);
+  const float voxelCells = float(m.rootCells >> 3) * levelSize(d.level);  // this level's voxel, in cells
+  float tEnd = r.t + s.shade.stepFactor * voxelCells / r.cellsPerWorld;
+  tEnd = tEnd < r.tExit ? tEnd : r.tExit;
+  tEnd = tEnd < r.tout ? tEnd : r.tout;
+  const V3 um = r.uo + r.ud * (0.5f * (r.t + tEnd));
+  const float lx = (um.x - brickLo[0]) * inv, ly = (um.y - brickLo[1]) * inv, lz = (um.z - brickLo[2]) * inv;
+  const CanopySample c = canopySampleBrickInPage(brickPage, d.brickSlotInPage, sparse, lx, ly, lz);
+  g.k = s.shade.sigma * c.density * (r.cellsPerWorld * m.extinctionScale);
+  if (c.density == 0.0f) CANOPY_PLAY_COUNT(s, zeroBrickSamples, 1);
+  g.albedo[0] = c.albedo[0], g.albedo[1] = c.albedo[1], g.albedo[2] = c.albedo[2];
+  g.tEnd = tEnd;
+  if (shading && g.k > 0.0f) segmentLight(s, m, d, um, 0.5f * (r.t + tEnd), g);
+  return g;
+}
+
 // The segment of instance `inst` at ray position t (world), the cone footprint there being
 // `footprint` (world units). tout is the end of the instance's box interval. `hold` (optional): set
 // for an empty leaf's segment, else cleared (see EmptyHold).
@@ -358,13 +440,15 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
                                          float tout, float footprint, bool shading, DescentCache& cache,
                                          EmptyHold* hold = nullptr) {
   const ModelView& m = s.models[inst.model];
-  const V3 uo = applyPoint(inst.worldToUnit, o);
-  const V3 ud = applyVector(inst.worldToUnit, dir);
-  const float cellsPerWorld = length(ud) * float(m.rootCells);
-  // a thousandth of a cell, but at least a few float ulps of t (progress far from the origin)
-  const float eps = fmaxf(1e-3f / cellsPerWorld, fabsf(t) * 1e-6f);
+  SegmentRay r;
+  r.uo = applyPoint(inst.worldToUnit, o);
+  r.ud = applyVector(inst.worldToUnit, dir);
+  r.t = t;
+  r.tout = tout;
+  r.cellsPerWorld = length(r.ud) * float(m.rootCells);
+  r.eps = fmaxf(1e-3f / r.cellsPerWorld, fabsf(t) * 1e-6f);
   const uint32_t level = segmentLevel(s, inst, m.depth, footprint);
-  const V3 up = uo + ud * (t + eps);
+  const V3 up = r.uo + r.ud * (t + r.eps);
   if (hold) hold->until = -3.0e38f;
   CANOPY_PLAY_COUNT(s, segments, 1);
   if (!s.shade.descentCache || !descentCovers(cache, up, level)) {
@@ -372,78 +456,21 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
     CANOPY_PLAY_COUNT(s, descents, 1);
   }
   const Descent& d = cache.d;
-  Segment g;
-  float tExit = nodeExit(uo, ud, d.lo, levelSize(d.level));
-  if (tExit < t + eps) tExit = t + eps;
+  r.tExit = nodeExit(r.uo, r.ud, d.lo, levelSize(d.level));
+  if (r.tExit < t + r.eps) r.tExit = t + r.eps;
   if (d.missingPage != kCanopyNone) writeStamp(s.pageWanted + d.missingPage, s.stamp);
   const unsigned char* brickPage = descentBrickPage(s, d);
-  const bool useBrick = d.node.brick != kCanopyNone && brickPage != nullptr;
-  if (!useBrick) {
-    // constant node, or a missing brick without a close resident ancestor: the node's mean
-    const CanopySample c = canopyUnpack(d.node.density, d.node.material);
-    g.k = s.shade.sigma * c.density * (cellsPerWorld * m.extinctionScale);
-    g.albedo[0] = c.albedo[0], g.albedo[1] = c.albedo[1], g.albedo[2] = c.albedo[2];
-    float tEnd = tExit;
-    if (shading && c.density > 0.0f) {  // a shadow cone integrates it in one go
-      const float maxLen = kMaxConstantCells / cellsPerWorld;
-      tEnd = tEnd < t + maxLen ? tEnd : t + maxLen;
-    }
-    g.tEnd = tEnd < tout ? tEnd : tout;
-    if (shading && g.k > 0.0f) segmentLight(s, m, d, uo + ud * (0.5f * (t + g.tEnd)), 0.5f * (t + g.tEnd), g);
-    if (hold && c.density == 0.0f && d.node.brick == kCanopyNone && !(d.node.child != kCanopyNone && d.node.child < m.tileCount)) {
-      const float epsEnd = fmaxf(1e-3f / cellsPerWorld, fabsf(g.tEnd) * 1e-6f);
-      hold->until = g.tEnd - 3.0f * epsEnd;
-      hold->end = g.tEnd;
-      hold->level = d.level;
-    }
-    return g;
-  }
+  if (d.node.brick == kCanopyNone || brickPage == nullptr) return constantSegment(s, m, d, r, shading, hold);
   writeStamp(s.slotUsed + d.brickPoolSlot, s.stamp);
   float brickLo[3];
   const float brickSize = levelBox(d, d.brickLevel, brickLo);
   const float inv = 1.0f / brickSize;
   const bool sparse = d.brickLevel > m.lightDepth;  // a detail level's brick (format 2.0)
-  if (s.shade.skipEmptyBlocks && (sparse || s.brickMaskOffset != 0)) {
-    float tEnd;
-    const uint32_t* words = sparse ? canopySparseBrickInPage(brickPage, d.brickSlotInPage).empty
-                                   : reinterpret_cast<const uint32_t*>(brickPage + s.brickMaskOffset) + 2 * kCanopyEmptyWords * d.brickSlotInPage;
-    if (emptyRunEnd(EmptyCellBits{words}, uo, ud, up, brickLo, brickSize, inv, tEnd)) {
-      // k = 0 up to the empty run's end: the samples a march would take there all read 0
-      CANOPY_PLAY_COUNT(s, emptyBlockSkips, 1);
-      tEnd = tEnd > t + eps ? tEnd : t + eps;
-      tEnd = tEnd < tExit ? tEnd : tExit;
-      g.tEnd = tEnd < tout ? tEnd : tout;
-      g.k = 0.0f;
-      g.albedo[0] = g.albedo[1] = g.albedo[2] = 0.0f;
-      if (hold) {
-        // Evaluated again at t' < until with the footprint's level still >= d.level (so equal to it
-        // where the node has children: the level only gets coarser along the ray), the descent
-        // reaches the same node and brick, the point lies in a later cell of the same run, and
-        // the walk from there ends at the same plane, computed alike (the argument of EmptyHold;
-        // where the ray grazes a cell edge within float rounding, the point's cell may
-        // be the diagonal neighbour of the walk's, and the two could differ).
-        const float epsEnd = fmaxf(1e-3f / cellsPerWorld, fabsf(g.tEnd) * 1e-6f);
-        hold->until = g.tEnd - 3.0f * epsEnd;
-        hold->end = g.tEnd;
-        hold->level = d.level;
-      }
-      return g;
-    }
-  }
-  CANOPY_PLAY_COUNT(s, brickSamples, 1);
-  const float voxelCells = float(m.rootCells >> 3) * levelSize(d.level);  // this level's voxel, in cells
-  float tEnd = t + s.shade.stepFactor * voxelCells / cellsPerWorld;
-  tEnd = tEnd < tExit ? tEnd : tExit;
-  tEnd = tEnd < tout ? tEnd : tout;
-  const V3 um = uo + ud * (0.5f * (t + tEnd));
-  const float lx = (um.x - brickLo[0]) * inv, ly = (um.y - brickLo[1]) * inv, lz = (um.z - brickLo[2]) * inv;
-  const CanopySample c = canopySampleBrickInPage(brickPage, d.brickSlotInPage, sparse, lx, ly, lz);
-  g.k = s.shade.sigma * c.density * (cellsPerWorld * m.extinctionScale);
-  if (c.density == 0.0f) CANOPY_PLAY_COUNT(s, zeroBrickSamples, 1);
-  g.albedo[0] = c.albedo[0], g.albedo[1] = c.albedo[1], g.albedo[2] = c.albedo[2];
-  g.tEnd = tEnd;
-  if (shading && g.k > 0.0f) segmentLight(s, m, d, um, 0.5f * (t + tEnd), g);
-  return g;
+  Segment g;
+  if (s.shade.skipEmptyBlocks && (sparse || s.brickMaskOffset != 0) &&
+      emptyCellSegment(s, brickPage, d, sparse, r, up, brickLo, brickSize, inv, hold, g))
+    return g;
+  return brickSegment(s, m, d, brickPage, sparse, r, brickLo, inv, shading);
 }
 
 }  // namespace canopy::play

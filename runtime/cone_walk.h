@@ -42,9 +42,8 @@ struct InstanceWalk {
   DescentCache caches[kHitCapacity];  // caches[i]: hits[i]'s last descent along the ray (empty when added)
   uint32_t live;                      // bit i: hits[i] is pending or active
   float minTout;                      // <= every live hit's tout
-  int cell[3];
-  int stepDir[3];
-  float tNext[3], tDelta[3];
+  GridDda dda;       // the instance grid's cell and plane crossings (grid_dda.h)
+  float tDelta[3];   // the ray's t across one cell on each axis
   float tCellExit;  // the march may advance up to here with the current list
   float tGridExit;
   bool done;
@@ -64,7 +63,7 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t lowestSetBit(uint32_t m) {
 // Adds the instances of the current cell, entered through `face` (2 a for a step along +a, 2 a + 1
 // along -a; -1: the walk's first cell).
 CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 d, float tNow, int face) {
-  const int c = w.cell[0] + s.gridDim[0] * (w.cell[1] + s.gridDim[1] * w.cell[2]);
+  const int c = w.dda.cell[0] + s.gridDim[0] * (w.dda.cell[1] + s.gridDim[1] * w.dda.cell[2]);
   const bool scan = face < 0 || w.dropped;
   const uint32_t* items = scan ? s.gridItems : s.gridFaceItems;
   const uint32_t list = scan ? uint32_t(c) : uint32_t(6 * c + face);
@@ -124,29 +123,18 @@ CANOPY_HD inline void walkBegin(const SceneView& s, InstanceWalk& w, V3 o, V3 d,
   w.done = false;
   w.tGridExit = t1;
   const V3 p = o + d * t0;
+  int cell[3];
   for (int a = 0; a < 3; ++a) {
-    const float cs = s.gridCell[a];
-    int c = int(floorf((comp(p, a) - s.gridLo[a]) / cs));
-    c = c < 0 ? 0 : (c >= s.gridDim[a] ? s.gridDim[a] - 1 : c);
-    w.cell[a] = c;
-    const float da = comp(d, a);
-    if (da > 0.0f) {
-      w.stepDir[a] = 1;
-      w.tNext[a] = (s.gridLo[a] + float(c + 1) * cs - comp(o, a)) / da;
-      w.tDelta[a] = cs / da;
-    } else if (da < 0.0f) {
-      w.stepDir[a] = -1;
-      w.tNext[a] = (s.gridLo[a] + float(c) * cs - comp(o, a)) / da;
-      w.tDelta[a] = -cs / da;
-    } else {
-      w.stepDir[a] = 0;
-      w.tNext[a] = 3.0e38f;
-      w.tDelta[a] = 3.0e38f;
-    }
+    const int c = int(floorf((comp(p, a) - s.gridLo[a]) / s.gridCell[a]));
+    cell[a] = c < 0 ? 0 : (c >= s.gridDim[a] ? s.gridDim[a] - 1 : c);
+  }
+  gridStart(w.dda, cell, s.gridLo, s.gridCell, o, d);
+  for (int a = 0; a < 3; ++a) {
+    const int st = w.dda.step[a];
+    w.tDelta[a] = st == 0 ? 3.0e38f : (st > 0 ? s.gridCell[a] / comp(d, a) : -s.gridCell[a] / comp(d, a));
   }
   walkAddCell(s, w, o, d, t0, -1);
-  float tx = w.tNext[0] < w.tNext[1] ? w.tNext[0] : w.tNext[1];
-  tx = tx < w.tNext[2] ? tx : w.tNext[2];
+  const float tx = gridExit(w.dda);
   w.tCellExit = tx < t1 ? tx : t1;
 }
 
@@ -157,19 +145,16 @@ CANOPY_HD inline void walkAdvance(const SceneView& s, InstanceWalk& w, V3 o, V3 
     w.done = true;
     return;
   }
-  int a = 0;
-  if (w.tNext[1] < w.tNext[a]) a = 1;
-  if (w.tNext[2] < w.tNext[a]) a = 2;
-  w.cell[a] += w.stepDir[a];
-  w.tNext[a] += w.tDelta[a];
-  if (w.cell[a] < 0 || w.cell[a] >= s.gridDim[a]) {
+  const int a = gridAxis(w.dda);
+  w.dda.cell[a] += w.dda.step[a];
+  w.dda.tNext[a] += w.tDelta[a];
+  if (w.dda.cell[a] < 0 || w.dda.cell[a] >= s.gridDim[a]) {
     w.done = true;
     w.tCellExit = w.tGridExit;
     return;
   }
-  walkAddCell(s, w, o, d, tNow, 2 * a + (w.stepDir[a] > 0 ? 0 : 1));
-  float tx = w.tNext[0] < w.tNext[1] ? w.tNext[0] : w.tNext[1];
-  tx = tx < w.tNext[2] ? tx : w.tNext[2];
+  walkAddCell(s, w, o, d, tNow, 2 * a + (w.dda.step[a] > 0 ? 0 : 1));
+  const float tx = gridExit(w.dda);
   w.tCellExit = tx < w.tGridExit ? tx : w.tGridExit;
 }
 

@@ -5,18 +5,27 @@
 #include "canopy/cli.h"
 #include "runtime/player.h"
 
-int main(int argc, char** argv) {
-  canopy::Tool tool("canopy-play",
-                    "Cone-traces a packed scene (.canopy) headless, streaming bricks through a cache.\n"
-                    "  canopy-play FILE.canopy -o out.png [--size WxH]\n"
-                    "  canopy-play FILE.canopy -o frames/f_%04d.exr --frames 120 --camera orbit:turns=1 --sun orbit:turns=0.25\n"
-                    "  canopy-play FILE.canopy -o pair.png --stereo 0.064   (left | right)");
-  CLI::App& app = tool.app();
-  canopy::play::PlayOptions o;
+namespace {
+
+// The command line's values that are not PlayOptions fields as they stand (parsed or inverted in
+// applyValues).
+struct CliValues {
   std::string size = "640x360";
+  double stopOpacity = 1.0 - double(canopy::play::kStopT);
+  bool noShadows = false;
+  bool noDirect = false;
+  bool noDescentCache = false;
+  bool noEmptySkip = false;
+  std::string lightMode = "fast";
+  std::string groundAlbedo = "0.2,0.17,0.13";
+  bool coldStart = false;
+};
+
+// The input, output, frames, camera and shading options.
+void addFrameOptions(CLI::App& app, canopy::play::PlayOptions& o, CliValues& x) {
   app.add_option("input", o.input, "FILE.canopy")->required();
   app.add_option("-o,--output", o.output, "out.png | out.exr | frames/f_%04d.exr (several frames: one %d, %Nd or %0Nd; %% for a literal %)");
-  app.add_option("--size", size, "Frame size WxH")->capture_default_str();
+  app.add_option("--size", x.size, "Frame size WxH")->capture_default_str();
   app.add_option("--frames", o.frames, "Number of frames")->capture_default_str();
   app.add_option("--camera", o.camera, "orbit[:azimuth=,elevation=,distance=,height=,fov=,turns=] or a keyframe path.json")
       ->capture_default_str();
@@ -28,14 +37,15 @@ int main(int argc, char** argv) {
   app.add_option("--sun-intensity", o.sunIntensity, "Sun radiance")->capture_default_str();
   app.add_option("--step", o.stepFactor, "Brick step in voxels of the chosen level")->capture_default_str();
   app.add_option("--lod-bias", o.lodBias, "Added to the footprint's level (negative = coarser)")->capture_default_str();
-  double stopOpacity = 1.0 - double(canopy::play::kStopT);
-  app.add_option("--stop-opacity", stopOpacity, "A cone stops at this opacity; at most 1 - this of a pixel's light is dropped")
+  app.add_option("--stop-opacity", x.stopOpacity, "A cone stops at this opacity; at most 1 - this of a pixel's light is dropped")
       ->default_str("0.999")->check(CLI::Range(0.5, 1.0));
+}
+
+// The shadow options, and the benchmarks' timing knobs (hidden from --help).
+void addShadowOptions(CLI::App& app, canopy::play::PlayOptions& o, CliValues& x) {
   app.add_option("--shadow-aperture", o.shadowAperture, "Shadow cone aperture (radians)")->capture_default_str();
-  bool noShadows = false;
-  app.add_flag("--no-shadows", noShadows, "Direct sun unshadowed");
-  bool noDirect = false;
-  app.add_flag("--no-direct-sun", noDirect, "Leave the direct sun out: indirect light only (the LB bases and ambient), to inspect it");
+  app.add_flag("--no-shadows", x.noShadows, "Direct sun unshadowed");
+  app.add_flag("--no-direct-sun", x.noDirect, "Leave the direct sun out: indirect light only (the LB bases and ambient), to inspect it");
   app.add_option("--shadows", o.shadowMethod, "map: per-frame sun transmittance map; cone: a shadow cone per shadow interval (slow reference)")
       ->capture_default_str();
   app.add_option("--shadow-map-cells", o.shadowMapCells, "Shadow extinction grid voxel in lattice cells of the finest instance")->capture_default_str();
@@ -43,15 +53,16 @@ int main(int argc, char** argv) {
   // Timing knobs for the benchmarks (same image, or the images before a change): hidden from --help,
   // documented in docs/play.md.
   app.add_option("--warp-tile", o.warpTileWidth, "CUDA: a warp renders a W x (32/W) pixel tile")->capture_default_str()->group("");
-  bool noDescentCache = false;
-  app.add_flag("--no-descent-cache", noDescentCache, "Descend the octree from the root for every segment (same image; for timing)")->group("");
-  bool noEmptySkip = false;
-  app.add_flag("--no-empty-skip", noEmptySkip,
+  app.add_flag("--no-descent-cache", x.noDescentCache, "Descend the octree from the root for every segment (same image; for timing)")->group("");
+  app.add_flag("--no-empty-skip", x.noEmptySkip,
                "March the empty cells of bricks in half-voxel steps instead of skipping them (the sample phase changes by 0.1-0.4 % RMS; for comparison)")
       ->group("");
   app.add_option("--shadow-map-voxels", o.shadowMapMaxVoxels, "Shadow map size cap (the voxel grows to fit)")->capture_default_str();
-  std::string lightMode = "fast";
-  app.add_option("--light", lightMode,
+}
+
+// The light, ground, convergence and loader options.
+void addLightOptions(CLI::App& app, canopy::play::PlayOptions& o, CliValues& x) {
+  app.add_option("--light", x.lightMode,
                  "fast: LB light from the float16 light items on every level; exact: at the finest level, from the .chaar's Haar "
                  "bricks where the file has them (the .chaar's own samples; a little slower, docs/play.md)")
       ->check(CLI::IsMember({"fast", "exact"}))
@@ -60,12 +71,14 @@ int main(int argc, char** argv) {
                  "none, auto (a plane at the lowest instance base: the bottom of its lowest occupied cell) or a height Y; it takes the "
                  "sun's shadow and the scene light's sky occlusion")
       ->capture_default_str();
-  std::string groundAlbedo = "0.2,0.17,0.13";
-  app.add_option("--ground-albedo", groundAlbedo, "The ground's albedo: R,G,B or one value, linear, in [0, 1]")->capture_default_str();
+  app.add_option("--ground-albedo", x.groundAlbedo, "The ground's albedo: R,G,B or one value, linear, in [0, 1]")->capture_default_str();
   app.add_flag("--converge", o.converge, "Per frame, render passes until no loadable page is missing (reference quality)");
-  bool coldStart = false;
-  app.add_flag("--no-warm-start", coldStart, "Render the first frame in real-time mode too (node means until pages arrive)");
+  app.add_flag("--no-warm-start", x.coldStart, "Render the first frame in real-time mode too (node means until pages arrive)");
   app.add_option("--loader-threads", o.loaderThreads, "Page reader threads")->capture_default_str()->check(CLI::Range(1, 64));
+}
+
+// The stereo and band options.
+void addStereoOptions(CLI::App& app, canopy::play::PlayOptions& o) {
   app.add_option("--stereo", o.stereoIpd,
                  "Render a stereo pair, the eyes IPD scene units apart (0.064 for people in a scene in metres): the left eye traced, "
                  "the right reprojected from it and only its holes traced; side by side in -o unless --right-output is given");
@@ -85,29 +98,51 @@ int main(int argc, char** argv) {
                  "--device cuda, else one); balanced every frame by the last frame's times")
       ->capture_default_str()
       ->check(CLI::Range(0, 64));
+}
 
-  return tool.run(argc, argv, [&] {
-    int w = 0, h = 0;
+// Parses and checks the values of CliValues into o (a usage error for a bad --size or
+// --ground-albedo).
+void applyValues(const CLI::App& app, const CliValues& x, canopy::play::PlayOptions& o) {
+  int w = 0, h = 0;
+  char tail;
+  if (std::sscanf(x.size.c_str(), "%dx%d%c", &w, &h, &tail) != 2)
+    throw canopy::usageError("--size '" + x.size + "': expected WxH, e.g. 1920x1080");
+  o.width = w;
+  o.height = h;
+  o.shadows = !x.noShadows;
+  o.directSun = !x.noDirect;
+  if (app.count("--stop-opacity")) o.stopTransmittance = float(1.0 - x.stopOpacity);  // else exactly kStopT
+  o.descentCache = !x.noDescentCache;
+  o.skipEmptyBlocks = !x.noEmptySkip;
+  o.warmStart = !x.coldStart;
+  o.exactLight = x.lightMode == "exact";
+  {
+    float a[3];
     char tail;
-    if (std::sscanf(size.c_str(), "%dx%d%c", &w, &h, &tail) != 2)
-      throw canopy::usageError("--size '" + size + "': expected WxH, e.g. 1920x1080");
-    o.width = w;
-    o.height = h;
-    o.shadows = !noShadows;
-    o.directSun = !noDirect;
-    if (app.count("--stop-opacity")) o.stopTransmittance = float(1.0 - stopOpacity);  // else exactly kStopT
-    o.descentCache = !noDescentCache;
-    o.skipEmptyBlocks = !noEmptySkip;
-    o.warmStart = !coldStart;
-    o.exactLight = lightMode == "exact";
-    {
-      float a[3];
-      char tail;
-      const int n = std::sscanf(groundAlbedo.c_str(), "%f,%f,%f%c", &a[0], &a[1], &a[2], &tail);
-      if (n == 1 && std::sscanf(groundAlbedo.c_str(), "%f%c", &a[0], &tail) == 1) a[1] = a[2] = a[0];  // one value, nothing after it
-      else if (n != 3) throw canopy::usageError("--ground-albedo '" + groundAlbedo + "': expected R,G,B or one value in [0, 1]");
-      for (int c = 0; c < 3; ++c) o.groundAlbedo[c] = a[c];
-    }
+    const int n = std::sscanf(x.groundAlbedo.c_str(), "%f,%f,%f%c", &a[0], &a[1], &a[2], &tail);
+    if (n == 1 && std::sscanf(x.groundAlbedo.c_str(), "%f%c", &a[0], &tail) == 1) a[1] = a[2] = a[0];  // one value, nothing after it
+    else if (n != 3) throw canopy::usageError("--ground-albedo '" + x.groundAlbedo + "': expected R,G,B or one value in [0, 1]");
+    for (int c = 0; c < 3; ++c) o.groundAlbedo[c] = a[c];
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  canopy::Tool tool("canopy-play",
+                    "Cone-traces a packed scene (.canopy) headless, streaming bricks through a cache.\n"
+                    "  canopy-play FILE.canopy -o out.png [--size WxH]\n"
+                    "  canopy-play FILE.canopy -o frames/f_%04d.exr --frames 120 --camera orbit:turns=1 --sun orbit:turns=0.25\n"
+                    "  canopy-play FILE.canopy -o pair.png --stereo 0.064   (left | right)");
+  CLI::App& app = tool.app();
+  canopy::play::PlayOptions o;
+  CliValues x;
+  addFrameOptions(app, o, x);
+  addShadowOptions(app, o, x);
+  addLightOptions(app, o, x);
+  addStereoOptions(app, o);
+  return tool.run(argc, argv, [&] {
+    applyValues(app, x, o);
     tool.report() = canopy::play::play(o, tool.device());
   });
 }

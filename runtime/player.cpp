@@ -640,6 +640,87 @@ void logSummary(const PlayOptions& o, const nlohmann::json& r, const StreamStats
   }
 }
 
+// The frame loop's record: frame times, stereo's per-eye times and traced fractions, the first
+// complete frame.
+struct FrameLog {
+  std::vector<double> frameMs, firstEyeMs, secondEyeMs, tracedFraction;
+  double firstCompleteS = -1.0;
+  uint64_t coldStartBytes = 0;  // streamed by the first complete frame
+};
+
+// One band per renderer (or --tiles bands over them, round robin), each with its own cache.
+std::vector<Tile> makeTiles(const PlayOptions& o, const Device& device, const CanopyFile& file, const HostScene& scene, uint32_t slots,
+                            int tileH) {
+  const std::vector<int> devices = deviceList(device);
+  const std::vector<Band> bands0 = equalBands(o.height, o.tiles > 0 ? o.tiles : int(devices.size()), tileH);
+  std::vector<Tile> tiles(bands0.size());
+  for (size_t k = 0; k < tiles.size(); ++k) {
+    Tile& t = tiles[k];
+    t.device = devices[k % devices.size()];
+    t.band = bands0[k];
+    t.backend = t.device >= 0 ? makeCudaBackend(scene, slots, t.device) : makeCpuBackend(scene, slots);
+    t.streamer = std::make_unique<Streamer>(file, *t.backend, slots, std::min<uint32_t>(o.stagingPages, std::max<uint32_t>(slots, 1)), o.loaderThreads);
+  }
+  return tiles;
+}
+
+// Records a rendered frame's times, stereo figures and completeness; returns each band's cost (the
+// next frame's balance).
+std::vector<double> recordFrame(const PlayOptions& o, const std::vector<Tile>& tiles, std::chrono::steady_clock::time_point t0, FrameLog& log) {
+  uint32_t missing = 0;
+  double first = 0.0, second = 0.0;
+  uint64_t traced = 0;
+  std::vector<double> cost;
+  for (const Tile& t : tiles) {
+    missing += t.missing;
+    first = std::max(first, t.firstEyeS), second = std::max(second, t.secondEyeS);
+    traced += t.traced;
+    cost.push_back(t.firstEyeS + t.secondEyeS);
+  }
+  if (o.stereoIpd > 0.0f) {
+    log.firstEyeMs.push_back(1000.0 * first);
+    log.secondEyeMs.push_back(1000.0 * second);
+    log.tracedFraction.push_back(double(traced) / (double(o.width) * o.height));
+  }
+  if (missing == 0 && log.firstCompleteS < 0.0) {
+    log.firstCompleteS = secondsSince(t0);
+    log.coldStartBytes = sumStats(tiles).bytesLoaded;
+  }
+  return cost;
+}
+
+// Writes frame f (-o, and --right-output for stereo's right eye; side by side without it).
+void writeFrame(const PlayOptions& o, int f, const std::vector<float>& image, const std::vector<float>& right, WrittenFrames& written) {
+  const std::string path = frameFileName(o.output, f, o.frames);
+  if (o.stereoIpd > 0.0f && o.rightOutput.empty()) {
+    writeImage(path, sideBySide(image, right, o.width, o.height), 2 * o.width, o.height, o.background);
+  } else {
+    writeImage(path, image, o.width, o.height, o.background);
+  }
+  written.add(path);
+  if (!o.rightOutput.empty()) {
+    const std::string rpath = frameFileName(o.rightOutput, f, o.frames);
+    writeImage(rpath, right, o.width, o.height, o.background);
+    written.add(rpath);
+  }
+}
+
+// The report's "stereo" object.
+nlohmann::json stereoReport(const PlayOptions& o, const FrameLog& log) {
+  const double first = percentile(log.firstEyeMs, 0.5), second = percentile(log.secondEyeMs, 0.5);
+  return {{"ipd", o.stereoIpd},
+          {"fill", o.stereoFill},
+          {"max_spread_px", o.stereo.maxSpread},
+          {"solid_alpha", o.stereo.solidAlpha},
+          {"layout", o.rightOutput.empty() ? "side-by-side" : "separate"},
+          {"traced_fraction_mean", mean(log.tracedFraction)},
+          {"first_eye_ms_median", first},
+          {"second_eye_ms_median", second},
+          {"second_over_first", first > 0 ? second / first : 0.0},
+          {"traced_fraction", log.tracedFraction},
+          {"second_eye_ms", log.secondEyeMs}};
+}
+
 }  // namespace
 
 nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<float>* lastImage, std::vector<float>* lastRight) {
@@ -652,19 +733,8 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   const std::vector<FrameSetup> plan = framePlan(o, scene);
   const uint64_t cacheBytes = uint64_t(o.cacheMb * 1024.0 * 1024.0);
   const uint32_t slots = uint32_t(std::min<uint64_t>(std::max<uint64_t>(cacheBytes / file.header().pageBytes, 1), std::max<uint32_t>(file.pageCount(), 1)));
-
-  // One band per renderer (or --tiles bands over them, round robin), each with its own cache.
-  const std::vector<int> devices = deviceList(device);
   const int tileH = 32 / o.warpTileWidth;
-  const std::vector<Band> bands0 = equalBands(o.height, o.tiles > 0 ? o.tiles : int(devices.size()), tileH);
-  std::vector<Tile> tiles(bands0.size());
-  for (size_t k = 0; k < tiles.size(); ++k) {
-    Tile& t = tiles[k];
-    t.device = devices[k % devices.size()];
-    t.band = bands0[k];
-    t.backend = t.device >= 0 ? makeCudaBackend(scene, slots, t.device) : makeCpuBackend(scene, slots);
-    t.streamer = std::make_unique<Streamer>(file, *t.backend, slots, std::min<uint32_t>(o.stagingPages, std::max<uint32_t>(slots, 1)), o.loaderThreads);
-  }
+  std::vector<Tile> tiles = makeTiles(o, device, file, scene, slots, tileH);
   const std::string backendName = tiles[0].backend->name();
   logInfo("canopy-play: " + o.input + ": " + std::to_string(file.modelCount()) + " model(s), " + std::to_string(file.instanceCount()) +
           " instance(s), " + std::to_string(file.pageCount()) + " pages; cache " + std::to_string(slots) + " pages (" +
@@ -680,10 +750,8 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
     t.backend->setPixelOccupancy(o.pixelMinBlocks);
   }
 
-  std::vector<double> frameMs, firstEyeMs, secondEyeMs, tracedFraction;
+  FrameLog log;
   std::vector<float> image, right;
-  double firstCompleteS = -1.0;
-  uint64_t coldStartBytes = 0;  // streamed by the first complete frame
   Progress progress("canopy-play", o.frames);
   WrittenFrames written;
   for (int f = 0; f < o.frames; ++f) {
@@ -693,44 +761,13 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
     const EyeCameras eyes = eyeCameras(o, fs.camera);
     const auto tf = std::chrono::steady_clock::now();
     renderFrame(tiles, o, scene, shade, eyes, o.converge || (o.warmStart && f == 0));
-    frameMs.push_back(1000.0 * secondsSince(tf));
-    uint32_t missing = 0;
-    double first = 0.0, second = 0.0;
-    uint64_t traced = 0;
-    std::vector<double> cost;
-    for (const Tile& t : tiles) {
-      missing += t.missing;
-      first = std::max(first, t.firstEyeS), second = std::max(second, t.secondEyeS);
-      traced += t.traced;
-      cost.push_back(t.firstEyeS + t.secondEyeS);
-    }
-    if (stereo) {
-      firstEyeMs.push_back(1000.0 * first);
-      secondEyeMs.push_back(1000.0 * second);
-      tracedFraction.push_back(double(traced) / (double(o.width) * o.height));
-    }
-    if (missing == 0 && firstCompleteS < 0.0) {
-      firstCompleteS = secondsSince(t0);
-      coldStartBytes = sumStats(tiles).bytesLoaded;
-    }
+    log.frameMs.push_back(1000.0 * secondsSince(tf));
+    const std::vector<double> cost = recordFrame(o, tiles, t0, log);
     if (!o.output.empty() || lastImage) {
       readEye(tiles, 0, o.width, o.height, image);
       if (stereo) readEye(tiles, 1, o.width, o.height, right);
     }
-    if (!o.output.empty()) {
-      const std::string path = frameFileName(o.output, f, o.frames);
-      if (stereo && o.rightOutput.empty()) {
-        writeImage(path, sideBySide(image, right, o.width, o.height), 2 * o.width, o.height, o.background);
-      } else {
-        writeImage(path, image, o.width, o.height, o.background);
-      }
-      written.add(path);
-      if (!o.rightOutput.empty()) {
-        const std::string rpath = frameFileName(o.rightOutput, f, o.frames);
-        writeImage(rpath, right, o.width, o.height, o.background);
-        written.add(rpath);
-      }
-    }
+    if (!o.output.empty()) writeFrame(o, f, image, right, written);
     if (tiles.size() > 1) {
       const std::vector<Band> next = balanceBands(bandsOf(tiles), cost, o.height, tileH);
       for (size_t k = 0; k < tiles.size(); ++k) tiles[k].band = next[k];
@@ -740,20 +777,8 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   written.keep();
   progress.done();
 
-  nlohmann::json r = playReport(o, file, scene, tiles, shade, frameMs, t0, firstCompleteS, coldStartBytes, slots);
-  if (stereo) {
-    r["stereo"] = {{"ipd", o.stereoIpd},
-                   {"fill", o.stereoFill},
-                   {"max_spread_px", o.stereo.maxSpread},
-                   {"solid_alpha", o.stereo.solidAlpha},
-                   {"layout", o.rightOutput.empty() ? "side-by-side" : "separate"},
-                   {"traced_fraction_mean", mean(tracedFraction)},
-                   {"first_eye_ms_median", percentile(firstEyeMs, 0.5)},
-                   {"second_eye_ms_median", percentile(secondEyeMs, 0.5)},
-                   {"second_over_first", percentile(firstEyeMs, 0.5) > 0 ? percentile(secondEyeMs, 0.5) / percentile(firstEyeMs, 0.5) : 0.0},
-                   {"traced_fraction", tracedFraction},
-                   {"second_eye_ms", secondEyeMs}};
-  }
+  nlohmann::json r = playReport(o, file, scene, tiles, shade, log.frameMs, t0, log.firstCompleteS, log.coldStartBytes, slots);
+  if (stereo) r["stereo"] = stereoReport(o, log);
   if (o.countWork && backendName == "cpu" && tiles.size() == 1)
     r["work"] = workReport(work, tiles[0].passes);
   logSummary(o, r, sumStats(tiles), backendName);
