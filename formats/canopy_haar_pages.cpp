@@ -1,5 +1,5 @@
 // canopy_haar_pages.cpp: a .chaar's bricks re-paged as the Haar light of a .canopy model
-// (canopy_write.h, layout in canopy_file.h "Haar light pages").
+// (canopy_write.h, layout in canopy_layout.h "Haar light pages").
 #include <cstring>
 
 #include "canopy/errors.h"

@@ -1,4 +1,4 @@
-// canopy_write.h: writes a .canopy file (layout in canopy_file.h) atomically and deterministically.
+// canopy_write.h: writes a .canopy file (layout in canopy_layout.h) atomically and deterministically.
 //
 // The caller supplies built models (record + node tiles + brick bytes), instances, an optional
 // scene lighting lattice and a metadata string; the writer assigns each model's firstTile and
@@ -18,7 +18,7 @@ namespace haar {
 struct ChaarData;
 }
 
-// A model's Haar light (format 1.1, canopy_file.h "Haar light pages"): a .chaar's bricks re-paged.
+// A model's Haar light (format 1.1, canopy_layout.h "Haar light pages"): a .chaar's bricks re-paged.
 struct CanopyHaarPages {
   uint32_t precision = 0;                  // haar::Precision of the coefficients
   int32_t brickDims[3] = {0, 0, 0};

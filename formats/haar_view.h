@@ -45,7 +45,7 @@ struct BrickLookup {
 };
 
 // The brick coordinates b and the lookup of point (x,y,z) in a lattice [lmin, lmax] (slot unset):
-// the one rule that chaarSample and the .canopy file's Haar light (canopy_file.h) share.
+// the one rule that chaarSample and the .canopy file's Haar light (canopy_layout.h, canopy_sample.h) share.
 CANOPY_HD inline BrickLookup locateInLattice(const int32_t lmin[3], const int32_t lmax[3], float x, float y, float z, int b[3]) {
   const float p[3] = {x, y, z};
   int l[3];

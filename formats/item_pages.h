@@ -1,5 +1,5 @@
 // item_pages.h: whole variable-size items packed greedily into page payloads, the layout of Haar
-// light pages and sparse brick pages (canopy_file.h): payload = uint32 offset[n + 1] (offset[0] =
+// light pages and sparse brick pages (canopy_layout.h): payload = uint32 offset[n + 1] (offset[0] =
 // 4 (n + 1), offset[n] = payload bytes), then the n items; at most maxItems items per page.
 #pragma once
 #include <cstdint>

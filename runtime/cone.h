@@ -40,7 +40,7 @@
 //      same size). Light item b belongs to brick b and covers the same node, so the sample's
 //      node-local coordinates are the density's. The light used is that of the deepest brick on the
 //      descent path whose light page is resident (the node's own brick, else an ancestor's: a
-//      constant node always uses its nearest brick ancestor's, as canopy_file.h says); the node's
+//      constant node always uses its nearest brick ancestor's, as canopy_layout.h says); the node's
 //      own light page is asked for when it is missing. Only when no light page on the path is
 //      resident yet (a cold start) does the sample get the density-only indirect term
 //      (ambient x ambient scene factor), and the coarsest brick's light page is asked for as well.

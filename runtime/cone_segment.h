@@ -285,7 +285,7 @@ struct EmptyHold {
   uint32_t level;  // the leaf's level
 };
 
-// The end of the run of empty cells (formats/canopy_file.h, empty-cell masks) of a brick that
+// The end of the run of empty cells (formats/canopy_sample.h, empty-cell masks) of a brick that
 // the ray o + t d (unit space) crosses from unit point u on: false when u's cell is not empty, else
 // true and tEnd = where the ray enters the first cell that is not, or leaves the brick ([brickLo,
 // brickLo + brickSize), inv = 1 / brickSize). The grid walk (grid_dda.h) over the brick's n^3 cells; each plane's
@@ -315,7 +315,7 @@ CANOPY_HD inline bool emptyRunEnd(const Empty& empty, V3 uo, V3 ud, V3 u, const 
   }
 }
 
-// A brick's empty cells (formats/canopy_file.h): bit i of 32-bit word i / 32, i = x + 8 (y + 8 z):
+// A brick's empty cells (formats/canopy_sample.h): bit i of 32-bit word i / 32, i = x + 8 (y + 8 z):
 // a dense brick's mask in its page image (canopyFillBrickMasks, 64-bit words read as 32-bit ones:
 // little-endian, the same bits) or a sparse brick's stored empty cells (format 2.0), so that a
 // detail model marches exactly as its dense form would.

@@ -75,7 +75,7 @@ struct SceneLightData {
 };
 
 // Builds every model with its lighting (lights[m] may be null: density only; the octreepack
-// builder makes the light items, canopy_file.h's "Light pages") and writes `path`.
+// builder makes the light items, canopy_layout.h's "Light pages") and writes `path`.
 // scatteredSun: the lit models are flagged kCanopyModelScatteredSun, as canopy-octreepack flags
 // canopy-lbsolve's default output (sun bases without their direct beam); false: beam included.
 // sceneLight: an optional coarse scene light (lbsolve --scene's bases).

@@ -211,7 +211,7 @@ TEST(Cone, SceneLightFactorsAreTrilinearAndOneWithoutALattice) {
 // The cache
 // ---------------------------------------------------------------------------------------------
 
-// The empty-cell masks (formats/canopy_file.h) that the loader derives for the empty skip: a set
+// The empty-cell masks (formats/canopy_sample.h) that the loader derives for the empty skip: a set
 // bit must prove that the trilinear density is 0 everywhere in the cell, and a clear bit must mean
 // that it is not (each of the cell's support voxels has positive weight somewhere inside it), so
 // sampling each cell on a grid that reaches both halves of every axis decides the bit. Sparse

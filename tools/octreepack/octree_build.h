@@ -4,7 +4,7 @@
 // benchmark can build octrees from synthetic cells. The result is deterministic: the same cells in
 // any order give the same bytes.
 //
-// Levels (formats/canopy_file.h): level `depth` has one voxel per lattice cell; level d-1 is the
+// Levels (formats/canopy_layout.h): level `depth` has one voxel per lattice cell; level d-1 is the
 // 2x2x2 box filter of level d: density = mean of the 8 stored densities (summed in double in child
 // order c = x + 2y + 4z, then rounded to float), albedo and wood = density-weighted means of the 8
 // stored (already quantised) values, then quantised to unorm8. A node is constant when its whole
@@ -57,14 +57,14 @@ struct BuiltModel {
   CanopyModel record{};                         // firstTile/firstBrickPage etc. set by the writer
   std::vector<CanopyNode> tiles;                // 8 per tile, model-relative child indices
   std::vector<unsigned char> bricks;            // brickCount * kCanopyBrickBytes
-  std::vector<uint16_t> light;                  // empty, or brickCount light items (canopy_file.h)
+  std::vector<uint16_t> light;                  // empty, or brickCount light items (canopy_layout.h)
   std::string sourceLabel;
   uint64_t occupiedCells = 0;
 };
 
 // Validates the source (finite values, density >= 0, cells inside the lattice, no duplicates,
 // lattice not absurd) and builds its octree; with `light`, also one light item per brick (light
-// levels = Haar averages of the lighting, layout in canopy_file.h). Throws
+// levels = Haar averages of the lighting, layout in canopy_layout.h). Throws
 // canopy::Error(InvalidInput) naming `what` (also for non-finite lighting).
 BuiltModel buildOctree(const ModelSource& src, const std::string& what, const LightFn& light = nullptr);
 
