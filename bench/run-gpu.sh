@@ -66,7 +66,7 @@
 #   SHARED            the shared assets folder (default: the bundle's share/shared, else ../shared)
 #   LB_BINS           bench_lbsolve binaries run in turn (default bench_lbsolve; e.g. "bench_lbsolve
 #                     bench_lbsolve-prev" for an A/B of two builds on one machine)
-#   LB_SCHEMES        default shift,pull (also shift-split, push, push-fused, pull-fused)
+#   LB_SCHEMES        default shift,pull (also shift-split, push)
 #   LB_IN_FLIGHT      solves in flight per GPU, default 1 (e.g. 1,3)
 #   LB_SOLVES_SIZES   synthetic plants whose 57 solves are timed, default 128
 #   HAAR_PRECISIONS   default "quant fp16 fp32"

@@ -2,7 +2,7 @@
 // wall time of the 57 solves (19 bases x RGB) of one plant. Prints Markdown tables on stdout.
 //
 //   bench_lbsolve [--device cpu|cuda|cuda:N] [--sizes 128,256] [--solves-sizes 128]
-//                 [--iterations 64] [--schemes shift,shift-split,push,push-fused,pull,pull-fused] [--fill plant|full|plant,full]
+//                 [--iterations 64] [--schemes shift,shift-split,push,pull] [--fill plant|full|plant,full]
 //                 [--lattices a.density.vdb,b.density.vdb] [--in-flight 1,2,3] [--boxes 256x128x64,...]
 //
 // Throughput: K solves in flight on one GPU (--in-flight, CudaRun::solvesPerGpu; 1 by default),
@@ -69,9 +69,9 @@ std::vector<int> parseList(const std::string& s) {
 }
 
 CudaScheme parseScheme(const std::string& s) {
-  for (CudaScheme c : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::PushFused, CudaScheme::Pull, CudaScheme::PullFused})
+  for (CudaScheme c : {CudaScheme::Shift, CudaScheme::ShiftSplit, CudaScheme::Push, CudaScheme::Pull})
     if (s == cudaSchemeName(c)) return c;
-  throw std::runtime_error("unknown scheme '" + s + "' (shift, shift-split, push, push-fused, pull, pull-fused)");
+  throw std::runtime_error("unknown scheme '" + s + "' (shift, shift-split, push, pull)");
 }
 
 int64_t occupiedNodes(const DenseLattice& L) {
@@ -82,8 +82,7 @@ int64_t occupiedNodes(const DenseLattice& L) {
 
 // Nominal device-memory bytes per lattice node and iteration (see the header comment).
 double bytesPerUpdate(const DenseLattice& L, const Device& dev, CudaScheme scheme) {
-  if (!dev.isCuda() || scheme == CudaScheme::Push || scheme == CudaScheme::PushFused || scheme == CudaScheme::Pull ||
-      scheme == CudaScheme::PullFused)
+  if (!dev.isCuda() || scheme == CudaScheme::Push || scheme == CudaScheme::Pull)
     return (2 * kQ + 1) * 4.0;
   const Dims d = L.dims;
   double bytes = 0;
@@ -219,7 +218,7 @@ std::vector<CudaRun> runsOf(const std::vector<CudaScheme>& schemes, const std::v
 
 constexpr char kUsage[] =
     "usage: bench_lbsolve [--device D] [--sizes 128,256] [--solves-sizes 128] [--iterations 64]\n"
-    "                     [--schemes shift,shift-split,push,push-fused,pull,pull-fused] [--fill plant,full]\n"
+    "                     [--schemes shift,shift-split,push,pull] [--fill plant,full]\n"
     "                     [--lattices a.vdb,...] [--in-flight 1,2,3] [--boxes 256x128x64,...]\n"
     "  Dense-update throughput (node updates/s, fraction of the copy bandwidth) and the wall time of\n"
     "  the 57 solves per lattice; Markdown on stdout. Exit 0 ok, 1 usage, 4 failure, 5 no such device.\n";

@@ -422,7 +422,7 @@ TEST(Cli, ExitCodesAndNoOutputOnErrors) {
   EXPECT_EQ(code(dir + "/p.vdb -o " + out + " --sun 1,2"), int(ExitCode::Usage));
   EXPECT_EQ(code(dir + "/p.vdb -o " + out + " --device gpu"), int(ExitCode::Usage));
   EXPECT_EQ(code(dir + "/p.vdb -o " + out + " --cuda-scheme bogus"), int(ExitCode::Usage));
-  EXPECT_EQ(code(dir + "/p.vdb -o " + out + " --cuda-scheme push-fused"), int(ExitCode::Usage));  // bench only
+  EXPECT_EQ(code(dir + "/p.vdb -o " + out + " --cuda-scheme push-fused"), int(ExitCode::Usage));  // not a scheme (measured, then removed)
   EXPECT_EQ(code(dir + "/p.vdb -o " + out + " --solves-per-gpu 0"), int(ExitCode::Usage));
   EXPECT_EQ(code(dir + "/p.vdb -o " + out + " --solves-per-gpu 65"), int(ExitCode::Usage));
   // An out-of-range --wood-threshold is a usage error like every other bad option value (it was

@@ -370,136 +370,193 @@ std::string formatVerify(const nlohmann::json& report) {
 }
 
 // ---- sweep --------------------------------------------------------------------------------
-nlohmann::json sweepThresholds(const SweepOptions& o) {
-  const auto t0 = std::chrono::steady_clock::now();
+namespace {
+
+// One base at one threshold: its coefficient bytes and errors.
+struct SweepCell {
+  uint64_t coefBytes;
+  double maxErr, sumSq, rms, peak;
+};
+
+// What encoding every base at every threshold measured: stats[t][b], the stored bricks of the file.
+struct SweepStats {
+  std::vector<std::vector<SweepCell>> stats;
+  std::vector<uint64_t> active;
+  std::vector<double> peaks;
+  uint32_t slots = 0;
+};
+
+// The plot of the sweep: one series per base and one for the whole file.
+struct SweepPlot {
+  PlotSpec plot;
+  PlotSeries overall;
+  std::vector<PlotSeries> bases;
+};
+
+// The sums over the bases at one threshold.
+struct SweepTotals {
+  uint64_t totalCoefBytes = 0, sparse = 0;
+  double maxErr = 0, sumSq = 0, peak = 0;
+};
+
+// Refuses an empty --thresholds list or a threshold the precision cannot take.
+void checkSweepOptions(const SweepOptions& o) {
   if (o.thresholds.empty()) throw usageError("--thresholds needs at least one value");
   for (float t : o.thresholds)
     if (!(t >= 0) || !std::isfinite(t)) throw usageError("--thresholds must be finite numbers >= 0");
   if (o.precision == Precision::Quant)
     for (float t : o.thresholds)
       if (!(t > 0)) throw usageError("--precision quant: every threshold (the quantisation step) must be > 0");
-  AtomicOutput csvOut(o.prefix + ".csv"), jsonOut(o.prefix + ".json");
-  LightFieldPtr f = openLightField(o.input);
-  const LatticeGeom& g = f->geom;
-  const size_t nt = o.thresholds.size(), nb = f->grids.size();
-  // stats[t][b]
-  struct Cell {
-    uint64_t coefBytes;
-    double maxErr, sumSq, rms, peak;
-  };
-  std::vector<std::vector<Cell>> stats(nt, std::vector<Cell>(nb));
+}
+
+// Encodes every base at every threshold and keeps the sizes and errors.
+SweepStats measureSweep(const SweepOptions& o, const LightField& f) {
+  const LatticeGeom& g = f.geom;
+  const size_t nt = o.thresholds.size(), nb = f.grids.size();
+  SweepStats s;
+  s.stats.assign(nt, std::vector<SweepCell>(nb));
   std::vector<uint8_t> anyLight(g.bricks, 0);
-  std::vector<uint64_t> active(nb);
-  std::vector<double> peaks(nb);
+  s.active.resize(nb);
+  s.peaks.resize(nb);
   Progress progress("sweeping bases", int64_t(nb));
   for (uint32_t b = 0; b < nb; ++b) {
     std::array<int32_t, 3> dir;
-    const DenseLight light = lightBase(*f, b, dir);
+    const DenseLight light = lightBase(f, b, dir);
     const LiftedBase lifted(g, light, o.precision, o.input + " grid " + baseName(b));
     for (uint64_t k = 0; k < g.bricks; ++k) anyLight[k] |= lifted.nonEmpty()[k];
-    active[b] = light.activeVoxels;
-    peaks[b] = lifted.valueMax();
+    s.active[b] = light.activeVoxels;
+    s.peaks[b] = lifted.valueMax();
     for (size_t t = 0; t < nt; ++t) {
       const BaseCode c = lifted.encode(o.thresholds[t]);
-      stats[t][b] = Cell{c.coefBytes(o.precision), c.maxError, c.sumSqError,
-                         std::sqrt(c.sumSqError / (3.0 * double(g.cells))), lifted.valueMax()};
+      s.stats[t][b] = SweepCell{c.coefBytes(o.precision), c.maxError, c.sumSqError,
+                                std::sqrt(c.sumSqError / (3.0 * double(g.cells))), lifted.valueMax()};
     }
     progress.add();
   }
   progress.done();
-  uint32_t slots = 0;
-  for (uint8_t v : anyLight) slots += v;
-  const uint64_t dense = g.cells * 12;
+  for (uint8_t v : anyLight) s.slots += v;
+  return s;
+}
 
-  std::ostringstream csv;
-  csv << "threshold,base,bytes,ratio_dense,ratio_sparse,max_error,rms_error,psnr_db\n";
-  nlohmann::json rows = nlohmann::json::array();
-  PlotSpec plot;
+// The plot's title, axes and empty series.
+SweepPlot sweepPlot(const SweepOptions& o, size_t nb) {
+  SweepPlot p;
+  PlotSpec& plot = p.plot;
   plot.title = "canopy-haar sweep: " + o.input.substr(o.input.find_last_of('/') + 1) + " (" +
                precisionName(o.precision) + ", " + std::to_string(nb) + " bases)";
   plot.xLabel = "RMS error (volume, relative to the peak value)";
   plot.yLabel = "compression ratio vs dense fp32";
   plot.logX = plot.logY = true;
-  PlotSeries overallS;
+  PlotSeries& overallS = p.overall;
   overallS.label = "all bases (whole file)";
   overallS.color = {200, 40, 40};
   overallS.width = 3.5f;
   overallS.markers = true;
-  std::vector<PlotSeries> baseS(nb);
+  std::vector<PlotSeries>& baseS = p.bases;
+  baseS.resize(nb);
   for (uint32_t b = 0; b < nb; ++b) {
     baseS[b].color = {150, 160, 185};
     baseS[b].width = 1.2f;
     baseS[b].label = b == 0 ? "each base B00..B" + std::to_string(nb - 1) : "";
   }
-  bool zeroRms = false;
-  for (size_t t = 0; t < nt; ++t) {
-    uint64_t totalCoefBytes = 0, sparse = 0;
-    double maxErr = 0, sumSq = 0, peak = 0;
-    for (uint32_t b = 0; b < nb; ++b) {
-      const Cell& c = stats[t][b];
-      const uint64_t bytes = uint64_t(slots) * recordBytes(o.precision) + c.coefBytes;
-      const double psnr = psnrOf(c.peak, c.rms);
-      char line[256];
-      std::snprintf(line, sizeof line, "%.9g,%s,%llu,%.6g,%.6g,%.9g,%.9g,%s\n", o.thresholds[t],
-                    baseName(b).c_str(), (unsigned long long)bytes, double(dense) / bytes,
-                    double(active[b] * 12) / bytes, c.maxErr, c.rms,
-                    std::isfinite(psnr) ? std::to_string(psnr).c_str() : "inf");
-      csv << line;
-      rows.push_back({{"threshold", o.thresholds[t]}, {"base", baseName(b)}, {"bytes", bytes},
-                      {"ratio_dense", double(dense) / bytes}, {"ratio_sparse", double(active[b] * 12) / bytes},
-                      {"max_error", c.maxErr}, {"rms_error", c.rms}, {"psnr_db", numberOrNull(psnr)}});
-      totalCoefBytes += c.coefBytes;
-      sparse += active[b] * 12;
-      maxErr = std::max(maxErr, c.maxErr);
-      sumSq += c.sumSq;
-      peak = std::max(peak, c.peak);
-      if (c.peak > 0 && c.rms > 0) {
-        baseS[b].x.push_back(c.rms / c.peak);
-        baseS[b].y.push_back(double(dense) / bytes);
-      }
-    }
-    // The META text compressLight would write for this threshold: the size is exact.
-    const std::string meta =
-        metaJson(o.input, {{"precision", precisionName(o.precision)}, {"threshold", o.thresholds[t]}});
-    const uint64_t file = chaarFileSize(uint32_t(nb), g.bricks, slots, totalCoefBytes, o.precision, meta.size());
-    const double rms = std::sqrt(sumSq / (3.0 * double(g.cells) * nb));
-    const double psnr = psnrOf(peak, rms);
+  return p;
+}
+
+// The CSV and JSON rows of every base at threshold t, and its plot points; returns the sums.
+SweepTotals sweepBaseRows(const SweepOptions& o, const SweepStats& s, size_t t, uint64_t dense, std::ostringstream& csv,
+                          nlohmann::json& rows, std::vector<PlotSeries>& baseS) {
+  SweepTotals sum;
+  const size_t nb = s.active.size();
+  for (uint32_t b = 0; b < nb; ++b) {
+    const SweepCell& c = s.stats[t][b];
+    const uint64_t bytes = uint64_t(s.slots) * recordBytes(o.precision) + c.coefBytes;
+    const double psnr = psnrOf(c.peak, c.rms);
     char line[256];
-    std::snprintf(line, sizeof line, "%.9g,all,%llu,%.6g,%.6g,%.9g,%.9g,%s\n", o.thresholds[t],
-                  (unsigned long long)file, double(dense * nb) / file, double(sparse) / file, maxErr, rms,
+    std::snprintf(line, sizeof line, "%.9g,%s,%llu,%.6g,%.6g,%.9g,%.9g,%s\n", o.thresholds[t],
+                  baseName(b).c_str(), (unsigned long long)bytes, double(dense) / bytes,
+                  double(s.active[b] * 12) / bytes, c.maxErr, c.rms,
                   std::isfinite(psnr) ? std::to_string(psnr).c_str() : "inf");
     csv << line;
-    rows.push_back({{"threshold", o.thresholds[t]}, {"base", "all"}, {"bytes", file},
-                    {"ratio_dense", double(dense * nb) / file}, {"ratio_sparse", double(sparse) / file},
-                    {"max_error", maxErr}, {"rms_error", rms}, {"psnr_db", numberOrNull(psnr)}});
-    char lbl[64];
-    std::snprintf(lbl, sizeof lbl, "T=%g", o.thresholds[t]);
-    if (peak > 0 && rms > 0) {
-      overallS.x.push_back(rms / peak);
-      overallS.y.push_back(double(dense * nb) / file);
-      overallS.pointLabels.push_back(lbl);
-    } else {
-      zeroRms = true;
-      char note[160];
-      std::snprintf(note, sizeof note, "T=%g: lossless (RMS 0), ratio %.2fx (not on the log axis)",
-                    o.thresholds[t], double(dense * nb) / file);
-      plot.notes.push_back(note);
+    rows.push_back({{"threshold", o.thresholds[t]}, {"base", baseName(b)}, {"bytes", bytes},
+                    {"ratio_dense", double(dense) / bytes}, {"ratio_sparse", double(s.active[b] * 12) / bytes},
+                    {"max_error", c.maxErr}, {"rms_error", c.rms}, {"psnr_db", numberOrNull(psnr)}});
+    sum.totalCoefBytes += c.coefBytes;
+    sum.sparse += s.active[b] * 12;
+    sum.maxErr = std::max(sum.maxErr, c.maxErr);
+    sum.sumSq += c.sumSq;
+    sum.peak = std::max(sum.peak, c.peak);
+    if (c.peak > 0 && c.rms > 0) {
+      baseS[b].x.push_back(c.rms / c.peak);
+      baseS[b].y.push_back(double(dense) / bytes);
     }
-    logInfo("canopy-haar: threshold " + std::string(lbl + 2) + ": file " + fmtBytes(file) + ", ratio " +
-            std::to_string(double(dense * nb) / file) + "x, RMS " + std::to_string(rms) + ", max " +
-            std::to_string(maxErr));
   }
-  (void)zeroRms;
-  for (auto& s : baseS) plot.series.push_back(s);
-  plot.series.push_back(overallS);
-  plot.notes.push_back("labels: threshold T of each point");
+  return sum;
+}
+
+// The CSV and JSON row of the whole file at threshold t, its plot point (or note) and log line.
+void sweepFileRow(const SweepOptions& o, const LatticeGeom& g, size_t nb, uint32_t slots, size_t t, uint64_t dense,
+                  const SweepTotals& sum, std::ostringstream& csv, nlohmann::json& rows, SweepPlot& p) {
+  // The META text compressLight would write for this threshold: the size is exact.
+  const std::string meta =
+      metaJson(o.input, {{"precision", precisionName(o.precision)}, {"threshold", o.thresholds[t]}});
+  const uint64_t file = chaarFileSize(uint32_t(nb), g.bricks, slots, sum.totalCoefBytes, o.precision, meta.size());
+  const double rms = std::sqrt(sum.sumSq / (3.0 * double(g.cells) * nb));
+  const double psnr = psnrOf(sum.peak, rms);
+  char line[256];
+  std::snprintf(line, sizeof line, "%.9g,all,%llu,%.6g,%.6g,%.9g,%.9g,%s\n", o.thresholds[t],
+                (unsigned long long)file, double(dense * nb) / file, double(sum.sparse) / file, sum.maxErr, rms,
+                std::isfinite(psnr) ? std::to_string(psnr).c_str() : "inf");
+  csv << line;
+  rows.push_back({{"threshold", o.thresholds[t]}, {"base", "all"}, {"bytes", file},
+                  {"ratio_dense", double(dense * nb) / file}, {"ratio_sparse", double(sum.sparse) / file},
+                  {"max_error", sum.maxErr}, {"rms_error", rms}, {"psnr_db", numberOrNull(psnr)}});
+  char lbl[64];
+  std::snprintf(lbl, sizeof lbl, "T=%g", o.thresholds[t]);
+  if (sum.peak > 0 && rms > 0) {
+    p.overall.x.push_back(rms / sum.peak);
+    p.overall.y.push_back(double(dense * nb) / file);
+    p.overall.pointLabels.push_back(lbl);
+  } else {
+    char note[160];
+    std::snprintf(note, sizeof note, "T=%g: lossless (RMS 0), ratio %.2fx (not on the log axis)",
+                  o.thresholds[t], double(dense * nb) / file);
+    p.plot.notes.push_back(note);
+  }
+  logInfo("canopy-haar: threshold " + std::string(lbl + 2) + ": file " + fmtBytes(file) + ", ratio " +
+          std::to_string(double(dense * nb) / file) + "x, RMS " + std::to_string(rms) + ", max " +
+          std::to_string(sum.maxErr));
+}
+
+}  // namespace
+
+nlohmann::json sweepThresholds(const SweepOptions& o) {
+  const auto t0 = std::chrono::steady_clock::now();
+  checkSweepOptions(o);
+  AtomicOutput csvOut(o.prefix + ".csv"), jsonOut(o.prefix + ".json");
+  LightFieldPtr f = openLightField(o.input);
+  const LatticeGeom& g = f->geom;
+  const size_t nt = o.thresholds.size(), nb = f->grids.size();
+  const SweepStats stats = measureSweep(o, *f);
+  const uint64_t dense = g.cells * 12;
+
+  std::ostringstream csv;
+  csv << "threshold,base,bytes,ratio_dense,ratio_sparse,max_error,rms_error,psnr_db\n";
+  nlohmann::json rows = nlohmann::json::array();
+  SweepPlot p = sweepPlot(o, nb);
+  for (size_t t = 0; t < nt; ++t) {
+    const SweepTotals sum = sweepBaseRows(o, stats, t, dense, csv, rows, p.bases);
+    sweepFileRow(o, g, nb, stats.slots, t, dense, sum, csv, rows, p);
+  }
+  for (auto& s : p.bases) p.plot.series.push_back(s);
+  p.plot.series.push_back(p.overall);
+  p.plot.notes.push_back("labels: threshold T of each point");
 
   nlohmann::json rep = {{"input", o.input}, {"precision", precisionName(o.precision)},
                         {"thresholds", o.thresholds}, {"rows", rows},
                         {"outputs", {o.prefix + ".csv", o.prefix + ".json", o.prefix + ".png"}}};
   writeTemp(csvOut, csv.str());
   writeTemp(jsonOut, rep.dump(2) + "\n");
-  writePlotPng(o.prefix + ".png", plot);
+  writePlotPng(o.prefix + ".png", p.plot);
   csvOut.commit();
   jsonOut.commit();
   rep["seconds"] = secondsSince(t0);

@@ -181,75 +181,85 @@ void savePng(const std::string& path, const Canvas& c) {
   out.commit();
 }
 
-}  // namespace
+const Color kBlack{0, 0, 0}, kGrid{225, 228, 235}, kGridMinor{242, 243, 247}, kDark{60, 60, 60};
 
-void writePlotPng(const std::string& path, const PlotSpec& spec) {
-  Canvas cv(spec.width, spec.height);
-  const Color black{0, 0, 0}, grid{225, 228, 235}, gridMinor{242, 243, 247}, dark{60, 60, 60};
-  const int left = 110, right = 300, top = 60, bottom = 90;
-  const int x0 = left, x1 = spec.width - right, y0 = top, y1 = spec.height - bottom;
-  const Axis ax = makeAxis(spec.series, true, spec.logX), ay = makeAxis(spec.series, false, spec.logY);
-  auto X = [&](double u) { return x0 + (u - ax.lo) / (ax.hi - ax.lo) * (x1 - x0); };
-  auto Y = [&](double u) { return y1 - (u - ay.lo) / (ay.hi - ay.lo) * (y1 - y0); };
+// The plot box in pixels, its axes, and the mapping of plot units to pixels.
+struct PlotBox {
+  int x0, x1, y0, y1;
+  Axis ax, ay;
+  double X(double u) const { return x0 + (u - ax.lo) / (ax.hi - ax.lo) * (x1 - x0); }
+  double Y(double u) const { return y1 - (u - ay.lo) / (ay.hi - ay.lo) * (y1 - y0); }
+  bool inside(double px, double py) const { return px >= x0 - 1 && px <= x1 + 1 && py >= y0 - 1 && py <= y1 + 1; }
+};
 
+// Grid lines, the frame, ticks and tick labels.
+void drawAxes(Canvas& cv, const PlotBox& b) {
+  const int x0 = b.x0, x1 = b.x1, y0 = b.y0, y1 = b.y1;
   std::vector<double> mx, my, nx, ny;
   std::vector<std::string> lx, ly;
-  ticks(ax, mx, lx, nx);
-  ticks(ay, my, ly, ny);
-  for (double u : nx) cv.line(X(u), y0, X(u), y1, gridMinor, 1);
-  for (double u : ny) cv.line(x0, Y(u), x1, Y(u), gridMinor, 1);
-  for (double u : mx) cv.line(X(u), y0, X(u), y1, grid, 1);
-  for (double u : my) cv.line(x0, Y(u), x1, Y(u), grid, 1);
+  ticks(b.ax, mx, lx, nx);
+  ticks(b.ay, my, ly, ny);
+  for (double u : nx) cv.line(b.X(u), y0, b.X(u), y1, kGridMinor, 1);
+  for (double u : ny) cv.line(x0, b.Y(u), x1, b.Y(u), kGridMinor, 1);
+  for (double u : mx) cv.line(b.X(u), y0, b.X(u), y1, kGrid, 1);
+  for (double u : my) cv.line(x0, b.Y(u), x1, b.Y(u), kGrid, 1);
   // Frame and tick labels.
-  cv.line(x0, y1, x1, y1, black, 1.5);
-  cv.line(x0, y0, x0, y1, black, 1.5);
-  cv.line(x1, y0, x1, y1, dark, 1);
-  cv.line(x0, y0, x1, y0, dark, 1);
+  cv.line(x0, y1, x1, y1, kBlack, 1.5);
+  cv.line(x0, y0, x0, y1, kBlack, 1.5);
+  cv.line(x1, y0, x1, y1, kDark, 1);
+  cv.line(x0, y0, x1, y0, kDark, 1);
   for (size_t i = 0; i < mx.size(); ++i) {
-    cv.line(X(mx[i]), y1, X(mx[i]), y1 + 7, black, 1.5);
-    cv.text(X(mx[i]) - Canvas::textWidth(lx[i], 2) / 2.0, y1 + 12, lx[i], black, 2);
+    cv.line(b.X(mx[i]), y1, b.X(mx[i]), y1 + 7, kBlack, 1.5);
+    cv.text(b.X(mx[i]) - Canvas::textWidth(lx[i], 2) / 2.0, y1 + 12, lx[i], kBlack, 2);
   }
-  for (double u : nx) cv.line(X(u), y1, X(u), y1 + 4, black, 1);
+  for (double u : nx) cv.line(b.X(u), y1, b.X(u), y1 + 4, kBlack, 1);
   for (size_t i = 0; i < my.size(); ++i) {
-    cv.line(x0 - 7, Y(my[i]), x0, Y(my[i]), black, 1.5);
-    cv.text(x0 - 12 - Canvas::textWidth(ly[i], 2), Y(my[i]) - 7, ly[i], black, 2);
+    cv.line(x0 - 7, b.Y(my[i]), x0, b.Y(my[i]), kBlack, 1.5);
+    cv.text(x0 - 12 - Canvas::textWidth(ly[i], 2), b.Y(my[i]) - 7, ly[i], kBlack, 2);
   }
-  for (double u : ny) cv.line(x0 - 4, Y(u), x0, Y(u), black, 1);
-  // Titles.
-  cv.text(x0, 20, spec.title, black, 2);
-  const std::string xl = spec.xLabel + (spec.logX ? "  [log scale]" : "");
-  cv.text((x0 + x1) / 2.0 - Canvas::textWidth(xl, 2) / 2.0, y1 + 48, xl, black, 2);
-  const std::string yl = spec.yLabel + (spec.logY ? "  [log scale]" : "");
-  cv.text(22, (y0 + y1) / 2.0 + Canvas::textWidth(yl, 2) / 2.0, yl, black, 2, /*rotated=*/true);
+  for (double u : ny) cv.line(x0 - 4, b.Y(u), x0, b.Y(u), kBlack, 1);
+}
 
-  // Series (clipped to the plot box by skipping points outside).
-  auto inside = [&](double px, double py) { return px >= x0 - 1 && px <= x1 + 1 && py >= y0 - 1 && py <= y1 + 1; };
+// The plot's title and the two axis titles.
+void drawTitles(Canvas& cv, const PlotBox& b, const PlotSpec& spec) {
+  cv.text(b.x0, 20, spec.title, kBlack, 2);
+  const std::string xl = spec.xLabel + (spec.logX ? "  [log scale]" : "");
+  cv.text((b.x0 + b.x1) / 2.0 - Canvas::textWidth(xl, 2) / 2.0, b.y1 + 48, xl, kBlack, 2);
+  const std::string yl = spec.yLabel + (spec.logY ? "  [log scale]" : "");
+  cv.text(22, (b.y0 + b.y1) / 2.0 + Canvas::textWidth(yl, 2) / 2.0, yl, kBlack, 2, /*rotated=*/true);
+}
+
+// Every series' lines, markers and point labels (clipped to the plot box by skipping points outside).
+void drawSeries(Canvas& cv, const PlotBox& b, const PlotSpec& spec) {
   for (const auto& s : spec.series) {
     std::vector<std::pair<double, double>> pts;
     std::vector<std::string> labs;
     for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
       if ((spec.logX && s.x[i] <= 0) || (spec.logY && s.y[i] <= 0) || !std::isfinite(s.x[i]) || !std::isfinite(s.y[i]))
         continue;
-      pts.emplace_back(X(ax.map(s.x[i])), Y(ay.map(s.y[i])));
+      pts.emplace_back(b.X(b.ax.map(s.x[i])), b.Y(b.ay.map(s.y[i])));
       labs.push_back(i < s.pointLabels.size() ? s.pointLabels[i] : "");
     }
     for (size_t i = 1; i < pts.size(); ++i)
-      if (inside(pts[i - 1].first, pts[i - 1].second) && inside(pts[i].first, pts[i].second))
+      if (b.inside(pts[i - 1].first, pts[i - 1].second) && b.inside(pts[i].first, pts[i].second))
         cv.line(pts[i - 1].first, pts[i - 1].second, pts[i].first, pts[i].second, s.color, s.width);
     for (size_t i = 0; i < pts.size(); ++i) {
-      if (!inside(pts[i].first, pts[i].second)) continue;
+      if (!b.inside(pts[i].first, pts[i].second)) continue;
       if (s.markers) cv.disc(pts[i].first, pts[i].second, s.width + 2, s.color);
       if (!labs[i].empty()) cv.text(pts[i].first + 10, pts[i].second - 24, labs[i], s.color, 2);
     }
   }
-  // Legend.
-  int ly0 = y0 + 10;
-  const int lx0 = x1 + 20;
+}
+
+// The legend right of the plot box, then the notes under it.
+void drawLegend(Canvas& cv, const PlotBox& b, const PlotSpec& spec) {
+  int ly0 = b.y0 + 10;
+  const int lx0 = b.x1 + 20;
   for (const auto& s : spec.series) {
     if (s.label.empty()) continue;
     cv.line(lx0, ly0 + 6, lx0 + 36, ly0 + 6, s.color, s.width);
     if (s.markers) cv.disc(lx0 + 18, ly0 + 6, s.width + 2, s.color);
-    cv.text(lx0 + 44, ly0, s.label, black, 2);
+    cv.text(lx0 + 44, ly0, s.label, kBlack, 2);
     ly0 += 28;
   }
   ly0 += 10;
@@ -257,7 +267,7 @@ void writePlotPng(const std::string& path, const PlotSpec& spec) {
     // Wrap long notes at ~26 characters per line on word boundaries.
     std::string line, word;
     auto flush = [&] {
-      if (!line.empty()) cv.text(lx0, ly0, line, dark, 1), ly0 += 14;
+      if (!line.empty()) cv.text(lx0, ly0, line, kDark, 1), ly0 += 14;
       line.clear();
     };
     for (size_t i = 0; i <= n.size(); ++i) {
@@ -272,6 +282,20 @@ void writePlotPng(const std::string& path, const PlotSpec& spec) {
     flush();
     ly0 += 6;
   }
+}
+
+}  // namespace
+
+void writePlotPng(const std::string& path, const PlotSpec& spec) {
+  Canvas cv(spec.width, spec.height);
+  const int left = 110, right = 300, top = 60, bottom = 90;
+  const int x0 = left, x1 = spec.width - right, y0 = top, y1 = spec.height - bottom;
+  const Axis ax = makeAxis(spec.series, true, spec.logX), ay = makeAxis(spec.series, false, spec.logY);
+  const PlotBox box{x0, x1, y0, y1, ax, ay};
+  drawAxes(cv, box);
+  drawTitles(cv, box, spec);
+  drawSeries(cv, box, spec);
+  drawLegend(cv, box, spec);
   savePng(path, cv);
 }
 

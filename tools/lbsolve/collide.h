@@ -118,8 +118,8 @@ struct Dims {
 // The kind is a template parameter so that every Omega entry is read at a compile-time offset: on
 // the GPU the matrix is a kernel parameter (constant memory) and a run-time kind would turn its
 // uniform operands into per-thread indexed constant loads (measured: docs/performance.md, 'Omega at compile-time offsets').
-// Fused = true uses fmaf in the product (one rounding per term instead of two): a benchmark variant
-// only; the reference (CPU) and the default CUDA path use Fused = false.
+// Fused = true uses fmaf in the product (one rounding per term instead of two): only the standalone
+// measurement bench/lbsolve/collide_fma_cpu.cpp uses it; every solver uses Fused = false.
 template <int L, bool Wood, bool Fused = false>
 CANOPY_HD CANOPY_FORCEINLINE void collideKind(const OmegaSet& om, const float rho[L], float f[kQ][L],
                                               float out[kQ][L]) {
@@ -151,13 +151,13 @@ CANOPY_HD CANOPY_FORCEINLINE void collideKind(const OmegaSet& om, const float rh
 }
 
 // The same with the kind known at run time (all L lanes wood, or none).
-template <int L, bool Fused = false>
+template <int L>
 CANOPY_HD CANOPY_FORCEINLINE void collideLanes(const OmegaSet& om, bool wood, const float rho[L],
                                                float f[kQ][L], float out[kQ][L]) {
   if (wood) {
-    collideKind<L, true, Fused>(om, rho, f, out);
+    collideKind<L, true>(om, rho, f, out);
   } else {
-    collideKind<L, false, Fused>(om, rho, f, out);
+    collideKind<L, false>(om, rho, f, out);
   }
 }
 
@@ -167,7 +167,7 @@ enum NodeKind : int { kAnyKind = -1, kLeafKind = 0, kWoodKind = 1 };
 
 // One node's collision; `coded` is rho (leaf/empty) or -rho (wood). With Kind != kAnyKind the
 // caller guarantees the node is of that kind.
-template <int Kind = kAnyKind, bool Fused = false>
+template <int Kind = kAnyKind>
 CANOPY_HD CANOPY_FORCEINLINE void collide(const OmegaSet& om, float coded, float f[kQ], float out[kQ]) {
   const bool wood = Kind == kAnyKind ? coded < 0.f : Kind == kWoodKind;
   const float rho[1] = {wood ? -coded : coded};
@@ -175,9 +175,9 @@ CANOPY_HD CANOPY_FORCEINLINE void collide(const OmegaSet& om, float coded, float
   CANOPY_UNROLL
   for (int m = 0; m < kQ; ++m) fl[m][0] = f[m];
   if constexpr (Kind == kAnyKind) {
-    collideLanes<1, Fused>(om, wood, rho, fl, ol);
+    collideLanes<1>(om, wood, rho, fl, ol);
   } else {
-    collideKind<1, Kind == kWoodKind, Fused>(om, rho, fl, ol);
+    collideKind<1, Kind == kWoodKind>(om, rho, fl, ol);
   }
   CANOPY_UNROLL
   for (int m = 0; m < kQ; ++m) f[m] = fl[m][0], out[m] = ol[m][0];
@@ -189,7 +189,7 @@ CANOPY_HD CANOPY_FORCEINLINE void collide(const OmegaSet& om, float coded, float
 // are targets, and each (target, m) pair has exactly one source, so the update is race-free with
 // separate in/out buffers (ping-pong). Precondition: all L nodes are wood, or none is (and, with
 // Kind != kAnyKind, they are of that kind).
-template <int L, int Kind = kAnyKind, bool Fused = false>
+template <int L, int Kind = kAnyKind>
 CANOPY_HD CANOPY_FORCEINLINE void updateLanes(const OmegaSet& om, const Dims& d, const float* coded,
                                               const float* in, float* out, int x, int y, int z) {
   const int64_t n = d.count();
@@ -201,9 +201,9 @@ CANOPY_HD CANOPY_FORCEINLINE void updateLanes(const OmegaSet& om, const Dims& d,
   for (int m = 0; m < kQ; ++m)
     for (int l = 0; l < L; ++l) f[m][l] = in[m * n + idx + l];
   if constexpr (Kind == kAnyKind) {
-    collideLanes<L, Fused>(om, wood, rho, f, post);
+    collideLanes<L>(om, wood, rho, f, post);
   } else {
-    collideKind<L, Kind == kWoodKind, Fused>(om, rho, f, post);
+    collideKind<L, Kind == kWoodKind>(om, rho, f, post);
   }
   CANOPY_UNROLL
   for (int m = 0; m < kQ; ++m) {
@@ -218,10 +218,10 @@ CANOPY_HD CANOPY_FORCEINLINE void updateLanes(const OmegaSet& om, const Dims& d,
   }
 }
 
-template <int Kind = kAnyKind, bool Fused = false>
+template <int Kind = kAnyKind>
 CANOPY_HD CANOPY_FORCEINLINE void updateNode(const OmegaSet& om, const Dims& d, const float* coded,
                                              const float* in, float* out, int x, int y, int z) {
-  updateLanes<1, Kind, Fused>(om, d, coded, in, out, x, y, z);
+  updateLanes<1, Kind>(om, d, coded, in, out, x, y, z);
 }
 
 // Initial state of node idx for a solve: boundary nodes hold the fixed boundary values, interior

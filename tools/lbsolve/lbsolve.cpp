@@ -142,6 +142,82 @@ openvdb::Vec3SGrid::Ptr makeLightGrid(const std::string& name, const LoadedLatti
   return grid;
 }
 
+// The solves of one plant: a spec per grid and channel, with its label.
+struct PlantSolves {
+  std::vector<SolveSpec> specs;
+  std::vector<LbsolveSolve> labels;
+  void add(const LbsolveOptions& o, const LightParams& params, int cap, const std::string& grid, int c,
+           const float boundary[kQ]) {
+    SolveSpec s;
+    s.omega = channelOmega(params, c);
+    for (int m = 0; m < kQ; ++m) s.boundary[m] = boundary[m];
+    s.maxIterations = cap;
+    s.tolerance = o.tolerance;
+    s.checkEvery = o.checkEvery;
+    specs.push_back(s);
+    labels.push_back({grid, c});
+  }
+};
+
+// Bases mode: the 19 bases x RGB, the sun bases less their direct beam unless --sun-bases total.
+void solveBases(const LbsolveOptions& o, const LoadedLattice& L, int cap, LbsolveReport& report,
+                openvdb::GridPtrVec& grids) {
+  PlantSolves solves;
+  report.mode = "bases";
+  for (int b = 0; b < kQ; ++b) {
+    float boundary[kQ];
+    for (int m = 0; m < kQ; ++m) boundary[m] = (b == 0 || m == b) ? 1.f : 0.f;  // §4.2
+    for (int c = 0; c < 3; ++c) solves.add(o, report.params, cap, lattice::baseName(b), c, boundary);
+  }
+  const std::vector<SolveSpec>& specs = solves.specs;
+  auto results = runWithProgress(L.dense, specs, solves.labels, o.device, report, parseCudaRun(o));
+  report.sunBases = o.scatteredSunBases ? "scattered" : "total";
+  if (o.scatteredSunBases) {
+    // B_j - U_j: the light of the sun bases that was scattered at least once (beam.h).
+    Progress progress("lbsolve direct beams", int64_t(specs.size() - 3));
+    for (size_t k = 3; k < specs.size(); ++k) {
+      const std::vector<float> beam =
+          directBeam(L.dense, specs[k].omega, int(k / 3), results[k].iterations, specs[k].boundary[k / 3]);
+      std::vector<float>& v = results[k].values;
+      for (size_t i = 0; i < v.size(); ++i) v[i] = std::max(0.0f, v[i] - beam[i]);
+      progress.add();
+    }
+    progress.done();
+  }
+  for (int b = 0; b < kQ; ++b) {
+    auto g = makeLightGrid(lattice::baseName(b), L, results, size_t(3 * b));
+    g->insertMeta("canopy_direction", openvdb::Vec3IMetadata(openvdb::Vec3i(
+                                          lattice::dir(b, 0), lattice::dir(b, 1), lattice::dir(b, 2))));
+    // B00 (ambient) keeps the sky's unscattered light: the player has no other sky term.
+    g->insertMeta(vdbio::kDirectBeamMeta, openvdb::BoolMetadata(b == 0 || !o.scatteredSunBases));
+    stampParams(*g, report.params);
+    grids.push_back(g);
+  }
+}
+
+// Sun mode: one static bake of the --sun direction plus --ambient, RGB.
+void solveSun(const LbsolveOptions& o, const LoadedLattice& L, int cap, LbsolveReport& report,
+              openvdb::GridPtrVec& grids) {
+  PlantSolves solves;
+  report.mode = "sun";
+  const auto& s = *o.sun;
+  sun::Weights w;
+  sun::lookup(s[0], s[1], s[2], w);
+  float boundary[kQ];
+  for (int m = 0; m < kQ; ++m) boundary[m] = o.ambient;
+  for (int k = 0; k < 3; ++k) boundary[w.base[k]] += w.weight[k];
+  for (int c = 0; c < 3; ++c) solves.add(o, report.params, cap, "light", c, boundary);
+  auto results = runWithProgress(L.dense, solves.specs, solves.labels, o.device, report, parseCudaRun(o));
+  auto g = makeLightGrid("light", L, results, 0);
+  g->insertMeta("canopy_sun", openvdb::Vec3SMetadata(openvdb::Vec3s(s[0], s[1], s[2])));
+  g->insertMeta("canopy_sun_bases", openvdb::Vec3IMetadata(openvdb::Vec3i(w.base[0], w.base[1], w.base[2])));
+  g->insertMeta("canopy_sun_weights", openvdb::Vec3SMetadata(openvdb::Vec3s(w.weight[0], w.weight[1], w.weight[2])));
+  g->insertMeta("canopy_ambient", openvdb::FloatMetadata(o.ambient));
+  g->insertMeta(vdbio::kDirectBeamMeta, openvdb::BoolMetadata(true));  // a static bake: all of the light
+  stampParams(*g, report.params);
+  grids.push_back(g);
+}
+
 LbsolveReport solvePlant(const LbsolveOptions& o) {
   LbsolveReport report;
   report.params = resolveParams(o);
@@ -158,69 +234,12 @@ LbsolveReport solvePlant(const LbsolveOptions& o) {
           ", " + std::to_string(L.dense.stored.size()) + " stored nodes, cap " + std::to_string(cap) +
           " iterations, device " + o.device.str());
 
-  std::vector<SolveSpec> specs;
-  std::vector<LbsolveSolve> labels;
-  auto addSpec = [&](const std::string& grid, int c, const float boundary[kQ]) {
-    SolveSpec s;
-    s.omega = channelOmega(report.params, c);
-    for (int m = 0; m < kQ; ++m) s.boundary[m] = boundary[m];
-    s.maxIterations = cap;
-    s.tolerance = o.tolerance;
-    s.checkEvery = o.checkEvery;
-    specs.push_back(s);
-    labels.push_back({grid, c});
-  };
-
   openvdb::GridPtrVec grids;
   openvdb::MetaMap fileMeta;
   if (!o.sun) {
-    report.mode = "bases";
-    for (int b = 0; b < kQ; ++b) {
-      float boundary[kQ];
-      for (int m = 0; m < kQ; ++m) boundary[m] = (b == 0 || m == b) ? 1.f : 0.f;  // §4.2
-      for (int c = 0; c < 3; ++c) addSpec(lattice::baseName(b), c, boundary);
-    }
-    auto results = runWithProgress(L.dense, specs, labels, o.device, report, parseCudaRun(o));
-    report.sunBases = o.scatteredSunBases ? "scattered" : "total";
-    if (o.scatteredSunBases) {
-      // B_j - U_j: the light of the sun bases that was scattered at least once (beam.h).
-      Progress progress("lbsolve direct beams", int64_t(specs.size() - 3));
-      for (size_t k = 3; k < specs.size(); ++k) {
-        const std::vector<float> beam =
-            directBeam(L.dense, specs[k].omega, int(k / 3), results[k].iterations, specs[k].boundary[k / 3]);
-        std::vector<float>& v = results[k].values;
-        for (size_t i = 0; i < v.size(); ++i) v[i] = std::max(0.0f, v[i] - beam[i]);
-        progress.add();
-      }
-      progress.done();
-    }
-    for (int b = 0; b < kQ; ++b) {
-      auto g = makeLightGrid(lattice::baseName(b), L, results, size_t(3 * b));
-      g->insertMeta("canopy_direction", openvdb::Vec3IMetadata(openvdb::Vec3i(
-                                            lattice::dir(b, 0), lattice::dir(b, 1), lattice::dir(b, 2))));
-      // B00 (ambient) keeps the sky's unscattered light: the player has no other sky term.
-      g->insertMeta(vdbio::kDirectBeamMeta, openvdb::BoolMetadata(b == 0 || !o.scatteredSunBases));
-      stampParams(*g, report.params);
-      grids.push_back(g);
-    }
+    solveBases(o, L, cap, report, grids);
   } else {
-    report.mode = "sun";
-    const auto& s = *o.sun;
-    sun::Weights w;
-    sun::lookup(s[0], s[1], s[2], w);
-    float boundary[kQ];
-    for (int m = 0; m < kQ; ++m) boundary[m] = o.ambient;
-    for (int k = 0; k < 3; ++k) boundary[w.base[k]] += w.weight[k];
-    for (int c = 0; c < 3; ++c) addSpec("light", c, boundary);
-    auto results = runWithProgress(L.dense, specs, labels, o.device, report, parseCudaRun(o));
-    auto g = makeLightGrid("light", L, results, 0);
-    g->insertMeta("canopy_sun", openvdb::Vec3SMetadata(openvdb::Vec3s(s[0], s[1], s[2])));
-    g->insertMeta("canopy_sun_bases", openvdb::Vec3IMetadata(openvdb::Vec3i(w.base[0], w.base[1], w.base[2])));
-    g->insertMeta("canopy_sun_weights", openvdb::Vec3SMetadata(openvdb::Vec3s(w.weight[0], w.weight[1], w.weight[2])));
-    g->insertMeta("canopy_ambient", openvdb::FloatMetadata(o.ambient));
-    g->insertMeta(vdbio::kDirectBeamMeta, openvdb::BoolMetadata(true));  // a static bake: all of the light
-    stampParams(*g, report.params);
-    grids.push_back(g);
+    solveSun(o, L, cap, report, grids);
   }
   stampRun(fileMeta, report.mode, o, cap, report.params, report.solves);
   if (!report.sunBases.empty()) fileMeta.insertMeta("canopy_sun_terms", openvdb::StringMetadata(report.sunBases));

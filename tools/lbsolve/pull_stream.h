@@ -58,12 +58,11 @@ CANOPY_HD CANOPY_FORCEINLINE void pullLoad(const PullLayout& L, const float* in,
 
 // Collide the arrivals f of interior node (x, y, z), coded density `coded` (of kind Kind, or any),
 // and store its post values at the node itself in `out`. f is modified (collide.h).
-// Fused: fmaf in the collision (the benchmark-only pull-fused scheme; not the CPU's bits).
-template <int Kind = kAnyKind, bool Fused = false>
+template <int Kind = kAnyKind>
 CANOPY_HD CANOPY_FORCEINLINE void pullCollideStore(const OmegaSet& om, const PullLayout& L, float coded, float f[kQ],
                                                    float* out, int x, int y, int z) {
   float post[kQ];
-  collide<Kind, Fused>(om, coded, f, post);
+  collide<Kind>(om, coded, f, post);
   CANOPY_UNROLL
   for (int m = 0; m < kQ; ++m) out[pullSlot(L, m, x, y, z)] = post[m];
 }
@@ -76,7 +75,6 @@ CANOPY_HD CANOPY_FORCEINLINE void pullCollideStore(const OmegaSet& om, const Pul
 // that every warp of the row writes whole 32-byte sectors without a second memory round trip (a
 // sector written in part is read from DRAM first: docs/performance.md, 'Whole sectors'). Boundary
 // rows and planes are not written at all.
-template <bool Fused = false>
 CANOPY_HD CANOPY_FORCEINLINE void pullNode(const OmegaSet& om, const PullLayout& L, const float* coded, const float* in,
                                            float* out, int x, int y, int z) {
   const bool inside = L.d.interior(x, y, z);
@@ -85,9 +83,9 @@ CANOPY_HD CANOPY_FORCEINLINE void pullNode(const OmegaSet& om, const PullLayout&
   pullLoad(L, in, x, y, z, f, inside ? 1 : 0);
   const float c = inside ? coded[L.d.index(x, y, z)] : -0.f;
   if (inside && c >= 0.f)
-    pullCollideStore<kLeafKind, Fused>(om, L, c, f, out, x, y, z);
+    pullCollideStore<kLeafKind>(om, L, c, f, out, x, y, z);
   else
-    pullCollideStore<kWoodKind, Fused>(om, L, c, f, out, x, y, z);
+    pullCollideStore<kWoodKind>(om, L, c, f, out, x, y, z);
 }
 
 // Boundary node (x, y, z): its post values, the collision of the fixed boundary values (what the

@@ -60,21 +60,21 @@ Scene readScene(const std::string& path) {
 // 18 inside, where f_0 is zeroed at every collision and the 18 moving populations arrive whole.
 float unoccludedValue(int b, bool interior) { return b != 0 ? 1.f : interior ? float(kQ - 1) : float(kQ); }
 
-}  // namespace
+// The coarse lattice over the scene: its dimensions, cell edge h and the world corner of node (0,0,0).
+struct CoarseBox {
+  Dims d;
+  double h;
+  openvdb::Vec3d origin;
+};
 
-LbsolveReport solveScene(const LbsolveOptions& o) {
-  LbsolveReport report;
-  report.mode = "scene";
-  report.params = resolveParams(o);
-  report.params.beerLambert = false;  // the coarse lattice keeps the dissertation's collision (docs/lbsolve.md)
-  report.device = o.device.str();
-  vdbio::initialize();
-  { AtomicOutput probe(o.output); }
-  const Scene scene = readScene(o.scene);
-  std::vector<LoadedLattice> models;
-  for (const auto& p : scene.densityPaths) models.push_back(loadDensityLattice(p, report.params.woodThreshold));
+// The coarse lattice's densities: coded per node (wood negative) for the solver, plain for the output.
+struct CoarseDensity {
+  DenseLattice coarse;
+  std::vector<float> density;
+};
 
-  // World bounding box of every instance's lattice box.
+// Lays the coarse lattice over the world bounding box of every instance's lattice box.
+CoarseBox coarseBox(const LbsolveOptions& o, const Scene& scene, const std::vector<LoadedLattice>& models) {
   openvdb::Vec3d lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
   for (const auto& inst : scene.instances) {
     const auto& L = models[size_t(inst.model)];
@@ -96,8 +96,15 @@ LbsolveReport solveScene(const LbsolveOptions& o) {
   d.nz = int(std::ceil(extent.z() / h - 1e-9)) + 2;
   d.nx = std::max(d.nx, 3), d.ny = std::max(d.ny, 3), d.nz = std::max(d.nz, 3);
   const openvdb::Vec3d origin = lo - openvdb::Vec3d(h);  // world position of node (0,0,0)'s corner
+  return CoarseBox{d, h, origin};
+}
 
-  // Coarse density: biomass of the instances in each coarse cell.
+// Coarse density: biomass of the instances in each coarse cell; wood where its share of the mass is.
+CoarseDensity coarseDensity(const Scene& scene, const std::vector<LoadedLattice>& models, const CoarseBox& box,
+                            double woodThreshold) {
+  const Dims& d = box.d;
+  const double h = box.h;
+  const openvdb::Vec3d& origin = box.origin;
   std::vector<double> mass(size_t(d.count()), 0.0), woodMass(size_t(d.count()), 0.0);
   for (const auto& inst : scene.instances) {
     const auto& L = models[size_t(inst.model)];
@@ -117,29 +124,27 @@ LbsolveReport solveScene(const LbsolveOptions& o) {
       if (L.dense.coded[size_t(i)] < 0.f) woodMass[size_t(d.index(x, y, z))] += rho * fineVolume;
     }
   }
-  DenseLattice coarse;
+  CoarseDensity out;
+  DenseLattice& coarse = out.coarse;
   coarse.dims = d;
   coarse.coded.resize(size_t(d.count()));
-  std::vector<float> density(size_t(d.count()));
+  std::vector<float>& density = out.density;
+  density.resize(size_t(d.count()));
   const double cellVolume = h * h * h;
   for (size_t i = 0; i < density.size(); ++i) {
     density[i] = float(std::min(1.0, mass[i] / cellVolume));
-    const bool wood = mass[i] > 0 && woodMass[i] / mass[i] >= report.params.woodThreshold;
+    const bool wood = mass[i] > 0 && woodMass[i] / mass[i] >= woodThreshold;
     coarse.coded[i] = wood ? -density[i] : density[i];
   }
   coarse.stored.resize(size_t(d.count()));
   for (int64_t i = 0; i < d.count(); ++i) coarse.stored[size_t(i)] = i;
-  report.dims = {d.nx, d.ny, d.nz};
-  report.storedNodes = d.count();
-  const int cap = iterationCap(o, d);
-  logInfo(o.scene + ": " + std::to_string(scene.instances.size()) + " instances, coarse lattice " +
-          std::to_string(d.nx) + "x" + std::to_string(d.ny) + "x" + std::to_string(d.nz) + ", cell " +
-          std::to_string(h) + " m, cap " + std::to_string(cap) + " iterations");
+  return out;
+}
 
-  const auto lum = report.params.luminance();
-  const OmegaSet omega = makeOmegaSet(lum[0], lum[1], lum[2], report.params.gWood, 0.0);  // linear (above)
-  std::vector<SolveSpec> specs;
-  std::vector<LbsolveSolve> labels;
+// The 19 base solves on the coarse lattice: luminance only, with the linear collision (above).
+void sceneSolves(const LbsolveOptions& o, const LightParams& params, const std::array<double, 3>& lum, int cap,
+                 std::vector<SolveSpec>& specs, std::vector<LbsolveSolve>& labels) {
+  const OmegaSet omega = makeOmegaSet(lum[0], lum[1], lum[2], params.gWood, 0.0);  // linear (above)
   for (int b = 0; b < kQ; ++b) {
     SolveSpec s;
     s.omega = omega;
@@ -150,14 +155,19 @@ LbsolveReport solveScene(const LbsolveOptions& o) {
     specs.push_back(s);
     labels.push_back({lattice::baseName(b), 3});
   }
-  auto results = runWithProgress(coarse, specs, labels, o.device, report, parseCudaRun(o));
+}
 
+// The output grids: each base divided by its unoccluded value, then the coarse density.
+openvdb::GridPtrVec sceneGrids(const LbsolveOptions& o, const CoarseBox& box, const std::vector<SolveResult>& results,
+                               const std::vector<float>& density) {
+  const Dims& d = box.d;
+  const double h = box.h;
   vdbio::LatticeMeta meta;
   meta.min = openvdb::Coord(0);
   meta.max = openvdb::Coord(d.nx - 1, d.ny - 1, d.nz - 1);
   meta.source = vdbio::describeSource(o.scene);
   auto xform = openvdb::math::Transform::createLinearTransform(h);
-  xform->postTranslate(origin + openvdb::Vec3d(0.5 * h));  // node centres
+  xform->postTranslate(box.origin + openvdb::Vec3d(0.5 * h));  // node centres
   openvdb::GridPtrVec grids;
   for (int b = 0; b < kQ; ++b) {
     auto g = openvdb::FloatGrid::create(0.f);
@@ -183,11 +193,44 @@ LbsolveReport solveScene(const LbsolveOptions& o) {
     if (density[size_t(i)] > 0.f) dacc.setValue(nodeCoord(d, meta.min, i), density[size_t(i)]);
   vdbio::stampGrid(*dg, meta);
   grids.push_back(dg);
+  return grids;
+}
+
+}  // namespace
+
+LbsolveReport solveScene(const LbsolveOptions& o) {
+  LbsolveReport report;
+  report.mode = "scene";
+  report.params = resolveParams(o);
+  report.params.beerLambert = false;  // the coarse lattice keeps the dissertation's collision (docs/lbsolve.md)
+  report.device = o.device.str();
+  vdbio::initialize();
+  { AtomicOutput probe(o.output); }
+  const Scene scene = readScene(o.scene);
+  std::vector<LoadedLattice> models;
+  for (const auto& p : scene.densityPaths) models.push_back(loadDensityLattice(p, report.params.woodThreshold));
+
+  const CoarseBox box = coarseBox(o, scene, models);
+  const Dims& d = box.d;
+  const CoarseDensity cd = coarseDensity(scene, models, box, report.params.woodThreshold);
+  report.dims = {d.nx, d.ny, d.nz};
+  report.storedNodes = d.count();
+  const int cap = iterationCap(o, d);
+  logInfo(o.scene + ": " + std::to_string(scene.instances.size()) + " instances, coarse lattice " +
+          std::to_string(d.nx) + "x" + std::to_string(d.ny) + "x" + std::to_string(d.nz) + ", cell " +
+          std::to_string(box.h) + " m, cap " + std::to_string(cap) + " iterations");
+
+  const auto lum = report.params.luminance();
+  std::vector<SolveSpec> specs;
+  std::vector<LbsolveSolve> labels;
+  sceneSolves(o, report.params, lum, cap, specs, labels);
+  auto results = runWithProgress(cd.coarse, specs, labels, o.device, report, parseCudaRun(o));
+  const openvdb::GridPtrVec grids = sceneGrids(o, box, results, cd.density);
 
   openvdb::MetaMap fileMeta;
   stampRun(fileMeta, "scene", o, cap, report.params, report.solves);
   fileMeta.insertMeta("canopy_scene_resolution", openvdb::Int32Metadata(o.sceneResolution));
-  fileMeta.insertMeta("canopy_scene_cell", openvdb::DoubleMetadata(h));
+  fileMeta.insertMeta("canopy_scene_cell", openvdb::DoubleMetadata(box.h));
   fileMeta.insertMeta("canopy_luminance", openvdb::Vec3SMetadata(openvdb::Vec3s(float(lum[0]), float(lum[1]), float(lum[2]))));
   fileMeta.insertMeta("canopy_normalised", openvdb::BoolMetadata(true));
   vdbio::writeVdb(o.output, grids, fileMeta);

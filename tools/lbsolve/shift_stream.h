@@ -79,7 +79,7 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t opaqueCopy(uint32_t v) {
 // (a): collide occupied interior node p (coded density `coded` != 0) in place. With totalBefore,
 // also stores the node's total before the collision (nodeTotal's order of additions): the
 // residual's previous total of an occupied node, whose slots the collision overwrites.
-template <int Kind = kAnyKind, bool Fused = false>
+template <int Kind = kAnyKind>
 CANOPY_HD CANOPY_FORCEINLINE void shiftCollideNode(const OmegaSet& om, const ShiftOffsets& s, int64_t n,
                                                    float coded, int64_t p, float* state,
                                                    float* totalBefore = nullptr) {
@@ -93,7 +93,7 @@ CANOPY_HD CANOPY_FORCEINLINE void shiftCollideNode(const OmegaSet& om, const Shi
     for (int m = 0; m < kQ; ++m) t += f[m];
     *totalBefore = t;
   }
-  collide<Kind, Fused>(om, coded, f, post);
+  collide<Kind>(om, coded, f, post);
   const uint32_t r = opaqueCopy(q);
   CANOPY_UNROLL
   for (int m = 0; m < kQ; ++m) state[m * n + shifted(r, s.off[m], nn)] = post[m];

@@ -108,9 +108,9 @@ int64_t cudaSolverBytes(const DenseLattice& l, CudaScheme scheme) {
     wood += l.coded[size_t(i)] < 0.f;
     occupied += l.coded[size_t(i)] != 0.f;
   }
-  if (scheme == CudaScheme::Push || scheme == CudaScheme::PushFused)
+  if (scheme == CudaScheme::Push)
     return n * (2 * kQ + 1) * int64_t(sizeof(float)) + wood * int64_t(sizeof(int64_t)) + stored;
-  if (scheme == CudaScheme::Pull || scheme == CudaScheme::PullFused)
+  if (scheme == CudaScheme::Pull)
     return 2 * pullStateFloats(pullLayout(d)) * int64_t(sizeof(float)) + 2 * n * int64_t(sizeof(float)) + stored;
   const int64_t boundary = n - int64_t(std::max(d.nx - 2, 0)) * std::max(d.ny - 2, 0) * std::max(d.nz - 2, 0);
   return n * (kQ + 2) * int64_t(sizeof(float)) + occupied * int64_t(sizeof(int64_t) + sizeof(float)) +

@@ -22,7 +22,7 @@
 // addresses.
 // Built with --fmad=false (CMakeLists.txt): no multiply-add contraction, so each node computes the
 // same IEEE operations in the same order as the CPU reference and the results agree bit for bit
-// (tests/lbsolve/test_lbsolve_cuda.cpp). PushFused and PullFused use explicit fmaf (benchmark only).
+// (tests/lbsolve/test_lbsolve_cuda.cpp).
 #include <algorithm>
 #include <cstdio>
 #include <cstring>
@@ -74,7 +74,6 @@ __device__ __forceinline__ void reduceMax2(float dmax, float rmax, unsigned* res
 // ---- Push scheme -----------------------------------------------------------------------------
 
 // Leaf and empty nodes (wood nodes: pushWoodKernel).
-template <bool Fused>
 __global__ void __launch_bounds__(kBlockX) pushLeafKernel(const OmegaSet omega, const Dims d,
                                                           const float* __restrict__ coded,
                                                           const float* __restrict__ in,
@@ -83,10 +82,9 @@ __global__ void __launch_bounds__(kBlockX) pushLeafKernel(const OmegaSet omega, 
   if (x >= d.nx) return;
   const int y = int(blockIdx.y), z = int(blockIdx.z);
   if (coded[d.index(x, y, z)] < 0.f) return;  // a wood node: pushWoodKernel
-  updateNode<kLeafKind, Fused>(omega, d, coded, in, out, x, y, z);
+  updateNode<kLeafKind>(omega, d, coded, in, out, x, y, z);
 }
 
-template <bool Fused>
 __global__ void __launch_bounds__(kBlockX) pushWoodKernel(const OmegaSet omega, const Dims d,
                                                           const float* __restrict__ coded,
                                                           const float* __restrict__ in,
@@ -96,7 +94,7 @@ __global__ void __launch_bounds__(kBlockX) pushWoodKernel(const OmegaSet omega, 
   if (i >= count) return;
   int x, y, z;
   coordsOf(d, wood[i], x, y, z);
-  updateNode<kWoodKind, Fused>(omega, d, coded, in, out, x, y, z);
+  updateNode<kWoodKind>(omega, d, coded, in, out, x, y, z);
 }
 
 __global__ void pushInitKernel(const Boundary b, const Dims d, float* __restrict__ a, float* __restrict__ c) {
@@ -132,7 +130,6 @@ __global__ void pushGatherKernel(const float* __restrict__ cur, int64_t n, const
 // order, so a launch's resident blocks read and write a few neighbouring z-slices; blocks scattered
 // over the lattice (to mix the plant's colliding warps with the air's streaming ones) were slower
 // by 7-13 points of the copy bandwidth (docs/performance.md, 'Row order and solves in flight').
-template <bool Fused>
 __global__ void __launch_bounds__(kBlockX) pullLeafKernel(const OmegaSet omega, const PullLayout L,
                                                           const float* __restrict__ coded,
                                                           const float* __restrict__ in, float* __restrict__ out) {
@@ -148,7 +145,7 @@ __global__ void __launch_bounds__(kBlockX) pullLeafKernel(const OmegaSet omega, 
   // second kernel per iteration used to update the wood nodes from a list, loading their arrivals
   // again, scattered: docs/performance.md, 'Wood nodes in the pull kernel'). The boundary and padding lanes of an
   // interior row store the values they hold, so that every store covers whole sectors ('Whole sectors').
-  pullNode<Fused>(omega, L, coded, in, out, x, y, z);
+  pullNode(omega, L, coded, in, out, x, y, z);
 }
 
 // The boundary nodes' post values (constant over a solve) into both buffers.
@@ -356,7 +353,7 @@ void uploadVector(cuda::DeviceBuffer<T>& buffer, const std::vector<T>& v) {
 int64_t blocksFor(int64_t count) { return (count + kBlockX - 1) / kBlockX; }
 
 bool isShift(CudaScheme scheme) { return scheme == CudaScheme::Shift || scheme == CudaScheme::ShiftSplit; }
-bool isPull(CudaScheme scheme) { return scheme == CudaScheme::Pull || scheme == CudaScheme::PullFused; }
+bool isPull(CudaScheme scheme) { return scheme == CudaScheme::Pull; }
 
 class CudaSolver final : public Solver {
  public:
@@ -507,14 +504,12 @@ class CudaSolver final : public Solver {
       launchPull(omega);
       std::swap(cur_, prev_);
     } else {
-      const bool fused = scheme_ == CudaScheme::PushFused;
-      (fused ? pushLeafKernel<true> : pushLeafKernel<false>)<<<grid(), kBlockX, 0, stream_>>>(
-          omega, d, coded_.data(), cur_, prev_);
+      pushLeafKernel<<<grid(), kBlockX, 0, stream_>>>(omega, d, coded_.data(), cur_, prev_);
       CANOPY_CUDA_CHECK(cudaGetLastError());
       const int64_t woodCount = int64_t(wood_.size());
       if (woodCount > 0) {
-        (fused ? pushWoodKernel<true> : pushWoodKernel<false>)<<<unsigned(blocksFor(woodCount)), kBlockX, 0, stream_>>>(
-            omega, d, coded_.data(), cur_, prev_, wood_.data(), woodCount);
+        pushWoodKernel<<<unsigned(blocksFor(woodCount)), kBlockX, 0, stream_>>>(omega, d, coded_.data(), cur_, prev_,
+                                                                                wood_.data(), woodCount);
         CANOPY_CUDA_CHECK(cudaGetLastError());
       }
       std::swap(cur_, prev_);
@@ -539,11 +534,7 @@ class CudaSolver final : public Solver {
     const float* in = cur_;
     float* out = prev_;
     const float* coded = coded_.data();
-    if (scheme_ == CudaScheme::PullFused) {
-      CANOPY_CUDA_CHECK(cudaLaunchKernelEx(&config, pullLeafKernel<true>, omega, pull_, coded, in, out));
-    } else {
-      CANOPY_CUDA_CHECK(cudaLaunchKernelEx(&config, pullLeafKernel<false>, omega, pull_, coded, in, out));
-    }
+    CANOPY_CUDA_CHECK(cudaLaunchKernelEx(&config, pullLeafKernel, omega, pull_, coded, in, out));
   }
 
   float residual() override {

@@ -18,9 +18,7 @@ const char* cudaSchemeName(CudaScheme scheme) {
     case CudaScheme::Shift: return "shift";
     case CudaScheme::Push: return "push";
     case CudaScheme::ShiftSplit: return "shift-split";
-    case CudaScheme::PushFused: return "push-fused";
     case CudaScheme::Pull: return "pull";
-    case CudaScheme::PullFused: return "pull-fused";
   }
   return "?";
 }

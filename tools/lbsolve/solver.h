@@ -69,11 +69,8 @@ class Solver {
 //               post-collision values stored aligned at the node, in tiles of 32 nodes with their 19
 //               directions contiguous; arrivals read from the neighbours. The dense scheme nearest
 //               the bandwidth roofline.
-//   PushFused, PullFused: Push and Pull with fused multiply-adds (fmaf) in the collision: benchmark
-//               variants that measure what the unfused arithmetic costs; not bitwise equal to the
-//               CPU reference.
-// All but PushFused and PullFused compute the CPU reference's bits (same IEEE operations in the same order).
-enum class CudaScheme { Shift, ShiftSplit, Push, PushFused, Pull, PullFused };
+// All compute the CPU reference's bits (same IEEE operations in the same order).
+enum class CudaScheme { Shift, ShiftSplit, Push, Pull };
 const char* cudaSchemeName(CudaScheme scheme);
 
 // How the CUDA solves run (docs/performance.md, 'Row order and solves in flight', has the measurements). Nothing

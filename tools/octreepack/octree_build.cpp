@@ -205,21 +205,16 @@ void fillUnavailable(LightBlock& b) {
       for (int c = 0; c < kCh; ++c) b.v[c][i] = n ? float(mean[c] / n) : 0.0f;
 }
 
-// Light levels aligned with the density levels (lights[d].blocks[i] belongs to levels[d].keys[i]),
-// then one light item per brick.
-// `levels` are the light levels (0..depth - detailLevels); `bricks` the bricks that get items.
-void buildLight(const ModelSource& src, const std::string& what, const LightFn& light, const std::vector<Level>& levels,
-                const std::vector<std::pair<uint32_t, uint64_t>>& bricks, std::vector<uint16_t>& out) {
-  const size_t depth = levels.size() - 1;
-  std::vector<std::vector<LightBlock>> lights(levels.size());
+// The finest light level: the mean of the source over each light voxel's 2x2x2 light lattice cells.
+void finestLight(const ModelSource& src, const std::string& what, const LightFn& light, const Level& level,
+                 std::vector<LightBlock>& lights) {
   int32_t lightMin[3];  // the light lattice's first cell
   for (int a = 0; a < 3; ++a) lightMin[a] = src.latticeMin[a] >> src.detailLevels;
-  // Finest: the mean of the source over each light voxel's 2x2x2 light lattice cells.
-  lights[depth].resize(levels[depth].keys.size());
-  parallelFor(int64_t(levels[depth].keys.size()), [&](int64_t bi) {
+  lights.resize(level.keys.size());
+  parallelFor(int64_t(level.keys.size()), [&](int64_t bi) {
     uint32_t k[3];
-    unpackKey(levels[depth].keys[size_t(bi)], k);
-    LightBlock& lb = lights[depth][size_t(bi)];
+    unpackKey(level.keys[size_t(bi)], k);
+    LightBlock& lb = lights[size_t(bi)];
     float tmp[kCh];
     for (int z = 0; z < kL; ++z)
       for (int y = 0; y < kL; ++y)
@@ -242,41 +237,42 @@ void buildLight(const ModelSource& src, const std::string& what, const LightFn& 
           lb.avail[li] = true;
         }
   });
-  // Coarser: the mean of the available 2x2x2 voxels below.
-  for (int d = int(depth) - 1; d >= 0; --d) {
-    const Level& L = levels[size_t(d)];
-    const Level& C = levels[size_t(d) + 1];
-    lights[size_t(d)].resize(L.keys.size());
-    parallelFor(int64_t(L.keys.size()), [&](int64_t bi) {
-      uint32_t k[3];
-      unpackKey(L.keys[size_t(bi)], k);
-      LightBlock& lb = lights[size_t(d)][size_t(bi)];
-      for (int z = 0; z < kL; ++z)
-        for (int y = 0; y < kL; ++y)
-          for (int x = 0; x < kL; ++x) {
-            const int li = lightIndex(x, y, z);
-            const auto it = C.index.find(packKey(2 * k[0] + uint32_t(x >> 1), 2 * k[1] + uint32_t(y >> 1), 2 * k[2] + uint32_t(z >> 1)));
-            lb.avail[li] = false;
-            if (it == C.index.end()) continue;
-            const LightBlock& cb = lights[size_t(d) + 1][it->second];
-            double sum[kCh] = {};
-            int n = 0;
-            for (int s = 0; s < 8; ++s) {
-              const int ci = lightIndex((2 * x + (s & 1)) & 3, (2 * y + ((s >> 1) & 1)) & 3, (2 * z + (s >> 2)) & 3);
-              if (!cb.avail[ci]) continue;
-              ++n;
-              for (int c = 0; c < kCh; ++c) sum[c] += cb.v[c][ci];
-            }
-            if (n == 0) continue;
-            for (int c = 0; c < kCh; ++c) lb.v[c][li] = float(sum[c] / n);
-            lb.avail[li] = true;
+}
+
+// A coarser light level (L, child level C): the mean of the available 2x2x2 voxels below.
+void coarserLight(const Level& L, const Level& C, const std::vector<LightBlock>& below, std::vector<LightBlock>& lights) {
+  lights.resize(L.keys.size());
+  parallelFor(int64_t(L.keys.size()), [&](int64_t bi) {
+    uint32_t k[3];
+    unpackKey(L.keys[size_t(bi)], k);
+    LightBlock& lb = lights[size_t(bi)];
+    for (int z = 0; z < kL; ++z)
+      for (int y = 0; y < kL; ++y)
+        for (int x = 0; x < kL; ++x) {
+          const int li = lightIndex(x, y, z);
+          const auto it = C.index.find(packKey(2 * k[0] + uint32_t(x >> 1), 2 * k[1] + uint32_t(y >> 1), 2 * k[2] + uint32_t(z >> 1)));
+          lb.avail[li] = false;
+          if (it == C.index.end()) continue;
+          const LightBlock& cb = below[it->second];
+          double sum[kCh] = {};
+          int n = 0;
+          for (int s = 0; s < 8; ++s) {
+            const int ci = lightIndex((2 * x + (s & 1)) & 3, (2 * y + ((s >> 1) & 1)) & 3, (2 * z + (s >> 2)) & 3);
+            if (!cb.avail[ci]) continue;
+            ++n;
+            for (int c = 0; c < kCh; ++c) sum[c] += cb.v[c][ci];
           }
-    });
-    // Availability is decided from the level below before any filling (filled values are not
-    // "available" for the level above).
-  }
-  // Items: interior + border (neighbour block of the same level, else the edge voxel repeated).
-  // The fill of unavailable voxels happens on copies so that avail flags above stay exact.
+          if (n == 0) continue;
+          for (int c = 0; c < kCh; ++c) lb.v[c][li] = float(sum[c] / n);
+          lb.avail[li] = true;
+        }
+  });
+}
+
+// Items: interior + border (neighbour block of the same level, else the edge voxel repeated).
+// The fill of unavailable voxels happens on copies so that avail flags above stay exact.
+void lightItems(const std::vector<Level>& levels, const std::vector<std::vector<LightBlock>>& lights,
+                const std::vector<std::pair<uint32_t, uint64_t>>& bricks, std::vector<uint16_t>& out) {
   out.assign(bricks.size() * size_t(kCh) * kCanopyLightVoxelCount, 0);
   parallelFor(int64_t(bricks.size()), [&](int64_t bi) {
     const uint32_t level = bricks[size_t(bi)].first;
@@ -316,6 +312,22 @@ void buildLight(const ModelSource& src, const std::string& what, const LightFn& 
   });
 }
 
+// Light levels aligned with the density levels (lights[d].blocks[i] belongs to levels[d].keys[i]),
+// then one light item per brick.
+// `levels` are the light levels (0..depth - detailLevels); `bricks` the bricks that get items.
+void buildLight(const ModelSource& src, const std::string& what, const LightFn& light, const std::vector<Level>& levels,
+                const std::vector<std::pair<uint32_t, uint64_t>>& bricks, std::vector<uint16_t>& out) {
+  const size_t depth = levels.size() - 1;
+  std::vector<std::vector<LightBlock>> lights(levels.size());
+  finestLight(src, what, light, levels[depth], lights[depth]);
+  for (int d = int(depth) - 1; d >= 0; --d) {
+    coarserLight(levels[size_t(d)], levels[size_t(d) + 1], lights[size_t(d) + 1], lights[size_t(d)]);
+    // Availability is decided from the level below before any filling (filled values are not
+    // "available" for the level above).
+  }
+  lightItems(levels, lights, bricks, out);
+}
+
 }  // namespace
 
 LightFn chaarLightFn(const haar::ChaarView& view) {
@@ -337,21 +349,18 @@ uint32_t depthForCells(int64_t maxDim) {
   return depth;
 }
 
-BuiltModel buildOctree(const ModelSource& src, const std::string& what, const LightFn& light) {
-  checkSource(src, what);
-  int64_t maxDim = 0;
-  for (int a = 0; a < 3; ++a) maxDim = std::max<int64_t>(maxDim, int64_t(src.latticeMax[a]) - src.latticeMin[a] + 1);
-  const uint32_t depth = depthForCells(maxDim);
-  if (src.detailLevels > depth) throw invalidInput(what + ": more detail levels than the octree has levels");
+namespace {
 
-  // Levels, finest first; levels[d] is level d.
-  std::vector<Level> levels(depth + 1);
-  levels[depth] = finestLevel(src, what);
-  for (int d = int(depth) - 1; d >= 0; --d) levels[size_t(d)] = coarserLevel(levels[size_t(d) + 1]);
+// A brick node: its level and block key (bricks are listed in brick id order).
+struct BrickRef {
+  uint32_t level;
+  uint64_t key;
+};
 
-  BuiltModel out;
+// The model record's fields that the build knows (the writer sets the rest), and the occupied cells.
+void describeModel(const ModelSource& src, uint32_t depth, const Level& finest, BuiltModel& out) {
   out.sourceLabel = src.sourceLabel;
-  for (const Block& b : levels[depth].blocks)
+  for (const Block& b : finest.blocks)
     for (int i = 0; i < kBlockVoxels; ++i) out.occupiedCells += b.d[i] != 0.0f;
   CanopyModel& M = out.record;
   std::memset(&M, 0, sizeof M);
@@ -367,16 +376,16 @@ BuiltModel buildOctree(const ModelSource& src, const std::string& what, const Li
   M.rootCells = kCanopyBrickSize << depth;
   M.brickSize = kCanopyBrickSize;
   M.brickBorder = kCanopyBrickBorder;
+}
 
-  // Breadth-first node assignment. Each queue entry: (level, block key, where to store the node).
+// Breadth-first node assignment: the root, node tiles and brick ids; returns the bricks in id order.
+std::vector<BrickRef> assignNodes(const std::vector<Level>& levels, uint32_t depth, BuiltModel& out) {
+  CanopyModel& M = out.record;
+  // Each queue entry: (level, block key, where to store the node).
   struct Pending {
     uint32_t level;
     uint64_t key;
     int64_t slot;  // -1 = root, else index into out.tiles
-  };
-  struct BrickRef {
-    uint32_t level;
-    uint64_t key;
   };
   std::vector<BrickRef> bricks;  // in brick id order
   std::vector<Pending> queue{{0, packKey(0, 0, 0), -1}};
@@ -409,9 +418,12 @@ BuiltModel buildOctree(const ModelSource& src, const std::string& what, const Li
   }
   M.tileCount = uint32_t(out.tiles.size() / 8);
   M.brickCount = uint32_t(bricks.size());
+  return bricks;
+}
 
-  // Brick voxels: interior + one-voxel border from the same level (0 outside the lattice/octree).
-  out.bricks.assign(size_t(M.brickCount) * kCanopyBrickBytes, 0);
+// Brick voxels: interior + one-voxel border from the same level (0 outside the lattice/octree).
+void writeBricks(const std::vector<Level>& levels, const std::vector<BrickRef>& bricks, BuiltModel& out) {
+  out.bricks.assign(size_t(out.record.brickCount) * kCanopyBrickBytes, 0);
   parallelFor(int64_t(bricks.size()), [&](int64_t bi) {
     const BrickRef& br = bricks[size_t(bi)];
     const Level& L = levels[br.level];
@@ -445,6 +457,26 @@ BuiltModel buildOctree(const ModelSource& src, const std::string& what, const Li
           }
         }
   });
+}
+
+}  // namespace
+
+BuiltModel buildOctree(const ModelSource& src, const std::string& what, const LightFn& light) {
+  checkSource(src, what);
+  int64_t maxDim = 0;
+  for (int a = 0; a < 3; ++a) maxDim = std::max<int64_t>(maxDim, int64_t(src.latticeMax[a]) - src.latticeMin[a] + 1);
+  const uint32_t depth = depthForCells(maxDim);
+  if (src.detailLevels > depth) throw invalidInput(what + ": more detail levels than the octree has levels");
+
+  // Levels, finest first; levels[d] is level d.
+  std::vector<Level> levels(depth + 1);
+  levels[depth] = finestLevel(src, what);
+  for (int d = int(depth) - 1; d >= 0; --d) levels[size_t(d)] = coarserLevel(levels[size_t(d) + 1]);
+
+  BuiltModel out;
+  describeModel(src, depth, levels[depth], out);
+  const std::vector<BrickRef> bricks = assignNodes(levels, depth, out);
+  writeBricks(levels, bricks, out);
   if (light) {
     // Items for the light levels' bricks: the first ones (breadth-first ids, coarse to fine).
     const uint32_t lightDepth = depth - src.detailLevels;
@@ -453,8 +485,8 @@ BuiltModel buildOctree(const ModelSource& src, const std::string& what, const Li
       if (b.level <= lightDepth) refs.emplace_back(b.level, b.key);
     levels.resize(lightDepth + 1);  // the detail levels' blocks are written: free them
     buildLight(src, what, light, levels, refs, out.light);
-    M.lightCount = uint32_t(refs.size());
-    M.flags |= kCanopyModelHasLight;
+    out.record.lightCount = uint32_t(refs.size());
+    out.record.flags |= kCanopyModelHasLight;
   }
   return out;
 }

@@ -110,11 +110,8 @@ Scene gltfScene(const std::string& glb, const std::vector<std::string>& inputs) 
   return scene;
 }
 
-}  // namespace
-
-nlohmann::json octreepack(const OctreepackOptions& o) {
-  const auto t0 = std::chrono::steady_clock::now();
-  nlohmann::json meta = {{"tool", "canopy-octreepack"}, {"version", versionString()}};
+// The scene to pack (one plant, a glTF scene or a scene list), checked before any work; notes its source in meta.
+Scene packScene(const OctreepackOptions& o, nlohmann::json& meta) {
   Scene scene;
   if (o.scene.empty()) {
     scene = singlePlant(o.inputs);
@@ -133,45 +130,70 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
     requireReadableFile(m.density);
     if (!m.light.empty() && !o.ignoreLight) requireReadableFile(m.light);
   }
+  return scene;
+}
+
+// --scene-light: the scene lattice's light into the file.
+void addSceneLight(const OctreepackOptions& o, CanopyWriteInput& w, nlohmann::json& meta) {
+  SceneLightSource sl = readSceneLightVdb(o.sceneLight, o.sceneLightGrid);
+  w.hasSceneLight = true;
+  w.sceneLight = sl.header;
+  w.sceneLightBases = sl.bases;
+  w.sceneLightValues = std::move(sl.values);
+  meta["scene_light"] = sl.sourceLabel;
+  if (!o.sceneLightGrid.empty()) meta["scene_light_grid"] = o.sceneLightGrid;
+}
+
+// One model built: its octree, its .chaar Haar pages (or null) and its entry in the metadata.
+struct PackedModel {
+  BuiltModel built;
+  std::shared_ptr<const CanopyHaarPages> haar;
+  nlohmann::json source;
+};
+
+// Builds model i's octree, with its lighting unless --ignore-light.
+PackedModel packModel(const OctreepackOptions& o, const SceneModel& m, size_t i) {
+  logInfo("canopy-octreepack: model " + std::to_string(i) + " '" + m.name + "' from " + m.density);
+  ModelSource src = readDensityVdb(m.density, m.name);
+  nlohmann::json source = {{"name", m.name}, {"density", src.sourceLabel}};
+  LightFn light;
+  std::shared_ptr<const CanopyHaarPages> haar;  // .chaar lighting: its bricks, the finest level's exact light
+  bool scatteredSun = false;
+  if (!m.light.empty() && !o.ignoreLight) {
+    LightVdb lv = endsWith(m.light, ".chaar") ? readChaarLight(m.light, src, !o.noHaarLight) : readLightVdb(m.light, src);
+    light = std::move(lv.fn);
+    haar = std::move(lv.haar);
+    scatteredSun = lv.scatteredSun;
+    source["light"] = lv.sourceLabel;
+    source["sun_bases"] = scatteredSun ? "scattered" : "total";
+    if (!scatteredSun)
+      logWarn(m.light + ": its sun bases include the direct beam (canopy-lbsolve --sun-bases total, or a light file "
+              "from before 2026-12): canopy-play will count the direct sun twice; re-run canopy-lbsolve");
+  }
+  PackedModel p{buildOctree(src, m.density, light), std::move(haar), std::move(source)};
+  if (scatteredSun) p.built.record.flags |= kCanopyModelScatteredSun;
+  return p;
+}
+
+}  // namespace
+
+nlohmann::json octreepack(const OctreepackOptions& o) {
+  const auto t0 = std::chrono::steady_clock::now();
+  nlohmann::json meta = {{"tool", "canopy-octreepack"}, {"version", versionString()}};
+  const Scene scene = packScene(o, meta);
 
   CanopyWriteInput w;
-  if (!o.sceneLight.empty()) {  // read first: a bad scene lattice fails before the models are built
-    SceneLightSource sl = readSceneLightVdb(o.sceneLight, o.sceneLightGrid);
-    w.hasSceneLight = true;
-    w.sceneLight = sl.header;
-    w.sceneLightBases = sl.bases;
-    w.sceneLightValues = std::move(sl.values);
-    meta["scene_light"] = sl.sourceLabel;
-    if (!o.sceneLightGrid.empty()) meta["scene_light_grid"] = o.sceneLightGrid;
-  }
+  if (!o.sceneLight.empty()) addSceneLight(o, w, meta);  // read first: a bad scene lattice fails before the models are built
   std::vector<BuiltModel> built;
   built.reserve(scene.models.size());
   std::vector<std::shared_ptr<const CanopyHaarPages>> haarPages;  // per model, or null
   nlohmann::json sources = nlohmann::json::array();
   Progress progress("octreepack models", int64_t(scene.models.size()));
   for (size_t i = 0; i < scene.models.size(); ++i) {
-    const SceneModel& m = scene.models[i];
-    logInfo("canopy-octreepack: model " + std::to_string(i) + " '" + m.name + "' from " + m.density);
-    ModelSource src = readDensityVdb(m.density, m.name);
-    nlohmann::json source = {{"name", m.name}, {"density", src.sourceLabel}};
-    LightFn light;
-    std::shared_ptr<const CanopyHaarPages> haar;  // .chaar lighting: its bricks, the finest level's exact light
-    bool scatteredSun = false;
-    if (!m.light.empty() && !o.ignoreLight) {
-      LightVdb lv = endsWith(m.light, ".chaar") ? readChaarLight(m.light, src, !o.noHaarLight) : readLightVdb(m.light, src);
-      light = std::move(lv.fn);
-      haar = std::move(lv.haar);
-      scatteredSun = lv.scatteredSun;
-      source["light"] = lv.sourceLabel;
-      source["sun_bases"] = scatteredSun ? "scattered" : "total";
-      if (!scatteredSun)
-        logWarn(m.light + ": its sun bases include the direct beam (canopy-lbsolve --sun-bases total, or a light file "
-                "from before 2026-12): canopy-play will count the direct sun twice; re-run canopy-lbsolve");
-    }
-    built.push_back(buildOctree(src, m.density, light));
-    if (scatteredSun) built.back().record.flags |= kCanopyModelScatteredSun;
-    haarPages.push_back(std::move(haar));
-    sources.push_back(source);
+    PackedModel p = packModel(o, scene.models[i], i);
+    built.push_back(std::move(p.built));
+    haarPages.push_back(std::move(p.haar));
+    sources.push_back(p.source);
     progress.add();
   }
   for (size_t i = 0; i < built.size(); ++i)

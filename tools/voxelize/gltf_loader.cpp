@@ -63,17 +63,15 @@ size_t componentCount(const std::string& type) {
   return 0;
 }
 
-// For each Draco primitive: the extension's bufferView, the primitive's accessors, and every
-// attribute id named by the extension must exist, and the attribute's component count must match
-// its accessor. Decodes the bitstream (cheap next to voxelising) when the GLB's binary chunk holds
-// it; external buffers are checked by tinygltf's own loader.
-void preflightDraco(const uint8_t* data, size_t size, bool binary, const std::string& name) {
-  const std::string text = jsonText(data, size, binary, name);
-  Json j = Json::parse(text, nullptr, false);
-  if (j.is_discarded() || !j.is_object()) return;  // tinygltf reports the JSON error
-  // GLB binary chunk, if any.
+// The GLB's binary chunk (null when there is none, or for a .gltf).
+struct BinChunk {
   const uint8_t* bin = nullptr;
   size_t binSize = 0;
+};
+
+// Finds the binary chunk after a GLB's JSON chunk.
+BinChunk glbBinChunk(const uint8_t* data, size_t size, bool binary) {
+  BinChunk c;
   if (binary) {
     uint32_t jsonLen;
     std::memcpy(&jsonLen, data + 12, 4);
@@ -84,71 +82,102 @@ void preflightDraco(const uint8_t* data, size_t size, bool binary, const std::st
       std::memcpy(&len, data + at, 4);
       std::memcpy(&type, data + at + 4, 4);
       if (type == 0x004E4942u && at + 8 + size_t(len) <= size) {
-        bin = data + at + 8;
-        binSize = len;
+        c.bin = data + at + 8;
+        c.binSize = len;
       }
     }
   }
-  auto arr = [&](const char* key) -> const Json& {
-    static const Json empty = Json::array();
-    auto it = j.find(key);
-    return (it != j.end() && it->is_array()) ? *it : empty;
-  };
-  const Json& meshes = arr("meshes");
-  const Json& views = arr("bufferViews");
-  const Json& accessors = arr("accessors");
-  const Json& buffers = arr("buffers");
-  auto bad = [&](const std::string& what) { return invalidInput(name + ": " + what); };
-  auto index = [&](const Json& v, size_t n, const std::string& what) -> size_t {
+  return c;
+}
+
+// The top-level arrays of the glTF JSON the Draco checks read, and the binary chunk.
+struct DracoContext {
+  const Json& views;
+  const Json& accessors;
+  const Json& buffers;
+  BinChunk chunk;
+  const std::string& name;
+
+  Error bad(const std::string& what) const { return invalidInput(name + ": " + what); }
+  // v as an index below n; throws naming `what` otherwise.
+  size_t index(const Json& v, size_t n, const std::string& what) const {
     if (!v.is_number_integer() || v.get<int64_t>() < 0 || size_t(v.get<int64_t>()) >= n)
       throw bad(what + " is out of range");
     return size_t(v.get<int64_t>());
-  };
+  }
+};
+
+// Top-level array `key` of j, or an empty array.
+const Json& jsonArray(const Json& j, const char* key) {
+  static const Json empty = Json::array();
+  auto it = j.find(key);
+  return (it != j.end() && it->is_array()) ? *it : empty;
+}
+
+// Decodes a Draco primitive's bitstream in the GLB chunk and checks each attribute id against it.
+void decodeDracoPrimitive(const DracoContext& x, const Json& p, const Json& ext, const Json& view, size_t v,
+                          const std::string& where) {
+  const uint64_t off = view.value("byteOffset", uint64_t(0));
+  const uint64_t len = view.value("byteLength", uint64_t(0));
+  if (off + len > x.chunk.binSize) throw x.bad(where + ": bufferView " + std::to_string(v) + " overruns the binary chunk");
+  draco::DecoderBuffer db;
+  db.Init(reinterpret_cast<const char*>(x.chunk.bin + off), size_t(len));
+  draco::Decoder decoder;
+  auto result = decoder.DecodeMeshFromBuffer(&db);
+  if (!result.ok()) throw x.bad(where + ": Draco decoding failed (" + result.status().error_msg_string() + ")");
+  const auto& dmesh = result.value();
+  for (auto& [attr, id] : ext["attributes"].items()) {
+    if (!id.is_number_integer()) throw x.bad(where + ": attribute id of " + attr + " is not an integer");
+    auto it = p["attributes"].find(attr);
+    if (it == p["attributes"].end()) throw x.bad(where + ": Draco attribute " + attr + " is not a primitive attribute");
+    const draco::PointAttribute* pa = dmesh->GetAttributeByUniqueId(id.get<uint32_t>());
+    if (!pa) throw x.bad(where + ": Draco stream lacks attribute " + attr);
+    const Json& acc = x.accessors[size_t(it->get<int64_t>())];
+    if (!acc.is_object() || componentCount(acc.value("type", "")) != size_t(pa->num_components()))
+      throw x.bad(where + ": attribute " + attr + " component count differs from its accessor");
+  }
+}
+
+// Primitive pi of mesh mi, if Draco-compressed: its indices, then its bitstream when in the GLB chunk.
+void checkDracoPrimitive(const DracoContext& x, const Json& p, size_t mi, size_t pi) {
+  if (!p.is_object() || !p.contains("extensions") || !p["extensions"].is_object()) return;
+  auto ext = p["extensions"].find("KHR_draco_mesh_compression");
+  if (ext == p["extensions"].end()) return;
+  const std::string where =
+      "mesh " + std::to_string(mi) + " primitive " + std::to_string(pi) + " (Draco)";
+  if (!ext->is_object() || !ext->contains("bufferView") || !ext->contains("attributes") ||
+      !(*ext)["attributes"].is_object() || !p.contains("attributes") ||
+      !p["attributes"].is_object())
+    throw x.bad(where + ": malformed KHR_draco_mesh_compression");
+  const size_t v = x.index((*ext)["bufferView"], x.views.size(), where + " bufferView");
+  const Json& view = x.views[v];
+  if (!view.is_object() || !view.contains("buffer"))
+    throw x.bad(where + ": bufferView " + std::to_string(v) + " has no buffer");
+  const size_t b = x.index(view["buffer"], x.buffers.size(), where + " buffer");
+  if (p.contains("indices")) x.index(p["indices"], x.accessors.size(), where + " indices accessor");
+  for (auto& [attr, acc] : p["attributes"].items())
+    x.index(acc, x.accessors.size(), where + " accessor of " + attr);
+  // Decode when the bitstream is in the GLB chunk (buffer 0 without a uri).
+  const bool inBin = x.chunk.bin && b == 0 && !x.buffers[0].contains("uri");
+  if (!inBin) return;
+  decodeDracoPrimitive(x, p, *ext, view, v, where);
+}
+
+// For each Draco primitive: the extension's bufferView, the primitive's accessors, and every
+// attribute id named by the extension must exist, and the attribute's component count must match
+// its accessor. Decodes the bitstream (cheap next to voxelising) when the GLB's binary chunk holds
+// it; external buffers are checked by tinygltf's own loader.
+void preflightDraco(const uint8_t* data, size_t size, bool binary, const std::string& name) {
+  const std::string text = jsonText(data, size, binary, name);
+  Json j = Json::parse(text, nullptr, false);
+  if (j.is_discarded() || !j.is_object()) return;  // tinygltf reports the JSON error
+  const BinChunk chunk = glbBinChunk(data, size, binary);  // GLB binary chunk, if any
+  const Json& meshes = jsonArray(j, "meshes");
+  const DracoContext x{jsonArray(j, "bufferViews"), jsonArray(j, "accessors"), jsonArray(j, "buffers"), chunk, name};
   for (size_t mi = 0; mi < meshes.size(); ++mi) {
     const Json& prims = meshes[mi].value("primitives", Json::array());
     if (!prims.is_array()) continue;
-    for (size_t pi = 0; pi < prims.size(); ++pi) {
-      const Json& p = prims[pi];
-      if (!p.is_object() || !p.contains("extensions") || !p["extensions"].is_object()) continue;
-      auto ext = p["extensions"].find("KHR_draco_mesh_compression");
-      if (ext == p["extensions"].end()) continue;
-      const std::string where =
-          "mesh " + std::to_string(mi) + " primitive " + std::to_string(pi) + " (Draco)";
-      if (!ext->is_object() || !ext->contains("bufferView") || !ext->contains("attributes") ||
-          !(*ext)["attributes"].is_object() || !p.contains("attributes") ||
-          !p["attributes"].is_object())
-        throw bad(where + ": malformed KHR_draco_mesh_compression");
-      const size_t v = index((*ext)["bufferView"], views.size(), where + " bufferView");
-      const Json& view = views[v];
-      if (!view.is_object() || !view.contains("buffer"))
-        throw bad(where + ": bufferView " + std::to_string(v) + " has no buffer");
-      const size_t b = index(view["buffer"], buffers.size(), where + " buffer");
-      if (p.contains("indices")) index(p["indices"], accessors.size(), where + " indices accessor");
-      for (auto& [attr, acc] : p["attributes"].items())
-        index(acc, accessors.size(), where + " accessor of " + attr);
-      // Decode when the bitstream is in the GLB chunk (buffer 0 without a uri).
-      const bool inBin = bin && b == 0 && !buffers[0].contains("uri");
-      if (!inBin) continue;
-      const uint64_t off = view.value("byteOffset", uint64_t(0));
-      const uint64_t len = view.value("byteLength", uint64_t(0));
-      if (off + len > binSize) throw bad(where + ": bufferView " + std::to_string(v) + " overruns the binary chunk");
-      draco::DecoderBuffer db;
-      db.Init(reinterpret_cast<const char*>(bin + off), size_t(len));
-      draco::Decoder decoder;
-      auto result = decoder.DecodeMeshFromBuffer(&db);
-      if (!result.ok()) throw bad(where + ": Draco decoding failed (" + result.status().error_msg_string() + ")");
-      const auto& dmesh = result.value();
-      for (auto& [attr, id] : (*ext)["attributes"].items()) {
-        if (!id.is_number_integer()) throw bad(where + ": attribute id of " + attr + " is not an integer");
-        auto it = p["attributes"].find(attr);
-        if (it == p["attributes"].end()) throw bad(where + ": Draco attribute " + attr + " is not a primitive attribute");
-        const draco::PointAttribute* pa = dmesh->GetAttributeByUniqueId(id.get<uint32_t>());
-        if (!pa) throw bad(where + ": Draco stream lacks attribute " + attr);
-        const Json& acc = accessors[size_t(it->get<int64_t>())];
-        if (!acc.is_object() || componentCount(acc.value("type", "")) != size_t(pa->num_components()))
-          throw bad(where + ": attribute " + attr + " component count differs from its accessor");
-      }
-    }
+    for (size_t pi = 0; pi < prims.size(); ++pi) checkDracoPrimitive(x, prims[pi], mi, pi);
   }
 }
 

@@ -73,16 +73,41 @@ bool toDouble(std::string_view s, double& v) {
   return r.ec == std::errc() && r.ptr == s.data() + s.size();
 }
 
-}  // namespace
-
-Mesh loadOffFromMemory(const uint8_t* data, size_t size, const std::string& name) {
-  Lines lines(data, size);
+// The reader's state: the lines, the current line's tokens, and whether the colours are floats.
+struct OffReader {
+  Lines lines;
   std::vector<std::string_view> t;
-  auto fail = [&](const std::string& what) { return invalidInput(name + ": line " + std::to_string(lines.line()) + ": " + what); };
-  if (!lines.next(t)) throw invalidInput(name + ": empty OFF file");
+  const std::string& name;
+  // Colours are kept as read until the end: integers 0..255, or floats 0..1 where any colour value
+  // in the file has a '.' or an exponent (decided once per file: "1 0 0" beside "0.5 0.5 0.5" is red).
+  bool floatColors = false;
 
+  Error fail(const std::string& what) const {
+    return invalidInput(name + ": line " + std::to_string(lines.line()) + ": " + what);
+  }
+  // Reads r g b from token `from` on.
+  void readColor(size_t from, std::array<float, 3>& rgb) {
+    for (size_t k = 0; k < 3; ++k) {
+      double v = 0;
+      if (!toDouble(t[from + k], v) || !std::isfinite(v)) throw fail("colour value '" + std::string(t[from + k]) + "' is not a number");
+      floatColors |= t[from + k].find_first_of(".eE") != std::string_view::npos;
+      rgb[k] = float(std::clamp(v, 0.0, 255.0));
+    }
+  }
+};
+
+// What the first line (or two) declares: the vertex layout and the element counts.
+struct OffHeader {
+  bool color, normal;
+  long long nv, nf;
+};
+
+// The keyword [ST][C][N]OFF and the counts, checked against the file's size before anything is allocated.
+OffHeader readOffHeader(OffReader& r, size_t size) {
+  const std::string& name = r.name;
+  if (!r.lines.next(r.t)) throw invalidInput(name + ": empty OFF file");
   // The keyword: [ST][C][N][4][n]OFF.
-  std::string_view key = t[0];
+  std::string_view key = r.t[0];
   const bool st = key.substr(0, 2) == "ST";
   if (st) key.remove_prefix(2);
   const bool color = !key.empty() && key[0] == 'C';
@@ -92,80 +117,90 @@ Mesh loadOffFromMemory(const uint8_t* data, size_t size, const std::string& name
   if (key == "4OFF" || key == "nOFF" || key == "4nOFF")
     throw unsupported(name + ": 4-D and n-D OFF files are not supported");
   if (key != "OFF") throw invalidInput(name + ": not an OFF file (its first word is not OFF, COFF, NOFF, STOFF ...)");
-  std::vector<std::string_view> counts(t.begin() + 1, t.end());
+  std::vector<std::string_view> counts(r.t.begin() + 1, r.t.end());
   if (!counts.empty() && counts[0] == "BINARY") throw unsupported(name + ": binary OFF files are not supported");
-  if (counts.empty() && !lines.next(counts)) throw invalidInput(name + ": truncated OFF file (no vertex and face counts)");
+  if (counts.empty() && !r.lines.next(counts)) throw invalidInput(name + ": truncated OFF file (no vertex and face counts)");
   long long nv = -1, nf = -1, ne = 0;
   if (counts.size() < 2 || counts.size() > 3 || !toInt(counts[0], nv) || !toInt(counts[1], nf) ||
       (counts.size() == 3 && !toInt(counts[2], ne)) || nv < 0 || nf < 0)
-    throw fail("bad OFF counts (expected: vertices faces [edges], non-negative integers)");
+    throw r.fail("bad OFF counts (expected: vertices faces [edges], non-negative integers)");
   // Before anything is allocated: a vertex line holds at least "x y z\n" (6 bytes), a face line
   // "n\n" (2 bytes; a face of 3 corners at least "3 a b c\n", 8).
   if (double(nv) * 6 + double(nf) * 2 > double(size))
     throw invalidInput(name + ": the OFF header declares " + std::to_string(nv) + " vertices and " + std::to_string(nf) +
                        " faces, more than its " + std::to_string(size) + " bytes can hold (truncated or corrupt)");
+  return OffHeader{color, normal, nv, nf};
+}
 
-  const size_t colorAt = normal ? 6 : 3;  // where a vertex's colour starts
-  // Colours are kept as read until the end: integers 0..255, or floats 0..1 where any colour value
-  // in the file has a '.' or an exponent (decided once per file: "1 0 0" beside "0.5 0.5 0.5" is red).
-  bool floatColors = false;
-  auto readColor = [&](size_t from, std::array<float, 3>& rgb) {
-    for (size_t k = 0; k < 3; ++k) {
-      double v = 0;
-      if (!toDouble(t[from + k], v) || !std::isfinite(v)) throw fail("colour value '" + std::string(t[from + k]) + "' is not a number");
-      floatColors |= t[from + k].find_first_of(".eE") != std::string_view::npos;
-      rgb[k] = float(std::clamp(v, 0.0, 255.0));
-    }
-  };
-
-  Polygons poly;
-  std::vector<std::array<float, 3>> vertexColors, faceColors;  // as read (the scale is known at the end)
-  poly.points.reserve(size_t(nv));
-  if (color) vertexColors.reserve(size_t(nv));
-  for (long long v = 0; v < nv; ++v) {
-    if (!lines.next(t))
-      throw invalidInput(name + ": truncated OFF file (" + std::to_string(v) + " of " + std::to_string(nv) +
+// One vertex per line: x y z, then the normal and the colour if the keyword has them.
+void readOffVertices(OffReader& r, const OffHeader& h, Polygons& poly, std::vector<std::array<float, 3>>& vertexColors) {
+  const std::string& name = r.name;
+  const std::vector<std::string_view>& t = r.t;
+  const size_t colorAt = h.normal ? 6 : 3;  // where a vertex's colour starts
+  poly.points.reserve(size_t(h.nv));
+  if (h.color) vertexColors.reserve(size_t(h.nv));
+  for (long long v = 0; v < h.nv; ++v) {
+    if (!r.lines.next(r.t))
+      throw invalidInput(name + ": truncated OFF file (" + std::to_string(v) + " of " + std::to_string(h.nv) +
                          " vertices; one vertex per line)");
-    const size_t need = colorAt + (color ? 3 : 0);
+    const size_t need = colorAt + (h.color ? 3 : 0);
     if (t.size() < need)
-      throw fail("vertex " + std::to_string(v) + " (counting from 0) has " + std::to_string(t.size()) + " values, " +
-                 std::to_string(need) + " expected");
+      throw r.fail("vertex " + std::to_string(v) + " (counting from 0) has " + std::to_string(t.size()) + " values, " +
+                   std::to_string(need) + " expected");
     Vec3 p;
     for (size_t k = 0; k < 3; ++k) {
-      if (!toDouble(t[k], p[k])) throw fail("vertex " + std::to_string(v) + " (counting from 0) has a coordinate '" + std::string(t[k]) + "' that is not a number");
-      if (!std::isfinite(p[k])) throw fail("vertex " + std::to_string(v) + " (counting from 0) has a NaN or infinite coordinate");
+      if (!toDouble(t[k], p[k])) throw r.fail("vertex " + std::to_string(v) + " (counting from 0) has a coordinate '" + std::string(t[k]) + "' that is not a number");
+      if (!std::isfinite(p[k])) throw r.fail("vertex " + std::to_string(v) + " (counting from 0) has a NaN or infinite coordinate");
     }
     poly.points.push_back(p);
-    if (color) readColor(colorAt, vertexColors.emplace_back());
+    if (h.color) r.readColor(colorAt, vertexColors.emplace_back());
   }
+}
 
-  // Faces of 3 corners or more (a line of at least 8 bytes each); fewer give no triangle.
+// Faces of 3 corners or more (a line of at least 8 bytes each); fewer give no triangle. Nothing but
+// comments may follow the last.
+void readOffFaces(OffReader& r, const OffHeader& h, Polygons& poly, std::vector<std::array<float, 3>>& faceColors) {
+  const std::string& name = r.name;
+  const std::vector<std::string_view>& t = r.t;
+  const long long nv = h.nv, nf = h.nf;
   poly.faceStart.push_back(0);
   for (long long f = 0; f < nf; ++f) {
-    if (!lines.next(t))
+    if (!r.lines.next(r.t))
       throw invalidInput(name + ": truncated OFF file (" + std::to_string(f) + " of " + std::to_string(nf) +
                          " faces; one face per line)");
     const std::string face = "face " + std::to_string(f) + " (counting from 0) ";
     long long n = -1;
     if (!toInt(t[0], n) || n < 0 || uint64_t(n) + 1 > t.size())
-      throw fail(face + "is not a corner count followed by that many vertex indices");
+      throw r.fail(face + "is not a corner count followed by that many vertex indices");
     for (size_t k = 1; k <= size_t(n); ++k) {
       long long i = -1;
       if (!toInt(t[k], i) || i < 0 || i >= nv)
-        throw fail(face + "refers to vertex '" + std::string(t[k]) + "', but the file has " + std::to_string(nv) + " vertices");
+        throw r.fail(face + "refers to vertex '" + std::string(t[k]) + "', but the file has " + std::to_string(nv) + " vertices");
       if (n >= 3) poly.corners.push_back(uint32_t(i));
     }
     // after the indices: nothing, a colour-map index (ignored), or r g b [a]
     std::array<float, 3> rgb{};
     const bool hasColor = t.size() - 1 - size_t(n) >= 3;
-    if (hasColor) readColor(1 + size_t(n), rgb);
+    if (hasColor) r.readColor(1 + size_t(n), rgb);
     if (n < 3) continue;
     poly.faceStart.push_back(uint32_t(poly.corners.size()));
     faceColors.push_back(rgb);
     poly.faceHasRgb.push_back(hasColor);
   }
-  if (lines.next(t)) throw fail("data after the last of the " + std::to_string(nf) + " faces the header declares");
+  if (r.lines.next(r.t)) throw r.fail("data after the last of the " + std::to_string(nf) + " faces the header declares");
+}
 
+}  // namespace
+
+Mesh loadOffFromMemory(const uint8_t* data, size_t size, const std::string& name) {
+  OffReader r{Lines(data, size), {}, name};
+  const OffHeader h = readOffHeader(r, size);
+  Polygons poly;
+  std::vector<std::array<float, 3>> vertexColors, faceColors;  // as read (the scale is known at the end)
+  readOffVertices(r, h, poly, vertexColors);
+  readOffFaces(r, h, poly, faceColors);
+
+  const bool floatColors = r.floatColors;
   auto toSrgb8 = [&](const std::array<float, 3>& c) {
     std::array<uint8_t, 3> b;
     for (size_t ch = 0; ch < 3; ++ch)

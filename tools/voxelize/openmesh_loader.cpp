@@ -160,42 +160,15 @@ void checkStl(const std::vector<unsigned char>& b, const std::string& path) {
   if (!ended) throw invalidInput(path + ": truncated ASCII STL (no 'endsolid' after its last facet)");
 }
 
-}  // namespace
-
-Error nonFiniteTriangle(const std::string& name, size_t index) {
-  return invalidInput(name + ": triangle " + std::to_string(index) + " has a NaN or infinite vertex coordinate");
-}
-
-void requireFinite(const Mesh& mesh, const std::string& name) {
-  for (size_t i = 0; i < mesh.triangles.size(); ++i)
-    for (const Vec3& p : mesh.triangles[i].p)
-      for (double c : p)
-        if (!std::isfinite(c)) throw nonFiniteTriangle(name, i);
-}
-
-Mesh loadWithOpenMesh(const std::string& path) {
-  const std::string ext = extensionOf(path);
-  // Never OpenMesh's PLY reader (it hangs on truncation) nor its OFF reader (off_loader.cpp).
-  if (ext == "ply") return loadPly(path);
-  if (ext == "off") return loadOff(path);
-  requireReadableFile(path);
-  {
-    std::ifstream probe(path, std::ios::binary | std::ios::ate);
-    if (probe.tellg() == 0) throw invalidInput(path + ": empty file");
-  }
-  ObjMaterials objMat;
-  if (ext == "stl") {
-    checkStl(readFile(path), path);
-  } else if (ext == "obj") {
-    objMat = scanObjMaterials(path);
-  }
+// Reads the file with OpenMesh (its logs off), asking for vertex and face colours; refuses what it cannot parse.
+OmMesh readWithOpenMesh(const std::string& path, OpenMesh::IO::Options& opt) {
   omerr().disable();
   omlog().disable();
   omout().disable();
   OmMesh om;
   om.request_vertex_colors();
   om.request_face_colors();
-  OpenMesh::IO::Options opt = OpenMesh::IO::Options::VertexColor | OpenMesh::IO::Options::FaceColor;
+  opt = OpenMesh::IO::Options::VertexColor | OpenMesh::IO::Options::FaceColor;
   bool read = false;
   try {
     read = OpenMesh::IO::read_mesh(om, path, opt);
@@ -203,8 +176,13 @@ Mesh loadWithOpenMesh(const std::string& path) {
     throw invalidInput(path + ": OpenMesh ran out of memory reading the file (corrupt?)");
   }
   if (!read) throw invalidInput(path + ": OpenMesh could not parse the file (malformed or truncated)");
+  return om;
+}
 
-  Mesh out;
+// The mesh's materials: the OBJ's, by order, when its material runs match the faces OpenMesh read
+// (returns true), else one "default".
+bool addMaterials(const std::string& path, const std::string& ext, const ObjMaterials& objMat, const OmMesh& om,
+                  Mesh& out) {
   bool byOrder = false;
   if (ext == "obj") {
     byOrder = objMat.triangleMaterial.size() == om.n_faces();
@@ -224,6 +202,12 @@ Mesh loadWithOpenMesh(const std::string& path) {
     m.hasColor = false;
     out.materials.push_back(m);
   }
+  return byOrder;
+}
+
+// OpenMesh's triangles into out, with their colours and materials.
+void addTriangles(const std::string& ext, const OmMesh& om, const OpenMesh::IO::Options& opt,
+                  const ObjMaterials& objMat, bool byOrder, Mesh& out) {
   // STL carries no colour (Canopy ignores the non-standard colour uses of its attribute bytes),
   // but OpenMesh's STL reader reports the colours it was asked for: they are uninitialised.
   const bool faceColor = ext != "stl" && opt.face_has_color();
@@ -256,6 +240,43 @@ Mesh loadWithOpenMesh(const std::string& path) {
     out.triangles.push_back(t);
     ++fi;
   }
+}
+
+}  // namespace
+
+Error nonFiniteTriangle(const std::string& name, size_t index) {
+  return invalidInput(name + ": triangle " + std::to_string(index) + " has a NaN or infinite vertex coordinate");
+}
+
+void requireFinite(const Mesh& mesh, const std::string& name) {
+  for (size_t i = 0; i < mesh.triangles.size(); ++i)
+    for (const Vec3& p : mesh.triangles[i].p)
+      for (double c : p)
+        if (!std::isfinite(c)) throw nonFiniteTriangle(name, i);
+}
+
+Mesh loadWithOpenMesh(const std::string& path) {
+  const std::string ext = extensionOf(path);
+  // Never OpenMesh's PLY reader (it hangs on truncation) nor its OFF reader (off_loader.cpp).
+  if (ext == "ply") return loadPly(path);
+  if (ext == "off") return loadOff(path);
+  requireReadableFile(path);
+  {
+    std::ifstream probe(path, std::ios::binary | std::ios::ate);
+    if (probe.tellg() == 0) throw invalidInput(path + ": empty file");
+  }
+  ObjMaterials objMat;
+  if (ext == "stl") {
+    checkStl(readFile(path), path);
+  } else if (ext == "obj") {
+    objMat = scanObjMaterials(path);
+  }
+  OpenMesh::IO::Options opt;
+  const OmMesh om = readWithOpenMesh(path, opt);
+
+  Mesh out;
+  const bool byOrder = addMaterials(path, ext, objMat, om, out);
+  addTriangles(ext, om, opt, objMat, byOrder, out);
   return out;
 }
 

@@ -243,51 +243,59 @@ uint8_t toByte(double v, Type t) {
   return v >= 255 ? 255 : uint8_t(std::lround(v));
 }
 
-}  // namespace
-
-Mesh loadPlyFromMemory(const uint8_t* data, size_t size, const std::string& name) {
-  if (size == 0) throw invalidInput(name + ": empty file");
-  auto fail = [&](const std::string& what) { return invalidInput(name + ": " + what); };
-  const Header h = parseHeader(data, size, name);
-
-  // The elements Canopy needs.
+// The elements and properties Canopy reads: vertex positions, face corners, and colours if any.
+struct PlyLayout {
   const Element* vertex = nullptr;
   const Element* face = nullptr;
+  int xyz[3];
+  int indices;
+  int vRGB[3], fRGB[3];
+  bool vertexColor, faceColor;
+};
+
+// The properties red, green and blue (or diffuse_*) of element e, all scalar; false if one is missing.
+bool colourOf(const Element& e, int out[3]) {
+  const char* n[3] = {"red", "green", "blue"};
+  const char* d[3] = {"diffuse_red", "diffuse_green", "diffuse_blue"};
+  bool all = true;
+  for (int c = 0; c < 3; ++c) {
+    out[c] = e.find(n[c]);
+    if (out[c] < 0) out[c] = e.find(d[c]);
+    all &= out[c] >= 0 && !e.props[size_t(out[c])].list;
+  }
+  return all;
+}
+
+// Finds the vertex and face elements and the properties Canopy needs; refuses a file without them.
+PlyLayout plyLayout(const Header& h, const std::string& name) {
+  auto fail = [&](const std::string& what) { return invalidInput(name + ": " + what); };
+  PlyLayout y;
   for (const Element& e : h.elements) {
     if (e.count > 0 && e.props.empty()) throw fail("PLY element '" + e.name + "' has no properties");
-    if (e.name == "vertex" && !vertex) vertex = &e;
-    if (e.name == "face" && !face) face = &e;
+    if (e.name == "vertex" && !y.vertex) y.vertex = &e;
+    if (e.name == "face" && !y.face) y.face = &e;
   }
-  if (!vertex) throw fail("PLY file has no vertex element");
-  if (!face) throw fail("PLY file has no face element");
-  int xyz[3];
+  if (!y.vertex) throw fail("PLY file has no vertex element");
+  if (!y.face) throw fail("PLY file has no face element");
   for (int k = 0; k < 3; ++k) {
     const char* n[3] = {"x", "y", "z"};
-    xyz[k] = vertex->find(n[k]);
-    if (xyz[k] < 0 || vertex->props[size_t(xyz[k])].list)
+    y.xyz[k] = y.vertex->find(n[k]);
+    if (y.xyz[k] < 0 || y.vertex->props[size_t(y.xyz[k])].list)
       throw fail(std::string("PLY vertex element has no scalar property ") + n[k]);
   }
-  int indices = face->find("vertex_indices");
-  if (indices < 0) indices = face->find("vertex_index");
-  if (indices < 0 || !face->props[size_t(indices)].list)
+  y.indices = y.face->find("vertex_indices");
+  if (y.indices < 0) y.indices = y.face->find("vertex_index");
+  if (y.indices < 0 || !y.face->props[size_t(y.indices)].list)
     throw fail("PLY face element has no list property vertex_indices");
-  if (!isInteger(face->props[size_t(indices)].type)) throw fail("PLY vertex_indices must have an integer type");
-  auto colourOf = [](const Element& e, int out[3]) {
-    const char* n[3] = {"red", "green", "blue"};
-    const char* d[3] = {"diffuse_red", "diffuse_green", "diffuse_blue"};
-    bool all = true;
-    for (int c = 0; c < 3; ++c) {
-      out[c] = e.find(n[c]);
-      if (out[c] < 0) out[c] = e.find(d[c]);
-      all &= out[c] >= 0 && !e.props[size_t(out[c])].list;
-    }
-    return all;
-  };
-  int vRGB[3], fRGB[3];
-  const bool vertexColor = colourOf(*vertex, vRGB);
-  const bool faceColor = colourOf(*face, fRGB);
+  if (!isInteger(y.face->props[size_t(y.indices)].type)) throw fail("PLY vertex_indices must have an integer type");
+  y.vertexColor = colourOf(*y.vertex, y.vRGB);
+  y.faceColor = colourOf(*y.face, y.fRGB);
+  return y;
+}
 
-  // The body must hold at least the fixed part of every element before anything is allocated.
+// The body must hold at least the fixed part of every element before anything is allocated.
+void checkBodySize(const Header& h, size_t size, const std::string& name) {
+  auto fail = [&](const std::string& what) { return invalidInput(name + ": " + what); };
   const uint64_t body = size - h.bodyOffset;
   uint64_t need = 0;
   for (const Element& e : h.elements) {
@@ -300,7 +308,13 @@ Mesh loadPlyFromMemory(const uint8_t* data, size_t size, const std::string& name
   if (need > body)
     throw fail("truncated PLY body (" + std::to_string(body) + " bytes; the header's elements need at least " +
                std::to_string(need) + ")");
+}
 
+// Reads every element of the body, keeping the vertices, face corners and colours.
+Polygons readPlyBody(const uint8_t* data, size_t size, const Header& h, const PlyLayout& y, const std::string& name) {
+  auto fail = [&](const std::string& what) { return invalidInput(name + ": " + what); };
+  const Element* vertex = y.vertex;
+  const Element* face = y.face;
   Polygons poly;
   std::vector<Vec3>& points = poly.points;
   std::vector<std::array<uint8_t, 3>>& vertexRgb = poly.vertexRgb;
@@ -313,7 +327,7 @@ Mesh loadPlyFromMemory(const uint8_t* data, size_t size, const std::string& name
     const bool isVertex = &e == vertex, isFace = &e == face;
     if (isVertex) {
       points.reserve(size_t(e.count));
-      if (vertexColor) vertexRgb.reserve(size_t(e.count));
+      if (y.vertexColor) vertexRgb.reserve(size_t(e.count));
     }
     if (isFace) faceStart.reserve(size_t(e.count));
     for (uint64_t item = 0; item < e.count; ++item) {
@@ -327,7 +341,7 @@ Mesh loadPlyFromMemory(const uint8_t* data, size_t size, const std::string& name
         }
         const double n = in.read(p.countType);
         if (n < 0) throw fail("PLY element '" + e.name + "' " + std::to_string(item) + " has a negative list length");
-        const bool keep = isFace && int(pi) == indices;
+        const bool keep = isFace && int(pi) == y.indices;
         if (keep) faceStart.push_back(uint32_t(corners.size()));
         for (uint64_t k = 0; k < uint64_t(n); ++k) {
           const double v = in.read(p.type);
@@ -339,21 +353,31 @@ Mesh loadPlyFromMemory(const uint8_t* data, size_t size, const std::string& name
         }
       }
       if (isVertex) {
-        points.push_back({scalar[size_t(xyz[0])], scalar[size_t(xyz[1])], scalar[size_t(xyz[2])]});
-        if (vertexColor)
-          vertexRgb.push_back({toByte(scalar[size_t(vRGB[0])], vertex->props[size_t(vRGB[0])].type),
-                               toByte(scalar[size_t(vRGB[1])], vertex->props[size_t(vRGB[1])].type),
-                               toByte(scalar[size_t(vRGB[2])], vertex->props[size_t(vRGB[2])].type)});
+        points.push_back({scalar[size_t(y.xyz[0])], scalar[size_t(y.xyz[1])], scalar[size_t(y.xyz[2])]});
+        if (y.vertexColor)
+          vertexRgb.push_back({toByte(scalar[size_t(y.vRGB[0])], vertex->props[size_t(y.vRGB[0])].type),
+                               toByte(scalar[size_t(y.vRGB[1])], vertex->props[size_t(y.vRGB[1])].type),
+                               toByte(scalar[size_t(y.vRGB[2])], vertex->props[size_t(y.vRGB[2])].type)});
       }
-      if (isFace && faceColor)
-        faceRgb.push_back({toByte(scalar[size_t(fRGB[0])], face->props[size_t(fRGB[0])].type),
-                           toByte(scalar[size_t(fRGB[1])], face->props[size_t(fRGB[1])].type),
-                           toByte(scalar[size_t(fRGB[2])], face->props[size_t(fRGB[2])].type)});
+      if (isFace && y.faceColor)
+        faceRgb.push_back({toByte(scalar[size_t(y.fRGB[0])], face->props[size_t(y.fRGB[0])].type),
+                           toByte(scalar[size_t(y.fRGB[1])], face->props[size_t(y.fRGB[1])].type),
+                           toByte(scalar[size_t(y.fRGB[2])], face->props[size_t(y.fRGB[2])].type)});
     }
   }
   in.requireEnd();
   faceStart.push_back(uint32_t(corners.size()));
+  return poly;
+}
 
+}  // namespace
+
+Mesh loadPlyFromMemory(const uint8_t* data, size_t size, const std::string& name) {
+  if (size == 0) throw invalidInput(name + ": empty file");
+  const Header h = parseHeader(data, size, name);
+  const PlyLayout layout = plyLayout(h, name);
+  checkBodySize(h, size, name);
+  Polygons poly = readPlyBody(data, size, h, layout, name);
   return fanPolygons(poly);
 }
 

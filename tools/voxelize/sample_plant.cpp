@@ -136,9 +136,11 @@ std::vector<uint8_t> makeGlb(const std::string& json, const std::vector<uint8_t>
   return out;
 }
 
-std::vector<uint8_t> samplePlantGlb(const SamplePlantOptions& o) {
+namespace {
+
+// The plant's geometry: a trunk, o.branches branches with their leaves, and a crown tuft.
+void growPlant(const SamplePlantOptions& o, Primitive& bark, Primitive& leaves) {
   Rng rng{o.seed ? o.seed : 1};
-  Primitive bark, leaves;
   const double trunkHeight = 2.0;
   cylinder(bark, {0, 0, 0}, {0, trunkHeight, 0}, 0.12, 0.05, 12, 6);
   const double golden = M_PI * (3 - std::sqrt(5.0));
@@ -165,17 +167,22 @@ std::vector<uint8_t> samplePlantGlb(const SamplePlantOptions& o) {
     const V3 dir = normalize({std::cos(yaw), rng.range(0.3, 1.2), std::sin(yaw)});
     leaf(leaves, {0, trunkHeight, 0}, dir, {0, 1, 0}, rng.range(0.14, 0.2), rng.range(0.08, 0.11));
   }
+}
 
-  // Binary chunk: bark positions, bark indices, leaf positions, leaf uvs, leaf indices, PNG.
+// The binary chunk under construction, with its buffer views and accessors.
+struct GlbBuffers {
   std::vector<uint8_t> bin;
   nlohmann::json views = nlohmann::json::array(), accessors = nlohmann::json::array();
-  auto addView = [&](const void* data, size_t bytes) {
+
+  // Appends bytes as a buffer view (4-byte aligned); returns its index.
+  int addView(const void* data, size_t bytes) {
     pad4(bin, 0);
     views.push_back({{"buffer", 0}, {"byteOffset", bin.size()}, {"byteLength", bytes}});
     bin.insert(bin.end(), static_cast<const uint8_t*>(data), static_cast<const uint8_t*>(data) + bytes);
     return int(views.size() - 1);
-  };
-  auto addPositions = [&](const std::vector<float>& p) {
+  }
+  // A VEC3 float accessor with its bounds; returns its index.
+  int addPositions(const std::vector<float>& p) {
     std::array<float, 3> lo{1e30f, 1e30f, 1e30f}, hi{-1e30f, -1e30f, -1e30f};
     for (size_t i = 0; i < p.size(); ++i) {
       lo[i % 3] = std::min(lo[i % 3], p[i]);
@@ -185,22 +192,34 @@ std::vector<uint8_t> samplePlantGlb(const SamplePlantOptions& o) {
     accessors.push_back({{"bufferView", v}, {"componentType", 5126}, {"count", p.size() / 3},
                          {"type", "VEC3"}, {"min", lo}, {"max", hi}});
     return int(accessors.size() - 1);
-  };
-  auto addFloats = [&](const std::vector<float>& p, int comps, const char* type) {
+  }
+  // A float accessor of `comps` components per element; returns its index.
+  int addFloats(const std::vector<float>& p, int comps, const char* type) {
     const int v = addView(p.data(), p.size() * 4);
     accessors.push_back({{"bufferView", v}, {"componentType", 5126}, {"count", p.size() / size_t(comps)}, {"type", type}});
     return int(accessors.size() - 1);
-  };
-  auto addIndices = [&](const std::vector<uint32_t>& idx) {
+  }
+  // A uint32 index accessor; returns its index.
+  int addIndices(const std::vector<uint32_t>& idx) {
     const int v = addView(idx.data(), idx.size() * 4);
     accessors.push_back({{"bufferView", v}, {"componentType", 5125}, {"count", idx.size()}, {"type", "SCALAR"}});
     return int(accessors.size() - 1);
-  };
-  const int barkPos = addPositions(bark.pos), barkIdx = addIndices(bark.idx);
-  const int leafPos = addPositions(leaves.pos), leafUv = addFloats(leaves.uv, 2, "VEC2");
-  const int leafIdx = addIndices(leaves.idx);
+  }
+};
+
+}  // namespace
+
+std::vector<uint8_t> samplePlantGlb(const SamplePlantOptions& o) {
+  Primitive bark, leaves;
+  growPlant(o, bark, leaves);
+
+  // Binary chunk: bark positions, bark indices, leaf positions, leaf uvs, leaf indices, PNG.
+  GlbBuffers buf;
+  const int barkPos = buf.addPositions(bark.pos), barkIdx = buf.addIndices(bark.idx);
+  const int leafPos = buf.addPositions(leaves.pos), leafUv = buf.addFloats(leaves.uv, 2, "VEC2");
+  const int leafIdx = buf.addIndices(leaves.idx);
   const std::vector<uint8_t> png = encodePng(64, 64, leafTexture(64));
-  const int pngView = addView(png.data(), png.size());
+  const int pngView = buf.addView(png.data(), png.size());
 
   nlohmann::json doc = {
       {"asset", {{"version", "2.0"}, {"generator", "canopy-voxelize sample plant"}}},
@@ -218,12 +237,12 @@ std::vector<uint8_t> samplePlantGlb(const SamplePlantOptions& o) {
       {"textures", {{{"source", 0}, {"sampler", 0}}}},
       {"samplers", {{{"magFilter", 9729}, {"minFilter", 9729}, {"wrapS", 33071}, {"wrapT", 33071}}}},
       {"images", {{{"name", "leaf"}, {"mimeType", "image/png"}, {"bufferView", pngView}}}},
-      {"bufferViews", views},
-      {"accessors", accessors},
+      {"bufferViews", buf.views},
+      {"accessors", buf.accessors},
   };
-  pad4(bin, 0);
-  doc["buffers"] = {{{"byteLength", bin.size()}}};
-  return makeGlb(doc.dump(), bin);
+  pad4(buf.bin, 0);
+  doc["buffers"] = {{{"byteLength", buf.bin.size()}}};
+  return makeGlb(doc.dump(), buf.bin);
 }
 
 void writeSamplePlant(const std::string& path, const SamplePlantOptions& o) {
