@@ -189,13 +189,36 @@ const CanopySection* CanopyFile::findSection(CanopySectionKind kind) const {
   return nullptr;
 }
 
-void CanopyFile::parseResident(uint64_t fileBytes) {
-  const std::string& P = path_;
-  // --- header ---------------------------------------------------------------------------------
-  if (fileBytes < sizeof(CanopyFileHeader))
-    bad(P, "truncated: " + u64s(fileBytes) + " bytes, smaller than the 128-byte header");
-  readAt(0, &header_, sizeof header_);
-  const CanopyFileHeader& h = header_;
+namespace {
+
+// What the stages of CanopyFile::parseResident check and fill: the file's members, by reference,
+// and what the earlier stages derive.
+struct ResidentParse {
+  const CanopyFile& file;  // findSection
+  const std::string& P;
+  const CanopyFileHeader& h;
+  std::vector<unsigned char>& resident;
+  std::vector<CanopySection>& sections;
+  std::vector<CanopyModel>& models;
+  std::vector<CanopyInstance>& instances;
+  std::vector<CanopyNode>& tiles;
+  std::vector<CanopyPageEntry>& pages;
+  bool& hasSceneLight;
+  CanopySceneLight& sceneLight;
+  uint32_t& sceneLightBases;
+  std::vector<float>& sceneLightValues;
+  std::string& metadata;
+  std::vector<uint32_t>& haarIndex;
+  std::vector<uint32_t>& sparseIndex;
+  bool knownMinor = false;  // every section and page kind of the file is known (checkHeader)
+  uint64_t tableEnd = 0;    // the end of the section table (checkHeader)
+  uint64_t tileTotal = 0;   // NodeTiles' item count (copyTables)
+};
+
+// The header read into r.h: magic, version, checksum, sizes, page and item geometry, section count.
+void checkHeader(ResidentParse& r, uint64_t fileBytes) {
+  const std::string& P = r.P;
+  const CanopyFileHeader& h = r.h;
   if (std::memcmp(h.magic, kCanopyMagic, 8) != 0) bad(P, "not a .canopy file (bad magic)");
   if (h.major > kCanopyMajor)
     throw unsupported(P + ": format version " + std::to_string(h.major) + "." + std::to_string(h.minor) +
@@ -204,7 +227,7 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
   if (h.major < 1) bad(P, "invalid format version " + std::to_string(h.major) + "." + std::to_string(h.minor));
   // Everything in a file of an older major, or of this major up to this minor, is known to this
   // reader; a newer minor may add section and page kinds that are skipped.
-  const bool knownMinor = h.major == 1 ? h.minor <= kCanopyMinor1 : h.minor <= kCanopyMinor;
+  r.knownMinor = h.major == 1 ? h.minor <= kCanopyMinor1 : h.minor <= kCanopyMinor;
   if (crc32(0, &h, offsetof(CanopyFileHeader, headerCrc)) != h.headerCrc) bad(P, "header checksum mismatch");
   if (h.headerBytes != sizeof(CanopyFileHeader)) bad(P, "header size " + u64s(h.headerBytes) + " != 128");
   if (h.fileBytes != fileBytes)
@@ -223,72 +246,90 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
   if ((fileBytes - h.pagesOffset) / h.pageBytes != h.pageCount || (fileBytes - h.pagesOffset) % h.pageBytes != 0)
     bad(P, "page count " + u64s(h.pageCount) + " does not match the file size");
   if (h.residentBytes > (uint64_t(1) << 34)) bad(P, "resident part of " + u64s(h.residentBytes) + " bytes is absurd");
-  const uint64_t tableEnd = sizeof(CanopyFileHeader) + uint64_t(h.sectionCount) * sizeof(CanopySection);
-  if (h.sectionCount == 0 || h.sectionCount > 64 || tableEnd > h.residentBytes)
+  r.tableEnd = sizeof(CanopyFileHeader) + uint64_t(h.sectionCount) * sizeof(CanopySection);
+  if (h.sectionCount == 0 || h.sectionCount > 64 || r.tableEnd > h.residentBytes)
     bad(P, "section count " + u64s(h.sectionCount) + " invalid");
+}
 
-  // --- resident bytes and section table -------------------------------------------------------
-  resident_.resize(size_t(h.residentBytes));
-  readAt(0, resident_.data(), resident_.size());
-  if (crc32(0, resident_.data() + sizeof(CanopyFileHeader), size_t(tableEnd - sizeof(CanopyFileHeader))) != h.sectionTableCrc)
+// The section table: its checksum, then each section inside the resident part, sized, checksummed, once.
+void checkSectionTable(ResidentParse& r) {
+  const std::string& P = r.P;
+  const CanopyFileHeader& h = r.h;
+  if (crc32(0, r.resident.data() + sizeof(CanopyFileHeader), size_t(r.tableEnd - sizeof(CanopyFileHeader))) != h.sectionTableCrc)
     bad(P, "section table checksum mismatch");
-  sections_ = copyArray<CanopySection>(resident_, sizeof(CanopyFileHeader), h.sectionCount);
-  for (size_t i = 0; i < sections_.size(); ++i) {
-    const CanopySection& s = sections_[i];
+  r.sections = copyArray<CanopySection>(r.resident, sizeof(CanopyFileHeader), h.sectionCount);
+  for (size_t i = 0; i < r.sections.size(); ++i) {
+    const CanopySection& s = r.sections[i];
     const std::string name = std::string("section ") + sectionName(s.kind);
-    if (s.offset % kCanopySectionAlign != 0 || s.offset < tableEnd || s.offset > h.residentBytes ||
+    if (s.offset % kCanopySectionAlign != 0 || s.offset < r.tableEnd || s.offset > h.residentBytes ||
         s.bytes > h.residentBytes - s.offset)
       bad(P, name + " lies outside the resident part");
     if (s.itemBytes != 0 && uint64_t(s.itemBytes) * s.itemCount != s.bytes)
       bad(P, name + " size does not match its item count");
-    if (crc32(0, resident_.data() + s.offset, size_t(s.bytes)) != s.crc) bad(P, name + " checksum mismatch");
+    if (crc32(0, r.resident.data() + s.offset, size_t(s.bytes)) != s.crc) bad(P, name + " checksum mismatch");
     for (size_t j = 0; j < i; ++j)
-      if (sections_[j].kind == s.kind) bad(P, "duplicate " + name);
+      if (r.sections[j].kind == s.kind) bad(P, "duplicate " + name);
   }
-  // Bytes of the resident part outside the header, the table and the sections must be zero (no CRC
-  // covers them, so anything else there is corruption).
-  {
-    std::vector<std::pair<uint64_t, uint64_t>> used{{0, tableEnd}};
-    for (const CanopySection& s : sections_) used.emplace_back(s.offset, s.offset + s.bytes);
-    std::sort(used.begin(), used.end());
-    uint64_t at = 0;
-    for (const auto& [b, e] : used) {
-      if (b < at) bad(P, "sections overlap");
-      for (uint64_t i = at; i < b; ++i)
-        if (resident_[size_t(i)] != 0) bad(P, "non-zero padding at offset " + u64s(i));
-      at = e;
-    }
-    for (uint64_t i = at; i < resident_.size(); ++i)
-      if (resident_[size_t(i)] != 0) bad(P, "non-zero padding at offset " + u64s(i));
+}
+
+// Bytes of the resident part outside the header, the table and the sections must be zero (no CRC
+// covers them, so anything else there is corruption).
+void checkPadding(const ResidentParse& r) {
+  const std::string& P = r.P;
+  std::vector<std::pair<uint64_t, uint64_t>> used{{0, r.tableEnd}};
+  for (const CanopySection& s : r.sections) used.emplace_back(s.offset, s.offset + s.bytes);
+  std::sort(used.begin(), used.end());
+  uint64_t at = 0;
+  for (const auto& [b, e] : used) {
+    if (b < at) bad(P, "sections overlap");
+    for (uint64_t i = at; i < b; ++i)
+      if (r.resident[size_t(i)] != 0) bad(P, "non-zero padding at offset " + u64s(i));
+    at = e;
   }
-  auto require = [&](CanopySectionKind k, uint32_t itemBytes) -> const CanopySection& {
-    const CanopySection* s = findSection(k);
-    if (!s) bad(P, std::string("missing section ") + sectionName(uint32_t(k)));
-    if (s->itemBytes != itemBytes) bad(P, std::string("section ") + sectionName(uint32_t(k)) + " has the wrong item size");
-    return *s;
-  };
-  const CanopySection& sm = require(CanopySectionKind::Models, sizeof(CanopyModel));
-  const CanopySection& si = require(CanopySectionKind::Instances, sizeof(CanopyInstance));
-  const CanopySection& st = require(CanopySectionKind::NodeTiles, sizeof(CanopyNode) * 8);
-  const CanopySection& sp = require(CanopySectionKind::PageTable, sizeof(CanopyPageEntry));
+  for (uint64_t i = at; i < r.resident.size(); ++i)
+    if (r.resident[size_t(i)] != 0) bad(P, "non-zero padding at offset " + u64s(i));
+}
+
+// A section every file has, with its item size.
+const CanopySection& requireSection(const ResidentParse& r, CanopySectionKind k, uint32_t itemBytes) {
+  const CanopySection* s = r.file.findSection(k);
+  if (!s) bad(r.P, std::string("missing section ") + sectionName(uint32_t(k)));
+  if (s->itemBytes != itemBytes) bad(r.P, std::string("section ") + sectionName(uint32_t(k)) + " has the wrong item size");
+  return *s;
+}
+
+// The four required sections, their counts against the header, copied into the tables.
+void copyTables(ResidentParse& r) {
+  const std::string& P = r.P;
+  const CanopyFileHeader& h = r.h;
+  const CanopySection& sm = requireSection(r, CanopySectionKind::Models, sizeof(CanopyModel));
+  const CanopySection& si = requireSection(r, CanopySectionKind::Instances, sizeof(CanopyInstance));
+  const CanopySection& st = requireSection(r, CanopySectionKind::NodeTiles, sizeof(CanopyNode) * 8);
+  const CanopySection& sp = requireSection(r, CanopySectionKind::PageTable, sizeof(CanopyPageEntry));
   if (sm.itemCount != h.modelCount) bad(P, "model count differs between header and Models section");
   if (si.itemCount != h.instanceCount) bad(P, "instance count differs between header and Instances section");
   if (sp.itemCount != h.pageCount) bad(P, "page count differs between header and PageTable section");
-  models_ = copyArray<CanopyModel>(resident_, sm.offset, sm.itemCount);
-  instances_ = copyArray<CanopyInstance>(resident_, si.offset, si.itemCount);
-  tiles_ = copyArray<CanopyNode>(resident_, st.offset, st.itemCount * 8);
-  pages_ = copyArray<CanopyPageEntry>(resident_, sp.offset, sp.itemCount);
+  r.models = copyArray<CanopyModel>(r.resident, sm.offset, sm.itemCount);
+  r.instances = copyArray<CanopyInstance>(r.resident, si.offset, si.itemCount);
+  r.tiles = copyArray<CanopyNode>(r.resident, st.offset, st.itemCount * 8);
+  r.pages = copyArray<CanopyPageEntry>(r.resident, sp.offset, sp.itemCount);
+  r.tileTotal = st.itemCount;
+}
 
-  const CanopySection* sun = findSection(CanopySectionKind::SceneSunLight);
-  if (const CanopySection* sl = findSection(CanopySectionKind::SceneLight)) {
+// The scene light (SceneLight, 1.2's SceneSunLight): lattice, sizes, values non-negative and finite.
+void readSceneLight(ResidentParse& r) {
+  const std::string& P = r.P;
+  const CanopyFileHeader& h = r.h;
+  const CanopySection* sun = r.file.findSection(CanopySectionKind::SceneSunLight);
+  if (const CanopySection* sl = r.file.findSection(CanopySectionKind::SceneLight)) {
     if (sl->bytes < sizeof(CanopySceneLight)) bad(P, "SceneLight section too small");
-    std::memcpy(&sceneLight_, resident_.data() + sl->offset, sizeof sceneLight_);
-    for (double v : sceneLight_.indexToWorld)
+    std::memcpy(&r.sceneLight, r.resident.data() + sl->offset, sizeof r.sceneLight);
+    for (double v : r.sceneLight.indexToWorld)
       if (!std::isfinite(v)) bad(P, "SceneLight has a non-finite transform");
     uint64_t n = 1;
     for (int a = 0; a < 3; ++a) {
-      if (sceneLight_.dim[a] <= 0 || sceneLight_.dim[a] > 65536) bad(P, "SceneLight dimensions invalid");
-      n *= uint64_t(sceneLight_.dim[a]);
+      if (r.sceneLight.dim[a] <= 0 || r.sceneLight.dim[a] > 65536) bad(P, "SceneLight dimensions invalid");
+      n *= uint64_t(r.sceneLight.dim[a]);
     }
     if (sl->bytes != sizeof(CanopySceneLight) + n * sizeof(float)) bad(P, "SceneLight size does not match its dimensions");
     // 1.2: the sun bases B01..B18 of the same lattice, one item each.
@@ -298,175 +339,210 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
         bad(P, "SceneSunLight holds " + u64s(sun->itemCount) + " bases of " + u64s(sun->itemBytes) + " bytes, not " +
                    u64s(kCanopySceneSunBases) + " of " + u64s(n * sizeof(float)) + " (SceneLight's lattice)");
     }
-    sceneLightBases_ = sun ? 1 + kCanopySceneSunBases : 1;
-    sceneLightValues_.resize(size_t(n) * sceneLightBases_);
-    std::memcpy(sceneLightValues_.data(), resident_.data() + sl->offset + sizeof(CanopySceneLight), size_t(n) * sizeof(float));
-    if (sun) std::memcpy(sceneLightValues_.data() + n, resident_.data() + sun->offset, size_t(n) * kCanopySceneSunBases * sizeof(float));
-    for (size_t i = 0; i < sceneLightValues_.size(); ++i)
-      if (!(sceneLightValues_[i] >= 0.0f) || sceneLightValues_[i] > 3.0e38f)
+    r.sceneLightBases = sun ? 1 + kCanopySceneSunBases : 1;
+    r.sceneLightValues.resize(size_t(n) * r.sceneLightBases);
+    std::memcpy(r.sceneLightValues.data(), r.resident.data() + sl->offset + sizeof(CanopySceneLight), size_t(n) * sizeof(float));
+    if (sun) std::memcpy(r.sceneLightValues.data() + n, r.resident.data() + sun->offset, size_t(n) * kCanopySceneSunBases * sizeof(float));
+    for (size_t i = 0; i < r.sceneLightValues.size(); ++i)
+      if (!(r.sceneLightValues[i] >= 0.0f) || r.sceneLightValues[i] > 3.0e38f)
         bad(P, "scene light base B" + std::string(i / n < 10 ? "0" : "") + std::to_string(i / n) + " value " + u64s(i % n) +
                    " is negative or not finite");
-    hasSceneLight_ = true;
+    r.hasSceneLight = true;
   } else if (sun) {
     bad(P, "SceneSunLight section without a SceneLight section");
   }
-  if (const CanopySection* md = findSection(CanopySectionKind::Metadata))
-    metadata_.assign(reinterpret_cast<const char*>(resident_.data() + md->offset), size_t(md->bytes));
-  if (const CanopySection* hi = findSection(CanopySectionKind::HaarIndex)) {
+}
+
+// The optional sections Metadata, HaarIndex (1.1) and SparseIndex (2.0), copied.
+void readOptionalSections(ResidentParse& r) {
+  const std::string& P = r.P;
+  const CanopyFileHeader& h = r.h;
+  if (const CanopySection* md = r.file.findSection(CanopySectionKind::Metadata))
+    r.metadata.assign(reinterpret_cast<const char*>(r.resident.data() + md->offset), size_t(md->bytes));
+  if (const CanopySection* hi = r.file.findSection(CanopySectionKind::HaarIndex)) {
     if (h.major == 1 && h.minor < 1) bad(P, "a 1.0 file has a HaarIndex section");
     if (hi->itemBytes != sizeof(uint32_t)) bad(P, "section HaarIndex has the wrong item size");
-    haarIndex_ = copyArray<uint32_t>(resident_, hi->offset, hi->itemCount);
+    r.haarIndex = copyArray<uint32_t>(r.resident, hi->offset, hi->itemCount);
   }
-  if (const CanopySection* si = findSection(CanopySectionKind::SparseIndex)) {
+  if (const CanopySection* si = r.file.findSection(CanopySectionKind::SparseIndex)) {
     if (h.major < 2) bad(P, "a 1.x file has a SparseIndex section");
     if (si->itemBytes != sizeof(uint32_t)) bad(P, "section SparseIndex has the wrong item size");
-    sparseIndex_ = copyArray<uint32_t>(resident_, si->offset, si->itemCount);
+    r.sparseIndex = copyArray<uint32_t>(r.resident, si->offset, si->itemCount);
   }
+}
 
-  // --- models: ranges and the tree ------------------------------------------------------------
-  const uint64_t tileTotal = st.itemCount;
-  for (uint32_t m = 0; m < models_.size(); ++m) {
-    const CanopyModel& M = models_[m];
-    const std::string name = "model " + std::to_string(m);
-    if (M.name[sizeof M.name - 1] != 0) bad(P, name + " name is not NUL-terminated");
-    for (double v : M.indexToModel)
-      if (!std::isfinite(v)) bad(P, name + " has a non-finite transform");
-    if (M.depth > kCanopyMaxDepth || M.brickSize != kCanopyBrickSize || M.brickBorder != kCanopyBrickBorder ||
-        M.rootCells != (kCanopyBrickSize << M.depth))
-      bad(P, name + " has an invalid octree geometry");
+// Model m's record: name, transform, octree geometry, lattice, tile, brick, sparse and light ranges.
+void checkModelRanges(const ResidentParse& r, uint32_t m) {
+  const std::string& P = r.P;
+  const CanopyFileHeader& h = r.h;
+  const CanopyModel& M = r.models[m];
+  const std::string name = "model " + std::to_string(m);
+  if (M.name[sizeof M.name - 1] != 0) bad(P, name + " name is not NUL-terminated");
+  for (double v : M.indexToModel)
+    if (!std::isfinite(v)) bad(P, name + " has a non-finite transform");
+  if (M.depth > kCanopyMaxDepth || M.brickSize != kCanopyBrickSize || M.brickBorder != kCanopyBrickBorder ||
+      M.rootCells != (kCanopyBrickSize << M.depth))
+    bad(P, name + " has an invalid octree geometry");
+  for (int a = 0; a < 3; ++a) {
+    if (M.latticeMax[a] < M.latticeMin[a] || int64_t(M.latticeMax[a]) - M.octreeOrigin[a] >= int64_t(M.rootCells) ||
+        M.latticeMin[a] < M.octreeOrigin[a])
+      bad(P, name + " lattice bounds do not fit its octree");
+  }
+  if (uint64_t(M.firstTile) + M.tileCount > r.tileTotal) bad(P, name + " tiles lie outside NodeTiles");
+  const uint64_t bpp = h.bricksPerPage;
+  // (2.0) the detail levels' bricks are sparse bricks: the brick pages hold the others
+  if (M.sparseBricks > M.brickCount) bad(P, name + " has more sparse bricks than bricks");
+  const uint64_t denseBricks = uint64_t(M.brickCount) - M.sparseBricks;
+  if (M.detailLevels == 0 ? (M.sparseBricks | M.firstSparsePage | M.sparsePageCount | M.firstSparseIndex) != 0
+                          : uint64_t(M.firstSparseIndex) + M.sparseBricks > r.sparseIndex.size() ||
+                                uint64_t(M.firstSparsePage) + M.sparsePageCount > h.pageCount ||
+                                (M.sparseBricks > 0) != (M.sparsePageCount > 0) ||
+                                M.sparseBricks > uint64_t(M.sparsePageCount) * kCanopySparseMaxItemsPerPage)
+    bad(P, name + " sparse bricks, pages or index out of range");
+  if (M.brickPageCount != (denseBricks + bpp - 1) / bpp ||
+      uint64_t(M.firstBrickPage) + M.brickPageCount > h.pageCount)
+    bad(P, name + " brick pages out of range");
+  const uint64_t lpp = h.lightItemsPerPage;
+  const bool lit = (M.flags & kCanopyModelHasLight) != 0;
+  if (M.detailLevels != 0 && h.major < 2) bad(P, name + " has detail levels in a 1." + std::to_string(h.minor) + " file");
+  if (M.detailLevels > M.depth) bad(P, name + " has more detail levels (" + u64s(M.detailLevels) + ") than levels");
+  for (int a = 0; a < 3; ++a)  // the light lattice's cells are whole blocks of the lattice
+    if (M.detailLevels != 0 && (((M.latticeMin[a] | (M.latticeMax[a] + 1)) & ((1 << M.detailLevels) - 1)) != 0))
+      bad(P, name + " lattice bounds are not whole light cells");
+  // Light items: one per brick of levels 0..depth - detailLevels (every brick without detail).
+  const uint64_t lightBricks = canopyLightLevelBricks(M);
+  uint64_t levelSum = 0;
+  for (uint32_t l = 0; l <= M.depth; ++l) levelSum += M.levelBricks[l];
+  if (levelSum != M.brickCount) bad(P, name + " level brick counts do not add up to its bricks");
+  if (M.detailLevels != 0 && uint64_t(M.brickCount) - M.sparseBricks != lightBricks)
+    bad(P, name + " sparse bricks are not its detail levels' bricks");
+  if ((lit ? M.lightCount != lightBricks : M.lightCount != 0) || M.lightPageCount != (uint64_t(M.lightCount) + lpp - 1) / lpp ||
+      uint64_t(M.firstLightPage) + M.lightPageCount > h.pageCount)
+    bad(P, name + " light items or pages out of range");
+  if (M.flags & kCanopyModelScatteredSun) {
+    if (h.major == 1 && h.minor < 1) bad(P, name + " has scattered-only sun bases in a 1.0 file");
+    if (!lit) bad(P, name + " has scattered-only sun bases but no light");
+  }
+}
+
+// Model m's Haar light (1.1): geometry, index and page ranges, group table; without it, zero fields.
+void checkModelHaar(const ResidentParse& r, uint32_t m) {
+  const std::string& P = r.P;
+  const CanopyFileHeader& h = r.h;
+  const CanopyModel& M = r.models[m];
+  const std::string name = "model " + std::to_string(m);
+  const bool lit = (M.flags & kCanopyModelHasLight) != 0;
+  const bool haar = (M.flags & kCanopyModelHaarLight) != 0;
+  if (haar) {
+    if (h.major == 1 && h.minor < 1) bad(P, name + " has Haar light in a 1.0 file");
+    if (!lit) bad(P, name + " has Haar light but no light items");
+    if (M.haarPrecision > 1) bad(P, name + " Haar coefficient precision " + u64s(M.haarPrecision) + " is unknown");
+    uint64_t groups = 1;
     for (int a = 0; a < 3; ++a) {
-      if (M.latticeMax[a] < M.latticeMin[a] || int64_t(M.latticeMax[a]) - M.octreeOrigin[a] >= int64_t(M.rootCells) ||
-          M.latticeMin[a] < M.octreeOrigin[a])
-        bad(P, name + " lattice bounds do not fit its octree");
+      const int64_t dim = (int64_t(M.latticeMax[a]) - M.latticeMin[a] + 1) >> M.detailLevels;  // the light lattice's
+      if (M.haarBrickDims[a] != (dim + 2) / 3 || M.haarGroupDims[a] != (uint64_t(M.haarBrickDims[a]) + 3) / 4)
+        bad(P, name + " Haar brick geometry does not match its lattice");
+      groups *= M.haarGroupDims[a];
     }
-    if (uint64_t(M.firstTile) + M.tileCount > tileTotal) bad(P, name + " tiles lie outside NodeTiles");
-    const uint64_t bpp = h.bricksPerPage;
-    // (2.0) the detail levels' bricks are sparse bricks: the brick pages hold the others
-    if (M.sparseBricks > M.brickCount) bad(P, name + " has more sparse bricks than bricks");
-    const uint64_t denseBricks = uint64_t(M.brickCount) - M.sparseBricks;
-    if (M.detailLevels == 0 ? (M.sparseBricks | M.firstSparsePage | M.sparsePageCount | M.firstSparseIndex) != 0
-                            : uint64_t(M.firstSparseIndex) + M.sparseBricks > sparseIndex_.size() ||
-                                  uint64_t(M.firstSparsePage) + M.sparsePageCount > h.pageCount ||
-                                  (M.sparseBricks > 0) != (M.sparsePageCount > 0) ||
-                                  M.sparseBricks > uint64_t(M.sparsePageCount) * kCanopySparseMaxItemsPerPage)
-      bad(P, name + " sparse bricks, pages or index out of range");
-    if (M.brickPageCount != (denseBricks + bpp - 1) / bpp ||
-        uint64_t(M.firstBrickPage) + M.brickPageCount > h.pageCount)
-      bad(P, name + " brick pages out of range");
-    const uint64_t lpp = h.lightItemsPerPage;
-    const bool lit = (M.flags & kCanopyModelHasLight) != 0;
-    const bool haar = (M.flags & kCanopyModelHaarLight) != 0;
-    if (M.detailLevels != 0 && h.major < 2) bad(P, name + " has detail levels in a 1." + std::to_string(h.minor) + " file");
-    if (M.detailLevels > M.depth) bad(P, name + " has more detail levels (" + u64s(M.detailLevels) + ") than levels");
-    for (int a = 0; a < 3; ++a)  // the light lattice's cells are whole blocks of the lattice
-      if (M.detailLevels != 0 && (((M.latticeMin[a] | (M.latticeMax[a] + 1)) & ((1 << M.detailLevels) - 1)) != 0))
-        bad(P, name + " lattice bounds are not whole light cells");
-    // Light items: one per brick of levels 0..depth - detailLevels (every brick without detail).
-    const uint64_t lightBricks = canopyLightLevelBricks(M);
-    uint64_t levelSum = 0;
-    for (uint32_t l = 0; l <= M.depth; ++l) levelSum += M.levelBricks[l];
-    if (levelSum != M.brickCount) bad(P, name + " level brick counts do not add up to its bricks");
-    if (M.detailLevels != 0 && uint64_t(M.brickCount) - M.sparseBricks != lightBricks)
-      bad(P, name + " sparse bricks are not its detail levels' bricks");
-    if ((lit ? M.lightCount != lightBricks : M.lightCount != 0) || M.lightPageCount != (uint64_t(M.lightCount) + lpp - 1) / lpp ||
-        uint64_t(M.firstLightPage) + M.lightPageCount > h.pageCount)
-      bad(P, name + " light items or pages out of range");
-    if (M.flags & kCanopyModelScatteredSun) {
-      if (h.major == 1 && h.minor < 1) bad(P, name + " has scattered-only sun bases in a 1.0 file");
-      if (!lit) bad(P, name + " has scattered-only sun bases but no light");
+    if (M.haarGroups > groups || uint64_t(M.haarIndexCount) != groups + uint64_t(kCanopyHaarGroupBricks) * M.haarGroups ||
+        uint64_t(M.firstHaarIndex) + M.haarIndexCount > r.haarIndex.size())
+      bad(P, name + " Haar index out of range");
+    if (uint64_t(M.firstHaarPage) + M.haarPageCount > h.pageCount || (M.haarItemCount > 0) != (M.haarPageCount > 0) ||
+        M.haarItemCount > uint64_t(M.haarPageCount) * kCanopyHaarMaxItemsPerPage)
+      bad(P, name + " Haar pages out of range");
+    // Every group table entry names a distinct block.
+    std::vector<unsigned char> used(M.haarGroups, 0);
+    const uint32_t* idx = r.haarIndex.data() + M.firstHaarIndex;
+    for (uint64_t g = 0; g < groups; ++g) {
+      if (idx[g] == kCanopyNone) continue;
+      if (idx[g] >= M.haarGroups || used[idx[g]]) bad(P, name + " Haar group table entry " + u64s(g) + " is invalid");
+      used[idx[g]] = 1;
     }
-    if (haar) {
-      if (h.major == 1 && h.minor < 1) bad(P, name + " has Haar light in a 1.0 file");
-      if (!lit) bad(P, name + " has Haar light but no light items");
-      if (M.haarPrecision > 1) bad(P, name + " Haar coefficient precision " + u64s(M.haarPrecision) + " is unknown");
-      uint64_t groups = 1;
-      for (int a = 0; a < 3; ++a) {
-        const int64_t dim = (int64_t(M.latticeMax[a]) - M.latticeMin[a] + 1) >> M.detailLevels;  // the light lattice's
-        if (M.haarBrickDims[a] != (dim + 2) / 3 || M.haarGroupDims[a] != (uint64_t(M.haarBrickDims[a]) + 3) / 4)
-          bad(P, name + " Haar brick geometry does not match its lattice");
-        groups *= M.haarGroupDims[a];
-      }
-      if (M.haarGroups > groups || uint64_t(M.haarIndexCount) != groups + uint64_t(kCanopyHaarGroupBricks) * M.haarGroups ||
-          uint64_t(M.firstHaarIndex) + M.haarIndexCount > haarIndex_.size())
-        bad(P, name + " Haar index out of range");
-      if (uint64_t(M.firstHaarPage) + M.haarPageCount > h.pageCount || (M.haarItemCount > 0) != (M.haarPageCount > 0) ||
-          M.haarItemCount > uint64_t(M.haarPageCount) * kCanopyHaarMaxItemsPerPage)
-        bad(P, name + " Haar pages out of range");
-      // Every group table entry names a distinct block.
-      std::vector<unsigned char> used(M.haarGroups, 0);
-      const uint32_t* idx = haarIndex_.data() + M.firstHaarIndex;
-      for (uint64_t g = 0; g < groups; ++g) {
-        if (idx[g] == kCanopyNone) continue;
-        if (idx[g] >= M.haarGroups || used[idx[g]]) bad(P, name + " Haar group table entry " + u64s(g) + " is invalid");
-        used[idx[g]] = 1;
-      }
-      for (uint32_t b = 0; b < M.haarGroups; ++b)
-        if (!used[b]) bad(P, name + " Haar block " + u64s(b) + " is not in the group table");
-    } else {
-      // Without the flag every Haar field is zero (1.0's reserved bytes).
-      static_assert(offsetof(CanopyModel, detailLevels) - offsetof(CanopyModel, haarPrecision) == 56, "the Haar fields of CanopyModel");
-      const unsigned char* f = reinterpret_cast<const unsigned char*>(&M) + offsetof(CanopyModel, haarPrecision);
-      for (size_t b = 0; b < offsetof(CanopyModel, detailLevels) - offsetof(CanopyModel, haarPrecision); ++b)
-        if (f[b] != 0) bad(P, name + " has Haar fields but no Haar light flag");
-    }
-    // Every tile must be reached exactly once from the root, at a level < depth: no cycles, no
-    // shared or orphan tiles, every brick id in range.
-    std::vector<unsigned char> seen(M.tileCount, 0);
-    std::vector<std::pair<uint32_t, uint32_t>> stack;  // (tile, level of its nodes)
-    auto checkNode = [&](const CanopyNode& n, uint32_t level) {
-      if (n.brick != kCanopyNone && n.brick >= M.brickCount) bad(P, name + ": brick id " + u64s(n.brick) + " out of range");
-      // a player takes the light of a brick at a light level from light item `brick`
-      if (lit && n.brick != kCanopyNone && level <= canopyLightDepth(M) && n.brick >= M.lightCount)
-        bad(P, name + ": brick " + u64s(n.brick) + " of light level " + u64s(level) + " has no light item");
-      // a player finds a brick by its id (dense or sparse) and samples it by its level's form
-      if (n.brick != kCanopyNone && M.detailLevels != 0 && (level > canopyLightDepth(M)) != (n.brick >= M.brickCount - M.sparseBricks))
-        bad(P, name + ": brick " + u64s(n.brick) + " of level " + u64s(level) + " is not stored in its level's form");
-      if (!(n.density >= 0.0f) || n.density > 3.0e38f) bad(P, name + ": node density is negative or not finite");
-      if (n.child == kCanopyNone) return;
-      if (n.child >= M.tileCount) bad(P, name + ": child tile " + u64s(n.child) + " out of range");
-      if (level >= M.depth) bad(P, name + ": a node at the finest level has children");
-      if (seen[n.child]) bad(P, name + ": tile " + u64s(n.child) + " is referenced twice");
-      seen[n.child] = 1;
-      stack.emplace_back(n.child, level + 1);
-    };
-    checkNode(M.root, 0);
-    while (!stack.empty()) {
-      const auto [t, level] = stack.back();
-      stack.pop_back();
-      const CanopyNode* nodes = tiles_.data() + (size_t(M.firstTile) + t) * 8;
-      for (int c = 0; c < 8; ++c) checkNode(nodes[c], level);
-    }
-    for (uint32_t t = 0; t < M.tileCount; ++t)
-      if (!seen[t]) bad(P, name + ": tile " + u64s(t) + " is not reachable from the root");
+    for (uint32_t b = 0; b < M.haarGroups; ++b)
+      if (!used[b]) bad(P, name + " Haar block " + u64s(b) + " is not in the group table");
+  } else {
+    // Without the flag every Haar field is zero (1.0's reserved bytes).
+    static_assert(offsetof(CanopyModel, detailLevels) - offsetof(CanopyModel, haarPrecision) == 56, "the Haar fields of CanopyModel");
+    const unsigned char* f = reinterpret_cast<const unsigned char*>(&M) + offsetof(CanopyModel, haarPrecision);
+    for (size_t b = 0; b < offsetof(CanopyModel, detailLevels) - offsetof(CanopyModel, haarPrecision); ++b)
+      if (f[b] != 0) bad(P, name + " has Haar fields but no Haar light flag");
   }
-  // Every page belongs to exactly one model range (brick or light): no page is shared or orphaned.
-  {
-    std::vector<unsigned char> owner(h.pageCount, 0);
-    for (const CanopyModel& M : models_)
-      for (auto [first, count] : {std::pair<uint32_t, uint32_t>{M.firstBrickPage, M.brickPageCount}, {M.firstLightPage, M.lightPageCount},
-                                  {M.firstHaarPage, M.haarPageCount}, {M.firstSparsePage, M.sparsePageCount}})
-        for (uint32_t p = first; p < first + count; ++p) {
-          if (owner[p]) bad(P, "page " + u64s(p) + " is claimed by two model ranges");
-          owner[p] = 1;
-        }
-    if (knownMinor)  // a newer minor may add page kinds outside the model ranges
-      for (uint32_t p = 0; p < h.pageCount; ++p)
-        if (!owner[p]) bad(P, "page " + u64s(p) + " belongs to no model");
+}
+
+// Every tile of model m must be reached exactly once from the root, at a level < depth: no cycles,
+// no shared or orphan tiles, every brick id in range.
+void checkModelTree(const ResidentParse& r, uint32_t m) {
+  const std::string& P = r.P;
+  const CanopyModel& M = r.models[m];
+  const std::string name = "model " + std::to_string(m);
+  const bool lit = (M.flags & kCanopyModelHasLight) != 0;
+  std::vector<unsigned char> seen(M.tileCount, 0);
+  std::vector<std::pair<uint32_t, uint32_t>> stack;  // (tile, level of its nodes)
+  auto checkNode = [&](const CanopyNode& n, uint32_t level) {
+    if (n.brick != kCanopyNone && n.brick >= M.brickCount) bad(P, name + ": brick id " + u64s(n.brick) + " out of range");
+    // a player takes the light of a brick at a light level from light item `brick`
+    if (lit && n.brick != kCanopyNone && level <= canopyLightDepth(M) && n.brick >= M.lightCount)
+      bad(P, name + ": brick " + u64s(n.brick) + " of light level " + u64s(level) + " has no light item");
+    // a player finds a brick by its id (dense or sparse) and samples it by its level's form
+    if (n.brick != kCanopyNone && M.detailLevels != 0 && (level > canopyLightDepth(M)) != (n.brick >= M.brickCount - M.sparseBricks))
+      bad(P, name + ": brick " + u64s(n.brick) + " of level " + u64s(level) + " is not stored in its level's form");
+    if (!(n.density >= 0.0f) || n.density > 3.0e38f) bad(P, name + ": node density is negative or not finite");
+    if (n.child == kCanopyNone) return;
+    if (n.child >= M.tileCount) bad(P, name + ": child tile " + u64s(n.child) + " out of range");
+    if (level >= M.depth) bad(P, name + ": a node at the finest level has children");
+    if (seen[n.child]) bad(P, name + ": tile " + u64s(n.child) + " is referenced twice");
+    seen[n.child] = 1;
+    stack.emplace_back(n.child, level + 1);
+  };
+  checkNode(M.root, 0);
+  while (!stack.empty()) {
+    const auto [t, level] = stack.back();
+    stack.pop_back();
+    const CanopyNode* nodes = r.tiles.data() + (size_t(M.firstTile) + t) * 8;
+    for (int c = 0; c < 8; ++c) checkNode(nodes[c], level);
   }
-  for (uint32_t i = 0; i < instances_.size(); ++i) {
-    if (instances_[i].model >= models_.size()) bad(P, "instance " + u64s(i) + " names model " + u64s(instances_[i].model) + " out of range");
-    for (float v : instances_[i].modelToWorld)
+  for (uint32_t t = 0; t < M.tileCount; ++t)
+    if (!seen[t]) bad(P, name + ": tile " + u64s(t) + " is not reachable from the root");
+}
+
+// Every page belongs to exactly one model range (brick or light): no page is shared or orphaned.
+void checkPageOwners(const ResidentParse& r) {
+  const std::string& P = r.P;
+  const CanopyFileHeader& h = r.h;
+  std::vector<unsigned char> owner(h.pageCount, 0);
+  for (const CanopyModel& M : r.models)
+    for (auto [first, count] : {std::pair<uint32_t, uint32_t>{M.firstBrickPage, M.brickPageCount}, {M.firstLightPage, M.lightPageCount},
+                                {M.firstHaarPage, M.haarPageCount}, {M.firstSparsePage, M.sparsePageCount}})
+      for (uint32_t p = first; p < first + count; ++p) {
+        if (owner[p]) bad(P, "page " + u64s(p) + " is claimed by two model ranges");
+        owner[p] = 1;
+      }
+  if (r.knownMinor)  // a newer minor may add page kinds outside the model ranges
+    for (uint32_t p = 0; p < h.pageCount; ++p)
+      if (!owner[p]) bad(P, "page " + u64s(p) + " belongs to no model");
+}
+
+// Each instance names a model in range and has a finite transform.
+void checkInstances(const ResidentParse& r) {
+  const std::string& P = r.P;
+  for (uint32_t i = 0; i < r.instances.size(); ++i) {
+    if (r.instances[i].model >= r.models.size()) bad(P, "instance " + u64s(i) + " names model " + u64s(r.instances[i].model) + " out of range");
+    for (float v : r.instances[i].modelToWorld)
       if (!std::isfinite(v)) bad(P, "instance " + u64s(i) + " has a non-finite transform");
   }
+}
 
-  // --- page table ----------------------------------------------------------------------------
-  for (uint32_t i = 0; i < pages_.size(); ++i) {
-    const CanopyPageEntry& e = pages_[i];
+// Each page table entry: its index, model and payload, and the item range of its kind in its model.
+void checkPageTable(const ResidentParse& r) {
+  const std::string& P = r.P;
+  const CanopyFileHeader& h = r.h;
+  for (uint32_t i = 0; i < r.pages.size(); ++i) {
+    const CanopyPageEntry& e = r.pages[i];
     const std::string name = "page " + std::to_string(i);
     if (std::memcmp(e.magic, kCanopyPageMagic, 4) != 0 || e.pageIndex != i) bad(P, name + ": page table entry is corrupt");
-    if (e.model >= models_.size()) bad(P, name + ": model out of range");
+    if (e.model >= r.models.size()) bad(P, name + ": model out of range");
     if (e.payloadBytes > h.pageBytes - sizeof(CanopyPageHeader)) bad(P, name + ": payload larger than a page");
-    const CanopyModel& M = models_[e.model];
+    const CanopyModel& M = r.models[e.model];
     if (e.kind == uint32_t(CanopyPageKind::Brick)) {
       if (i < M.firstBrickPage || i >= M.firstBrickPage + M.brickPageCount) bad(P, name + ": brick page outside its model's range");
       const uint32_t first = (i - M.firstBrickPage) * h.bricksPerPage;
@@ -482,7 +558,7 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
     } else if (e.kind == uint32_t(CanopyPageKind::HaarLight) && (M.flags & kCanopyModelHaarLight)) {
       if (i < M.firstHaarPage || i >= M.firstHaarPage + M.haarPageCount) bad(P, name + ": Haar page outside its model's range");
       // Haar pages hold whole items, numbered on from the model's previous Haar page.
-      const uint32_t first = i == M.firstHaarPage ? 0 : pages_[i - 1].firstItem + pages_[i - 1].itemCount;
+      const uint32_t first = i == M.firstHaarPage ? 0 : r.pages[i - 1].firstItem + r.pages[i - 1].itemCount;
       if (e.firstItem != first || e.itemCount == 0 || e.itemCount > kCanopyHaarMaxItemsPerPage ||
           uint64_t(e.firstItem) + e.itemCount > M.haarItemCount || e.payloadBytes < 4 * (uint64_t(e.itemCount) + 1) ||
           (i + 1 == M.firstHaarPage + M.haarPageCount && e.firstItem + e.itemCount != M.haarItemCount))
@@ -491,51 +567,87 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
       if (i < M.firstSparsePage || i >= M.firstSparsePage + M.sparsePageCount) bad(P, name + ": sparse brick page outside its model's range");
       // whole sparse bricks in id order, numbered on from the model's previous sparse page
       const uint32_t dense = M.brickCount - M.sparseBricks;
-      const uint32_t first = i == M.firstSparsePage ? dense : pages_[i - 1].firstItem + pages_[i - 1].itemCount;
+      const uint32_t first = i == M.firstSparsePage ? dense : r.pages[i - 1].firstItem + r.pages[i - 1].itemCount;
       if (e.firstItem != first || e.itemCount == 0 || e.itemCount > kCanopySparseMaxItemsPerPage ||
           uint64_t(e.firstItem) + e.itemCount > M.brickCount || e.payloadBytes < 4 * (uint64_t(e.itemCount) + 1) ||
           (i + 1 == M.firstSparsePage + M.sparsePageCount && e.firstItem + e.itemCount != M.brickCount))
         bad(P, name + ": sparse brick range does not match its model");
-    } else if (knownMinor) {
+    } else if (r.knownMinor) {
       bad(P, name + ": unknown page kind " + u64s(e.kind));
     }
   }
+}
 
-  // --- Haar locations: every stored brick's (page, item) is in range and names a distinct item ---
-  for (uint32_t m = 0; m < models_.size(); ++m) {
-    const CanopyModel& M = models_[m];
+// Haar locations: every stored brick's (page, item) is in range and names a distinct item.
+void checkHaarLocations(const ResidentParse& r) {
+  const std::string& P = r.P;
+  for (uint32_t m = 0; m < r.models.size(); ++m) {
+    const CanopyModel& M = r.models[m];
     if (!(M.flags & kCanopyModelHaarLight)) continue;
     const std::string name = "model " + std::to_string(m);
     const uint64_t groups = uint64_t(M.haarGroupDims[0]) * M.haarGroupDims[1] * M.haarGroupDims[2];
-    const uint32_t* loc = haarIndex_.data() + M.firstHaarIndex + groups;
+    const uint32_t* loc = r.haarIndex.data() + M.firstHaarIndex + groups;
     std::vector<unsigned char> seen(M.haarItemCount, 0);
     uint64_t stored = 0;
     for (uint64_t i = 0; i < uint64_t(kCanopyHaarGroupBricks) * M.haarGroups; ++i) {
       if (loc[i] == kCanopyNone) continue;
       const uint32_t page = loc[i] >> kCanopyHaarItemBits, item = loc[i] & (kCanopyHaarMaxItemsPerPage - 1u);
       // (a page of the range may be of a kind a newer minor added: only a Haar page is sampled)
-      if (page >= M.haarPageCount || pages_[M.firstHaarPage + page].kind != uint32_t(CanopyPageKind::HaarLight) ||
-          item >= pages_[M.firstHaarPage + page].itemCount)
+      if (page >= M.haarPageCount || r.pages[M.firstHaarPage + page].kind != uint32_t(CanopyPageKind::HaarLight) ||
+          item >= r.pages[M.firstHaarPage + page].itemCount)
         bad(P, name + ": Haar brick location " + u64s(i) + " out of range");
-      const uint32_t id = pages_[M.firstHaarPage + page].firstItem + item;
+      const uint32_t id = r.pages[M.firstHaarPage + page].firstItem + item;
       if (seen[id]) bad(P, name + ": Haar item " + u64s(id) + " is referenced twice");
       seen[id] = 1;
       ++stored;
     }
     if (stored != M.haarItemCount) bad(P, name + ": " + u64s(M.haarItemCount - stored) + " Haar items are not referenced");
   }
-  // --- sparse brick locations: detail brick i is item (id - page.firstItem) of its page ----------
-  for (uint32_t m = 0; m < models_.size(); ++m) {
-    const CanopyModel& M = models_[m];
+}
+
+// Sparse brick locations: detail brick i is item (id - page.firstItem) of its page.
+void checkSparseLocations(const ResidentParse& r) {
+  for (uint32_t m = 0; m < r.models.size(); ++m) {
+    const CanopyModel& M = r.models[m];
     const uint32_t dense = M.brickCount - M.sparseBricks;
     for (uint32_t i = 0; i < M.sparseBricks; ++i) {
-      const uint32_t loc = sparseIndex_[size_t(M.firstSparseIndex) + i];
+      const uint32_t loc = r.sparseIndex[size_t(M.firstSparseIndex) + i];
       const uint32_t page = loc >> kCanopySparseItemBits, item = loc & (kCanopySparseMaxItemsPerPage - 1u);
-      if (page >= M.sparsePageCount || pages_[M.firstSparsePage + page].kind != uint32_t(CanopyPageKind::SparseBrick) ||
-          pages_[M.firstSparsePage + page].firstItem + item != dense + i || item >= pages_[M.firstSparsePage + page].itemCount)
-        bad(P, "model " + std::to_string(m) + ": sparse brick location " + u64s(i) + " is wrong");
+      if (page >= M.sparsePageCount || r.pages[M.firstSparsePage + page].kind != uint32_t(CanopyPageKind::SparseBrick) ||
+          r.pages[M.firstSparsePage + page].firstItem + item != dense + i || item >= r.pages[M.firstSparsePage + page].itemCount)
+        bad(r.P, "model " + std::to_string(m) + ": sparse brick location " + u64s(i) + " is wrong");
     }
   }
+}
+
+}  // namespace
+
+// Reads the header and the resident part, and checks them stage by stage (the stages above, in
+// this order: each stage may rely on what the earlier ones checked).
+void CanopyFile::parseResident(uint64_t fileBytes) {
+  ResidentParse r{*this, path_, header_, resident_, sections_, models_, instances_, tiles_, pages_, hasSceneLight_,
+                  sceneLight_, sceneLightBases_, sceneLightValues_, metadata_, haarIndex_, sparseIndex_};
+  if (fileBytes < sizeof(CanopyFileHeader))
+    bad(path_, "truncated: " + u64s(fileBytes) + " bytes, smaller than the 128-byte header");
+  readAt(0, &header_, sizeof header_);
+  checkHeader(r, fileBytes);
+  resident_.resize(size_t(header_.residentBytes));
+  readAt(0, resident_.data(), resident_.size());
+  checkSectionTable(r);
+  checkPadding(r);
+  copyTables(r);
+  readSceneLight(r);
+  readOptionalSections(r);
+  for (uint32_t m = 0; m < models_.size(); ++m) {
+    checkModelRanges(r, m);
+    checkModelHaar(r, m);
+    checkModelTree(r, m);
+  }
+  checkPageOwners(r);
+  checkInstances(r);
+  checkPageTable(r);
+  checkHaarLocations(r);
+  checkSparseLocations(r);
 }
 
 CanopyFile::BrickLocation CanopyFile::brickLocation(uint32_t m, uint32_t brick) const {

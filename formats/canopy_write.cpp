@@ -17,7 +17,7 @@ namespace {
 
 uint64_t alignUp(uint64_t v, uint64_t a) { return (v + a - 1) / a * a; }
 
-// A dense brick (kCanopyBrickBytes) as a sparse brick item (canopy_file.h, "Sparse bricks"): the
+// A dense brick (kCanopyBrickBytes) as a sparse brick item (canopy_layout.h, "Sparse bricks"): the
 // voxels of non-zero density only (the others hold density 0 and, as the builder writes them,
 // material 0: a sample reads the same values).
 void appendSparseItem(const unsigned char* dense, std::vector<unsigned char>& out) {
@@ -76,90 +76,124 @@ struct Layout {
   CanopyWriteStats stats;
 };
 
-// Assigns model ranges, builds the page table (CRCs need page contents: `makePage` is called for
-// every page) and the resident image.
-Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vector<unsigned char>&)>& emitPage) {
-  const uint32_t pageBytes = kCanopyPageBytes;
-  const uint32_t perPage = (pageBytes - uint32_t(sizeof(CanopyPageHeader))) / kCanopyBrickBytes;
-  const uint32_t lightPerPage = (pageBytes - uint32_t(sizeof(CanopyPageHeader))) / kCanopyLightItemBytes;
-  Layout L;
-  // Model ranges.
+using EmitPage = std::function<void(uint32_t, std::vector<unsigned char>&)>;
+
+// The page geometry the writer lays out with.
+struct PageGeometry {
+  uint32_t pageBytes = kCanopyPageBytes;
+  uint32_t perPage = (pageBytes - uint32_t(sizeof(CanopyPageHeader))) / kCanopyBrickBytes;
+  uint32_t lightPerPage = (pageBytes - uint32_t(sizeof(CanopyPageHeader))) / kCanopyLightItemBytes;
+};
+
+// The models with their ranges assigned, and the tables and pages those ranges index.
+struct Ranges {
   std::vector<CanopyModel> models;
   std::vector<CanopyNode> tiles;
   std::vector<uint32_t> haarIndex;
   std::vector<uint32_t> sparseIndex;            // (2.0) detail models' sparse brick locations
-  std::vector<SparsePages> sparse(in.models.size());
+  std::vector<SparsePages> sparse;
   bool scatteredSun = false;  // a model flagged kCanopyModelScatteredSun (1.1)
   bool detail = false;        // a model with detail levels (2.0)
-  uint32_t page = 0;
+  uint32_t page = 0;          // the next page
+};
+
+// Lays out model m's tiles, brick pages and light pages and sets its light flags; returns its dense bricks.
+uint32_t placeBricksAndLight(const CanopyWriteModel& wm, CanopyModel& m, Ranges& R, const PageGeometry& g) {
+  if (!wm.tiles || !wm.bricks || wm.tiles->size() != size_t(m.tileCount) * 8 ||
+      wm.bricks->size() != size_t(m.brickCount) * kCanopyBrickBytes)
+    throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has inconsistent tile/brick sizes");
+  m.firstTile = uint32_t(R.tiles.size() / 8);
+  R.tiles.insert(R.tiles.end(), wm.tiles->begin(), wm.tiles->end());
+  // (2.0) a detail model's detail levels go to sparse pages, after its other pages
+  const uint64_t lightBricks = canopyLightLevelBricks(m);  // the ones with light items, and the dense ones
+  if (m.detailLevels > m.depth || lightBricks > m.brickCount)
+    throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has inconsistent level brick counts");
+  const uint32_t denseBricks = m.detailLevels != 0 ? uint32_t(lightBricks) : m.brickCount;
+  m.sparseBricks = m.brickCount - denseBricks;
+  m.firstBrickPage = R.page;
+  m.brickPageCount = (denseBricks + g.perPage - 1) / g.perPage;
+  R.page += m.brickPageCount;
+  const bool lit = wm.light && !wm.light->empty();
+  const bool haar = wm.haar != nullptr;
+  R.detail = R.detail || m.detailLevels != 0;
+  if (lit && (m.lightCount != lightBricks || wm.light->size() * 2 != size_t(m.lightCount) * kCanopyLightItemBytes))
+    throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has inconsistent light items");
+  if (haar && !lit) throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has Haar light but no light items");
+  m.lightCount = lit ? m.lightCount : 0;
+  m.firstLightPage = R.page;
+  m.lightPageCount = (m.lightCount + g.lightPerPage - 1) / g.lightPerPage;
+  R.page += m.lightPageCount;
+  m.flags = lit ? (m.flags | kCanopyModelHasLight) : (m.flags & ~uint32_t(kCanopyModelHasLight | kCanopyModelScatteredSun));
+  R.scatteredSun = R.scatteredSun || (m.flags & kCanopyModelScatteredSun) != 0;
+  return denseBricks;
+}
+
+// Sets model m's Haar fields (all zero without Haar light) and lays out its Haar index and pages.
+void placeHaar(const CanopyWriteModel& wm, CanopyModel& m, Ranges& R) {
+  const bool haar = wm.haar != nullptr;
+  m.flags &= ~uint32_t(kCanopyModelHaarLight);
+  m.haarPrecision = m.haarGroups = m.haarItemCount = m.firstHaarIndex = m.haarIndexCount = m.firstHaarPage = m.haarPageCount = 0;
+  m.haarThreshold = 0.0f;
+  for (int a = 0; a < 3; ++a) m.haarBrickDims[a] = 0, m.haarGroupDims[a] = 0;
+  if (haar) {
+    const CanopyHaarPages& H = *wm.haar;
+    if (H.payloads.size() != H.itemCounts.size() || H.index.size() < size_t(H.groupDims[0]) * H.groupDims[1] * H.groupDims[2])
+      throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has inconsistent Haar pages");
+    m.flags |= kCanopyModelHaarLight;
+    m.haarPrecision = H.precision;
+    for (int a = 0; a < 3; ++a) m.haarBrickDims[a] = H.brickDims[a], m.haarGroupDims[a] = H.groupDims[a];
+    m.haarGroups = H.groups;
+    m.haarItemCount = H.items;
+    m.haarThreshold = H.threshold;
+    m.firstHaarIndex = uint32_t(R.haarIndex.size());
+    m.haarIndexCount = uint32_t(H.index.size());
+    R.haarIndex.insert(R.haarIndex.end(), H.index.begin(), H.index.end());
+    m.firstHaarPage = R.page;
+    m.haarPageCount = uint32_t(H.payloads.size());
+    R.page += m.haarPageCount;
+  }
+}
+
+// Lays out model mi's sparse bricks (2.0: its detail levels), their index entries and pages.
+void placeSparse(const CanopyWriteModel& wm, CanopyModel& m, size_t mi, uint32_t denseBricks, Ranges& R, uint32_t pageBytes) {
+  m.firstSparsePage = m.sparsePageCount = m.firstSparseIndex = 0;
+  if (m.sparseBricks > 0) {
+    R.sparse[mi] = sparsePagesOf(*wm.bricks, denseBricks, m.brickCount, pageBytes);
+    m.firstSparseIndex = uint32_t(R.sparseIndex.size());
+    R.sparseIndex.insert(R.sparseIndex.end(), R.sparse[mi].index.begin(), R.sparse[mi].index.end());
+    m.firstSparsePage = R.page;
+    m.sparsePageCount = uint32_t(R.sparse[mi].payloads.size());
+    R.page += m.sparsePageCount;
+  }
+}
+
+// Assigns each model its ranges, in model order, and checks the instances' model numbers.
+Ranges assignModelRanges(const CanopyWriteInput& in, const PageGeometry& g) {
+  Ranges R;
+  R.sparse.resize(in.models.size());
   for (size_t mi = 0; mi < in.models.size(); ++mi) {
-    CanopyWriteModel& wm = in.models[mi];
+    const CanopyWriteModel& wm = in.models[mi];
     CanopyModel m = wm.record;
-    if (!wm.tiles || !wm.bricks || wm.tiles->size() != size_t(m.tileCount) * 8 ||
-        wm.bricks->size() != size_t(m.brickCount) * kCanopyBrickBytes)
-      throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has inconsistent tile/brick sizes");
-    m.firstTile = uint32_t(tiles.size() / 8);
-    tiles.insert(tiles.end(), wm.tiles->begin(), wm.tiles->end());
-    // (2.0) a detail model's detail levels go to sparse pages, after its other pages
-    const uint64_t lightBricks = canopyLightLevelBricks(m);  // the ones with light items, and the dense ones
-    if (m.detailLevels > m.depth || lightBricks > m.brickCount)
-      throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has inconsistent level brick counts");
-    const uint32_t denseBricks = m.detailLevels != 0 ? uint32_t(lightBricks) : m.brickCount;
-    m.sparseBricks = m.brickCount - denseBricks;
-    m.firstBrickPage = page;
-    m.brickPageCount = (denseBricks + perPage - 1) / perPage;
-    page += m.brickPageCount;
-    const bool lit = wm.light && !wm.light->empty();
-    const bool haar = wm.haar != nullptr;
-    detail = detail || m.detailLevels != 0;
-    if (lit && (m.lightCount != lightBricks || wm.light->size() * 2 != size_t(m.lightCount) * kCanopyLightItemBytes))
-      throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has inconsistent light items");
-    if (haar && !lit) throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has Haar light but no light items");
-    m.lightCount = lit ? m.lightCount : 0;
-    m.firstLightPage = page;
-    m.lightPageCount = (m.lightCount + lightPerPage - 1) / lightPerPage;
-    page += m.lightPageCount;
-    m.flags = lit ? (m.flags | kCanopyModelHasLight) : (m.flags & ~uint32_t(kCanopyModelHasLight | kCanopyModelScatteredSun));
-    scatteredSun = scatteredSun || (m.flags & kCanopyModelScatteredSun) != 0;
-    m.flags &= ~uint32_t(kCanopyModelHaarLight);
-    m.haarPrecision = m.haarGroups = m.haarItemCount = m.firstHaarIndex = m.haarIndexCount = m.firstHaarPage = m.haarPageCount = 0;
-    m.haarThreshold = 0.0f;
-    for (int a = 0; a < 3; ++a) m.haarBrickDims[a] = 0, m.haarGroupDims[a] = 0;
-    if (haar) {
-      const CanopyHaarPages& H = *wm.haar;
-      if (H.payloads.size() != H.itemCounts.size() || H.index.size() < size_t(H.groupDims[0]) * H.groupDims[1] * H.groupDims[2])
-        throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has inconsistent Haar pages");
-      m.flags |= kCanopyModelHaarLight;
-      m.haarPrecision = H.precision;
-      for (int a = 0; a < 3; ++a) m.haarBrickDims[a] = H.brickDims[a], m.haarGroupDims[a] = H.groupDims[a];
-      m.haarGroups = H.groups;
-      m.haarItemCount = H.items;
-      m.haarThreshold = H.threshold;
-      m.firstHaarIndex = uint32_t(haarIndex.size());
-      m.haarIndexCount = uint32_t(H.index.size());
-      haarIndex.insert(haarIndex.end(), H.index.begin(), H.index.end());
-      m.firstHaarPage = page;
-      m.haarPageCount = uint32_t(H.payloads.size());
-      page += m.haarPageCount;
-    }
-    m.firstSparsePage = m.sparsePageCount = m.firstSparseIndex = 0;
-    if (m.sparseBricks > 0) {
-      sparse[mi] = sparsePagesOf(*wm.bricks, denseBricks, m.brickCount, pageBytes);
-      m.firstSparseIndex = uint32_t(sparseIndex.size());
-      sparseIndex.insert(sparseIndex.end(), sparse[mi].index.begin(), sparse[mi].index.end());
-      m.firstSparsePage = page;
-      m.sparsePageCount = uint32_t(sparse[mi].payloads.size());
-      page += m.sparsePageCount;
-    }
-    models.push_back(m);
+    const uint32_t denseBricks = placeBricksAndLight(wm, m, R, g);
+    placeHaar(wm, m, R);
+    placeSparse(wm, m, mi, denseBricks, R, g.pageBytes);
+    R.models.push_back(m);
   }
   for (const CanopyInstance& inst : in.instances)
-    if (inst.model >= models.size()) throw invalidInput("canopy writer: instance names a model out of range");
+    if (inst.model >= R.models.size()) throw invalidInput("canopy writer: instance names a model out of range");
+  return R;
+}
 
-  // Page table (and page images through emitPage).
-  std::vector<unsigned char> img(pageBytes);
-  auto addPage = [&](CanopyPageKind kind, uint32_t index, uint32_t model, uint32_t first, uint32_t count, const unsigned char* payload,
-                     uint32_t payloadBytes) {
+// Builds page images (header, payload, CRC), appends their headers to the page table and hands
+// each image to emitPage.
+struct PageBuilder {
+  uint32_t pageBytes;
+  const EmitPage& emitPage;
+  std::vector<CanopyPageEntry>& pages;
+  std::vector<unsigned char> img = std::vector<unsigned char>(pageBytes);
+
+  void add(CanopyPageKind kind, uint32_t index, uint32_t model, uint32_t first, uint32_t count, const unsigned char* payload,
+           uint32_t payloadBytes) {
     std::fill(img.begin(), img.end(), 0);
     CanopyPageHeader h{};
     std::memcpy(h.magic, kCanopyPageMagic, 4);
@@ -174,53 +208,61 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
     std::memcpy(img.data(), &h, sizeof h);
     h.crc = canopyPageCrc(img.data(), pageBytes);
     std::memcpy(img.data(), &h, sizeof h);
-    L.pages.push_back(h);
+    pages.push_back(h);
     if (emitPage) emitPage(h.pageIndex, img);
-  };
-  for (uint32_t mi = 0; mi < models.size(); ++mi) {
-    const CanopyModel& m = models[mi];
+  }
+};
+
+// The page table (and page images through emitPage): each model's brick, light, Haar and sparse pages.
+void buildPages(const CanopyWriteInput& in, const Ranges& R, const PageGeometry& g, const EmitPage& emitPage,
+                std::vector<CanopyPageEntry>& pages) {
+  const uint32_t perPage = g.perPage, lightPerPage = g.lightPerPage;
+  PageBuilder pb{g.pageBytes, emitPage, pages};
+  for (uint32_t mi = 0; mi < R.models.size(); ++mi) {
+    const CanopyModel& m = R.models[mi];
     for (uint32_t p = 0; p < m.brickPageCount; ++p) {
       const uint32_t n = std::min(perPage, m.brickCount - m.sparseBricks - p * perPage);
-      addPage(CanopyPageKind::Brick, m.firstBrickPage + p, mi, p * perPage, n,
-              in.models[mi].bricks->data() + size_t(p) * perPage * kCanopyBrickBytes, n * kCanopyBrickBytes);
+      pb.add(CanopyPageKind::Brick, m.firstBrickPage + p, mi, p * perPage, n,
+             in.models[mi].bricks->data() + size_t(p) * perPage * kCanopyBrickBytes, n * kCanopyBrickBytes);
     }
     for (uint32_t p = 0; p < m.lightPageCount; ++p) {
       const uint32_t n = std::min(lightPerPage, m.lightCount - p * lightPerPage);
-      addPage(CanopyPageKind::Light, m.firstLightPage + p, mi, p * lightPerPage, n,
-              reinterpret_cast<const unsigned char*>(in.models[mi].light->data()) + size_t(p) * lightPerPage * kCanopyLightItemBytes,
-              n * kCanopyLightItemBytes);
+      pb.add(CanopyPageKind::Light, m.firstLightPage + p, mi, p * lightPerPage, n,
+             reinterpret_cast<const unsigned char*>(in.models[mi].light->data()) + size_t(p) * lightPerPage * kCanopyLightItemBytes,
+             n * kCanopyLightItemBytes);
     }
     uint32_t item = 0;
     for (uint32_t p = 0; p < m.haarPageCount; ++p) {
       const CanopyHaarPages& H = *in.models[mi].haar;
-      addPage(CanopyPageKind::HaarLight, m.firstHaarPage + p, mi, item, H.itemCounts[p], H.payloads[p].data(), uint32_t(H.payloads[p].size()));
+      pb.add(CanopyPageKind::HaarLight, m.firstHaarPage + p, mi, item, H.itemCounts[p], H.payloads[p].data(), uint32_t(H.payloads[p].size()));
       item += H.itemCounts[p];
     }
     uint32_t brick = m.brickCount - m.sparseBricks;
     for (uint32_t p = 0; p < m.sparsePageCount; ++p) {
-      const SparsePages& S = sparse[mi];
-      addPage(CanopyPageKind::SparseBrick, m.firstSparsePage + p, mi, brick, S.itemCounts[p], S.payloads[p].data(), uint32_t(S.payloads[p].size()));
+      const SparsePages& S = R.sparse[mi];
+      pb.add(CanopyPageKind::SparseBrick, m.firstSparsePage + p, mi, brick, S.itemCounts[p], S.payloads[p].data(), uint32_t(S.payloads[p].size()));
       brick += S.itemCounts[p];
     }
   }
+}
 
-  // Resident sections.
-  struct Blob {
-    CanopySectionKind kind;
-    uint32_t itemBytes, itemCount;
-    std::vector<unsigned char> bytes;
-    const char* name;
-  };
-  auto blobOf = [](CanopySectionKind k, const void* p, uint32_t itemBytes, uint32_t count, const char* name) {
-    Blob b{k, itemBytes, count, {}, name};
-    b.bytes.assign(static_cast<const unsigned char*>(p), static_cast<const unsigned char*>(p) + size_t(itemBytes) * count);
-    return b;
-  };
-  std::vector<Blob> blobs;
-  blobs.push_back(blobOf(CanopySectionKind::Models, models.data(), sizeof(CanopyModel), uint32_t(models.size()), "models"));
-  blobs.push_back(blobOf(CanopySectionKind::Instances, in.instances.data(), sizeof(CanopyInstance), uint32_t(in.instances.size()), "instances"));
-  blobs.push_back(blobOf(CanopySectionKind::NodeTiles, tiles.data(), sizeof(CanopyNode) * 8, uint32_t(tiles.size() / 8), "node_tiles"));
-  blobs.push_back(blobOf(CanopySectionKind::PageTable, L.pages.data(), sizeof(CanopyPageEntry), uint32_t(L.pages.size()), "page_table"));
+// A resident section's bytes, before it is placed.
+struct Blob {
+  CanopySectionKind kind;
+  uint32_t itemBytes, itemCount;
+  std::vector<unsigned char> bytes;
+  const char* name;
+};
+
+Blob blobOf(CanopySectionKind k, const void* p, uint32_t itemBytes, uint32_t count, const char* name) {
+  Blob b{k, itemBytes, count, {}, name};
+  b.bytes.assign(static_cast<const unsigned char*>(p), static_cast<const unsigned char*>(p) + size_t(itemBytes) * count);
+  return b;
+}
+
+// Checks the scene light and adds its SceneLight (and 1.2 SceneSunLight) section; returns whether
+// the scene lattice's sun bases were added.
+bool addSceneLightBlobs(const CanopyWriteInput& in, std::vector<Blob>& blobs) {
   bool sceneSun = false;  // the scene lattice's sun bases (1.2)
   if (in.hasSceneLight) {
     uint64_t n = 1;
@@ -243,16 +285,38 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
       sceneSun = true;
     }
   }
-  if (!haarIndex.empty())
-    blobs.push_back(blobOf(CanopySectionKind::HaarIndex, haarIndex.data(), sizeof(uint32_t), uint32_t(haarIndex.size()), "haar_index"));
-  if (!sparseIndex.empty())
-    blobs.push_back(blobOf(CanopySectionKind::SparseIndex, sparseIndex.data(), sizeof(uint32_t), uint32_t(sparseIndex.size()), "sparse_index"));
+  return sceneSun;
+}
+
+// The resident sections, in file order; sceneSun: whether the scene lattice's sun bases are among them.
+std::vector<Blob> residentBlobs(const CanopyWriteInput& in, const Ranges& R, const std::vector<CanopyPageEntry>& pages,
+                                bool& sceneSun) {
+  std::vector<Blob> blobs;
+  blobs.push_back(blobOf(CanopySectionKind::Models, R.models.data(), sizeof(CanopyModel), uint32_t(R.models.size()), "models"));
+  blobs.push_back(blobOf(CanopySectionKind::Instances, in.instances.data(), sizeof(CanopyInstance), uint32_t(in.instances.size()), "instances"));
+  blobs.push_back(blobOf(CanopySectionKind::NodeTiles, R.tiles.data(), sizeof(CanopyNode) * 8, uint32_t(R.tiles.size() / 8), "node_tiles"));
+  blobs.push_back(blobOf(CanopySectionKind::PageTable, pages.data(), sizeof(CanopyPageEntry), uint32_t(pages.size()), "page_table"));
+  sceneSun = addSceneLightBlobs(in, blobs);
+  if (!R.haarIndex.empty())
+    blobs.push_back(blobOf(CanopySectionKind::HaarIndex, R.haarIndex.data(), sizeof(uint32_t), uint32_t(R.haarIndex.size()), "haar_index"));
+  if (!R.sparseIndex.empty())
+    blobs.push_back(blobOf(CanopySectionKind::SparseIndex, R.sparseIndex.data(), sizeof(uint32_t), uint32_t(R.sparseIndex.size()), "sparse_index"));
   if (!in.metadata.empty()) {
     Blob b{CanopySectionKind::Metadata, 0, 1, {}, "metadata"};
     b.bytes.assign(in.metadata.begin(), in.metadata.end());
     blobs.push_back(std::move(b));
   }
+  return blobs;
+}
 
+// The section table and where the pages start.
+struct Sections {
+  std::vector<CanopySection> table;
+  uint64_t pagesOffset;
+};
+
+// Places the sections after the table, each aligned, and fills the resident image but its header.
+Sections placeSections(const std::vector<Blob>& blobs, uint32_t pageBytes, Layout& L) {
   std::vector<CanopySection> table(blobs.size());
   uint64_t off = alignUp(sizeof(CanopyFileHeader) + blobs.size() * sizeof(CanopySection), kCanopySectionAlign);
   for (size_t i = 0; i < blobs.size(); ++i) {
@@ -271,14 +335,22 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
   for (size_t i = 0; i < blobs.size(); ++i)
     if (!blobs[i].bytes.empty()) std::memcpy(L.resident.data() + table[i].offset, blobs[i].bytes.data(), blobs[i].bytes.size());
   std::memcpy(L.resident.data() + sizeof(CanopyFileHeader), table.data(), table.size() * sizeof(CanopySection));
+  return {std::move(table), pagesOffset};
+}
 
+// The file header (version, sizes, checksums) into the resident image, and the stats.
+void writeHeader(const CanopyWriteInput& in, const Ranges& R, const Sections& S, bool sceneSun, const PageGeometry& g,
+                 Layout& L) {
+  const std::vector<CanopySection>& table = S.table;
+  const uint64_t pagesOffset = S.pagesOffset;
+  const uint32_t pageBytes = g.pageBytes;
   CanopyFileHeader h{};
   std::memcpy(h.magic, kCanopyMagic, 8);
   // A file with a detail model is 2.0. Otherwise: without a 1.1 feature (Haar light, scattered-only
   // sun bases) a 1.0 file, byte for byte; with one but no 1.2 feature (the scene lattice's sun bases)
   // a 1.1 file; else 1.2.
-  h.major = detail ? 2 : 1;
-  h.minor = detail ? 0 : sceneSun ? 2 : haarIndex.empty() && !scatteredSun ? 0 : 1;
+  h.major = R.detail ? 2 : 1;
+  h.minor = R.detail ? 0 : sceneSun ? 2 : R.haarIndex.empty() && !R.scatteredSun ? 0 : 1;
   static_assert(kCanopyMajor == 2 && kCanopyMinor == 0 && kCanopyMinor1 == 2, "the writer's versions");
   h.headerBytes = sizeof(CanopyFileHeader);
   h.pageBytes = pageBytes;
@@ -288,13 +360,13 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
   h.fileBytes = pagesOffset + uint64_t(h.pageCount) * pageBytes;
   h.sectionCount = uint32_t(table.size());
   h.sectionTableCrc = crc32(0, table.data(), table.size() * sizeof(CanopySection));
-  h.modelCount = uint32_t(models.size());
+  h.modelCount = uint32_t(R.models.size());
   h.instanceCount = uint32_t(in.instances.size());
   h.brickVoxels = kCanopyBrickVoxels;
   h.brickBytes = kCanopyBrickBytes;
-  h.bricksPerPage = perPage;
+  h.bricksPerPage = g.perPage;
   h.lightItemBytes = kCanopyLightItemBytes;
-  h.lightItemsPerPage = lightPerPage;
+  h.lightItemsPerPage = g.lightPerPage;
   h.headerCrc = crc32(0, &h, offsetof(CanopyFileHeader, headerCrc));
   std::memcpy(L.resident.data(), &h, sizeof h);
 
@@ -302,6 +374,19 @@ Layout layout(CanopyWriteInput& in, const std::function<void(uint32_t, std::vect
   L.stats.residentBytes = h.residentBytes;
   L.stats.pageCount = h.pageCount;
   L.stats.sections.push_back({"pages", uint64_t(h.pageCount) * pageBytes});
+}
+
+// Assigns model ranges, builds the page table (CRCs need page contents: `makePage` is called for
+// every page) and the resident image.
+Layout layout(CanopyWriteInput& in, const EmitPage& emitPage) {
+  const PageGeometry g;
+  Layout L;
+  const Ranges R = assignModelRanges(in, g);
+  buildPages(in, R, g, emitPage, L.pages);
+  bool sceneSun = false;
+  const std::vector<Blob> blobs = residentBlobs(in, R, L.pages, sceneSun);
+  const Sections S = placeSections(blobs, g.pageBytes, L);
+  writeHeader(in, R, S, sceneSun, g, L);
   return L;
 }
 

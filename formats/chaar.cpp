@@ -110,9 +110,18 @@ void checkQuantRecords(ChaarData& d, uint32_t b, const Checker& ck) {
 }
 
 // ---------------------------------------------------------------------------------------------
-ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) {
-  const Checker ck{name};
-  ChaarData d;
+namespace {
+
+// What parseChaar's stages derive from the header.
+struct ChaarParse {
+  uint32_t headerSize = 0;
+  bool quant = false;                      // Precision::Quant (2.x)
+  uint16_t knownMinor = 0;                 // the newest minor of the file's major that this reader knows
+  uint64_t brickCount = 0;
+};
+
+// The header: magic, version, header size, checksum and file size; returns the header size.
+uint32_t readHeader(const uint8_t* data, size_t size, ChaarHeader& h, const Checker& ck) {
   ck.require(size >= sizeof(kChaarMagic) && std::memcmp(data, kChaarMagic, sizeof kChaarMagic) == 0,
              "not a .chaar file (bad magic)");
   ck.require(size >= 16, "truncated (" + str(size) + " bytes, shorter than the header)");
@@ -129,22 +138,26 @@ ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) 
              "bad header size " + str(headerSize));
   ck.require(size >= headerSize,
              "truncated (" + str(size) + " bytes, header needs " + str(headerSize) + ")");
-  ChaarHeader& h = d.header;
   std::memcpy(&h, data, sizeof h);
   ck.require(headerCrc(data, headerSize) == h.headerCrc32, "header checksum mismatch (corrupted)");
   ck.require(h.fileSize >= headerSize, "bad file size field");
   ck.require(size >= h.fileSize,
              "truncated (" + str(size) + " bytes, header says " + str(h.fileSize) + ")");
   ck.require(size == h.fileSize, str(size - h.fileSize) + " trailing bytes after the end of the file");
+  return headerSize;
+}
 
-  // Header fields.
+// Header fields: bases, precision and version, lattice and brick grid, transform, thresholds, counts.
+void checkHeaderFields(const ChaarData& d, ChaarParse& p, const Checker& ck) {
+  const ChaarHeader& h = d.header;
   ck.require(h.baseCount >= 1 && h.baseCount <= uint32_t(kMaxBases), "bad base count " + str(h.baseCount));
   ck.require(h.precision <= 2, "unknown coefficient precision " + str(h.precision));
-  const bool quant = h.precision == uint32_t(Precision::Quant);
+  p.quant = h.precision == uint32_t(Precision::Quant);
+  const bool quant = p.quant;
   ck.require(quant == (h.versionMajor == 2), quant ? "quantised coefficients in a 1.x file"
                                                    : "float coefficients in a 2.x file");
   // The newest minor of the file's major that this reader knows.
-  const uint16_t knownMinor = h.versionMajor == 1 ? kChaarVersionMinor : kChaarVersion2Minor;
+  p.knownMinor = h.versionMajor == 1 ? kChaarVersionMinor : kChaarVersion2Minor;
   for (int a = 0; a < 3; ++a) {
     const int64_t dim = int64_t(h.latticeMax[a]) - h.latticeMin[a] + 1;
     ck.require(dim >= 1 && dim <= kMaxLatticeEdge, "bad lattice bounds on axis " + str(a));
@@ -161,17 +174,20 @@ ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) 
   ck.require((std::isfinite(h.threshold) && (h.threshold >= 0 || h.threshold == -1)) &&
                  (std::isfinite(h.maxErrorTarget) && (h.maxErrorTarget >= 0 || h.maxErrorTarget == -1)),
              "bad threshold fields");
-  const uint64_t brickCount = d.brickCount();
-  ck.require(h.slotCount <= brickCount, "more stored bricks than the brick grid holds");
-  const uint64_t entryBytes = h.precision == 1 ? 6 : 12;
-  const uint64_t expected[kChaarSectionCount] = {
-      0, uint64_t(h.baseCount) * sizeof(ChaarBaseEntry), brickCount * 4,
-      uint64_t(h.baseCount) * h.slotCount * (quant ? sizeof(QuantRecord) : sizeof(BrickRecord)), 0};
+  p.brickCount = d.brickCount();
+  ck.require(h.slotCount <= p.brickCount, "more stored bricks than the brick grid holds");
   ck.require(h.coefCount <= uint64_t(h.baseCount) * h.slotCount * kBrickValues,
              "coefficient count larger than the bricks can hold");
+}
 
-  // Section table: in order, aligned, inside the file, not overlapping, checksummed.
-  uint64_t cursor = headerSize;
+// Section table: in order, aligned, inside the file, not overlapping, checksummed.
+void checkSectionTable(const uint8_t* data, const ChaarHeader& h, const ChaarParse& p, const Checker& ck) {
+  const bool quant = p.quant;
+  const uint64_t entryBytes = h.precision == 1 ? 6 : 12;
+  const uint64_t expected[kChaarSectionCount] = {
+      0, uint64_t(h.baseCount) * sizeof(ChaarBaseEntry), p.brickCount * 4,
+      uint64_t(h.baseCount) * h.slotCount * (quant ? sizeof(QuantRecord) : sizeof(BrickRecord)), 0};
+  uint64_t cursor = p.headerSize;
   for (int s = 0; s < kChaarSectionCount; ++s) {
     const ChaarSectionEntry& e = h.sections[s];
     const std::string sec = std::string("section ") + kSectionNames[s];
@@ -192,18 +208,21 @@ ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) 
     cursor = e.offset + e.size;
   }
   // A newer minor version may append sections after COEFS; in ours the file ends there.
-  if (h.versionMinor <= knownMinor)
+  if (h.versionMinor <= p.knownMinor)
     ck.require(cursor == h.fileSize, str(h.fileSize - cursor) + " unaccounted bytes after the last section");
+}
 
-  // Copy sections into typed arrays.
+// Copy sections into typed arrays (float coefficients must be finite).
+void copySections(const uint8_t* data, ChaarData& d, const ChaarParse& p, const Checker& ck) {
+  const ChaarHeader& h = d.header;
   auto sectionPtr = [&](int s) { return data + h.sections[s].offset; };
   d.meta.assign(reinterpret_cast<const char*>(sectionPtr(kSecMeta)), h.sections[kSecMeta].size);
   d.bases.resize(h.baseCount);
   std::memcpy(d.bases.data(), sectionPtr(kSecBases), h.sections[kSecBases].size);
-  d.slots.resize(brickCount);
+  d.slots.resize(p.brickCount);
   std::memcpy(d.slots.data(), sectionPtr(kSecSlots), h.sections[kSecSlots].size);
   d.records.resize(uint64_t(h.baseCount) * h.slotCount);
-  if (quant) {  // (levels are bounded by their widths; the records are checked below)
+  if (p.quant) {  // (levels are bounded by their widths; the records are checked below)
     d.quantRecords.resize(d.records.size());
     std::memcpy(static_cast<void*>(d.quantRecords.data()), sectionPtr(kSecRecords), h.sections[kSecRecords].size);
     d.quantWords.resize(h.sections[kSecCoefs].size / 8);
@@ -220,8 +239,12 @@ ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) 
       for (float v : d.coefs32) ck.require(std::isfinite(v), "non-finite coefficient");
     }
   }
+}
 
-  // Bases: streams consecutive and covering COEFS exactly.
+// Bases: streams consecutive and covering COEFS exactly.
+void checkBases(const ChaarData& d, const ChaarParse& p, const Checker& ck) {
+  const ChaarHeader& h = d.header;
+  const bool quant = p.quant;
   uint64_t coefCursor = 0, wordCursor = 0;
   for (uint32_t b = 0; b < h.baseCount; ++b) {
     const ChaarBaseEntry& e = d.bases[b];
@@ -243,7 +266,7 @@ ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) 
       ck.require(e.direction[a] >= -1 && e.direction[a] <= 1, bn + " has a bad direction");
     // Flags: none in 1.0; in 1.1 only kChaarBaseScattered, on a sun base (a newer minor may add more).
     if (h.versionMajor == 1 && h.versionMinor == 0) ck.require(e.flags == 0, bn + " has flags in a 1.0 file");
-    if (h.versionMinor <= knownMinor)
+    if (h.versionMinor <= p.knownMinor)
       ck.require((e.flags & ~uint32_t(kChaarBaseScattered)) == 0, bn + " has unknown flags " + str(e.flags));
     ck.require(!(e.flags & kChaarBaseScattered) || e.direction[0] != 0 || e.direction[1] != 0 || e.direction[2] != 0,
                bn + " is the ambient base but flagged scattered-only");
@@ -254,10 +277,13 @@ ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) 
   }
   ck.require(coefCursor == h.coefCount, "base streams do not cover the coefficient section");
   ck.require(!quant || wordCursor == d.quantWords.size(), "base streams do not cover the coefficient section");
+}
 
-  // Slots: a bijection between stored bricks and slots.
+// Slots: a bijection between stored bricks and slots.
+void checkSlots(const ChaarData& d, const ChaarParse& p, const Checker& ck) {
+  const ChaarHeader& h = d.header;
   std::vector<uint8_t> seen(h.slotCount, 0);
-  for (uint64_t i = 0; i < brickCount; ++i) {
+  for (uint64_t i = 0; i < p.brickCount; ++i) {
     const uint32_t s = d.slots[i];
     if (s == kEmptySlot) continue;
     ck.require(s < h.slotCount, "brick " + str(i) + " has slot " + str(s) + " out of range");
@@ -266,12 +292,15 @@ ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) 
   }
   for (uint32_t s = 0; s < h.slotCount; ++s)
     ck.require(seen[s], "slot " + str(s) + " belongs to no brick");
+}
 
-  // Records: compact, in order, within the base's stream; raw only where there is light.
+// Records: compact, in order, within the base's stream; raw only where there is light.
+void checkRecords(ChaarData& d, const ChaarParse& p, const Checker& ck) {
+  const ChaarHeader& h = d.header;
   for (uint32_t b = 0; b < h.baseCount; ++b) {
     uint64_t next = 0;
     uint32_t nonEmpty = 0, raw = 0;
-    if (quant) checkQuantRecords(d, b, ck);
+    if (p.quant) checkQuantRecords(d, b, ck);
     for (uint32_t s = 0; s < h.slotCount; ++s) {
       const BrickRecord& r = d.records[uint64_t(b) * h.slotCount + s];
       ck.require(!r.raw() || r.mask() != 0,
@@ -287,13 +316,34 @@ ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) 
     ck.require(nonEmpty == d.bases[b].brickCount && raw == d.bases[b].rawBrickCount,
                "base " + baseName(b) + " brick counts do not match its records");
   }
-  // Every stored slot has light in at least one base.
+}
+
+// Every stored slot has light in at least one base.
+void checkStoredSlots(const ChaarData& d, const Checker& ck) {
+  const ChaarHeader& h = d.header;
   for (uint32_t s = 0; s < h.slotCount; ++s) {
     bool any = false;
     for (uint32_t b = 0; b < h.baseCount && !any; ++b)
       any = d.records[uint64_t(b) * h.slotCount + s].mask() != 0;
     ck.require(any, "slot " + str(s) + " is stored but empty in every base");
   }
+}
+
+}  // namespace
+
+// Parses in stages (above, in this order: each may rely on what the earlier ones checked).
+ChaarData parseChaar(const uint8_t* data, size_t size, const std::string& name) {
+  const Checker ck{name};
+  ChaarData d;
+  ChaarParse p;
+  p.headerSize = readHeader(data, size, d.header, ck);
+  checkHeaderFields(d, p, ck);
+  checkSectionTable(data, d.header, p, ck);
+  copySections(data, d, p, ck);
+  checkBases(d, p, ck);
+  checkSlots(d, p, ck);
+  checkRecords(d, p, ck);
+  checkStoredSlots(d, ck);
   return d;
 }
 
