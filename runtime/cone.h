@@ -69,7 +69,35 @@ struct ConeResult {
   // share of the pixel): the moments of the inverse depth that stereo reprojection needs
   // (pixelDisparity, stereo.h).
   float depthSums[3];
+  // kWithDepth only: the front layer, the samples from the first one on while their inverse depth
+  // stays within the layer window of the first one of weight kLayerOpenWeight or more (frontLimit;
+  // ShadeParams::stereoLayer): their sums as above and their premultiplied radiance. The rest is
+  // the back layer (stereo.h).
+  float frontSums[3];
+  float frontRgb[3];
+  float frontLimit;  // -1 before the sample that opens the front layer
+  bool split;        // a sample fell behind the front layer: every later one is in the back layer
 };
+
+// A sample of at least this weight (its share of the pixel) opens a pixel's front layer: fainter
+// ones before it (a wisp in front of a crown) join the front layer without setting its depth.
+constexpr float kLayerOpenWeight = 0.02f;
+
+// kWithDepth: adds a sample of weight w = T alpha at inverse depth inv (1 / t), whose radiance add
+// was added to r.rgb, to the depth sums and, while the ray is in its front layer, to the front
+// layer's; window: the front layer's depth in inverse depth.
+CANOPY_HD CANOPY_FORCEINLINE void addDepthSample(ConeResult& r, float w, float inv, const float add[3], float window) {
+  r.depthSums[0] += w;
+  r.depthSums[1] += w * inv;
+  r.depthSums[2] += w * inv * inv;
+  if (r.frontLimit < 0.0f && w >= kLayerOpenWeight) r.frontLimit = inv - window;
+  r.split = r.split || inv < r.frontLimit;
+  if (r.split) return;
+  r.frontSums[0] += w;
+  r.frontSums[1] += w * inv;
+  r.frontSums[2] += w * inv * inv;
+  for (int c = 0; c < 3; ++c) r.frontRgb[c] += add[c];
+}
 
 // Transmittance from p towards the sun (shadow cone, footprint starts at `footprint0`).
 CANOPY_HD inline float shadowTransmittance(const SceneView& s, V3 p, float footprint0) {
@@ -252,10 +280,11 @@ struct SunAtSample {
 };
 
 // Shades the step [t, next) of extinction q.k: its radiance into r (and the inverse-depth moments,
-// kWithDepth), weighted by the transmittance T before it; returns the step's alpha.
+// kWithDepth, and the layers: window, addDepthSample), weighted by the transmittance T before it;
+// returns the step's alpha.
 template <bool kWithCones, bool kWithDepth>
 CANOPY_HD CANOPY_FORCEINLINE float shadeStep(const SceneView& s, V3 o, V3 d, float t, float pixelAngle, const StepSums& q, float T,
-                                             SunAtSample& sun, ConeResult& r) {
+                                             SunAtSample& sun, ConeResult& r, float window) {
   const float dt = q.next - t;
   const float alpha = 1.0f - expf(-q.k * dt);
   if (!(alpha > 0.0f && T * alpha > kMinContribution)) return alpha;
@@ -279,12 +308,15 @@ CANOPY_HD CANOPY_FORCEINLINE float shadeStep(const SceneView& s, V3 o, V3 d, flo
     sun.spacing = 2.0f * footprint > 1.5f * q.minCell ? 2.0f * footprint : 1.5f * q.minCell;
   }
   const float scale = T * alpha / q.k;
-  for (int c = 0; c < 3; ++c) r.rgb[c] += scale * (q.kAlbedo[c] * s.shade.direct[c] * sun.sunT + q.kIndirect[c]);
   if (kWithDepth) {
-    const float w = T * alpha, inv = 1.0f / tm;
-    r.depthSums[0] += w;
-    r.depthSums[1] += w * inv;
-    r.depthSums[2] += w * inv * inv;
+    float add[3];
+    for (int c = 0; c < 3; ++c) {
+      add[c] = scale * (q.kAlbedo[c] * s.shade.direct[c] * sun.sunT + q.kIndirect[c]);
+      r.rgb[c] += add[c];
+    }
+    addDepthSample(r, T * alpha, 1.0f / tm, add, window);
+  } else {
+    for (int c = 0; c < 3; ++c) r.rgb[c] += scale * (q.kAlbedo[c] * s.shade.direct[c] * sun.sunT + q.kIndirect[c]);
   }
   return alpha;
 }
@@ -292,15 +324,14 @@ CANOPY_HD CANOPY_FORCEINLINE float shadeStep(const SceneView& s, V3 o, V3 d, flo
 // The ground at ray parameter tGround behind what is left of the transmittance T: its radiance
 // into r (and its inverse depth, kWithDepth).
 template <bool kWithCones, bool kWithDepth>
-CANOPY_HD CANOPY_FORCEINLINE void addGround(const SceneView& s, V3 o, V3 d, float tGround, float pixelAngle, float T, ConeResult& r) {
+CANOPY_HD CANOPY_FORCEINLINE void addGround(const SceneView& s, V3 o, V3 d, float tGround, float pixelAngle, float T, ConeResult& r,
+                                            float window) {
   float g[3];
   groundRadiance<kWithCones>(s, o + d * tGround, tGround * pixelAngle, g);
   for (int c = 0; c < 3; ++c) r.rgb[c] += T * g[c];
   if (kWithDepth) {
-    const float inv = 1.0f / tGround;
-    r.depthSums[0] += T;
-    r.depthSums[1] += T * inv;
-    r.depthSums[2] += T * inv * inv;
+    const float add[3] = {T * g[0], T * g[1], T * g[2]};
+    addDepthSample(r, T, 1.0f / tGround, add, window);
   }
 }
 
@@ -308,18 +339,24 @@ CANOPY_HD CANOPY_FORCEINLINE void addGround(const SceneView& s, V3 o, V3 d, floa
 // kWithCones: compiled with the shadow-cone path (kShadowsCone); without it that mode is treated
 // as kShadowsOff, so the CUDA kernel of the other modes carries neither the shadow cone's instance
 // walk (its hit list and descent caches in local memory) nor its registers. Same code otherwise.
-// kWithDepth: also sums the inverse-depth moments of the shaded samples (ConeResult::depthSums).
+// kWithDepth: also sums the inverse-depth moments of the shaded samples (ConeResult::depthSums) and
+// of its front layer, the samples within `window` (inverse depth) of the first one of weight
+// kLayerOpenWeight or more (addDepthSample).
 // A ray that meets the ground (groundHit) before tMax is marched up to it (the parts of instances
 // below the plane are cut) and ends there: what is left of its transmittance shows the ground
 // (groundRadiance), and the result is opaque.
 // Each step: retire the hits that ended, bound the step and evaluate the hits that need it
 // (boundStep, evaluateHits), shade it (shadeStep), move the walk on.
 template <bool kWithCones, bool kWithLight = true, bool kWithDepth = false>
-CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixelAngle, float tMax) {
+CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixelAngle, float tMax, float window = 0.0f) {
   ConeResult r;
   r.rgb[0] = r.rgb[1] = r.rgb[2] = 0.0f;
   r.transmittance = 1.0f;
   r.depthSums[0] = r.depthSums[1] = r.depthSums[2] = 0.0f;
+  r.frontSums[0] = r.frontSums[1] = r.frontSums[2] = 0.0f;
+  r.frontRgb[0] = r.frontRgb[1] = r.frontRgb[2] = 0.0f;
+  r.frontLimit = -1.0f;
+  r.split = false;
   CANOPY_PLAY_COUNT(s, cones, 1);
   const float tGround = groundHit(s.shade, o, d);
   const bool ground = tGround < tMax;
@@ -344,14 +381,14 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
     if (q.next > tMax) q.next = tMax;
     CANOPY_PLAY_COUNT(s, primarySteps, 1);
     if (q.k == 0.0f) CANOPY_PLAY_COUNT(s, emptySteps, 1);
-    const float alpha = shadeStep<kWithCones, kWithDepth>(s, o, d, t, pixelAngle, q, T, sun, r);
+    const float alpha = shadeStep<kWithCones, kWithDepth>(s, o, d, t, pixelAngle, q, T, sun, r, window);
     T *= 1.0f - alpha;
     t = q.next;
     if (T < s.shade.stopT || t >= tMax) break;
     while (!w.done && t >= w.tCellExit) walkAdvance(s, w, o, d, t);
   }
   if (ground) {
-    addGround<kWithCones, kWithDepth>(s, o, d, tGround, pixelAngle, T, r);
+    addGround<kWithCones, kWithDepth>(s, o, d, tGround, pixelAngle, T, r, window);
     T = 0.0f;
   }
   r.transmittance = T;
@@ -395,23 +432,39 @@ CANOPY_HD inline void pixelDisparity(const float sums[3], float cosAxis, float d
   out[1] = k * sqrtf(var > 0.0f ? var : 0.0f);
 }
 
+// What stereo reprojection keeps of a traced pixel besides its RGBA (stereo.h), kStereoPixelFloats
+// floats: the front layer's disparity (mean, spread), the back layer's (mean, spread), and the
+// front layer's premultiplied RGBA (alpha = the front samples' share of the pixel).
+constexpr int kStereoPixelFloats = 8;
+CANOPY_HD inline void pixelLayers(const ConeResult& r, float cosAxis, float disparityScale, float out[kStereoPixelFloats]) {
+  const float back[3] = {r.depthSums[0] - r.frontSums[0], r.depthSums[1] - r.frontSums[1], r.depthSums[2] - r.frontSums[2]};
+  pixelDisparity(r.frontSums, cosAxis, disparityScale, out);
+  pixelDisparity(back, cosAxis, disparityScale, out + 2);
+  for (int c = 0; c < 3; ++c) out[4 + c] = r.frontRgb[c];
+  out[7] = r.frontSums[0];
+}
+
 // Renders pixel i of the frame into rgba (premultiplied RGB, alpha = 1 - T). kWithCones must be
 // true when s.shade.shadows == kShadowsCone, kWithLight when s.litModels > 0 (renderPixel() picks
-// them; the CUDA backend launches the kernel of the mode and scene). kWithDepth: also writes the
-// pixel's disparity statistics for stereo reprojection into depth[2 i], depth[2 i + 1]
-// (pixelDisparity: mean and spread, in pixels, for an eye separation of disparityScale / focal).
+// them; the CUDA backend launches the kernel of the mode and scene). kWithDepth: also writes what
+// stereo reprojection keeps of the pixel into depth[kStereoPixelFloats i ...] (pixelLayers: its
+// layers' disparities in pixels, for an eye separation of disparityScale / focal, and its front
+// layer's RGBA).
 template <bool kWithCones, bool kWithLight, bool kWithDepth = false>
 CANOPY_HD inline void renderPixelT(const SceneView& s, const CameraView& c, int64_t i, float* rgba, float* depth = nullptr,
                                    float disparityScale = 0.0f) {
   const int x = int(i % c.width), y = int(i / c.width);
   float fpPerT;
   const V3 d = cameraRay(c, x, y, fpPerT);
-  const ConeResult r = traceCone<kWithCones, kWithLight, kWithDepth>(s, c.position, d, fpPerT, 3.0e37f);
+  const float cosAxis = dot(d, c.forward);
+  // the front layer's depth in inverse depth: stereoLayer pixels of disparity (pixelDisparity)
+  const float window = kWithDepth && disparityScale > 0.0f ? s.shade.stereoLayer * cosAxis / disparityScale : 0.0f;
+  const ConeResult r = traceCone<kWithCones, kWithLight, kWithDepth>(s, c.position, d, fpPerT, 3.0e37f, window);
   rgba[4 * i + 0] = r.rgb[0];
   rgba[4 * i + 1] = r.rgb[1];
   rgba[4 * i + 2] = r.rgb[2];
   rgba[4 * i + 3] = 1.0f - r.transmittance;
-  if (kWithDepth) pixelDisparity(r.depthSums, dot(d, c.forward), disparityScale, depth + 2 * i);
+  if (kWithDepth) pixelLayers(r, cosAxis, disparityScale, depth + kStereoPixelFloats * i);
 }
 
 // renderPixelT of the mode and scene (s.shade.shadows, s.litModels), with depth when `depth` is set.

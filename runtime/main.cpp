@@ -87,7 +87,7 @@ void addStereoOptions(CLI::App& app, canopy::play::PlayOptions& o) {
       ->check(CLI::IsMember({"reproject", "trace"}))
       ->capture_default_str();
   app.add_option("--stereo-spread", o.stereo.maxSpread,
-                 "A left-eye pixel whose content spreads over more than this many pixels of disparity is traced in the right eye")
+                 "A left-eye layer whose content spreads over more than this many pixels of disparity is traced in the right eye (a pixel's front layer spans twice this)")
       ->capture_default_str();
   app.add_option("--stereo-solid", o.stereo.solidAlpha,
                  "A reprojected left-eye pixel at least this opaque hides what lies behind it in the right eye; less opaque ones are "

@@ -325,6 +325,7 @@ ShadeParams shadeParams(const PlayOptions& o) {
   shade.skipEmptyBlocks = o.skipEmptyBlocks ? 1 : 0;
   shade.exactLight = o.exactLight ? 1 : 0;
   shade.shadowMapMaxVoxels = o.shadowMapMaxVoxels;
+  shade.stereoLayer = o.stereoIpd > 0.0f ? 2.0f * o.stereo.maxSpread : 0.0f;  // a front layer is coherent (stereo.h)
   return shade;
 }
 

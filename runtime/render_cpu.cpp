@@ -67,7 +67,7 @@ class CpuBackend final : public Backend {
     float* out = image.data();
     float* depth = nullptr;
     if (disparityScale > 0.0f) {
-      if (disparity_.size() != pixels * 2) disparity_.assign(pixels * 2, 0.0f);
+      if (disparity_.size() != pixels * kStereoPixelFloats) disparity_.assign(pixels * kStereoPixelFloats, 0.0f);
       depth = disparity_.data();
     }
     const int64_t first = int64_t(band.y0) * camera.width;
@@ -76,21 +76,25 @@ class CpuBackend final : public Backend {
   uint64_t reprojectRows(const HostScene& scene, const CameraView& right, uint32_t stamp, Band band, const StereoParams& p) override {
     (void)scene, (void)stamp;  // the stamp and scene of view_, the last render of this pass
     const size_t pixels = size_t(right.width) * right.height;
-    if (keys_.size() != pixels) keys_.resize(pixels), cover_.resize(pixels);
+    if (keys_.size() != pixels) keys_.resize(pixels), behind_.resize(pixels), cover_.resize(pixels);
     if (image_[1].size() != pixels * 4) image_[1].assign(pixels * 4, 0.0f);
-    const StereoView sv = stereoView(image_[0].data(), disparity_.data(), keys_.data(), cover_.data(), image_[1].data(), right.width, p);
+    const StereoView sv =
+        stereoView(image_[0].data(), disparity_.data(), keys_.data(), behind_.data(), cover_.data(), image_[1].data(), right.width, p);
     // one row per task: a row's spans land in the row (max and count, in any order: the same keys)
     std::vector<uint8_t> hole(size_t(band.rows()) * right.width);
     parallelFor(band.rows(), [&](int64_t r) {
       const int y = band.y0 + int(r);
       const int64_t row = int64_t(y) * right.width;
       std::fill(keys_.begin() + row, keys_.begin() + row + right.width, 0ull);
+      std::fill(behind_.begin() + row, behind_.begin() + row + right.width, 0ull);
       std::fill(cover_.begin() + row, cover_.begin() + row + right.width, 0u);
       for (int x = 0; x < right.width; ++x)
-        stereoSplat(sv, x, y, [&](int64_t i, unsigned long long key, bool counts) {
+        stereoSplatNearest(sv, x, y, [&](int64_t i, unsigned long long key, bool counts) {
           keys_[size_t(i)] = std::max(keys_[size_t(i)], key);
           cover_[size_t(i)] += counts ? 1u : 0u;
         });
+      for (int x = 0; x < right.width; ++x)
+        stereoSplatBehind(sv, x, y, [&](int64_t i, unsigned long long key) { behind_[size_t(i)] = std::max(behind_[size_t(i)], key); });
       for (int x = 0; x < right.width; ++x) hole[size_t(r) * right.width + x] = stereoResolve(sv, x, y) ? 0 : 1;
     }, 1);
     std::vector<int64_t> holes;
@@ -117,7 +121,7 @@ class CpuBackend final : public Backend {
   std::vector<int32_t> table_;
   std::vector<uint32_t> slotUsed_, pageWanted_;
   std::vector<float> image_[2], disparity_, shadowMap_, extinction_;
-  std::vector<unsigned long long> keys_;
+  std::vector<unsigned long long> keys_, behind_;
   std::vector<uint32_t> cover_;
   SceneView view_{};  // the last render's view (its stamp, shade and shadow map): the second eye's holes use it
   ExtinctionGridView grid_{};

@@ -71,10 +71,20 @@ struct StereoSplatKernel {
   int y0;
   __device__ void operator()(int64_t i) const {
     const int x = int(i % view.width), y = y0 + int(i / view.width);
-    stereoSplat(view, x, y, [&](int64_t r, unsigned long long key, bool counts) {
+    stereoSplatNearest(view, x, y, [&](int64_t r, unsigned long long key, bool counts) {
       atomicMax(view.keys + r, key);
       if (counts) atomicAdd(view.cover + r, 1u);
     });
+  }
+};
+
+// Then, the keys complete, the spans behind each right-eye pixel's front span.
+struct StereoBehindKernel {
+  StereoView view;
+  int y0;
+  __device__ void operator()(int64_t i) const {
+    const int x = int(i % view.width), y = y0 + int(i / view.width);
+    stereoSplatBehind(view, x, y, [&](int64_t r, unsigned long long key) { atomicMax(view.behind + r, key); });
   }
 };
 
@@ -216,7 +226,7 @@ class CudaBackend final : public Backend {
     if (image_[eye].size() != pixels * 4) image_[eye].resize(pixels * 4);
     float* depth = nullptr;
     if (disparityScale > 0.0f) {
-      if (disparity_.size() != pixels * 2) disparity_.resize(pixels * 2);
+      if (disparity_.size() != pixels * kStereoPixelFloats) disparity_.resize(pixels * kStereoPixelFloats);
       depth = disparity_.data();
     }
     SceneView v = hostSceneView(scene);
@@ -303,12 +313,15 @@ class CudaBackend final : public Backend {
     CANOPY_CUDA_CHECK(cudaSetDevice(device_));
     const size_t pixels = size_t(right.width) * right.height;
     if (image_[1].size() != pixels * 4) image_[1].resize(pixels * 4);
-    if (keys_.size() != pixels) keys_.resize(pixels), cover_.resize(pixels);
+    if (keys_.size() != pixels) keys_.resize(pixels), behind_.resize(pixels), cover_.resize(pixels);
     const size_t first = size_t(band.y0) * right.width, count = size_t(band.rows()) * right.width;
     CANOPY_CUDA_CHECK(cudaMemsetAsync(keys_.data() + first, 0, count * sizeof(unsigned long long), compute_));
+    CANOPY_CUDA_CHECK(cudaMemsetAsync(behind_.data() + first, 0, count * sizeof(unsigned long long), compute_));
     CANOPY_CUDA_CHECK(cudaMemsetAsync(cover_.data() + first, 0, count * sizeof(uint32_t), compute_));
-    const StereoView sv = stereoView(image_[0].data(), disparity_.data(), keys_.data(), cover_.data(), image_[1].data(), right.width, p);
+    const StereoView sv =
+        stereoView(image_[0].data(), disparity_.data(), keys_.data(), behind_.data(), cover_.data(), image_[1].data(), right.width, p);
     cuda::parallelFor(int64_t(count), StereoSplatKernel{sv, band.y0}, compute_, 256);
+    cuda::parallelFor(int64_t(count), StereoBehindKernel{sv, band.y0}, compute_, 256);
     const int tilesX = (right.width + tileW_ - 1) / tileW_, tilesY = (band.rows() + tileH_ - 1) / tileH_;
     const int64_t threads = int64_t(tilesX) * tilesY * tileW_ * tileH_;
     if (hole_.size() < size_t(threads)) hole_.resize(size_t(threads)), holeList_.resize(size_t(threads));
@@ -359,7 +372,7 @@ class CudaBackend final : public Backend {
   cuda::DeviceBuffer<int32_t> table_;
   cuda::DeviceBuffer<uint32_t> slotUsed_, pageWanted_;
   cuda::DeviceBuffer<float> image_[2], disparity_, shadowMap_, extinction_;
-  cuda::DeviceBuffer<unsigned long long> keys_;   // stereo: per right-eye pixel, the nearest span (stereo.h)
+  cuda::DeviceBuffer<unsigned long long> keys_, behind_;  // stereo: per right-eye pixel, the nearest front span and the nearest span behind it (stereo.h)
   cuda::DeviceBuffer<uint32_t> cover_;
   cuda::DeviceBuffer<int32_t> hole_, holeList_;   // stereo: holes by tile position, and compacted
   cuda::DeviceBuffer<int64_t> holeCount_;

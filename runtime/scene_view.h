@@ -87,6 +87,9 @@ struct ShadeParams {
   int ground;
   float groundY;
   float groundAlbedo[3];    // linear RGB
+  // Stereo's traced eye (kWithDepth): a pixel's front layer holds its samples within this many
+  // pixels of disparity of its first one (ConeResult::frontSums; stereo.h); 0: no layers.
+  float stereoLayer;
 };
 
 // How a sample's sun transmittance Tshadow is found (ShadeParams::shadows).
