@@ -10,7 +10,8 @@
 //
 // A volume pixel has no single depth. The traced eye keeps, per pixel, two layers (pixelLayers,
 // cone.h): the front layer, its samples from the first one on while they stay within
-// ShadeParams::stereoLayer = 2 maxSpread pixels of disparity of the first one's, and the back
+// ShadeParams::stereoLayer = 2 maxSpread pixels of disparity of the first one of 2 % of the pixel
+// or more (kLayerOpenWeight; fainter ones before it join the front), and the back
 // layer, all the samples behind it. Per layer: the mean and the spread (standard deviation) of the
 // disparity of its samples, weighted by their share of the pixel, and its colour (the front's
 // RGBA; the back's is what the front lets through: (pixel - front) / (1 - front alpha)).
@@ -82,6 +83,9 @@ constexpr unsigned long long kStereoKeyValid = 1ull;
 constexpr unsigned long long kStereoKeyPair = 2ull;
 constexpr unsigned long long kStereoKeyBack = 4ull;
 constexpr int kStereoFront = 0, kStereoBack = 1;
+// A back layer is known only where its front lets at least 1e-3 through (1 / (1 - front alpha)
+// would otherwise turn rounding into colour; --stereo-solid may be 1).
+constexpr float kStereoBackVisible = 1.0f - 1e-3f;
 
 CANOPY_HD CANOPY_FORCEINLINE const float* stereoLayers(const StereoView& v, int64_t i) { return v.layers + kStereoPixelFloats * i; }
 // Layer L's alpha (the back's: its share of what the front lets through).
@@ -94,7 +98,8 @@ CANOPY_HD CANOPY_FORCEINLINE float stereoAlpha(const StereoView& v, int64_t i, i
 // Whether layer L is known: the front always, the back where the front is not solid (a sky pixel
 // has no back).
 CANOPY_HD CANOPY_FORCEINLINE bool stereoKnown(const StereoView& v, int64_t i, int L) {
-  return L == kStereoFront || (stereoLayers(v, i)[7] < v.p.solidAlpha && v.left[4 * i + 3] >= v.p.faintAlpha);
+  const float fa = stereoLayers(v, i)[7];
+  return L == kStereoFront || (fa < v.p.solidAlpha && fa < kStereoBackVisible && v.left[4 * i + 3] >= v.p.faintAlpha);
 }
 // Whether layer L is faint (the front: the pixel is sky; the back: nothing behind the front).
 CANOPY_HD CANOPY_FORCEINLINE bool stereoFaint(const StereoView& v, int64_t i, int L) {
@@ -182,14 +187,18 @@ CANOPY_HD inline void stereoSplatNearest(const StereoView& v, int x, int y, Emit
 }
 
 // After the first splat (keys complete): the spans of both layers of pixel x of row y that lie
-// behind the winning span of the right-eye pixel they cover by more than maxJump: emit(rightIndex,
-// key) (into behind, nearest wins).
+// behind the winning span of the right-eye pixel they cover by more than maxJump (a back layer
+// behind a front winner: at all): emit(rightIndex, key) (into behind, nearest wins).
 template <class Emit>
 CANOPY_HD inline void stereoSplatBehind(const StereoView& v, int x, int y, Emit&& emit) {
   for (int L = kStereoFront; L <= kStereoBack; ++L)
     stereoSplat(v, x, y, L, [&](int64_t r, unsigned long long key, bool) {
       const unsigned long long front = v.keys[r];
-      if ((front & kStereoKeyValid) && stereoKeyDisparity(key) < stereoKeyDisparity(front) - v.p.maxJump) emit(r, key);
+      if (!(front & kStereoKeyValid)) return;
+      // a back layer behind a front one lies behind it by construction (its own pixel's back may be
+      // less than maxJump behind it); other spans must be more than maxJump behind
+      const bool backOfFront = stereoKeyLayer(key) == kStereoBack && stereoKeyLayer(front) == kStereoFront && key < front;
+      if (backOfFront || stereoKeyDisparity(key) < stereoKeyDisparity(front) - v.p.maxJump) emit(r, key);
     });
 }
 
@@ -217,13 +226,17 @@ CANOPY_HD inline bool stereoSpanRgba(const StereoView& v, int64_t row, unsigned 
 // disparity c - x, and the left eye's ray there saw its layers and nothing else; a layer that does
 // not spread and lies at c - x would have made a span at x (behind, or the winner). Not seen: a
 // layer that spreads over c - x (it made no trusted span), or what lies behind a solid front
-// (its back is not known) where the crossing is behind it.
+// (its back is not known) or behind a pixel made solid by its back, where the crossing is behind it.
 CANOPY_HD inline bool stereoClearBetween(const StereoView& v, int64_t row, int x, int source, float behind) {
   for (int c = x + 1; c < source && c < v.width; ++c) {
     const float dc = float(c - x);
     if (dc <= behind + v.p.maxJump) continue;
     const int64_t j = row + c;
+    // the hidden side of a solid front, or of a solid back behind a translucent front
     if (!stereoKnown(v, j, kStereoBack) && stereoShift(v, j, kStereoFront) > dc + v.p.maxJump) return false;
+    if (stereoKnown(v, j, kStereoBack) && v.left[4 * j + 3] >= v.p.solidAlpha && !stereoFaint(v, j, kStereoBack) &&
+        stereoShift(v, j, kStereoBack) > dc + v.p.maxJump)
+      return false;
     for (int L = kStereoFront; L <= kStereoBack; ++L) {
       if (!stereoKnown(v, j, L) || stereoCoherent(v, j, L)) continue;
       const float* s = stereoLayers(v, j) + 2 * L;

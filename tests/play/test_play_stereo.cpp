@@ -319,6 +319,38 @@ TEST(Stereo, SpreadPixelsAndTranslucentOverlapsAreTracedAndSkyIsNot) {
   EXPECT_EQ(hole[7], 0);
 }
 
+TEST(Stereo, ALayerJustBehindItsFrontIsCompositedAndAPixelSolidThroughItsBackHidesWhatIsBehindIt) {
+  const int w = 16;
+  std::vector<float> right;
+  // crown pixels 4..9: a front (0.6, alpha 0.5, disparity 6) over their own solid back only 0.7 px
+  // behind it (less than maxJump): the right eye sees the crown over that back
+  Row near(w);
+  for (int x = 4; x < 10; ++x) near.setLayers(x, 0.6f, 0.5f, 6.0f, 0.2f, 1.0f, 5.3f);
+  std::vector<int> hole = reprojectRow(near, w, right);
+  for (int x = 0; x < 4; ++x) {
+    ASSERT_EQ(hole[size_t(x)], 0) << x;
+    EXPECT_NEAR(right[size_t(4 * x)], 0.6f * 0.5f + 0.5f * 0.2f, 1e-6f) << x;
+    EXPECT_NEAR(right[size_t(4 * x + 3)], 1.0f, 1e-6f) << x;
+  }
+  // a wall at disparity 1 behind a translucent crown at pixels 12, 13 (disparity 12, landing on right
+  // pixels 0, 1), and at pixel 5 a translucent front over a solid back (disparity 7 and 6.8): the
+  // right eye's rays at 0 and 1 cross column 5 behind that pixel, where the left eye saw nothing:
+  // traced, as behind a solid front
+  Row pole(w);
+  for (int x = 0; x < w; ++x) pole.set(x, 0.2f, 1.0f, 1.0f);
+  pole.set(12, 0.6f, 0.5f, 12.0f);
+  pole.set(13, 0.6f, 0.5f, 12.0f);
+  pole.setLayers(5, 0.1f, 0.5f, 7.0f, 0.9f, 1.0f, 6.8f);
+  hole = reprojectRow(pole, w, right);
+  EXPECT_EQ(hole[0], 1);
+  EXPECT_EQ(hole[1], 1);
+  Row solid = pole;
+  solid.set(5, 0.9f, 1.0f, 7.0f);
+  hole = reprojectRow(solid, w, right);
+  EXPECT_EQ(hole[0], 1);
+  EXPECT_EQ(hole[1], 1);
+}
+
 TEST(Stereo, TheTracedEyesFrontLayerNeverSpreadsAndTheLayersGiveThePixelBack) {
   // The grove's traced eye (every page resident, the ground under it): per covered pixel the front
   // layer spans 2 x --stereo-spread px of disparity from its opening sample, so it spreads at most
