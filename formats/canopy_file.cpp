@@ -33,22 +33,37 @@ std::vector<T> copyArray(const std::vector<unsigned char>& bytes, uint64_t offse
   return out;
 }
 
+// Each section kind's name in messages (the layout's) and in reports.
+struct SectionNames {
+  CanopySectionKind kind;
+  const char* name;
+  const char* label;
+};
+constexpr SectionNames kSectionNames[] = {
+    {CanopySectionKind::Models, "Models", "models"},
+    {CanopySectionKind::Instances, "Instances", "instances"},
+    {CanopySectionKind::NodeTiles, "NodeTiles", "node_tiles"},
+    {CanopySectionKind::PageTable, "PageTable", "page_table"},
+    {CanopySectionKind::SceneLight, "SceneLight", "scene_light"},
+    {CanopySectionKind::Metadata, "Metadata", "metadata"},
+    {CanopySectionKind::HaarIndex, "HaarIndex", "haar_index"},
+    {CanopySectionKind::SparseIndex, "SparseIndex", "sparse_index"},
+    {CanopySectionKind::SceneSunLight, "SceneSunLight", "scene_sun_light"},
+};
+
 const char* sectionName(uint32_t kind) {
-  switch (CanopySectionKind(kind)) {
-    case CanopySectionKind::Models: return "Models";
-    case CanopySectionKind::Instances: return "Instances";
-    case CanopySectionKind::NodeTiles: return "NodeTiles";
-    case CanopySectionKind::PageTable: return "PageTable";
-    case CanopySectionKind::SceneLight: return "SceneLight";
-    case CanopySectionKind::Metadata: return "Metadata";
-    case CanopySectionKind::HaarIndex: return "HaarIndex";
-    case CanopySectionKind::SparseIndex: return "SparseIndex";
-    case CanopySectionKind::SceneSunLight: return "SceneSunLight";
-  }
+  for (const SectionNames& n : kSectionNames)
+    if (uint32_t(n.kind) == kind) return n.name;
   return "unknown";
 }
 
 }  // namespace
+
+const char* canopySectionLabel(uint32_t kind) {
+  for (const SectionNames& n : kSectionNames)
+    if (uint32_t(n.kind) == kind) return n.label;
+  return "unknown";
+}
 
 bool canopyInvertAffine(const double m[12], double out[12]) {
   const double a = m[0], b = m[1], c = m[2], d = m[4], e = m[5], f = m[6], g = m[8], h = m[9], i = m[10];
@@ -729,7 +744,7 @@ std::string canopyCheckHaarPage(const void* pageImage, uint32_t pageBytes, bool 
   return "";
 }
 
-std::string canopyCheckSparsePage(const void* pageImage, uint32_t pageBytes) {
+std::string canopyCheckSparsePage(const void* pageImage, uint32_t pageBytes, bool uniformAllowed) {
   const auto* page = static_cast<const unsigned char*>(pageImage);
   const unsigned char* payload = page + sizeof(CanopyPageHeader);
   std::vector<uint32_t> off;
@@ -742,19 +757,23 @@ std::string canopyCheckSparsePage(const void* pageImage, uint32_t pageBytes) {
     uint16_t prefix[kCanopySparseMaskWords];
     std::memcpy(mask, payload + off[i], sizeof mask);
     std::memcpy(prefix, payload + off[i] + sizeof mask, sizeof prefix);
+    const uint32_t last = mask[kCanopySparseMaskWords - 1];
+    const bool uniform = uniformAllowed && (last & kCanopySparseUniform) != 0;
+    if ((last & ~kCanopySparseLastVoxels & ~(uniform ? kCanopySparseUniform : 0u)) != 0) return what("mask bits past the last voxel");
+    mask[kCanopySparseMaskWords - 1] = last & kCanopySparseLastVoxels;
     uint32_t set = 0;
     for (uint32_t w = 0; w < kCanopySparseMaskWords; ++w) {
       if (prefix[w] != set) return what("prefix counts do not match its mask");
       set += haar::popcount32(mask[w]);
     }
-    if (mask[kCanopySparseMaskWords - 1] >> (kCanopyBrickVoxelCount % 32) != 0) return what("mask bits past the last voxel");
-    if (canopySparseItemBytes(set) != uint64_t(off[i + 1]) - off[i]) return what("size does not match its voxel count");
+    if (uniform && set == 0) return what("uniform density without a stored voxel");
+    if (canopySparseItemBytes(set, uniform) != uint64_t(off[i + 1]) - off[i]) return what("size does not match its voxel count");
     uint32_t empty[kCanopySparseEmptyWords];
     std::memcpy(empty, payload + off[i] + sizeof mask + sizeof prefix, sizeof empty);
     for (uint32_t c = 0; c < kCanopyEmptyCells * kCanopyEmptyCells * kCanopyEmptyCells; ++c)
       if (((empty[c >> 5] >> (c & 31u)) & 1u) != uint32_t(canopySparseCellEmpty(mask, c % 8, (c / 8) % 8, c / 64)))
         return what("empty cells do not match its voxels");
-    for (uint32_t v = 0; v < set; ++v) {
+    for (uint32_t v = 0; v < (uniform ? 1u : set); ++v) {
       float d;
       std::memcpy(&d, payload + off[i] + kCanopySparseHeadBytes + 4 * v, 4);
       if (!(d > 0.0f) || d > 3.0e38f) return what("stored density not positive and finite");
@@ -783,7 +802,7 @@ void CanopyFile::readPage(uint32_t index, void* dst) const {
     const std::string problem = canopyCheckHaarPage(dst, header_.pageBytes, models_[ph.model].haarPrecision != 0);
     if (!problem.empty()) bad(path_, name + ": " + problem);
   } else if (ph.kind == uint32_t(CanopyPageKind::SparseBrick) && header_.major >= 2) {
-    const std::string problem = canopyCheckSparsePage(dst, header_.pageBytes);
+    const std::string problem = canopyCheckSparsePage(dst, header_.pageBytes, header_.major >= 3);
     if (!problem.empty()) bad(path_, name + ": " + problem);
   }
 }

@@ -19,8 +19,12 @@ namespace canopy {
 // masks' popcounts, as in a .chaar), every coefficient finite. Returns "" or the first problem.
 std::string canopyCheckHaarPage(const void* page, uint32_t pageBytes, bool fp16);
 // The same for a sparse brick page (2.0): offsets, every item's prefix counts against its mask, its
-// size against its voxel count, stored densities positive and finite.
-std::string canopyCheckSparsePage(const void* page, uint32_t pageBytes);
+// size against its voxel count, its empty cells against its voxels, stored densities positive and
+// finite; uniform items (3.0) only where `uniform` allows them, and only with a stored voxel.
+std::string canopyCheckSparsePage(const void* page, uint32_t pageBytes, bool uniform);
+// A section kind's name in reports (`info`, the writer's stats): "node_tiles", ...; "unknown" for a
+// kind this reader does not know.
+const char* canopySectionLabel(uint32_t kind);
 
 // Host-side matrix helpers (double precision, then rounded to float for the device).
 // The inverse of a 3x4 affine matrix; false if it is singular.

@@ -100,7 +100,9 @@
 // writes 1.2 only for a file with that section. 2.0 added detail levels (CanopyModel.detailLevels):
 // octree levels finer than the model's light lattice, whose bricks have no light items (their light
 // is their light-level ancestor's); a 1.x reader could not play them, so the writer writes 2.0 only
-// for a file with a detail model, and 1.x (as before, byte for byte) otherwise.
+// for a file with a detail model, and 1.x (as before, byte for byte) otherwise. 3.0 added uniform
+// sparse bricks (one density for all the stored voxels of an item: bit 1023 of its mask, which a 2.0
+// reader refuses as a voxel past the last); the writer writes 3.0 only for a file with such an item.
 //
 // This header holds the layout alone: constants, the resident structures and the arithmetic that
 // finds a brick, a light item or a level in them. canopy_sample.h samples page images (host and
@@ -116,7 +118,7 @@ namespace canopy {
 // Constants
 // ------------------------------------------------------------------------------------------------
 constexpr char kCanopyMagic[8] = {'C', 'A', 'N', 'O', 'P', 'Y', 'P', 'K'};
-constexpr uint16_t kCanopyMajor = 2;  // 2.0: detail levels (a model's levels finer than its light lattice)
+constexpr uint16_t kCanopyMajor = 3;  // 2.0: detail levels (a model's levels finer than its light lattice); 3.0: uniform sparse bricks
 constexpr uint16_t kCanopyMinor = 0;
 // The 1.x minors this reader knows: 1.1: Haar light pages (optional; a 1.0 reader skips them),
 // kCanopyModelScatteredSun; 1.2: the scene lattice's sun bases (SceneSunLight; a 1.1 reader skips it)
@@ -312,10 +314,14 @@ static_assert(sizeof(CanopySceneLight) == 128, "CanopySceneLight layout");
 // ---- Sparse bricks (2.0: a detail model's detail levels) ---------------------------------------
 // The same 10^3 voxels as a brick (interior and border, index canopyVoxelIndex), with only the
 // voxels of non-zero density stored. Item: uint32 mask[32] (bit v of word v / 32: voxel v has
-// density > 0; bits 1000..1023 zero), uint16 prefix[32] (set bits in the words before), uint32
-// empty[16] (the brick's empty-cell mask, bit i of word i / 32: cell i as in canopyBrickEmptyCells,
-// which the reader checks against the voxels), then float density[n] and uint32 material[n] of the
-// n set voxels in index order. 256 + 8 n bytes.
+// density > 0; bits 1000..1022 zero; bit 1023 the uniform flag, 3.0, below), uint16 prefix[32]
+// (set bits in the words before), uint32 empty[16] (the brick's empty-cell mask, bit i of word
+// i / 32: cell i as in canopyBrickEmptyCells, which the reader checks against the voxels), then
+// float density[n] and uint32 material[n] of the n set voxels in index order: 256 + 8 n bytes.
+// Uniform items (3.0): where bit 1023 is set, every stored voxel has the one density that follows
+// the head (n >= 1), then material[n]: 256 + 4 + 4 n bytes. The writer flags an item whose n >= 2
+// stored densities are all equal; at the finest level of a detail lattice every occupied cell has
+// density 1 (canopy-voxelize --detail), so nearly all of a detail model's finest bricks are uniform.
 // A sample reads the same voxel values as the dense brick would (canopySampleVoxels), so a
 // sparse brick samples bit for bit like its dense form.
 constexpr uint32_t kCanopySparseMaskWords = 32;
@@ -323,7 +329,12 @@ constexpr uint32_t kCanopySparseEmptyWords = 16;  // 512 empty-cell bits
 constexpr uint32_t kCanopySparseHeadBytes = kCanopySparseMaskWords * 4 + kCanopySparseMaskWords * 2 + kCanopySparseEmptyWords * 4;  // 256
 constexpr uint32_t kCanopySparseItemBits = 12;  // location = page << 12 | item
 constexpr uint32_t kCanopySparseMaxItemsPerPage = 1u << kCanopySparseItemBits;
-CANOPY_HD CANOPY_FORCEINLINE uint32_t canopySparseItemBytes(uint32_t voxels) { return kCanopySparseHeadBytes + 8u * voxels; }
+constexpr uint32_t kCanopySparseUniform = 1u << 31;  // in mask[31]: bit 1023, past the last voxel (999)
+constexpr uint32_t kCanopySparseLastVoxels = (1u << (kCanopyBrickVoxelCount % 32)) - 1u;  // mask[31]'s voxel bits
+static_assert(kCanopyBrickVoxelCount > 31 * 32 && kCanopyBrickVoxelCount % 32 < 31, "the uniform flag lies past the last voxel");
+CANOPY_HD CANOPY_FORCEINLINE uint32_t canopySparseItemBytes(uint32_t voxels, bool uniform = false) {
+  return kCanopySparseHeadBytes + 4u * (uniform ? 1u : voxels) + 4u * voxels;
+}
 
 // ------------------------------------------------------------------------------------------------
 // Addressing: where a brick, a level or a light item of a model is

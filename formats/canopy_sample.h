@@ -149,13 +149,20 @@ inline void canopyFillBrickMasks(void* page, uint32_t pageBytes, uint32_t bricks
 
 // ---- Sparse bricks (2.0: a detail model's detail levels; the item layout: canopy_layout.h) ------
 
+// The stored voxels of an item: its mask's set bits, without the uniform flag.
+CANOPY_HD CANOPY_FORCEINLINE uint32_t canopySparseVoxelCount(const uint32_t* mask, const uint16_t* prefix) {
+  return uint32_t(prefix[kCanopySparseMaskWords - 1]) + haar::popcount32(mask[kCanopySparseMaskWords - 1] & kCanopySparseLastVoxels);
+}
+
 struct CanopySparseBrickView {
   const uint32_t* mask;
   const uint16_t* prefix;
   const uint32_t* empty;  // the empty-cell bits (canopyBrickEmptyCells' cells, 32 per word)
   const float* density;
   const uint32_t* material;
-  // The stored voxel idx's values (0 and 0 where not stored).
+  uint32_t densityRank;   // ~0u; 0 in a uniform item (3.0), whose voxels all hold density[0]
+  // The stored voxel idx's values (0 and 0 where not stored). idx < 1000: the flag bit is never
+  // tested nor counted.
   CANOPY_HD CANOPY_FORCEINLINE void load(uint32_t idx, float& d, uint32_t& m) const {
     const uint32_t w = mask[idx >> 5], bit = 1u << (idx & 31u);
     if (!(w & bit)) {
@@ -163,7 +170,7 @@ struct CanopySparseBrickView {
       return;
     }
     const uint32_t rank = uint32_t(prefix[idx >> 5]) + haar::popcount32(w & (bit - 1u));
-    d = density[rank], m = material[rank];
+    d = density[rank & densityRank], m = material[rank];
   }
 };
 
@@ -175,9 +182,11 @@ CANOPY_HD CANOPY_FORCEINLINE CanopySparseBrickView canopySparseBrickInPage(const
   v.mask = reinterpret_cast<const uint32_t*>(p);
   v.prefix = reinterpret_cast<const uint16_t*>(p + kCanopySparseMaskWords * 4);
   v.empty = reinterpret_cast<const uint32_t*>(p + kCanopySparseMaskWords * 6);
-  const uint32_t n = uint32_t(v.prefix[kCanopySparseMaskWords - 1]) + haar::popcount32(v.mask[kCanopySparseMaskWords - 1]);
+  const uint32_t n = canopySparseVoxelCount(v.mask, v.prefix);
+  const bool uniform = (v.mask[kCanopySparseMaskWords - 1] & kCanopySparseUniform) != 0;
+  v.densityRank = uniform ? 0u : ~0u;
   v.density = reinterpret_cast<const float*>(p + kCanopySparseHeadBytes);
-  v.material = reinterpret_cast<const uint32_t*>(p + kCanopySparseHeadBytes + 4u * n);
+  v.material = reinterpret_cast<const uint32_t*>(p + kCanopySparseHeadBytes + 4u * (uniform ? 1u : n));
   return v;
 }
 

@@ -19,8 +19,9 @@ uint64_t alignUp(uint64_t v, uint64_t a) { return (v + a - 1) / a * a; }
 
 // A dense brick (kCanopyBrickBytes) as a sparse brick item (canopy_layout.h, "Sparse bricks"): the
 // voxels of non-zero density only (the others hold density 0 and, as the builder writes them,
-// material 0: a sample reads the same values).
-void appendSparseItem(const unsigned char* dense, std::vector<unsigned char>& out) {
+// material 0: a sample reads the same values). An item of n >= 2 stored voxels of one density is
+// uniform (3.0): that density once. Returns whether it is.
+bool appendSparseItem(const unsigned char* dense, std::vector<unsigned char>& out) {
   float d[kCanopyBrickVoxelCount];
   uint32_t m[kCanopyBrickVoxelCount];
   std::memcpy(d, dense, sizeof d);
@@ -36,17 +37,23 @@ void appendSparseItem(const unsigned char* dense, std::vector<unsigned char>& ou
     mv.push_back(m[v]);
   }
   for (uint32_t w = 1; w < kCanopySparseMaskWords; ++w) prefix[w] = uint16_t(prefix[w - 1] + __builtin_popcount(mask[w - 1]));
+  const bool uniform = dv.size() >= 2 && std::all_of(dv.begin(), dv.end(), [&](float x) { return x == dv[0]; });
+  if (uniform) {
+    mask[kCanopySparseMaskWords - 1] |= kCanopySparseUniform;
+    dv.resize(1);
+  }
   uint64_t empty[kCanopyEmptyWords];  // the march's empty cells (as a page reader fills them for dense bricks)
   canopyBrickEmptyCells(canopyBrickAt(dense), empty);
   static_assert(sizeof empty == kCanopySparseEmptyWords * 4, "512 empty-cell bits");
   const size_t at = out.size();
-  out.resize(at + canopySparseItemBytes(uint32_t(dv.size())));
+  out.resize(at + canopySparseItemBytes(uint32_t(mv.size()), uniform));
   unsigned char* p = out.data() + at;
   std::memcpy(p, mask, sizeof mask);
   std::memcpy(p + sizeof mask, prefix, sizeof prefix);
   std::memcpy(p + sizeof mask + sizeof prefix, empty, sizeof empty);  // little-endian: bit i in 32-bit word i / 32
   std::memcpy(p + kCanopySparseHeadBytes, dv.data(), dv.size() * 4);
   std::memcpy(p + kCanopySparseHeadBytes + dv.size() * 4, mv.data(), mv.size() * 4);
+  return uniform;
 }
 
 // A detail model's sparse pages: bricks first..count-1 of `bricks` (dense), in id order, in
@@ -54,13 +61,14 @@ void appendSparseItem(const unsigned char* dense, std::vector<unsigned char>& ou
 struct SparsePages {
   std::vector<std::vector<unsigned char>> payloads;
   std::vector<uint32_t> itemCounts, index;
+  bool uniform = false;  // an item is uniform (3.0)
 };
 SparsePages sparsePagesOf(const std::vector<unsigned char>& bricks, uint32_t first, uint32_t count, uint32_t pageBytes) {
   CanopyItemPager pager(pageBytes, kCanopySparseMaxItemsPerPage);
   SparsePages P;
   for (uint32_t b = first; b < count; ++b) {
     std::vector<unsigned char> item;
-    appendSparseItem(bricks.data() + size_t(b) * kCanopyBrickBytes, item);
+    if (appendSparseItem(bricks.data() + size_t(b) * kCanopyBrickBytes, item)) P.uniform = true;
     const auto [page, inPage] = pager.add(std::move(item));
     P.index.push_back(page << kCanopySparseItemBits | inPage);
   }
@@ -94,6 +102,7 @@ struct Ranges {
   std::vector<SparsePages> sparse;
   bool scatteredSun = false;  // a model flagged kCanopyModelScatteredSun (1.1)
   bool detail = false;        // a model with detail levels (2.0)
+  bool uniform = false;       // a uniform sparse brick (3.0)
   uint32_t page = 0;          // the next page
 };
 
@@ -163,6 +172,7 @@ void placeSparse(const CanopyWriteModel& wm, CanopyModel& m, size_t mi, uint32_t
     R.sparseIndex.insert(R.sparseIndex.end(), R.sparse[mi].index.begin(), R.sparse[mi].index.end());
     m.firstSparsePage = R.page;
     m.sparsePageCount = uint32_t(R.sparse[mi].payloads.size());
+    R.uniform = R.uniform || R.sparse[mi].uniform;
     R.page += m.sparsePageCount;
   }
 }
@@ -254,8 +264,8 @@ struct Blob {
   const char* name;
 };
 
-Blob blobOf(CanopySectionKind k, const void* p, uint32_t itemBytes, uint32_t count, const char* name) {
-  Blob b{k, itemBytes, count, {}, name};
+Blob blobOf(CanopySectionKind k, const void* p, uint32_t itemBytes, uint32_t count) {
+  Blob b{k, itemBytes, count, {}, canopySectionLabel(uint32_t(k))};
   b.bytes.assign(static_cast<const unsigned char*>(p), static_cast<const unsigned char*>(p) + size_t(itemBytes) * count);
   return b;
 }
@@ -274,14 +284,14 @@ bool addSceneLightBlobs(const CanopyWriteInput& in, std::vector<Blob>& blobs) {
     if (n * sizeof(float) > 0xFFFFFFFFu) throw invalidInput("canopy writer: scene light lattice too large");
     for (float v : in.sceneLightValues)
       if (!(v >= 0.0f) || v > 3.0e38f) throw invalidInput("canopy writer: scene light value negative or not finite");
-    Blob b{CanopySectionKind::SceneLight, 0, 1, {}, "scene_light"};
+    Blob b{CanopySectionKind::SceneLight, 0, 1, {}, canopySectionLabel(uint32_t(CanopySectionKind::SceneLight))};
     b.bytes.resize(sizeof(CanopySceneLight) + n * sizeof(float));
     std::memcpy(b.bytes.data(), &in.sceneLight, sizeof(CanopySceneLight));
     std::memcpy(b.bytes.data() + sizeof(CanopySceneLight), in.sceneLightValues.data(), n * sizeof(float));
     blobs.push_back(std::move(b));
     if (bases > 1) {
       blobs.push_back(blobOf(CanopySectionKind::SceneSunLight, in.sceneLightValues.data() + n, uint32_t(n * sizeof(float)),
-                             kCanopySceneSunBases, "scene_sun_light"));
+                             kCanopySceneSunBases));
       sceneSun = true;
     }
   }
@@ -292,17 +302,17 @@ bool addSceneLightBlobs(const CanopyWriteInput& in, std::vector<Blob>& blobs) {
 std::vector<Blob> residentBlobs(const CanopyWriteInput& in, const Ranges& R, const std::vector<CanopyPageEntry>& pages,
                                 bool& sceneSun) {
   std::vector<Blob> blobs;
-  blobs.push_back(blobOf(CanopySectionKind::Models, R.models.data(), sizeof(CanopyModel), uint32_t(R.models.size()), "models"));
-  blobs.push_back(blobOf(CanopySectionKind::Instances, in.instances.data(), sizeof(CanopyInstance), uint32_t(in.instances.size()), "instances"));
-  blobs.push_back(blobOf(CanopySectionKind::NodeTiles, R.tiles.data(), sizeof(CanopyNode) * 8, uint32_t(R.tiles.size() / 8), "node_tiles"));
-  blobs.push_back(blobOf(CanopySectionKind::PageTable, pages.data(), sizeof(CanopyPageEntry), uint32_t(pages.size()), "page_table"));
+  blobs.push_back(blobOf(CanopySectionKind::Models, R.models.data(), sizeof(CanopyModel), uint32_t(R.models.size())));
+  blobs.push_back(blobOf(CanopySectionKind::Instances, in.instances.data(), sizeof(CanopyInstance), uint32_t(in.instances.size())));
+  blobs.push_back(blobOf(CanopySectionKind::NodeTiles, R.tiles.data(), sizeof(CanopyNode) * 8, uint32_t(R.tiles.size() / 8)));
+  blobs.push_back(blobOf(CanopySectionKind::PageTable, pages.data(), sizeof(CanopyPageEntry), uint32_t(pages.size())));
   sceneSun = addSceneLightBlobs(in, blobs);
   if (!R.haarIndex.empty())
-    blobs.push_back(blobOf(CanopySectionKind::HaarIndex, R.haarIndex.data(), sizeof(uint32_t), uint32_t(R.haarIndex.size()), "haar_index"));
+    blobs.push_back(blobOf(CanopySectionKind::HaarIndex, R.haarIndex.data(), sizeof(uint32_t), uint32_t(R.haarIndex.size())));
   if (!R.sparseIndex.empty())
-    blobs.push_back(blobOf(CanopySectionKind::SparseIndex, R.sparseIndex.data(), sizeof(uint32_t), uint32_t(R.sparseIndex.size()), "sparse_index"));
+    blobs.push_back(blobOf(CanopySectionKind::SparseIndex, R.sparseIndex.data(), sizeof(uint32_t), uint32_t(R.sparseIndex.size())));
   if (!in.metadata.empty()) {
-    Blob b{CanopySectionKind::Metadata, 0, 1, {}, "metadata"};
+    Blob b{CanopySectionKind::Metadata, 0, 1, {}, canopySectionLabel(uint32_t(CanopySectionKind::Metadata))};
     b.bytes.assign(in.metadata.begin(), in.metadata.end());
     blobs.push_back(std::move(b));
   }
@@ -346,12 +356,12 @@ void writeHeader(const CanopyWriteInput& in, const Ranges& R, const Sections& S,
   const uint32_t pageBytes = g.pageBytes;
   CanopyFileHeader h{};
   std::memcpy(h.magic, kCanopyMagic, 8);
-  // A file with a detail model is 2.0. Otherwise: without a 1.1 feature (Haar light, scattered-only
-  // sun bases) a 1.0 file, byte for byte; with one but no 1.2 feature (the scene lattice's sun bases)
-  // a 1.1 file; else 1.2.
-  h.major = R.detail ? 2 : 1;
+  // A file with a uniform sparse brick is 3.0; with a detail model but none, 2.0. Otherwise: without
+  // a 1.1 feature (Haar light, scattered-only sun bases) a 1.0 file, byte for byte; with one but no
+  // 1.2 feature (the scene lattice's sun bases) a 1.1 file; else 1.2.
+  h.major = R.uniform ? 3 : R.detail ? 2 : 1;
   h.minor = R.detail ? 0 : sceneSun ? 2 : R.haarIndex.empty() && !R.scatteredSun ? 0 : 1;
-  static_assert(kCanopyMajor == 2 && kCanopyMinor == 0 && kCanopyMinor1 == 2, "the writer's versions");
+  static_assert(kCanopyMajor == 3 && kCanopyMinor == 0 && kCanopyMinor1 == 2, "the writer's versions");
   h.headerBytes = sizeof(CanopyFileHeader);
   h.pageBytes = pageBytes;
   h.pageCount = uint32_t(L.pages.size());
@@ -376,12 +386,10 @@ void writeHeader(const CanopyWriteInput& in, const Ranges& R, const Sections& S,
   L.stats.sections.push_back({"pages", uint64_t(h.pageCount) * pageBytes});
 }
 
-// Assigns model ranges, builds the page table (CRCs need page contents: `makePage` is called for
+// Builds the page table of the assigned ranges R (CRCs need page contents: `emitPage` is called for
 // every page) and the resident image.
-Layout layout(CanopyWriteInput& in, const EmitPage& emitPage) {
-  const PageGeometry g;
+Layout layout(const CanopyWriteInput& in, const Ranges& R, const PageGeometry& g, const EmitPage& emitPage) {
   Layout L;
-  const Ranges R = assignModelRanges(in, g);
   buildPages(in, R, g, emitPage, L.pages);
   bool sceneSun = false;
   const std::vector<Blob> blobs = residentBlobs(in, R, L.pages, sceneSun);
@@ -399,12 +407,15 @@ CanopyWriteStats writeCanopyFile(const std::string& path, CanopyWriteInput input
   bool ok = true;
   // The resident part holds the page table (page CRCs), so it is known only after every page has
   // been built. Pass 1 lays out without output (resident image); pass 2 streams the pages to their
-  // offsets; both passes must agree byte for byte.
-  const Layout probe = layout(input, nullptr);
+  // offsets; both passes must agree byte for byte. The ranges (and the sparse items they hold) are
+  // assigned once.
+  const PageGeometry g;
+  const Ranges R = assignModelRanges(input, g);
+  const Layout probe = layout(input, R, g, nullptr);
   const uint64_t pagesOffset = probe.resident.size();
   ok = std::fwrite(probe.resident.data(), 1, probe.resident.size(), f) == probe.resident.size();
   if (ok && std::fseek(f, long(pagesOffset), SEEK_SET) != 0) ok = false;
-  Layout L = layout(input, [&](uint32_t index, std::vector<unsigned char>& img) {
+  Layout L = layout(input, R, g, [&](uint32_t index, std::vector<unsigned char>& img) {
     if (ok) ok = std::fwrite(img.data(), 1, img.size(), f) == img.size();
   });
   if (ok && L.resident != probe.resident) ok = false;  // deterministic layout: both passes agree
@@ -416,7 +427,8 @@ CanopyWriteStats writeCanopyFile(const std::string& path, CanopyWriteInput input
 
 std::vector<unsigned char> writeCanopyBytes(CanopyWriteInput input, CanopyWriteStats* stats) {
   std::vector<std::vector<unsigned char>> pages;
-  Layout L = layout(input, [&](uint32_t, std::vector<unsigned char>& img) { pages.push_back(img); });
+  const PageGeometry g;
+  Layout L = layout(input, assignModelRanges(input, g), g, [&](uint32_t, std::vector<unsigned char>& img) { pages.push_back(img); });
   std::vector<unsigned char> bytes = std::move(L.resident);
   for (const auto& p : pages) bytes.insert(bytes.end(), p.begin(), p.end());
   if (stats) *stats = L.stats;

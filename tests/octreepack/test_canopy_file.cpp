@@ -30,8 +30,9 @@ namespace op = canopy::octreepack;
 
 namespace {
 
-// The current format's frozen file (1.2) and the previous ones (1.1, 1.0), which must still read.
+// The frozen files of every version (3.0, 2.0, 1.2, 1.1, 1.0), which must still read.
 const std::string kFrozen = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v1.2.canopy";
+const std::string kFrozenV30 = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v3.0.canopy";
 const std::string kFrozenV20 = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v2.0.canopy";
 const std::string kFrozenV11 = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v1.1.canopy";
 const std::string kFrozenV1 = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v1.0.canopy";
@@ -58,8 +59,10 @@ float sceneLightValue(uint32_t base, uint32_t node) { return 0.01f * float(node 
 // The frozen files' content: a 20-cell synthetic plant (depth 2, density only), an 8-cell one with
 // analytic float16 lighting (depth 0) and three instances (1.0); 1.1 adds a fourth instance of a
 // third model lit by the frozen .chaar (float16 items of its decoded values and its Haar pages);
-// 1.2 adds a coarse scene light with its 19 bases (SceneLight's B00, SceneSunLight's B01..B18).
-std::vector<unsigned char> smallFileBytes(int minor = 2, bool detail = false) {
+// 1.2 adds a coarse scene light with its 19 bases (SceneSunLight's B01..B18); `detail` 1 (2.0) adds
+// a detail model and a fifth instance, 2 (3.0) also a second detail model whose finest level holds
+// density 1 wherever it is occupied (uniform sparse bricks) and a sixth instance.
+std::vector<unsigned char> smallFileBytes(int minor = 2, int detail = 0) {
   const bool withHaar = minor >= 1;
   const op::ModelSource src = op::testing::syntheticPlant(20, 2, "frozen", 0);
   const op::BuiltModel m = op::buildOctree(src, "frozen");
@@ -76,6 +79,12 @@ std::vector<unsigned char> smallFileBytes(int minor = 2, bool detail = false) {
   fine.detailLevels = 1;
   const op::BuiltModel detailModel = op::buildOctree(fine, "detail", op::testing::analyticLight);
   if (detail) in.models.push_back({detailModel.record, &detailModel.tiles, &detailModel.bricks, &detailModel.light});
+  // 3.0: the same plant's cells at density 1, as canopy-voxelize --detail writes a detail lattice
+  op::ModelSource binary = fine;
+  binary.name = "binary";
+  for (auto& c : binary.cells) c.density = 1.0f;
+  const op::BuiltModel binaryModel = op::buildOctree(binary, "binary", op::testing::analyticLight);
+  if (detail >= 2) in.models.push_back({binaryModel.record, &binaryModel.tiles, &binaryModel.bricks, &binaryModel.light});
   CanopyInstance a{}, b{};
   a.modelToWorld[0] = a.modelToWorld[5] = a.modelToWorld[10] = 1.0f;
   b = a;
@@ -91,7 +100,11 @@ std::vector<unsigned char> smallFileBytes(int minor = 2, bool detail = false) {
   e.model = 3;
   e.modelToWorld[7] = 5.0f;
   if (detail) in.instances.push_back(e);
-  in.metadata = detail ? std::string(R"({"tool":"test_canopy_file","note":"frozen .canopy 2.0"})")
+  CanopyInstance u = e;
+  u.model = 4;
+  u.modelToWorld[3] = -5.0f;
+  if (detail >= 2) in.instances.push_back(u);
+  in.metadata = detail ? R"({"tool":"test_canopy_file","note":"frozen .canopy )" + std::string(detail >= 2 ? "3" : "2") + R"(.0"})"
                        : R"({"tool":"test_canopy_file","note":"frozen .canopy 1.)" + std::to_string(minor) + R"("})";
   if (minor >= 2) {
     in.hasSceneLight = true;
@@ -214,7 +227,7 @@ TEST(CanopyFile, FrozenSmallFileStillReads) {
 // model the same content is the 1.2 file (above).
 TEST(CanopyFile, FrozenVersion20FileStillReadsAndIsStillWritten) {
   if (std::getenv("CANOPY_WRITE_FROZEN")) {
-    const auto bytes = smallFileBytes(2, true);
+    const auto bytes = smallFileBytes(2, 1);
     writeFileAtomic(kFrozenV20, bytes.data(), bytes.size());
   }
   CanopyFile f = CanopyFile::open(kFrozenV20);
@@ -231,7 +244,7 @@ TEST(CanopyFile, FrozenVersion20FileStillReadsAndIsStillWritten) {
   EXPECT_EQ(D.lightCount, lightBricks);
   EXPECT_LT(D.lightCount, D.brickCount);
   for (uint32_t i = 0; i < f.pageCount(); ++i) EXPECT_NO_THROW(f.readPage(i));
-  EXPECT_EQ(readFile(kFrozenV20), smallFileBytes(2, true)) << "the .canopy layout changed: bump the version";
+  EXPECT_EQ(readFile(kFrozenV20), smallFileBytes(2, 1)) << "the .canopy layout changed: bump the version";
 }
 
 // A detail model's record is checked (valid CRCs): a 2.0 file's sections in a 1.x file, more detail
@@ -263,28 +276,29 @@ TEST(CanopyFile, DetailModelRecordIsChecked) {
   EXPECT_NE(expectRejected(v1, false).find("a 1.x file has a SparseIndex section"), std::string::npos);
 }
 
-// A detail model's sparse brick pages (2.0): a flipped byte fails the page checksum; a page edited
-// with valid checksums (as a crafted file could be) fails the structure check before anything
-// indexes into it: an offset, a prefix count, an empty-cell bit, a stored density. Truncated 2.0
-// files are refused.
-TEST(CanopyFile, SparseBrickPagesAreChecked) {
-  const std::vector<unsigned char> good = readFile(kFrozenV20);
-  CanopyFile f = CanopyFile::fromMemory(good.data(), good.size(), "ok.canopy");
-  const CanopyFileHeader& h = f.header();
-  uint32_t sp = kCanopyNone;
-  for (uint32_t i = 0; i < f.pageCount(); ++i)
-    if (f.pageEntry(i).kind == uint32_t(CanopyPageKind::SparseBrick)) sp = i;
-  ASSERT_NE(sp, kCanopyNone);
-  const size_t page = size_t(h.pagesOffset) + size_t(sp) * h.pageBytes;
-  const CanopySection* table = f.findSection(CanopySectionKind::PageTable);
-  ASSERT_NE(table, nullptr);
-  for (size_t off = 32; off < 32 + f.pageEntry(sp).payloadBytes; off += 97) {
-    std::vector<unsigned char> bad = good;
-    bad[page + off] ^= 0x04;
-    EXPECT_NE(expectRejected(bad).find("checksum mismatch"), std::string::npos) << off;
+// A file's last sparse brick page, and copies of the file with that page's payload edited and every
+// checksum made valid again (as a crafted file could be).
+struct SparsePageForger {
+  std::vector<unsigned char> good;
+  size_t page = 0, table = 0;
+  uint32_t index = kCanopyNone, pageBytes = 0, payloadBytes = 0;
+  explicit SparsePageForger(const std::string& path) : good(readFile(path)) {
+    CanopyFile f = CanopyFile::fromMemory(good.data(), good.size(), "ok.canopy");
+    for (uint32_t i = 0; i < f.pageCount(); ++i)
+      if (f.pageEntry(i).kind == uint32_t(CanopyPageKind::SparseBrick)) index = i;
+    if (index == kCanopyNone) return;
+    pageBytes = f.header().pageBytes;
+    page = size_t(f.header().pagesOffset) + size_t(index) * pageBytes;
+    table = f.findSection(CanopySectionKind::PageTable)->offset;
+    payloadBytes = f.pageEntry(index).payloadBytes;
   }
-  // edits with the page's CRC (in the page and in the page table) made valid again
-  auto forged = [&](const std::function<void(unsigned char* payload)>& edit) {
+  const unsigned char* payload() const { return good.data() + page + sizeof(CanopyPageHeader); }
+  uint32_t u32(size_t at) const {  // a word of the payload
+    uint32_t v;
+    std::memcpy(&v, payload() + at, 4);
+    return v;
+  }
+  std::string forged(const std::function<void(unsigned char* payload)>& edit) const {
     std::vector<unsigned char> bad = good;
     unsigned char* p = bad.data() + page;
     edit(p + sizeof(CanopyPageHeader));
@@ -292,29 +306,110 @@ TEST(CanopyFile, SparseBrickPagesAreChecked) {
     std::memcpy(&ph, p, sizeof ph);
     ph.crc = 0;
     std::memcpy(p, &ph, sizeof ph);
-    ph.crc = canopyPageCrc(p, h.pageBytes);
+    ph.crc = canopyPageCrc(p, pageBytes);
     std::memcpy(p, &ph, sizeof ph);
-    std::memcpy(bad.data() + table->offset + size_t(sp) * sizeof(CanopyPageEntry), &ph, sizeof ph);
+    std::memcpy(bad.data() + table + size_t(index) * sizeof(CanopyPageEntry), &ph, sizeof ph);
     reseal(bad);
     return expectRejected(bad);
-  };
-  auto u32at = [](unsigned char* p, size_t at, uint32_t xorWith) {
-    uint32_t v;
-    std::memcpy(&v, p + at, 4);
-    v ^= xorWith;
-    std::memcpy(p + at, &v, 4);
-  };
-  uint32_t first;  // the first item's offset
-  std::memcpy(&first, good.data() + page + sizeof(CanopyPageHeader), 4);
-  EXPECT_NE(forged([&](unsigned char* q) { u32at(q, 4, 8); }).find("sparse brick 0: "), std::string::npos);
-  EXPECT_NE(forged([&](unsigned char* q) { u32at(q, first + 128 + 4, 1); }).find("prefix counts"), std::string::npos);
-  EXPECT_NE(forged([&](unsigned char* q) { u32at(q, first + 192 + 8, 1u << 5); }).find("empty cells"), std::string::npos);
+  }
+};
+
+void xorU32(unsigned char* p, size_t at, uint32_t with) {
+  uint32_t v;
+  std::memcpy(&v, p + at, 4);
+  v ^= with;
+  std::memcpy(p + at, &v, 4);
+}
+
+// A detail model's sparse brick pages (2.0): a flipped byte fails the page checksum; a page edited
+// with valid checksums (as a crafted file could be) fails the structure check before anything
+// indexes into it: an offset, a prefix count, an empty-cell bit, a stored density, a mask bit past
+// the last voxel (the 3.0 uniform flag in a 2.0 file). Truncated 2.0 files are refused.
+TEST(CanopyFile, SparseBrickPagesAreChecked) {
+  const SparsePageForger F(kFrozenV20);
+  ASSERT_NE(F.index, kCanopyNone);
+  for (size_t off = 32; off < 32 + F.payloadBytes; off += 97) {
+    std::vector<unsigned char> bad = F.good;
+    bad[F.page + off] ^= 0x04;
+    EXPECT_NE(expectRejected(bad).find("checksum mismatch"), std::string::npos) << off;
+  }
+  const uint32_t first = F.u32(0);  // the first item's offset
+  EXPECT_NE(F.forged([&](unsigned char* q) { xorU32(q, 4, 8); }).find("sparse brick 0: "), std::string::npos);
+  EXPECT_NE(F.forged([&](unsigned char* q) { xorU32(q, first + 128 + 4, 1); }).find("prefix counts"), std::string::npos);
+  EXPECT_NE(F.forged([&](unsigned char* q) { xorU32(q, first + 192 + 8, 1u << 5); }).find("empty cells"), std::string::npos);
   const uint32_t nan = 0x7FC00000u;
-  EXPECT_NE(forged([&](unsigned char* q) { std::memcpy(q + first + 256, &nan, 4); }).find("density"), std::string::npos);
-  for (size_t n = 0; n < good.size(); n += 4093) {
+  EXPECT_NE(F.forged([&](unsigned char* q) { std::memcpy(q + first + 256, &nan, 4); }).find("density"), std::string::npos);
+  EXPECT_NE(F.forged([&](unsigned char* q) { xorU32(q, first + 124, kCanopySparseUniform); }).find("mask bits past the last voxel"),
+            std::string::npos);
+  for (size_t n = 0; n < F.good.size(); n += 4093) {
     try {
-      CanopyFile t = CanopyFile::fromMemory(good.data(), n, "trunc.canopy");
+      CanopyFile t = CanopyFile::fromMemory(F.good.data(), n, "trunc.canopy");
       ADD_FAILURE() << "a truncated 2.0 file of " << n << " bytes was accepted";
+    } catch (const Error&) {
+    }
+  }
+}
+
+// The 3.0 file: the 2.0 content plus a detail model of density 1 wherever it is occupied, whose
+// finest level is stored in uniform sparse bricks (one density per item). It reads, its sparse
+// bricks hold the built bricks' voxels, and the writer still produces it byte for byte.
+TEST(CanopyFile, FrozenVersion30FileStillReadsAndIsStillWritten) {
+  if (std::getenv("CANOPY_WRITE_FROZEN")) {
+    const auto bytes = smallFileBytes(2, 2);
+    writeFileAtomic(kFrozenV30, bytes.data(), bytes.size());
+  }
+  CanopyFile f = CanopyFile::open(kFrozenV30);
+  EXPECT_EQ(f.header().major, 3);
+  EXPECT_EQ(f.header().minor, 0);
+  checkFrozenV11Content(f);
+  ASSERT_EQ(f.modelCount(), 5u);
+  const CanopyModel& U = f.model(4);
+  EXPECT_EQ(U.detailLevels, 1u);
+  ASSERT_GT(U.sparseBricks, 0u);
+  op::ModelSource binary = op::testing::syntheticPlant(16, 4, "detail", 0);  // as smallFileBytes builds it
+  binary.detailLevels = 1;
+  for (auto& c : binary.cells) c.density = 1.0f;
+  const op::BuiltModel built = op::buildOctree(binary, "binary", op::testing::analyticLight);
+  ASSERT_EQ(built.record.brickCount, U.brickCount);
+  uint32_t uniform = 0;
+  for (uint32_t id = U.brickCount - U.sparseBricks; id < U.brickCount; ++id) {
+    const CanopyFile::BrickLocation at = f.brickLocation(4, id);
+    ASSERT_TRUE(at.sparse);
+    const std::vector<unsigned char> page = f.readPage(at.page);
+    const CanopySparseBrickView sp = canopySparseBrickInPage(page.data(), at.slot);
+    const CanopyBrickView dense = canopyBrickAt(built.bricks.data() + size_t(id) * kCanopyBrickBytes);
+    uniform += sp.densityRank == 0;
+    for (uint32_t v = 0; v < kCanopyBrickVoxelCount; ++v) {
+      float d0, d1;
+      uint32_t m0, m1;
+      canopyLoadVoxel(dense, v, d0, m0);
+      sp.load(v, d1, m1);
+      ASSERT_EQ(d0, d1) << id << " " << v;
+      ASSERT_EQ(d0 != 0.0f ? m0 : 0u, m1) << id << " " << v;
+    }
+  }
+  EXPECT_EQ(uniform, U.sparseBricks);  // every finest brick of a density-1 model (none holds a single voxel here)
+  for (uint32_t i = 0; i < f.pageCount(); ++i) EXPECT_NO_THROW(f.readPage(i));
+  EXPECT_EQ(readFile(kFrozenV30), smallFileBytes(2, 2)) << "the .canopy layout changed: bump the version";
+}
+
+// A uniform sparse brick (3.0) edited with valid checksums: without its flag its size no longer
+// matches its voxels, another bit past the last voxel is refused, its one density must be positive
+// and finite. Truncated 3.0 files are refused.
+TEST(CanopyFile, UniformSparseBricksAreChecked) {
+  const SparsePageForger F(kFrozenV30);
+  ASSERT_NE(F.index, kCanopyNone);
+  const uint32_t first = F.u32(0);
+  ASSERT_NE(F.u32(first + 124) & kCanopySparseUniform, 0u);  // the page's first item is uniform
+  EXPECT_NE(F.forged([&](unsigned char* q) { xorU32(q, first + 124, kCanopySparseUniform); }).find("size does not match"),
+            std::string::npos);
+  EXPECT_NE(F.forged([&](unsigned char* q) { xorU32(q, first + 124, 1u << 30); }).find("mask bits past the last voxel"), std::string::npos);
+  const uint32_t inf = 0x7F800000u;
+  EXPECT_NE(F.forged([&](unsigned char* q) { std::memcpy(q + first + 256, &inf, 4); }).find("density"), std::string::npos);
+  for (size_t n = 0; n < F.good.size(); n += 4093) {
+    try {
+      CanopyFile t = CanopyFile::fromMemory(F.good.data(), n, "trunc.canopy");
+      ADD_FAILURE() << "a truncated 3.0 file of " << n << " bytes was accepted";
     } catch (const Error&) {
     }
   }

@@ -870,6 +870,12 @@ TEST(OctreepackDetail, DetailLatticePacksWithItsLightLatticesLight) {
   EXPECT_EQ(info["models"][0]["detail_levels"], 1);
   EXPECT_EQ(info["models"][0]["light_lattice_max"][0], 15);
   EXPECT_EQ(info["models"][0]["lattice_max"][0], 31);
+  bool sparseIndex = false;  // every section is named
+  for (const auto& s : info["sections"]) {
+    EXPECT_NE(s["name"], "unknown");
+    sparseIndex = sparseIndex || s["name"] == "sparse_index";
+  }
+  EXPECT_TRUE(sparseIndex);
   // refused: another lattice, another box, no lattice metadata
   writeLight(dir + "/bounds.light.vdb", 15, 0.0, true);
   writeLight(dir + "/shifted.light.vdb", 16, 0.01, true);

@@ -148,20 +148,23 @@ TEST(DetailPack, LightLevelsAreTheLightLatticesOctree) {
   EXPECT_THROW(canopy::octreepack::buildOctree(bad, "bad"), canopy::Error);
 }
 
-// The file: a detail model makes a 2.0 file; a file without one stays 1.x.
-TEST(DetailPack, ADetailModelMakesA20File) {
+// The file: a detail model whose finest level holds density 1 wherever it is occupied (as
+// canopy-voxelize --detail writes it) makes a 3.0 file (uniform sparse bricks); a file without a
+// detail model stays 1.x.
+TEST(DetailPack, ADetailModelMakesA30File) {
   const std::string dir = pt::tmpDir("detail");
   const ModelSource detail = detailModel();
   writeDetailPack(dir + "/leafy.canopy", detail);
   const canopy::CanopyFile f = canopy::CanopyFile::open(dir + "/leafy.canopy");
-  EXPECT_EQ(f.header().major, 2);
+  EXPECT_EQ(f.header().major, 3);
   EXPECT_EQ(f.header().minor, 0);
   EXPECT_EQ(f.model(0).detailLevels, uint32_t(kDetailLevels));
   pt::writeScene(dir + "/light.canopy", {lightModel(detail)}, {pt::instanceAt(0, 0, 0, 0)});
   EXPECT_EQ(canopy::CanopyFile::open(dir + "/light.canopy").header().major, 1);
 }
 
-// The detail levels' bricks are stored sparse (format 2.0: occupied voxels only) and sample bit for
+// The detail levels' bricks are stored sparse (format 2.0: occupied voxels only; 3.0: one density
+// for an item whose stored voxels share it) and sample bit for
 // bit like their dense form, at voxel centres, borders and random points, with the same empty cells
 // for the march; the file holds them in fewer bytes than dense bricks.
 TEST(DetailPack, SparseBricksSampleLikeTheirDenseForm) {
@@ -174,7 +177,7 @@ TEST(DetailPack, SparseBricksSampleLikeTheirDenseForm) {
   ASSERT_EQ(M.brickCount, b.record.brickCount);
   ASSERT_EQ(M.brickCount - M.sparseBricks, M.lightCount);
   ASSERT_GT(M.sparseBricks, 0u);
-  uint64_t samples = 0, sparseBytes = 0;
+  uint64_t samples = 0, sparseBytes = 0, uniformBricks = 0;
   uint32_t seed = 12345;
   auto rnd = [&]() { return float((seed = seed * 1664525u + 1013904223u) >> 8) / float(1u << 24); };
   for (uint32_t id = M.brickCount - M.sparseBricks; id < M.brickCount; ++id) {
@@ -183,7 +186,9 @@ TEST(DetailPack, SparseBricksSampleLikeTheirDenseForm) {
     const std::vector<unsigned char> page = f.readPage(at.page);
     const canopy::CanopyBrickView dense = canopy::canopyBrickAt(b.bricks.data() + size_t(id) * canopy::kCanopyBrickBytes);
     const canopy::CanopySparseBrickView sp = canopy::canopySparseBrickInPage(page.data(), at.slot);
-    sparseBytes += canopy::canopySparseItemBytes(uint32_t(sp.prefix[31]) + uint32_t(__builtin_popcount(sp.mask[31])));
+    const bool uniform = sp.densityRank == 0;
+    uniformBricks += uniform;
+    sparseBytes += canopy::canopySparseItemBytes(canopy::canopySparseVoxelCount(sp.mask, sp.prefix), uniform);
     for (uint32_t v = 0; v < canopy::kCanopyBrickVoxelCount; ++v) {  // every stored voxel
       float d0, d1;
       uint32_t m0, m1;
@@ -212,9 +217,12 @@ TEST(DetailPack, SparseBricksSampleLikeTheirDenseForm) {
       ++samples;
     }
   }
-  std::printf("%u sparse bricks: %llu samples equal to the dense form's; %.1f KB sparse against %.1f KB dense\n", M.sparseBricks,
-              (unsigned long long)samples, sparseBytes / 1024.0, M.sparseBricks * double(canopy::kCanopyBrickBytes) / 1024.0);
+  std::printf("%u sparse bricks (%llu uniform): %llu samples equal to the dense form's; %.1f KB sparse against %.1f KB dense\n",
+              M.sparseBricks, (unsigned long long)uniformBricks, (unsigned long long)samples, sparseBytes / 1024.0,
+              M.sparseBricks * double(canopy::kCanopyBrickBytes) / 1024.0);
   EXPECT_LT(sparseBytes, uint64_t(M.sparseBricks) * canopy::kCanopyBrickBytes / 2);
+  EXPECT_GT(uniformBricks, 0u);  // the finest level's (density 1), sampled above like the others'
+  EXPECT_LT(uniformBricks, M.sparseBricks);  // the coarser detail levels' means are not uniform
 }
 
 // The player at a detail sample takes the light lattice's light: with the fast path, the item and

@@ -233,10 +233,9 @@ nlohmann::json canopyInfo(const CanopyFile& f) {
   j["bricks_per_page"] = h.bricksPerPage;
   j["instances"] = h.instanceCount;
   nlohmann::json sections = nlohmann::json::array();
-  const char* names[] = {"", "models", "instances", "node_tiles", "page_table", "scene_light", "metadata", "haar_index", "scene_sun_light"};
   for (uint32_t i = 0; i < f.sectionCount(); ++i) {
     const CanopySection& s = f.section(i);
-    sections.push_back({{"name", s.kind < 9 ? names[s.kind] : "unknown"}, {"offset", s.offset}, {"bytes", s.bytes}, {"items", s.itemCount}});
+    sections.push_back({{"name", canopySectionLabel(s.kind)}, {"offset", s.offset}, {"bytes", s.bytes}, {"items", s.itemCount}});
   }
   sections.push_back({{"name", "pages"}, {"offset", h.pagesOffset}, {"bytes", uint64_t(h.pageCount) * h.pageBytes}, {"items", h.pageCount}});
   j["sections"] = sections;
