@@ -5,7 +5,6 @@
 #include <cstring>
 #include <fstream>
 #include <mutex>
-#include <sstream>
 
 #include "canopy/atomic_file.h"
 #include "canopy/cli.h"
@@ -79,6 +78,19 @@ bool rewriteUuid(std::string& bytes) {
   return true;
 }
 
+// The XXH64 of every byte of a VDB file but its UUID: `head` (its first kUuidOffset + kUuidLength
+// bytes), then the rest of `in`, read from just after the head.
+static uint64_t contentHashAfter(const char* head, std::istream& in) {
+  Hasher h;
+  h.update(head, kUuidOffset);
+  char buf[1 << 16];
+  while (in) {
+    in.read(buf, sizeof buf);
+    h.update(buf, size_t(in.gcount()));
+  }
+  return h.digest();
+}
+
 // Checks the header and, for a file Canopy wrote (UUID version 8), that the UUID matches the
 // content hash. Files re-saved by other tools (random version-4 UUIDs) skip the content check.
 static void verifyHeaderAndContent(const std::string& path) {
@@ -94,14 +106,7 @@ static void verifyHeaderAndContent(const std::string& path) {
                        " is newer than this build reads (" + std::to_string(openvdb::OPENVDB_FILE_VERSION) + ")");
   const std::string stored(head + kUuidOffset, kUuidLength);
   if (stored[14] != '8') return;
-  Hasher h;
-  h.update(head, kUuidOffset);
-  char buf[1 << 16];
-  while (in) {
-    in.read(buf, sizeof buf);
-    h.update(buf, size_t(in.gcount()));
-  }
-  if (contentUuid(h.digest()) != stored)
+  if (contentUuid(contentHashAfter(head, in)) != stored)
     throw invalidInput(path + ": content does not match its checksum (truncated or corrupted)");
 }
 
@@ -116,20 +121,19 @@ void writeVdb(const std::string& path, const openvdb::GridPtrVec& grids,
   } catch (const std::exception& e) {
     throw ioError(path + ": cannot write VDB (" + e.what() + ")");
   }
-  std::string bytes;
-  {
-    std::ifstream in(out.tempPath(), std::ios::binary);
-    std::ostringstream ss;
-    ss << in.rdbuf();
-    bytes = ss.str();
-  }
-  if (!rewriteUuid(bytes)) throw runtimeError(path + ": OpenVDB wrote an unexpected header");
-  {
-    std::ofstream o(out.tempPath(), std::ios::binary | std::ios::trunc);
-    o.write(bytes.data(), std::streamsize(bytes.size()));
-    o.flush();
-    if (!o) throw ioError(path + ": write failed (disk full?)");
-  }
+  // The content UUID (as rewriteUuid), hashed from the file and written over OpenVDB's in place.
+  std::fstream io(out.tempPath(), std::ios::binary | std::ios::in | std::ios::out);
+  char head[kUuidOffset + kUuidLength];
+  io.read(head, sizeof head);
+  if (io.gcount() != std::streamsize(sizeof head) || !hasVdbMagic(head))
+    throw runtimeError(path + ": OpenVDB wrote an unexpected header");
+  const std::string uuid = contentUuid(contentHashAfter(head, io));
+  io.clear();
+  io.seekp(kUuidOffset);
+  io.write(uuid.data(), kUuidLength);
+  io.flush();
+  if (!io) throw ioError(path + ": write failed (disk full?)");
+  io.close();
   out.commit();
 }
 
