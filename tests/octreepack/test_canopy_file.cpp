@@ -56,6 +56,19 @@ op::ModelSource haarModelSource(const haar::ChaarData& d) {
 constexpr int kSceneDim[3] = {4, 3, 5};
 float sceneLightValue(uint32_t base, uint32_t node) { return 0.01f * float(node + 1) + 0.1f * float(base); }
 
+// The frozen detail models: a 16-cell plant on a lattice twice as fine as its 8-cell light lattice
+// (2.0); with `binary`, its cells at density 1, as canopy-voxelize --detail writes a detail
+// lattice (3.0: uniform sparse bricks).
+op::ModelSource detailSource(bool binary) {
+  op::ModelSource s = op::testing::syntheticPlant(16, 4, "detail", 0);
+  s.detailLevels = 1;
+  if (binary) {
+    s.name = "binary";
+    for (auto& c : s.cells) c.density = 1.0f;
+  }
+  return s;
+}
+
 // The frozen files' content: a 20-cell synthetic plant (depth 2, density only), an 8-cell one with
 // analytic float16 lighting (depth 0) and three instances (1.0); 1.1 adds a fourth instance of a
 // third model lit by the frozen .chaar (float16 items of its decoded values and its Haar pages);
@@ -74,16 +87,9 @@ std::vector<unsigned char> smallFileBytes(int minor = 2, int detail = 0) {
   in.models.push_back({m.record, &m.tiles, &m.bricks, nullptr});
   in.models.push_back({lit.record, &lit.tiles, &lit.bricks, &lit.light});
   if (withHaar) in.models.push_back({haarLit.record, &haarLit.tiles, &haarLit.bricks, &haarLit.light, &haarPages});
-  // 2.0: a detail model, a 16-cell plant on a lattice twice as fine as its 8-cell light lattice
-  op::ModelSource fine = op::testing::syntheticPlant(16, 4, "detail", 0);
-  fine.detailLevels = 1;
-  const op::BuiltModel detailModel = op::buildOctree(fine, "detail", op::testing::analyticLight);
+  const op::BuiltModel detailModel = op::buildOctree(detailSource(false), "detail", op::testing::analyticLight);
   if (detail) in.models.push_back({detailModel.record, &detailModel.tiles, &detailModel.bricks, &detailModel.light});
-  // 3.0: the same plant's cells at density 1, as canopy-voxelize --detail writes a detail lattice
-  op::ModelSource binary = fine;
-  binary.name = "binary";
-  for (auto& c : binary.cells) c.density = 1.0f;
-  const op::BuiltModel binaryModel = op::buildOctree(binary, "binary", op::testing::analyticLight);
+  const op::BuiltModel binaryModel = op::buildOctree(detailSource(true), "binary", op::testing::analyticLight);
   if (detail >= 2) in.models.push_back({binaryModel.record, &binaryModel.tiles, &binaryModel.bricks, &binaryModel.light});
   CanopyInstance a{}, b{};
   a.modelToWorld[0] = a.modelToWorld[5] = a.modelToWorld[10] = 1.0f;
@@ -194,15 +200,22 @@ std::string expectRejected(const std::vector<unsigned char>& bytes, bool readPag
 // The 1.1 and 1.2 frozen files' Haar-lit model and their content otherwise (1.2: the scene light).
 void checkFrozenV11Content(CanopyFile& f);
 
-TEST(CanopyFile, FrozenSmallFileStillReads) {
-  if (std::getenv("CANOPY_WRITE_FROZEN")) {  // regenerate deliberately (new format version only)
-    const auto bytes = smallFileBytes();
-    writeFileAtomic(kFrozen, bytes.data(), bytes.size());
+// A frozen file of the 1.2 content and more (regenerated deliberately from `content`, for a new
+// format version only, with CANOPY_WRITE_FROZEN=1), opened, its version and that content checked.
+CanopyFile openFrozen(const std::string& path, int major, int minor, const std::function<std::vector<unsigned char>()>& content) {
+  if (std::getenv("CANOPY_WRITE_FROZEN")) {
+    const auto bytes = content();
+    writeFileAtomic(path, bytes.data(), bytes.size());
   }
-  CanopyFile f = CanopyFile::open(kFrozen);
-  EXPECT_EQ(f.header().major, 1);
-  EXPECT_EQ(f.header().minor, 2);
+  CanopyFile f = CanopyFile::open(path);
+  EXPECT_EQ(f.header().major, major);
+  EXPECT_EQ(f.header().minor, minor);
   checkFrozenV11Content(f);
+  return f;
+}
+
+TEST(CanopyFile, FrozenSmallFileStillReads) {
+  CanopyFile f = openFrozen(kFrozen, 1, 2, [] { return smallFileBytes(); });
   EXPECT_NE(f.metadata().find("frozen .canopy 1.2"), std::string::npos);
   // The scene light: B00 in SceneLight, B01..B18 in SceneSunLight, read back base-major.
   ASSERT_TRUE(f.hasSceneLight());
@@ -226,14 +239,7 @@ TEST(CanopyFile, FrozenSmallFileStillReads) {
 // light levels only; it reads, and the writer still produces it byte for byte. Without the detail
 // model the same content is the 1.2 file (above).
 TEST(CanopyFile, FrozenVersion20FileStillReadsAndIsStillWritten) {
-  if (std::getenv("CANOPY_WRITE_FROZEN")) {
-    const auto bytes = smallFileBytes(2, 1);
-    writeFileAtomic(kFrozenV20, bytes.data(), bytes.size());
-  }
-  CanopyFile f = CanopyFile::open(kFrozenV20);
-  EXPECT_EQ(f.header().major, 2);
-  EXPECT_EQ(f.header().minor, 0);
-  checkFrozenV11Content(f);
+  CanopyFile f = openFrozen(kFrozenV20, 2, 0, [] { return smallFileBytes(2, 1); });
   ASSERT_EQ(f.modelCount(), 4u);
   const CanopyModel& D = f.model(3);
   EXPECT_EQ(D.detailLevels, 1u);
@@ -354,22 +360,12 @@ TEST(CanopyFile, SparseBrickPagesAreChecked) {
 // finest level is stored in uniform sparse bricks (one density per item). It reads, its sparse
 // bricks hold the built bricks' voxels, and the writer still produces it byte for byte.
 TEST(CanopyFile, FrozenVersion30FileStillReadsAndIsStillWritten) {
-  if (std::getenv("CANOPY_WRITE_FROZEN")) {
-    const auto bytes = smallFileBytes(2, 2);
-    writeFileAtomic(kFrozenV30, bytes.data(), bytes.size());
-  }
-  CanopyFile f = CanopyFile::open(kFrozenV30);
-  EXPECT_EQ(f.header().major, 3);
-  EXPECT_EQ(f.header().minor, 0);
-  checkFrozenV11Content(f);
+  CanopyFile f = openFrozen(kFrozenV30, 3, 0, [] { return smallFileBytes(2, 2); });
   ASSERT_EQ(f.modelCount(), 5u);
   const CanopyModel& U = f.model(4);
   EXPECT_EQ(U.detailLevels, 1u);
   ASSERT_GT(U.sparseBricks, 0u);
-  op::ModelSource binary = op::testing::syntheticPlant(16, 4, "detail", 0);  // as smallFileBytes builds it
-  binary.detailLevels = 1;
-  for (auto& c : binary.cells) c.density = 1.0f;
-  const op::BuiltModel built = op::buildOctree(binary, "binary", op::testing::analyticLight);
+  const op::BuiltModel built = op::buildOctree(detailSource(true), "binary", op::testing::analyticLight);
   ASSERT_EQ(built.record.brickCount, U.brickCount);
   uint32_t uniform = 0;
   for (uint32_t id = U.brickCount - U.sparseBricks; id < U.brickCount; ++id) {
