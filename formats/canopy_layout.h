@@ -320,8 +320,9 @@ static_assert(sizeof(CanopySceneLight) == 128, "CanopySceneLight layout");
 // float density[n] and uint32 material[n] of the n set voxels in index order: 256 + 8 n bytes.
 // Uniform items (3.0): where bit 1023 is set, every stored voxel has the one density that follows
 // the head (n >= 1), then material[n]: 256 + 4 + 4 n bytes. The writer flags an item whose n >= 2
-// stored densities are all equal; at the finest level of a detail lattice every occupied cell has
-// density 1 (canopy-voxelize --detail), so nearly all of a detail model's finest bricks are uniform.
+// stored densities are all equal; in a detail lattice of canopy-voxelize --detail at k >= 8 (one
+// sub-cell per detail cell) every occupied cell has density 1, so nearly all of such a model's
+// finest bricks are uniform.
 // A sample reads the same voxel values as the dense brick would (canopySampleVoxels), so a
 // sparse brick samples bit for bit like its dense form.
 constexpr uint32_t kCanopySparseMaskWords = 32;
