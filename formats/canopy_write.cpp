@@ -11,6 +11,7 @@
 #include "canopy/atomic_file.h"
 #include "canopy/errors.h"
 #include "canopy/hash.h"
+#include "canopy/parallel.h"
 
 namespace canopy {
 namespace {
@@ -64,12 +65,17 @@ struct SparsePages {
   bool uniform = false;  // an item is uniform (3.0)
 };
 SparsePages sparsePagesOf(const std::vector<unsigned char>& bricks, uint32_t first, uint32_t count, uint32_t pageBytes) {
+  // the items side by side (a detail model has tens of thousands), then paged in id order
+  std::vector<std::vector<unsigned char>> items(count - first);
+  std::vector<unsigned char> uniform(items.size());
+  parallelFor(int64_t(items.size()), [&](int64_t i) {
+    uniform[size_t(i)] = appendSparseItem(bricks.data() + (size_t(first) + size_t(i)) * kCanopyBrickBytes, items[size_t(i)]);
+  }, 64);
   CanopyItemPager pager(pageBytes, kCanopySparseMaxItemsPerPage);
   SparsePages P;
-  for (uint32_t b = first; b < count; ++b) {
-    std::vector<unsigned char> item;
-    if (appendSparseItem(bricks.data() + size_t(b) * kCanopyBrickBytes, item)) P.uniform = true;
-    const auto [page, inPage] = pager.add(std::move(item));
+  for (size_t i = 0; i < items.size(); ++i) {
+    if (uniform[i]) P.uniform = true;
+    const auto [page, inPage] = pager.add(std::move(items[i]));
     P.index.push_back(page << kCanopySparseItemBits | inPage);
   }
   pager.finish();
