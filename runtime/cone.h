@@ -76,7 +76,6 @@ struct ConeResult {
   float frontSums[3];
   float frontRgb[3];
   float frontLimit;  // -1 before the sample that opens the front layer
-  bool split;        // a sample fell behind the front layer: every later one is in the back layer
 };
 
 // A sample of at least this weight (its share of the pixel) opens a pixel's front layer: fainter
@@ -85,14 +84,14 @@ constexpr float kLayerOpenWeight = 0.02f;
 
 // kWithDepth: adds a sample of weight w = T alpha at inverse depth inv (1 / t), whose radiance add
 // was added to r.rgb, to the depth sums and, while the ray is in its front layer, to the front
-// layer's; window: the front layer's depth in inverse depth.
+// layer's; window: the front layer's depth in inverse depth. Samples come in ray order (inv never
+// grows), so once one falls behind the front layer every later one does.
 CANOPY_HD CANOPY_FORCEINLINE void addDepthSample(ConeResult& r, float w, float inv, const float add[3], float window) {
   r.depthSums[0] += w;
   r.depthSums[1] += w * inv;
   r.depthSums[2] += w * inv * inv;
   if (r.frontLimit < 0.0f && w >= kLayerOpenWeight) r.frontLimit = inv - window;
-  r.split = r.split || inv < r.frontLimit;
-  if (r.split) return;
+  if (inv < r.frontLimit) return;
   r.frontSums[0] += w;
   r.frontSums[1] += w * inv;
   r.frontSums[2] += w * inv * inv;
@@ -308,16 +307,12 @@ CANOPY_HD CANOPY_FORCEINLINE float shadeStep(const SceneView& s, V3 o, V3 d, flo
     sun.spacing = 2.0f * footprint > 1.5f * q.minCell ? 2.0f * footprint : 1.5f * q.minCell;
   }
   const float scale = T * alpha / q.k;
-  if (kWithDepth) {
-    float add[3];
-    for (int c = 0; c < 3; ++c) {
-      add[c] = scale * (q.kAlbedo[c] * s.shade.direct[c] * sun.sunT + q.kIndirect[c]);
-      r.rgb[c] += add[c];
-    }
-    addDepthSample(r, T * alpha, 1.0f / tm, add, window);
-  } else {
-    for (int c = 0; c < 3; ++c) r.rgb[c] += scale * (q.kAlbedo[c] * s.shade.direct[c] * sun.sunT + q.kIndirect[c]);
+  float add[3];
+  for (int c = 0; c < 3; ++c) {
+    add[c] = scale * (q.kAlbedo[c] * s.shade.direct[c] * sun.sunT + q.kIndirect[c]);
+    r.rgb[c] += add[c];
   }
+  if (kWithDepth) addDepthSample(r, T * alpha, 1.0f / tm, add, window);
   return alpha;
 }
 
@@ -356,7 +351,6 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
   r.frontSums[0] = r.frontSums[1] = r.frontSums[2] = 0.0f;
   r.frontRgb[0] = r.frontRgb[1] = r.frontRgb[2] = 0.0f;
   r.frontLimit = -1.0f;
-  r.split = false;
   CANOPY_PLAY_COUNT(s, cones, 1);
   const float tGround = groundHit(s.shade, o, d);
   const bool ground = tGround < tMax;
