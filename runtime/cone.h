@@ -307,12 +307,19 @@ CANOPY_HD CANOPY_FORCEINLINE float shadeStep(const SceneView& s, V3 o, V3 d, flo
     sun.spacing = 2.0f * footprint > 1.5f * q.minCell ? 2.0f * footprint : 1.5f * q.minCell;
   }
   const float scale = T * alpha / q.k;
-  float add[3];
-  for (int c = 0; c < 3; ++c) {
-    add[c] = scale * (q.kAlbedo[c] * s.shade.direct[c] * sun.sunT + q.kIndirect[c]);
-    r.rgb[c] += add[c];
+  // Two branches on purpose: with one loop through add[3] for both, nvcc kept add[] in local memory
+  // in the mono shadow-cone kernel and summed with a multiply and an add instead of one fma, so its
+  // CUDA frames moved by rounding (the CPU's did not).
+  if (kWithDepth) {
+    float add[3];
+    for (int c = 0; c < 3; ++c) {
+      add[c] = scale * (q.kAlbedo[c] * s.shade.direct[c] * sun.sunT + q.kIndirect[c]);
+      r.rgb[c] += add[c];
+    }
+    addDepthSample(r, T * alpha, 1.0f / tm, add, window);
+  } else {
+    for (int c = 0; c < 3; ++c) r.rgb[c] += scale * (q.kAlbedo[c] * s.shade.direct[c] * sun.sunT + q.kIndirect[c]);
   }
-  if (kWithDepth) addDepthSample(r, T * alpha, 1.0f / tm, add, window);
   return alpha;
 }
 
