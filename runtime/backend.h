@@ -21,6 +21,12 @@
 
 namespace canopy::play {
 
+// What a stereo second eye traced (Backend::reprojectRows): its holes, and of them those traced
+// only behind a reprojected front.
+struct StereoCounts {
+  uint64_t traced = 0, behind = 0;
+};
+
 class Backend {
  public:
   virtual ~Backend() = default;
@@ -40,8 +46,9 @@ class Backend {
                           int eye, float disparityScale) = 0;
   // Stereo's second eye over `band`: reprojects eye 0 (rendered with a disparityScale by the last
   // renderRows of this pass) into eye 1 and traces its holes with `right` (the same stamp, shade
-  // and shadow map as that render). Returns the number of pixels traced.
-  virtual uint64_t reprojectRows(const HostScene& scene, const CameraView& right, uint32_t stamp, Band band, const StereoParams& p) = 0;
+  // and shadow map as that render). Returns the number of pixels traced, and of them those traced
+  // only behind a reprojected front (stereoResolveHole).
+  virtual StereoCounts reprojectRows(const HostScene& scene, const CameraView& right, uint32_t stamp, Band band, const StereoParams& p) = 0;
   // Copies the stamps written by the last render() to the host.
   virtual void readStamps(std::vector<uint32_t>& slotUsed, std::vector<uint32_t>& pageWanted) = 0;
   // Copies eye `eye`'s rows `band` into rgba (width * height RGBA floats, premultiplied RGB,

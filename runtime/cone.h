@@ -347,10 +347,12 @@ CANOPY_HD CANOPY_FORCEINLINE void addGround(const SceneView& s, V3 o, V3 d, floa
 // A ray that meets the ground (groundHit) before tMax is marched up to it (the parts of instances
 // below the plane are cut) and ends there: what is left of its transmittance shows the ground
 // (groundRadiance), and the result is opaque.
+// The march starts at tStart (a stereo hole behind a reprojected layer starts behind it).
 // Each step: retire the hits that ended, bound the step and evaluate the hits that need it
 // (boundStep, evaluateHits), shade it (shadeStep), move the walk on.
 template <bool kWithCones, bool kWithLight = true, bool kWithDepth = false>
-CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixelAngle, float tMax, float window = 0.0f) {
+CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixelAngle, float tMax, float window = 0.0f,
+                                      float tStart = 0.0f) {
   ConeResult r;
   r.rgb[0] = r.rgb[1] = r.rgb[2] = 0.0f;
   r.transmittance = 1.0f;
@@ -363,8 +365,8 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
   const bool ground = tGround < tMax;
   if (ground) tMax = tGround;
   InstanceWalk w;
-  walkBegin(s, w, o, d, 0.0f, tMax);
-  float t = 0.0f;
+  walkBegin(s, w, o, d, tStart, tMax);
+  float t = tStart;
   float T = 1.0f;
   SunAtSample sun;
   while (true) {
@@ -434,25 +436,31 @@ CANOPY_HD inline void pixelDisparity(const float sums[3], float cosAxis, float d
 }
 
 // What stereo reprojection keeps of a traced pixel besides its RGBA (stereo.h), kStereoPixelFloats
-// floats: the front layer's disparity (mean, spread), the back layer's (mean, spread), and the
-// front layer's premultiplied RGBA (alpha = the front samples' share of the pixel).
-constexpr int kStereoPixelFloats = 8;
+// floats: the front layer's disparity (mean, spread), the back layer's (mean, spread), the front
+// layer's premultiplied RGBA (alpha = the front samples' share of the pixel), and the disparity of
+// the front layer's far side, where the back layer begins (ConeResult::frontLimit; 0: the front
+// layer never opened).
+constexpr int kStereoPixelFloats = 9;
 CANOPY_HD inline void pixelLayers(const ConeResult& r, float cosAxis, float disparityScale, float out[kStereoPixelFloats]) {
   const float back[3] = {r.depthSums[0] - r.frontSums[0], r.depthSums[1] - r.frontSums[1], r.depthSums[2] - r.frontSums[2]};
   pixelDisparity(r.frontSums, cosAxis, disparityScale, out);
   pixelDisparity(back, cosAxis, disparityScale, out + 2);
   for (int c = 0; c < 3; ++c) out[4 + c] = r.frontRgb[c];
   out[7] = r.frontSums[0];
+  out[8] = r.frontLimit > 0.0f ? disparityScale * r.frontLimit / cosAxis : 0.0f;
 }
 
 // Renders pixel i of the frame into rgba (premultiplied RGB, alpha = 1 - T). kWithCones must be
 // true when s.shade.shadows == kShadowsCone, kWithLight when s.litModels > 0 (renderPixel() picks
-// them; the CUDA backend launches the kernel of the mode and scene). kWithDepth: also writes what
-// stereo reprojection keeps of the pixel into depth[kStereoPixelFloats i ...] (pixelLayers: its
-// layers' disparities in pixels, for an eye separation of disparityScale / focal, and its front
-// layer's RGBA).
-template <bool kWithCones, bool kWithLight, bool kWithDepth = false>
-CANOPY_HD inline void renderPixelT(const SceneView& s, const CameraView& c, int64_t i, float* rgba, float* depth = nullptr,
+// them; the CUDA backend launches the kernel of the mode and scene). `stereo`:
+//   - kWithDepth (stereo's traced eye): written, what reprojection keeps of the pixel,
+//     stereo[kStereoPixelFloats i ...] (pixelLayers: its layers' disparities in pixels, for an eye
+//     separation of disparityScale / focal, and its front layer's RGBA);
+//   - kBehind (stereo's holes, stereoResolveHole): read, stereo[i] > 0: the ray is traced from
+//     disparity stereo[i] on (depth disparityScale / stereo[i]) and composited under the RGBA in
+//     rgba (a reprojected layer in front of it); else traced in full.
+template <bool kWithCones, bool kWithLight, bool kWithDepth = false, bool kBehind = false>
+CANOPY_HD inline void renderPixelT(const SceneView& s, const CameraView& c, int64_t i, float* rgba, float* stereo = nullptr,
                                    float disparityScale = 0.0f) {
   const int x = int(i % c.width), y = int(i / c.width);
   float fpPerT;
@@ -460,23 +468,41 @@ CANOPY_HD inline void renderPixelT(const SceneView& s, const CameraView& c, int6
   const float cosAxis = dot(d, c.forward);
   // the front layer's depth in inverse depth: stereoLayer pixels of disparity (pixelDisparity)
   const float window = kWithDepth && disparityScale > 0.0f ? s.shade.stereoLayer * cosAxis / disparityScale : 0.0f;
-  const ConeResult r = traceCone<kWithCones, kWithLight, kWithDepth>(s, c.position, d, fpPerT, 3.0e37f, window);
-  rgba[4 * i + 0] = r.rgb[0];
-  rgba[4 * i + 1] = r.rgb[1];
-  rgba[4 * i + 2] = r.rgb[2];
-  rgba[4 * i + 3] = 1.0f - r.transmittance;
-  if (kWithDepth) pixelLayers(r, cosAxis, disparityScale, depth + kStereoPixelFloats * i);
+  const bool behind = kBehind && stereo[i] > 0.0f;
+  const float tStart = behind ? disparityScale / (stereo[i] * cosAxis) : 0.0f;
+  // a hole's ray under the ground before its start sees only the front written in rgba
+  if (behind && groundHit(s.shade, c.position, d) <= tStart) return;
+  const ConeResult r = traceCone<kWithCones, kWithLight, kWithDepth>(s, c.position, d, fpPerT, 3.0e37f, window, tStart);
+  if (behind) {
+    const float through = 1.0f - rgba[4 * i + 3];
+    for (int ch = 0; ch < 3; ++ch) rgba[4 * i + ch] += through * r.rgb[ch];
+    rgba[4 * i + 3] += through * (1.0f - r.transmittance);
+  } else {
+    rgba[4 * i + 0] = r.rgb[0];
+    rgba[4 * i + 1] = r.rgb[1];
+    rgba[4 * i + 2] = r.rgb[2];
+    rgba[4 * i + 3] = 1.0f - r.transmittance;
+  }
+  if (kWithDepth) pixelLayers(r, cosAxis, disparityScale, stereo + kStereoPixelFloats * i);
 }
 
-// renderPixelT of the mode and scene (s.shade.shadows, s.litModels), with depth when `depth` is set.
+// renderPixelT of the mode and scene (s.shade.shadows, s.litModels): with depth (stereo's traced
+// eye) when `depth` is set, as stereo's holes when `behind` is (renderPixelT's `stereo`).
 CANOPY_HD inline void renderPixel(const SceneView& s, const CameraView& c, int64_t i, float* rgba, float* depth = nullptr,
-                                  float disparityScale = 0.0f) {
+                                  float disparityScale = 0.0f, float* behind = nullptr) {
   const bool cones = s.shade.shadows == kShadowsCone, light = s.litModels > 0;
   if (depth) {
     if (cones)
       light ? renderPixelT<true, true, true>(s, c, i, rgba, depth, disparityScale) : renderPixelT<true, false, true>(s, c, i, rgba, depth, disparityScale);
     else
       light ? renderPixelT<false, true, true>(s, c, i, rgba, depth, disparityScale) : renderPixelT<false, false, true>(s, c, i, rgba, depth, disparityScale);
+  } else if (behind) {
+    if (cones)
+      light ? renderPixelT<true, true, false, true>(s, c, i, rgba, behind, disparityScale)
+            : renderPixelT<true, false, false, true>(s, c, i, rgba, behind, disparityScale);
+    else
+      light ? renderPixelT<false, true, false, true>(s, c, i, rgba, behind, disparityScale)
+            : renderPixelT<false, false, false, true>(s, c, i, rgba, behind, disparityScale);
   } else if (cones) {
     light ? renderPixelT<true, true>(s, c, i, rgba) : renderPixelT<true, false>(s, c, i, rgba);
   } else {

@@ -406,6 +406,7 @@ struct Tile {
   double firstEyeS = 0.0;         // this frame's render time: the traced eye
   double secondEyeS = 0.0;        // stereo's second eye (reprojection and holes, or traced in full)
   uint64_t traced = 0;            // second-eye pixels traced this frame (last pass)
+  uint64_t tracedBehind = 0;      // of them, traced only behind a reprojected front
   std::vector<double> costMs;     // per frame, for the report
 };
 
@@ -431,7 +432,7 @@ void renderTileFrame(Tile& t, const PlayOptions& o, const HostScene& scene, cons
   const bool stereo = eyes.disparityScale > 0.0f;
   const uint32_t frameStart = t.stamp + 1;
   t.firstEyeS = t.secondEyeS = 0.0;
-  t.traced = 0;
+  t.traced = t.tracedBehind = 0;
   for (int pass = 0; pass < 64; ++pass) {
     ++t.stamp;
     ++t.passes;
@@ -446,7 +447,9 @@ void renderTileFrame(Tile& t, const PlayOptions& o, const HostScene& scene, cons
         t.backend->renderRows(scene, shade, eyes.right, t.stamp, t.band, 1, 0.0f);
         t.traced = uint64_t(t.band.rows()) * uint64_t(eyes.right.width);
       } else {
-        t.traced = t.backend->reprojectRows(scene, eyes.right, t.stamp, t.band, o.stereo);
+        const StereoCounts c = t.backend->reprojectRows(scene, eyes.right, t.stamp, t.band, o.stereo);
+        t.traced = c.traced;
+        t.tracedBehind = c.behind;
       }
       t.secondEyeS += secondsSince(t0);
     }
@@ -634,9 +637,11 @@ void logSummary(const PlayOptions& o, const nlohmann::json& r, const StreamStats
   logInfo(line);
   if (r.contains("stereo")) {
     const auto& s = r["stereo"];
-    std::snprintf(line, sizeof(line), "canopy-play: stereo (%s): second eye %.2f ms median (%.2fx the first eye), %.1f%% of its pixels traced",
+    std::snprintf(line, sizeof(line),
+                  "canopy-play: stereo (%s): second eye %.2f ms median (%.2fx the first eye), %.1f%% of its pixels traced (%.1f%% only behind a "
+                  "reprojected front)",
                   std::string(s["fill"]).c_str(), double(s["second_eye_ms_median"]), double(s["second_over_first"]),
-                  100.0 * double(s["traced_fraction_mean"]));
+                  100.0 * double(s["traced_fraction_mean"]), 100.0 * double(s["traced_behind_fraction_mean"]));
     logInfo(line);
   }
 }
@@ -644,7 +649,7 @@ void logSummary(const PlayOptions& o, const nlohmann::json& r, const StreamStats
 // The frame loop's record: frame times, stereo's per-eye times and traced fractions, the first
 // complete frame.
 struct FrameLog {
-  std::vector<double> frameMs, firstEyeMs, secondEyeMs, tracedFraction;
+  std::vector<double> frameMs, firstEyeMs, secondEyeMs, tracedFraction, behindFraction;
   double firstCompleteS = -1.0;
   uint64_t coldStartBytes = 0;  // streamed by the first complete frame
 };
@@ -670,18 +675,20 @@ std::vector<Tile> makeTiles(const PlayOptions& o, const Device& device, const Ca
 std::vector<double> recordFrame(const PlayOptions& o, const std::vector<Tile>& tiles, std::chrono::steady_clock::time_point t0, FrameLog& log) {
   uint32_t missing = 0;
   double first = 0.0, second = 0.0;
-  uint64_t traced = 0;
+  uint64_t traced = 0, behind = 0;
   std::vector<double> cost;
   for (const Tile& t : tiles) {
     missing += t.missing;
     first = std::max(first, t.firstEyeS), second = std::max(second, t.secondEyeS);
     traced += t.traced;
+    behind += t.tracedBehind;
     cost.push_back(t.firstEyeS + t.secondEyeS);
   }
   if (o.stereoIpd > 0.0f) {
     log.firstEyeMs.push_back(1000.0 * first);
     log.secondEyeMs.push_back(1000.0 * second);
     log.tracedFraction.push_back(double(traced) / (double(o.width) * o.height));
+    log.behindFraction.push_back(double(behind) / (double(o.width) * o.height));
   }
   if (missing == 0 && log.firstCompleteS < 0.0) {
     log.firstCompleteS = secondsSince(t0);
@@ -715,6 +722,7 @@ nlohmann::json stereoReport(const PlayOptions& o, const FrameLog& log) {
           {"solid_alpha", o.stereo.solidAlpha},
           {"layout", o.rightOutput.empty() ? "side-by-side" : "separate"},
           {"traced_fraction_mean", mean(log.tracedFraction)},
+          {"traced_behind_fraction_mean", mean(log.behindFraction)},
           {"first_eye_ms_median", first},
           {"second_eye_ms_median", second},
           {"second_over_first", first > 0 ? second / first : 0.0},

@@ -69,14 +69,15 @@ class CpuBackend final : public Backend {
     if (disparityScale > 0.0f) {
       if (disparity_.size() != pixels * kStereoPixelFloats) disparity_.assign(pixels * kStereoPixelFloats, 0.0f);
       depth = disparity_.data();
+      disparityScale_ = disparityScale;
     }
     const int64_t first = int64_t(band.y0) * camera.width;
     parallelFor(int64_t(band.rows()) * camera.width, [&](int64_t i) { renderPixel(v, camera, first + i, out, depth, disparityScale); }, 64);
   }
-  uint64_t reprojectRows(const HostScene& scene, const CameraView& right, uint32_t stamp, Band band, const StereoParams& p) override {
+  StereoCounts reprojectRows(const HostScene& scene, const CameraView& right, uint32_t stamp, Band band, const StereoParams& p) override {
     (void)scene, (void)stamp;  // the stamp and scene of view_, the last render of this pass
     const size_t pixels = size_t(right.width) * right.height;
-    if (keys_.size() != pixels) keys_.resize(pixels), behind_.resize(pixels), cover_.resize(pixels);
+    if (keys_.size() != pixels) keys_.resize(pixels), behind_.resize(pixels), cover_.resize(pixels), holeFrom_.resize(pixels);
     if (image_[1].size() != pixels * 4) image_[1].assign(pixels * 4, 0.0f);
     const StereoView sv =
         stereoView(image_[0].data(), disparity_.data(), keys_.data(), behind_.data(), cover_.data(), image_[1].data(), right.width, p);
@@ -95,15 +96,20 @@ class CpuBackend final : public Backend {
         });
       for (int x = 0; x < right.width; ++x)
         stereoSplatBehind(sv, x, y, [&](int64_t i, unsigned long long key) { behind_[size_t(i)] = std::max(behind_[size_t(i)], key); });
-      for (int x = 0; x < right.width; ++x) hole[size_t(r) * right.width + x] = stereoResolve(sv, x, y) ? 0 : 1;
+      for (int x = 0; x < right.width; ++x) hole[size_t(r) * right.width + x] = stereoResolveHole(sv, x, y, holeFrom_.data() + row + x) ? 0 : 1;
     }, 1);
     std::vector<int64_t> holes;
+    uint64_t behind = 0;
     for (size_t k = 0; k < hole.size(); ++k)
-      if (hole[k]) holes.push_back(int64_t(band.y0) * right.width + int64_t(k));
+      if (hole[k]) {
+        holes.push_back(int64_t(band.y0) * right.width + int64_t(k));
+        behind += holeFrom_[size_t(holes.back())] > 0.0f ? 1u : 0u;
+      }
     const SceneView v = view_;
     float* out = image_[1].data();
-    parallelFor(int64_t(holes.size()), [&](int64_t k) { renderPixel(v, right, holes[size_t(k)], out); }, 64);
-    return holes.size();
+    float* from = holeFrom_.data();
+    parallelFor(int64_t(holes.size()), [&](int64_t k) { renderPixel(v, right, holes[size_t(k)], out, nullptr, disparityScale_, from); }, 64);
+    return StereoCounts{holes.size(), behind};
   }
   void readStamps(std::vector<uint32_t>& slotUsed, std::vector<uint32_t>& pageWanted) override {
     slotUsed = slotUsed_;
@@ -121,6 +127,8 @@ class CpuBackend final : public Backend {
   std::vector<int32_t> table_;
   std::vector<uint32_t> slotUsed_, pageWanted_;
   std::vector<float> image_[2], disparity_, shadowMap_, extinction_;
+  std::vector<float> holeFrom_;  // stereo: per right-eye hole, where its trace starts (stereoResolveHole)
+  float disparityScale_ = 0.0f;  // the traced eye's (renderRows)
   std::vector<unsigned long long> keys_, behind_;
   std::vector<uint32_t> cover_;
   SceneView view_{};  // the last render's view (its stamp, shade and shadow map): the second eye's holes use it

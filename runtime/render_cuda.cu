@@ -21,7 +21,7 @@ namespace {
 // pixels of one row: the rays of a warp stay closer together, so they walk the same instances and
 // nodes longer). Thread j -> tile j / (tileW tileH), lane j % (tileW tileH). One kernel per shadow
 // path (renderPixelT): the map's and no-shadow kernel has no shadow-cone code.
-template <bool kWithCones, bool kWithLight, bool kWithDepth = false>
+template <bool kWithCones, bool kWithLight, bool kWithDepth = false, bool kBehind = false>
 struct PixelKernel {
   SceneView scene;
   CameraView camera;
@@ -29,12 +29,13 @@ struct PixelKernel {
   int tilesX, tileW, tileH;
   int y0, y1;                // the band's rows [y0, y1) (tiles.h)
   const int32_t* list;       // nullptr: thread j renders tile position j; else list[j] (stereo's holes)
-  float* depth;              // kWithDepth: the disparity per pixel (stereo's traced eye)
+  float* stereo;             // renderPixelT's: kWithDepth, the layers per pixel (stereo's traced eye); kBehind, where
+                             // each hole's trace starts (stereo's holes)
   float disparityScale;
   __device__ void operator()(int64_t k) const {
     int x, y;
     if (!bandTilePixel(list ? int64_t(list[k]) : k, tilesX, tileW, tileH, camera.width, y0, y1, x, y)) return;
-    renderPixelT<kWithCones, kWithLight, kWithDepth>(scene, camera, int64_t(y) * camera.width + x, out, depth, disparityScale);
+    renderPixelT<kWithCones, kWithLight, kWithDepth, kBehind>(scene, camera, int64_t(y) * camera.width + x, out, stereo, disparityScale);
   }
 };
 
@@ -48,24 +49,25 @@ struct PixelKernel {
 // the grove (lit) 14.44 -> 14.90 ms; 8 blocks was slower on all three. setPixelOccupancy overrides
 // it (6, 8, or -1 for unconstrained). Shadow-cone kernel: 5 (96 registers, as before the light change).
 constexpr int kPixelBlock = 128;
-template <bool kWithCones, bool kWithLight, bool kWithDepth, int kMinBlocks>
+template <bool kWithCones, bool kWithLight, bool kWithDepth, bool kBehind, int kMinBlocks>
 __global__ void __launch_bounds__(kPixelBlock, kMinBlocks > 0 ? kMinBlocks : 1)
-    pixelKernel(PixelKernel<kWithCones, kWithLight, kWithDepth> k, int64_t n) {
+    pixelKernel(PixelKernel<kWithCones, kWithLight, kWithDepth, kBehind> k, int64_t n) {
   const int64_t i = blockIdx.x * int64_t(kPixelBlock) + threadIdx.x;
   if (i < n) k(i);
 }
 
-template <int kMinBlocks, bool kWithCones, bool kWithLight, bool kWithDepth>
-void launchPixels(const PixelKernel<kWithCones, kWithLight, kWithDepth>& k, int64_t n, cudaStream_t stream) {
+template <int kMinBlocks, bool kWithCones, bool kWithLight, bool kWithDepth, bool kBehind>
+void launchPixels(const PixelKernel<kWithCones, kWithLight, kWithDepth, kBehind>& k, int64_t n, cudaStream_t stream) {
   if (n <= 0) return;
-  pixelKernel<kWithCones, kWithLight, kWithDepth, kMinBlocks><<<unsigned((n + kPixelBlock - 1) / kPixelBlock), kPixelBlock, 0, stream>>>(k, n);
+  pixelKernel<kWithCones, kWithLight, kWithDepth, kBehind, kMinBlocks><<<unsigned((n + kPixelBlock - 1) / kPixelBlock), kPixelBlock, 0, stream>>>(k, n);
   CANOPY_CUDA_CHECK(cudaGetLastError());
 }
 
 // Stereo (stereo.h): the traced eye's spans into the right eye's keys and cover counts (one thread
 // per traced pixel of the band), then each right-eye pixel resolved or marked a hole: hole[j] = j
 // for the tile position j of a hole, -1 otherwise (compacted in order into the list of pixels to
-// trace, so a warp traces neighbouring holes).
+// trace, so a warp traces neighbouring holes), and where its trace starts (stereoResolveHole; the
+// holes traced behind a reprojected front counted in *behindCount, one atomic per warp).
 struct StereoSplatKernel {
   StereoView view;
   int y0;
@@ -92,10 +94,21 @@ struct StereoResolveKernel {
   StereoView view;
   int tilesX, tileW, tileH, y0, y1;
   int32_t* hole;
+  float* from;
+  unsigned long long* behindCount;
   __device__ void operator()(int64_t j) const {
     int x, y;
     const bool inBand = bandTilePixel(j, tilesX, tileW, tileH, view.width, y0, y1, x, y);
-    hole[j] = inBand && !stereoResolve(view, x, y) ? int32_t(j) : -1;
+    bool isHole = false, isBehind = false;
+    if (inBand) {
+      float* f = from + (int64_t(y) * view.width + x);
+      isHole = !stereoResolveHole(view, x, y, f);
+      isBehind = isHole && *f > 0.0f;
+    }
+    hole[j] = isHole ? int32_t(j) : -1;
+    const unsigned active = __activemask();
+    const unsigned behind = __ballot_sync(active, isBehind);
+    if (behind != 0u && int(threadIdx.x & 31u) == __ffs(int(active)) - 1) atomicAdd(behindCount, static_cast<unsigned long long>(__popc(behind)));
   }
 };
 
@@ -128,6 +141,7 @@ class CudaBackend final : public Backend {
     device_ = device;
     CANOPY_CUDA_CHECK(cudaSetDevice(device));
     holeCount_.resize(1);
+    behindCount_.resize(1);
     CANOPY_CUDA_CHECK(cudaStreamCreateWithFlags(&compute_, cudaStreamNonBlocking));
     CANOPY_CUDA_CHECK(cudaStreamCreateWithFlags(&copy_, cudaStreamNonBlocking));
     for (int i = 0; i < 2; ++i) CANOPY_CUDA_CHECK(cudaEventCreateWithFlags(&tableCopied_[i], cudaEventDisableTiming));
@@ -228,6 +242,7 @@ class CudaBackend final : public Backend {
     if (disparityScale > 0.0f) {
       if (disparity_.size() != pixels * kStereoPixelFloats) disparity_.resize(pixels * kStereoPixelFloats);
       depth = disparity_.data();
+      disparityScale_ = disparityScale;
     }
     SceneView v = hostSceneView(scene);
     v.models = models_.data();
@@ -278,25 +293,28 @@ class CudaBackend final : public Backend {
       launchMode<false>(scene, shade, camera, out, band, nullptr, threads, nullptr, 0.0f);
     CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
   }
-  // The pixel kernel of the mode (shadow path, LB light, depth) over `threads` tile positions of
-  // the band (or list[0, threads) of them), with view_.
-  template <bool kWithDepth>
+  // The pixel kernel of the mode (shadow path, LB light, stereo's depth or holes) over `threads`
+  // tile positions of the band (or list[0, threads) of them), with view_.
+  template <bool kWithDepth, bool kBehind = false>
   void launchMode(const HostScene& scene, const ShadeParams& shade, const CameraView& camera, float* out, Band band, const int32_t* list,
-                  int64_t threads, float* depth, float disparityScale) {
+                  int64_t threads, float* stereo, float disparityScale) {
     const int tilesX = (camera.width + tileW_ - 1) / tileW_;
     if (shade.shadows == kShadowsCone) {
-      launchPixels<5>(PixelKernel<true, true, kWithDepth>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, depth, disparityScale}, threads, compute_);
+      launchPixels<5>(PixelKernel<true, true, kWithDepth, kBehind>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, stereo, disparityScale},
+                      threads, compute_);
     } else if (scene.litModels > 0) {
-      launchMap(PixelKernel<false, true, kWithDepth>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, depth, disparityScale}, threads);
+      launchMap(PixelKernel<false, true, kWithDepth, kBehind>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, stereo, disparityScale},
+                threads);
     } else {
-      launchMap(PixelKernel<false, false, kWithDepth>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, depth, disparityScale}, threads);
+      launchMap(PixelKernel<false, false, kWithDepth, kBehind>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, stereo, disparityScale},
+                threads);
     }
   }
-  // The map's (or no-shadow) kernel at the occupancy asked for (setPixelOccupancy); the depth
-  // kernels (stereo's traced eye) at the default one only.
-  template <bool kWithLight, bool kWithDepth>
-  void launchMap(const PixelKernel<false, kWithLight, kWithDepth>& k, int64_t threads) {
-    if constexpr (kWithDepth) {
+  // The map's (or no-shadow) kernel at the occupancy asked for (setPixelOccupancy); the stereo
+  // kernels (the traced eye's depth, the holes) at the default one only.
+  template <bool kWithLight, bool kWithDepth, bool kBehind>
+  void launchMap(const PixelKernel<false, kWithLight, kWithDepth, kBehind>& k, int64_t threads) {
+    if constexpr (kWithDepth || kBehind) {
       launchPixels<kWithLight ? 0 : 6>(k, threads, compute_);
     } else {
       const int blocks = minBlocks_ != 0 ? minBlocks_ : (kWithLight ? -1 : 6);
@@ -308,13 +326,14 @@ class CudaBackend final : public Backend {
         launchPixels<0>(k, threads, compute_);
     }
   }
-  uint64_t reprojectRows(const HostScene& scene, const CameraView& right, uint32_t stamp, Band band, const StereoParams& p) override {
+  StereoCounts reprojectRows(const HostScene& scene, const CameraView& right, uint32_t stamp, Band band, const StereoParams& p) override {
     (void)stamp;  // view_'s, the last render of this pass
     CANOPY_CUDA_CHECK(cudaSetDevice(device_));
     const size_t pixels = size_t(right.width) * right.height;
     if (image_[1].size() != pixels * 4) image_[1].resize(pixels * 4);
-    if (keys_.size() != pixels) keys_.resize(pixels), behind_.resize(pixels), cover_.resize(pixels);
+    if (keys_.size() != pixels) keys_.resize(pixels), behind_.resize(pixels), cover_.resize(pixels), holeFrom_.resize(pixels);
     const size_t first = size_t(band.y0) * right.width, count = size_t(band.rows()) * right.width;
+    CANOPY_CUDA_CHECK(cudaMemsetAsync(behindCount_.data(), 0, sizeof(unsigned long long), compute_));
     CANOPY_CUDA_CHECK(cudaMemsetAsync(keys_.data() + first, 0, count * sizeof(unsigned long long), compute_));
     CANOPY_CUDA_CHECK(cudaMemsetAsync(behind_.data() + first, 0, count * sizeof(unsigned long long), compute_));
     CANOPY_CUDA_CHECK(cudaMemsetAsync(cover_.data() + first, 0, count * sizeof(uint32_t), compute_));
@@ -325,18 +344,21 @@ class CudaBackend final : public Backend {
     const int tilesX = (right.width + tileW_ - 1) / tileW_, tilesY = (band.rows() + tileH_ - 1) / tileH_;
     const int64_t threads = int64_t(tilesX) * tilesY * tileW_ * tileH_;
     if (hole_.size() < size_t(threads)) hole_.resize(size_t(threads)), holeList_.resize(size_t(threads));
-    cuda::parallelFor(threads, StereoResolveKernel{sv, tilesX, tileW_, tileH_, band.y0, band.y1, hole_.data()}, compute_, 256);
+    cuda::parallelFor(threads, StereoResolveKernel{sv, tilesX, tileW_, tileH_, band.y0, band.y1, hole_.data(), holeFrom_.data(), behindCount_.data()},
+                      compute_, 256);
     size_t tempBytes = 0;
     CANOPY_CUDA_CHECK(cub::DeviceSelect::If(nullptr, tempBytes, hole_.data(), holeList_.data(), holeCount_.data(), threads, IsHole{}, compute_));
     if (selectTemp_.size() < tempBytes) selectTemp_.resize(tempBytes);
     CANOPY_CUDA_CHECK(cub::DeviceSelect::If(selectTemp_.data(), tempBytes, hole_.data(), holeList_.data(), holeCount_.data(), threads, IsHole{},
                                             compute_));
     int64_t holes = 0;
+    unsigned long long behind = 0;
     CANOPY_CUDA_CHECK(cudaMemcpyAsync(&holes, holeCount_.data(), sizeof holes, cudaMemcpyDeviceToHost, compute_));
+    CANOPY_CUDA_CHECK(cudaMemcpyAsync(&behind, behindCount_.data(), sizeof behind, cudaMemcpyDeviceToHost, compute_));
     CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
-    launchMode<false>(scene, view_.shade, right, image_[1].data(), band, holeList_.data(), holes, nullptr, 0.0f);
+    launchMode<false, true>(scene, view_.shade, right, image_[1].data(), band, holeList_.data(), holes, holeFrom_.data(), disparityScale_);
     CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
-    return uint64_t(holes);
+    return StereoCounts{uint64_t(holes), uint64_t(behind)};
   }
   void readStamps(std::vector<uint32_t>& slotUsed, std::vector<uint32_t>& pageWanted) override {
     CANOPY_CUDA_CHECK(cudaSetDevice(device_));
@@ -376,6 +398,9 @@ class CudaBackend final : public Backend {
   cuda::DeviceBuffer<uint32_t> cover_;
   cuda::DeviceBuffer<int32_t> hole_, holeList_;   // stereo: holes by tile position, and compacted
   cuda::DeviceBuffer<int64_t> holeCount_;
+  cuda::DeviceBuffer<unsigned long long> behindCount_;  // stereo: the holes traced behind a reprojected front
+  cuda::DeviceBuffer<float> holeFrom_;                  // stereo: per right-eye hole, where its trace starts
+  float disparityScale_ = 0.0f;                         // the traced eye's (renderRows)
   cuda::DeviceBuffer<unsigned char> selectTemp_;
   SceneView view_{};  // the last render's view (its stamp, shade and shadow map): the second eye's holes use it
   int device_ = 0;

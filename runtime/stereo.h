@@ -254,34 +254,81 @@ CANOPY_HD CANOPY_FORCEINLINE bool stereoClearBehind(const StereoView& v, int64_t
   return v.cover[row + x] < 2u && stereoFaint(v, row + x, kStereoFront);
 }
 
-// Right-eye pixel x of row y from its keys: writes its RGBA and returns true, or returns false (a
-// hole, to be traced; nothing written).
-CANOPY_HD inline bool stereoResolve(const StereoView& v, int x, int y) {
+// How a right-eye pixel is filled (stereoResolveFill).
+constexpr int kStereoResolved = 0, kStereoHole = 1, kStereoHoleBehind = 2;
+// A pair span whose two pixels' front layers differ in alpha by more than this is not used as
+// the front of a hole traced behind it (kStereoHoleBehind): the two pixels' fronts hold different
+// shares of the matter there, and neither is what the right eye's ray crosses.
+constexpr float kStereoBehindAlphaStep = 0.05f;
+
+// kStereoHoleBehind's test and fill for right-eye pixel x of the row whose winning span `key` is
+// translucent with what lies behind it not known (stereoResolveFill): writes the front and
+// *behindFrom, or returns kStereoHole.
+CANOPY_HD inline int stereoFillBehind(const StereoView& v, int64_t row, int x, unsigned long long key, float* behindFrom) {
+  if (stereoKeyLayer(key) != kStereoFront || !(key & kStereoKeyPair)) return kStereoHole;
+  const int64_t j0 = row + stereoKeySource(key);
+  const float da = stereoLayers(v, j0)[7] - stereoLayers(v, j0 + 1)[7];
+  if (da > kStereoBehindAlphaStep || da < -kStereoBehindAlphaStep) return kStereoHole;
+  // one pixel's front layer, colour and far side together: the pair's nearer one
+  const float p0 = float(stereoKeySource(key)) + 0.5f - stereoShift(v, j0, kStereoFront);
+  const float p1 = float(stereoKeySource(key)) + 1.5f - stereoShift(v, j0 + 1, kStereoFront);
+  const int64_t j = (float(x) + 0.5f - p0) / (p1 - p0) > 0.5f ? j0 + 1 : j0;
+  const float from = stereoLayers(v, j)[8];
+  if (!(from > 0.0f)) return kStereoHole;  // the front never opened: its far side is not known
+  float rgba[4];
+  stereoRgba(v, j, kStereoFront, rgba);
+  for (int c = 0; c < 4; ++c) v.right[4 * (row + x) + c] = rgba[c];
+  *behindFrom = from;
+  return kStereoHoleBehind;
+}
+
+// Right-eye pixel x of row y from its keys:
+//   - kStereoResolved: its RGBA written;
+//   - kStereoHole: to be traced in full (nothing written);
+//   - kStereoHoleBehind (only where behindFrom is given, else kStereoHole): the winner is the
+//     front layer of a surface that reprojects (a pair span that does not spread, its two pixels'
+//     fronts alike) but is not solid, and what lies behind it is not known. The front layer of the
+//     pair's nearer pixel is written, and *behindFrom is the disparity of that layer's far side
+//     (where its pixel's back layer begins): only the ray behind it is traced, and composited under
+//     it (renderPixelT's kBehind).
+CANOPY_HD inline int stereoResolveFill(const StereoView& v, int x, int y, float* behindFrom) {
   const int64_t row = int64_t(y) * v.width, i = row + x;
   const unsigned long long key = v.keys[i];
-  if (!(key & kStereoKeyValid)) return false;
+  if (!(key & kStereoKeyValid)) return kStereoHole;
   float rgba[4];
-  if (!stereoSpanRgba(v, row, key, x, rgba)) return false;
+  if (!stereoSpanRgba(v, row, key, x, rgba)) return kStereoHole;
   if (rgba[3] < v.p.solidAlpha) {  // what lies behind shows through
     const unsigned long long back = v.behind[i];
     float b[4] = {0.0f, 0.0f, 0.0f, 0.0f};
     float db = 0.0f;
+    bool known;
     if (back & kStereoKeyValid) {
-      if (!stereoSpanRgba(v, row, back, x, b)) return false;
       // behind a translucent layer the right eye's ray leaves the left eye's ray it came from: only a
       // solid layer or the sky (a sky pixel's span) ends what the right eye sees
       const bool sky = stereoKeyLayer(back) == kStereoFront && stereoFaint(v, row + stereoKeySource(back), kStereoFront);
-      if (b[3] < v.p.solidAlpha && !sky) return false;
+      known = stereoSpanRgba(v, row, back, x, b) && (b[3] >= v.p.solidAlpha || sky);
       db = stereoKeyDisparity(back);
-    } else if (!stereoClearBehind(v, row, x)) {
-      return false;
+    } else {
+      known = stereoClearBehind(v, row, x);
     }
-    if (!stereoClearBetween(v, row, x, stereoKeySource(key), db)) return false;
+    known = known && stereoClearBetween(v, row, x, stereoKeySource(key), db);
+    if (!known) return behindFrom ? stereoFillBehind(v, row, x, key, behindFrom) : kStereoHole;
     const float through = 1.0f - rgba[3];
     for (int c = 0; c < 4; ++c) rgba[c] += through * b[c];
   }
   for (int c = 0; c < 4; ++c) v.right[4 * i + c] = rgba[c];
-  return true;
+  return kStereoResolved;
+}
+
+// Right-eye pixel x of row y from its keys: writes its RGBA and returns true, or returns false (a
+// hole, to be traced; nothing written).
+CANOPY_HD inline bool stereoResolve(const StereoView& v, int x, int y) { return stereoResolveFill(v, x, y, nullptr) == kStereoResolved; }
+
+// Right-eye pixel x of row y: true where resolved (its RGBA written); else a hole, to be traced
+// from disparity behind[0] on under the front written (> 0, kStereoHoleBehind) or in full (0).
+CANOPY_HD inline bool stereoResolveHole(const StereoView& v, int x, int y, float* behind) {
+  *behind = 0.0f;
+  return stereoResolveFill(v, x, y, behind) == kStereoResolved;
 }
 
 // The two eyes of a stereo pair around `centre`: parallel, `ipd` apart along its right axis.

@@ -54,8 +54,10 @@ struct Row {
 };
 
 // Reprojects one row on the CPU as the backends do (the nearest spans with max and count, then the
-// spans behind them, then resolve); returns the hole mask and the right row.
-std::vector<int> reprojectRow(const Row& row, int w, std::vector<float>& right, const pl::StereoParams& p = {}) {
+// spans behind them, then resolve); returns the hole mask and the right row. With `from`
+// (stereoResolveHole, as the backends): a hole traced only behind its front is 2, from[x] its start.
+std::vector<int> reprojectRow(const Row& row, int w, std::vector<float>& right, const pl::StereoParams& p = {},
+                              std::vector<float>* from = nullptr) {
   std::vector<unsigned long long> keys(size_t(w), 0), behind(size_t(w), 0);
   std::vector<uint32_t> cover(size_t(w), 0);
   right.assign(size_t(w) * 4, -1.0f);
@@ -68,7 +70,15 @@ std::vector<int> reprojectRow(const Row& row, int w, std::vector<float>& right, 
   for (int x = 0; x < w; ++x)
     pl::stereoSplatBehind(v, x, 0, [&](int64_t i, unsigned long long key) { behind[size_t(i)] = std::max(behind[size_t(i)], key); });
   std::vector<int> hole(static_cast<size_t>(w));
-  for (int x = 0; x < w; ++x) hole[size_t(x)] = pl::stereoResolve(v, x, 0) ? 0 : 1;
+  if (from) from->assign(size_t(w), -1.0f);
+  for (int x = 0; x < w; ++x) {
+    if (!from) {
+      hole[size_t(x)] = pl::stereoResolve(v, x, 0) ? 0 : 1;
+      continue;
+    }
+    float* f = from->data() + x;
+    hole[size_t(x)] = pl::stereoResolveHole(v, x, 0, f) ? 0 : (*f > 0.0f ? 2 : 1);
+  }
   return hole;
 }
 
@@ -351,6 +361,55 @@ TEST(Stereo, ALayerJustBehindItsFrontIsCompositedAndAPixelSolidThroughItsBackHid
   EXPECT_EQ(hole[1], 1);
 }
 
+TEST(Stereo, ATranslucentSurfaceWithUnknownMatterBehindIsTracedOnlyBehindItsFront) {
+  const int w = 16;
+  // crown pixels 4..9: a front (0.6, alpha 0.5, disparity 6, its far side at disparity 5) over a
+  // back layer that spreads (disparity 2, spread 2: trees at many depths): the right eye's pixels
+  // 0..3 (front pairs from pixels 6..9) see the front, and behind it matter the left eye cannot
+  // place
+  Row crown(w);
+  for (int x = 4; x < 10; ++x) {
+    crown.setLayers(x, 0.6f, 0.5f, 6.0f, 0.2f, 1.0f, 2.0f);
+    crown.at(x)[3] = 2.0f;
+    crown.at(x)[8] = 5.0f;
+  }
+  std::vector<float> right, from;
+  // stereoResolve (no behind fill): holes, nothing written
+  std::vector<int> hole = reprojectRow(crown, w, right);
+  for (int x = 0; x < 4; ++x) {
+    EXPECT_EQ(hole[size_t(x)], 1) << x;
+    EXPECT_EQ(right[size_t(4 * x + 3)], -1.0f) << x;
+  }
+  // the backends' resolve: traced only behind the front, from its far side, the front written;
+  // but at right pixel 3, the crown's edge (pixel 9's own half width, no pair): traced in full
+  hole = reprojectRow(crown, w, right, {}, &from);
+  EXPECT_EQ(hole[3], 1);
+  for (int x = 0; x < 3; ++x) {
+    ASSERT_EQ(hole[size_t(x)], 2) << x;
+    EXPECT_EQ(from[size_t(x)], 5.0f) << x;
+    EXPECT_FLOAT_EQ(right[size_t(4 * x)], 0.6f * 0.5f) << x;
+    EXPECT_FLOAT_EQ(right[size_t(4 * x + 3)], 0.5f) << x;
+  }
+  // the pair's nearer pixel gives the front and its far side: pixel 7's far side at 4.5
+  crown.at(7)[8] = 4.5f;
+  hole = reprojectRow(crown, w, right, {}, &from);
+  EXPECT_EQ(from[0], 5.0f);  // right centre 0.5: the pair (6, 7) at pixel 6's centre
+  EXPECT_EQ(from[1], 4.5f);  // right centre 1.5: the pair (7, 8) at pixel 7's centre
+  // fronts that differ in alpha by more than kStereoBehindAlphaStep: neither is the right eye's front
+  Row uneven = crown;
+  uneven.set(7, 0.6f, 0.5f + 2.0f * pl::kStereoBehindAlphaStep, 6.0f);
+  uneven.at(7)[2] = 2.0f, uneven.at(7)[3] = 2.0f, uneven.at(7)[8] = 5.0f;
+  hole = reprojectRow(uneven, w, right, {}, &from);
+  EXPECT_EQ(hole[0], 1);  // the pair (6, 7)
+  EXPECT_EQ(hole[1], 1);  // the pair (7, 8)
+  EXPECT_EQ(hole[2], 2);  // the pair (8, 9)
+  // a front that never opened (its far side not known): traced in full
+  Row faint = crown;
+  for (int x = 4; x < 10; ++x) faint.at(x)[8] = 0.0f;
+  hole = reprojectRow(faint, w, right, {}, &from);
+  for (int x = 0; x < 3; ++x) EXPECT_EQ(hole[size_t(x)], 1) << x;
+}
+
 TEST(Stereo, TheTracedEyesFrontLayerNeverSpreadsAndTheLayersGiveThePixelBack) {
   // The grove's traced eye (every page resident, the ground under it): per covered pixel the front
   // layer spans 2 x --stereo-spread px of disparity from its opening sample, so it spreads at most
@@ -388,11 +447,54 @@ TEST(Stereo, TheTracedEyesFrontLayerNeverSpreadsAndTheLayersGiveThePixelBack) {
     if (px[3] - l[7] < 0.01f) continue;
     ++split;
     EXPECT_LT(l[2], l[0] - o.stereo.maxSpread) << i;           // the back layer lies behind the front
+    EXPECT_LT(l[2], l[8]) << i;                                // behind the front's far side,
+    EXPECT_LE(l[8], l[0]) << i;                                // which lies behind the front's mean
   }
   std::printf("grove traced eye: %d covered pixels, %d with a back layer, %d front layers spread wider\n", covered, split, wide);
   EXPECT_GT(covered, int(n / 2));
   EXPECT_LE(wide, covered / 100);  // faint samples before the opening one: 1 of 3264 measured (2026-12-04)
   EXPECT_GT(split, covered / 50);  // crowns in front of crowns and of the ground: 4.0 % measured (2026-12-04)
+}
+
+TEST(Stereo, AHoleTracedBehindItsFrontAddsWhatTheRayMeetsFromThereOn) {
+  // The grove's right eye (every page resident, the ground under it): a hole traced behind a front
+  // F from a depth in front of all matter is F over the full trace, the same march; from behind
+  // all matter (or under the ground) it is F alone.
+  pl::PlayOptions o = groveView(64, 36);
+  o.stereoIpd = 0.5f;
+  const canopy::CanopyFile f = canopy::CanopyFile::open(o.input);
+  pl::HostScene scene = pl::buildScene(f);
+  const std::vector<pl::FrameSetup> plan = pl::framePlan(o, scene);
+  pl::ShadeParams shade = pl::shadeParams(o);
+  shade.shadows = pl::kShadowsOff;
+  shade.toSun = plan[0].toSun;
+  pl::setGround(o, scene, shade);
+  scene.setSun(shade.toSun);
+  pt::ResidentPages pages(f);
+  pl::SceneView v = pages.view(scene);
+  v.shade = shade;
+  pl::CameraView left, right;
+  pl::stereoEyes(plan[0].camera, o.stereoIpd, left, right);
+  const float scale = pl::stereoDisparityScale(right, o.stereoIpd);
+  const int64_t n = int64_t(right.width) * right.height;
+  const float front[4] = {0.05f, 0.1f, 0.02f, 0.4f};
+  std::vector<float> full(size_t(n) * 4), near(size_t(n) * 4), far(size_t(n) * 4);
+  std::vector<float> fromNear(size_t(n), scale / 0.5f), fromFar(size_t(n), scale / 1.0e4f);  // depths 0.5 and 10 km
+  for (int64_t i = 0; i < n; ++i) {
+    for (int c = 0; c < 4; ++c) near[size_t(4 * i + c)] = far[size_t(4 * i + c)] = front[c];
+    pl::renderPixel(v, right, i, full.data());
+    pl::renderPixel(v, right, i, near.data(), nullptr, scale, fromNear.data());
+    pl::renderPixel(v, right, i, far.data(), nullptr, scale, fromFar.data());
+  }
+  int covered = 0;
+  for (int64_t i = 0; i < n; ++i) {
+    covered += full[size_t(4 * i + 3)] > 0.02f ? 1 : 0;
+    for (int c = 0; c < 4; ++c) {
+      ASSERT_NEAR(near[size_t(4 * i + c)], front[c] + (1.0f - front[3]) * full[size_t(4 * i + c)], 1e-6f) << i << " " << c;
+      ASSERT_EQ(far[size_t(4 * i + c)], front[c]) << i << " " << c;
+    }
+  }
+  EXPECT_GT(covered, int(n / 2));  // crowns and the ground: the march behind the front was not empty
 }
 
 TEST(Stereo, PixelDisparityIsTheWeightedMeanAndSpreadOfInverseDepth) {
@@ -432,7 +534,11 @@ TEST(Render, ReprojectedEyeMatchesTheTracedEyeAndTracesOnlyItsHoles) {
   // 2026-12-04 on this scene: 5.3 % of the pixels traced, RMS 0.0042 with two layers per pixel
   // (6.0 % and 0.0097 with one); bounds at about 1.5x.
   const double e = pt::imageRms(right, rightRef);
-  std::printf("reprojected right eye: traced %.3f of the pixels, RMS %.5f against the traced eye\n", traced, e);
+  const double behind = double(r["stereo"]["traced_behind_fraction_mean"]);
+  std::printf("reprojected right eye: traced %.3f of the pixels (%.4f behind a reprojected front), RMS %.5f against the traced eye\n", traced,
+              behind, e);
+  EXPECT_GT(behind, 0.0);  // 0.4 % measured (2026-12-05)
+  EXPECT_LT(behind, traced);
   EXPECT_LT(traced, 0.08);
   EXPECT_LT(e, 0.0065);
   // and it is a different picture from the left eye (the reprojection moved things)
