@@ -347,12 +347,13 @@ CANOPY_HD CANOPY_FORCEINLINE void addGround(const SceneView& s, V3 o, V3 d, floa
 // A ray that meets the ground (groundHit) before tMax is marched up to it (the parts of instances
 // below the plane are cut) and ends there: what is left of its transmittance shows the ground
 // (groundRadiance), and the result is opaque.
-// The march starts at tStart (a stereo hole behind a reprojected layer starts behind it).
+// The march starts at tStart with transmittance T0 (a stereo hole behind a reprojected layer: behind
+// it, with what that layer lets through, so that the march stops where the whole ray's would).
 // Each step: retire the hits that ended, bound the step and evaluate the hits that need it
 // (boundStep, evaluateHits), shade it (shadeStep), move the walk on.
 template <bool kWithCones, bool kWithLight = true, bool kWithDepth = false>
 CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixelAngle, float tMax, float window = 0.0f,
-                                      float tStart = 0.0f) {
+                                      float tStart = 0.0f, float T0 = 1.0f) {
   ConeResult r;
   r.rgb[0] = r.rgb[1] = r.rgb[2] = 0.0f;
   r.transmittance = 1.0f;
@@ -367,7 +368,7 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
   InstanceWalk w;
   walkBegin(s, w, o, d, tStart, tMax);
   float t = tStart;
-  float T = 1.0f;
+  float T = T0;
   SunAtSample sun;
   while (true) {
     walkRetire(w, t);
@@ -472,11 +473,13 @@ CANOPY_HD inline void renderPixelT(const SceneView& s, const CameraView& c, int6
   const float tStart = behind ? disparityScale / (stereo[i] * cosAxis) : 0.0f;
   // a hole's ray under the ground before its start sees only the front written in rgba
   if (behind && groundHit(s.shade, c.position, d) <= tStart) return;
-  const ConeResult r = traceCone<kWithCones, kWithLight, kWithDepth>(s, c.position, d, fpPerT, 3.0e37f, window, tStart);
+  // behind a front: marched with what the front lets through, so the radiance is already weighted
+  // and the transmittance is the whole ray's
+  const float T0 = behind ? 1.0f - rgba[4 * i + 3] : 1.0f;
+  const ConeResult r = traceCone<kWithCones, kWithLight, kWithDepth>(s, c.position, d, fpPerT, 3.0e37f, window, tStart, T0);
   if (behind) {
-    const float through = 1.0f - rgba[4 * i + 3];
-    for (int ch = 0; ch < 3; ++ch) rgba[4 * i + ch] += through * r.rgb[ch];
-    rgba[4 * i + 3] += through * (1.0f - r.transmittance);
+    for (int ch = 0; ch < 3; ++ch) rgba[4 * i + ch] += r.rgb[ch];
+    rgba[4 * i + 3] = 1.0f - r.transmittance;
   } else {
     rgba[4 * i + 0] = r.rgb[0];
     rgba[4 * i + 1] = r.rgb[1];

@@ -14,7 +14,8 @@
 // or more (kLayerOpenWeight; fainter ones before it join the front), and the back
 // layer, all the samples behind it. Per layer: the mean and the spread (standard deviation) of the
 // disparity of its samples, weighted by their share of the pixel, and its colour (the front's
-// RGBA; the back's is what the front lets through: (pixel - front) / (1 - front alpha)).
+// RGBA; the back's is what the front lets through: (pixel - front) / (1 - front alpha)); and the
+// disparity of the front layer's far side, where the back begins.
 // Reprojection treats each row of the traced eye as a line of pixels in the right eye's row
 // coordinate (a pixel's centre x + 1/2 moves to x + 1/2 - disparity), layer by layer:
 //   - two neighbours whose layers' disparities differ by at most maxJump are one surface: the span
@@ -34,6 +35,9 @@
 //     crosses between the two (stereoClearBetween: a layer that spreads over that depth, or the
 //     hidden side of a solid front), or nothing lies behind and the left eye does not see sky at
 //     that column (stereoClearBehind).
+// Where the winner is the front layer of a translucent surface that reprojects (a pair span whose
+// two pixels' fronts are alike) and only what lies behind it is not known, the hole is traced only
+// behind that layer's far side and composited under it (stereoResolveHole, stereoFillBehind).
 // A translucent winner is composited over the solid layer or the sky behind it. Faint layers
 // (alpha < faintAlpha: sky, the frame background) have disparity 0 (infinitely far). A back layer
 // whose front is solid is not known (it hides it), and a faint one (nothing behind the front) is

@@ -458,8 +458,10 @@ TEST(Stereo, TheTracedEyesFrontLayerNeverSpreadsAndTheLayersGiveThePixelBack) {
 
 TEST(Stereo, AHoleTracedBehindItsFrontAddsWhatTheRayMeetsFromThereOn) {
   // The grove's right eye (every page resident, the ground under it): a hole traced behind a front
-  // F from a depth in front of all matter is F over the full trace, the same march; from behind
-  // all matter (or under the ground) it is F alone.
+  // F from a depth in front of all matter is F over the full trace (the same march, with what F
+  // lets through: it stops where the whole ray's transmittance falls below --stop-opacity's, so
+  // within that of F + (1 - F alpha) x full; bit for bit where F is empty); from behind all matter
+  // (or under the ground) it is F alone.
   pl::PlayOptions o = groveView(64, 36);
   o.stereoIpd = 0.5f;
   const canopy::CanopyFile f = canopy::CanopyFile::open(o.input);
@@ -478,20 +480,23 @@ TEST(Stereo, AHoleTracedBehindItsFrontAddsWhatTheRayMeetsFromThereOn) {
   const float scale = pl::stereoDisparityScale(right, o.stereoIpd);
   const int64_t n = int64_t(right.width) * right.height;
   const float front[4] = {0.05f, 0.1f, 0.02f, 0.4f};
-  std::vector<float> full(size_t(n) * 4), near(size_t(n) * 4), far(size_t(n) * 4);
+  std::vector<float> full(size_t(n) * 4), near(size_t(n) * 4), clear(size_t(n) * 4, 0.0f), far(size_t(n) * 4);
   std::vector<float> fromNear(size_t(n), scale / 0.5f), fromFar(size_t(n), scale / 1.0e4f);  // depths 0.5 and 10 km
   for (int64_t i = 0; i < n; ++i) {
     for (int c = 0; c < 4; ++c) near[size_t(4 * i + c)] = far[size_t(4 * i + c)] = front[c];
     pl::renderPixel(v, right, i, full.data());
     pl::renderPixel(v, right, i, near.data(), nullptr, scale, fromNear.data());
+    pl::renderPixel(v, right, i, clear.data(), nullptr, scale, fromNear.data());
     pl::renderPixel(v, right, i, far.data(), nullptr, scale, fromFar.data());
   }
+  const float stopT = o.stopTransmittance;
   int covered = 0;
   for (int64_t i = 0; i < n; ++i) {
     covered += full[size_t(4 * i + 3)] > 0.02f ? 1 : 0;
     for (int c = 0; c < 4; ++c) {
-      ASSERT_NEAR(near[size_t(4 * i + c)], front[c] + (1.0f - front[3]) * full[size_t(4 * i + c)], 1e-6f) << i << " " << c;
-      ASSERT_EQ(far[size_t(4 * i + c)], front[c]) << i << " " << c;
+      ASSERT_EQ(clear[size_t(4 * i + c)], full[size_t(4 * i + c)]) << i << " " << c;
+      ASSERT_NEAR(near[size_t(4 * i + c)], front[c] + (1.0f - front[3]) * full[size_t(4 * i + c)], 1.0e-5f + stopT) << i << " " << c;
+      ASSERT_FLOAT_EQ(far[size_t(4 * i + c)], front[c]) << i << " " << c;  // alpha: 1 - (1 - a)
     }
   }
   EXPECT_GT(covered, int(n / 2));  // crowns and the ground: the march behind the front was not empty
