@@ -106,6 +106,38 @@ pl::PlayOptions groveView(int w, int h) {
   return o;
 }
 
+// The grove's stereo pair (IPD 0.5) with every page resident, the ground under it and shadows off
+// (the map is a backend's pass; nothing here depends on it): the scene's view and the two eyes.
+struct GroveStereo {
+  pl::PlayOptions o;
+  canopy::CanopyFile f;
+  pl::HostScene scene;
+  pl::ShadeParams shade;
+  pt::ResidentPages pages;
+  pl::SceneView v{};
+  pl::CameraView left{}, right{};
+  float scale = 0.0f;  // the eyes' disparity scale
+
+  GroveStereo(int w, int h) : o(withIpd(groveView(w, h))), f(canopy::CanopyFile::open(o.input)), scene(pl::buildScene(f)), pages(f) {
+    const std::vector<pl::FrameSetup> plan = pl::framePlan(o, scene);
+    shade = pl::shadeParams(o);
+    shade.shadows = pl::kShadowsOff;
+    shade.toSun = plan[0].toSun;
+    pl::setGround(o, scene, shade);
+    scene.setSun(shade.toSun);
+    v = pages.view(scene);
+    v.shade = shade;
+    pl::stereoEyes(plan[0].camera, o.stereoIpd, left, right);
+    scale = pl::stereoDisparityScale(left, o.stereoIpd);
+  }
+  GroveStereo(const GroveStereo&) = delete;
+  GroveStereo& operator=(const GroveStereo&) = delete;
+  static pl::PlayOptions withIpd(pl::PlayOptions o) {
+    o.stereoIpd = 0.5f;
+    return o;
+  }
+};
+
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
@@ -415,28 +447,15 @@ TEST(Stereo, TheTracedEyesFrontLayerNeverSpreadsAndTheLayersGiveThePixelBack) {
   // layer spans 2 x --stereo-spread px of disparity from its opening sample, so it spreads at most
   // --stereo-spread but for the faint samples before that one; the back layer lies behind it; the
   // front layer is a share of the pixel.
-  pl::PlayOptions o = groveView(96, 54);
-  o.stereoIpd = 0.5f;
-  const canopy::CanopyFile f = canopy::CanopyFile::open(o.input);
-  pl::HostScene scene = pl::buildScene(f);
-  const std::vector<pl::FrameSetup> plan = pl::framePlan(o, scene);
-  pl::ShadeParams shade = pl::shadeParams(o);
-  ASSERT_FLOAT_EQ(shade.stereoLayer, 2.0f * o.stereo.maxSpread);
-  shade.shadows = pl::kShadowsOff;  // (the map is a backend's pass; the layers do not depend on it)
-  shade.toSun = plan[0].toSun;
-  pl::setGround(o, scene, shade);
-  scene.setSun(shade.toSun);
-  pt::ResidentPages pages(f);
-  pl::SceneView v = pages.view(scene);
-  v.shade = shade;
-  pl::CameraView left, right;
-  pl::stereoEyes(plan[0].camera, o.stereoIpd, left, right);
-  const float scale = pl::stereoDisparityScale(left, o.stereoIpd);
+  const GroveStereo g(96, 54);
+  const pl::PlayOptions& o = g.o;
+  ASSERT_FLOAT_EQ(g.shade.stereoLayer, 2.0f * o.stereo.maxSpread);
+  const pl::CameraView& left = g.left;
   const int64_t n = int64_t(left.width) * left.height;
   std::vector<float> rgba(size_t(n) * 4), layers(size_t(n) * pl::kStereoPixelFloats);
   int covered = 0, split = 0, wide = 0;
   for (int64_t i = 0; i < n; ++i) {
-    pl::renderPixel(v, left, i, rgba.data(), layers.data(), scale);
+    pl::renderPixel(g.v, left, i, rgba.data(), layers.data(), g.scale);
     const float* px = rgba.data() + 4 * i;
     const float* l = layers.data() + pl::kStereoPixelFloats * i;
     if (px[3] < o.stereo.faintAlpha) continue;
@@ -462,22 +481,10 @@ TEST(Stereo, AHoleTracedBehindItsFrontAddsWhatTheRayMeetsFromThereOn) {
   // lets through: it stops where the whole ray's transmittance falls below --stop-opacity's, so
   // within that of F + (1 - F alpha) x full; bit for bit where F is empty); from behind all matter
   // (or under the ground) it is F alone.
-  pl::PlayOptions o = groveView(64, 36);
-  o.stereoIpd = 0.5f;
-  const canopy::CanopyFile f = canopy::CanopyFile::open(o.input);
-  pl::HostScene scene = pl::buildScene(f);
-  const std::vector<pl::FrameSetup> plan = pl::framePlan(o, scene);
-  pl::ShadeParams shade = pl::shadeParams(o);
-  shade.shadows = pl::kShadowsOff;
-  shade.toSun = plan[0].toSun;
-  pl::setGround(o, scene, shade);
-  scene.setSun(shade.toSun);
-  pt::ResidentPages pages(f);
-  pl::SceneView v = pages.view(scene);
-  v.shade = shade;
-  pl::CameraView left, right;
-  pl::stereoEyes(plan[0].camera, o.stereoIpd, left, right);
-  const float scale = pl::stereoDisparityScale(right, o.stereoIpd);
+  const GroveStereo g(64, 36);
+  const pl::SceneView& v = g.v;
+  const pl::CameraView& right = g.right;
+  const float scale = g.scale;
   const int64_t n = int64_t(right.width) * right.height;
   const float front[4] = {0.05f, 0.1f, 0.02f, 0.4f};
   std::vector<float> full(size_t(n) * 4), near(size_t(n) * 4), clear(size_t(n) * 4, 0.0f), far(size_t(n) * 4);
@@ -489,7 +496,7 @@ TEST(Stereo, AHoleTracedBehindItsFrontAddsWhatTheRayMeetsFromThereOn) {
     pl::renderPixel(v, right, i, clear.data(), nullptr, scale, fromNear.data());
     pl::renderPixel(v, right, i, far.data(), nullptr, scale, fromFar.data());
   }
-  const float stopT = o.stopTransmittance;
+  const float stopT = g.o.stopTransmittance;
   int covered = 0;
   for (int64_t i = 0; i < n; ++i) {
     covered += full[size_t(4 * i + 3)] > 0.02f ? 1 : 0;
