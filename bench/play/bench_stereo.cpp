@@ -93,12 +93,12 @@ int main(int argc, char** argv) {
     double rmsMean = 0.0, relMean = 0.0;
     for (size_t i = 0; i < rmsAll.size(); ++i) rmsMean += rmsAll[i] / double(rmsAll.size()), relMean += relAll[i] / double(relAll.size());
     std::printf("| scene | device | size | frames | ipd | first eye ms | second eye ms (reprojected) | second eye ms (traced) | "
-                "reprojected / traced | pixels traced | RMS vs traced (error frames) | relative |\n"
-                "|---|---|---|---|---|---|---|---|---|---|---|---|\n");
-    std::printf("| %s | %s | %dx%d | %d | %g | %.2f | %.2f | %.2f | %.3f | %.1f%% | %.4g | %.2f%% |\n", o.input.c_str(),
+                "reprojected / traced | pixels traced | pixels traced behind a front | RMS vs traced (error frames) | relative |\n"
+                "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    std::printf("| %s | %s | %dx%d | %d | %g | %.2f | %.2f | %.2f | %.3f | %.1f%% | %.1f%% | %.4g | %.2f%% |\n", o.input.c_str(),
                 std::string(report["reproject"]["device"]).c_str(), o.width, o.height, o.frames, double(o.stereoIpd),
-                double(rp["first_eye_ms_median"]), second, full, full > 0 ? second / full : 0.0, 100.0 * double(rp["traced_fraction_mean"]), rmsMean,
-                100.0 * relMean);
+                double(rp["first_eye_ms_median"]), second, full, full > 0 ? second / full : 0.0, 100.0 * double(rp["traced_fraction_mean"]),
+                100.0 * double(rp["traced_behind_fraction_mean"]), rmsMean, 100.0 * relMean);
     report["second_eye_reprojected_over_traced"] = full > 0 ? second / full : 0.0;
     report["rms_mean"] = rmsMean;
     report["relative_rms_mean"] = relMean;
