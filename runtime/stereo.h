@@ -262,8 +262,9 @@ CANOPY_HD CANOPY_FORCEINLINE bool stereoClearBehind(const StereoView& v, int64_t
 constexpr int kStereoResolved = 0, kStereoHole = 1, kStereoHoleBehind = 2;
 // A pair span whose two pixels' front layers differ in alpha by more than this is not used as
 // the front of a hole traced behind it (kStereoHoleBehind): the two pixels' fronts hold different
-// shares of the matter there, and neither is what the right eye's ray crosses.
-constexpr float kStereoBehindAlphaStep = 0.05f;
+// shares of the matter there (a sub-pixel crown edge), and neither is what the right eye's ray
+// crosses (bench/RESULTS.md, "Holes traced behind their front": 0.05, 0.1, 0.2 and no gate).
+constexpr float kStereoBehindAlphaStep = 0.1f;
 
 // kStereoHoleBehind's test and fill for right-eye pixel x of the row whose winning span `key` is
 // translucent with what lies behind it not known (stereoResolveFill): writes the front and
@@ -273,15 +274,18 @@ CANOPY_HD inline int stereoFillBehind(const StereoView& v, int64_t row, int x, u
   const int64_t j0 = row + stereoKeySource(key);
   const float da = stereoLayers(v, j0)[7] - stereoLayers(v, j0 + 1)[7];
   if (da > kStereoBehindAlphaStep || da < -kStereoBehindAlphaStep) return kStereoHole;
-  // one pixel's front layer, colour and far side together: the pair's nearer one
+  // the front layer and its far side interpolated along the pair span, as its colour (stereoSpanRgba)
   const float p0 = float(stereoKeySource(key)) + 0.5f - stereoShift(v, j0, kStereoFront);
   const float p1 = float(stereoKeySource(key)) + 1.5f - stereoShift(v, j0 + 1, kStereoFront);
-  const int64_t j = (float(x) + 0.5f - p0) / (p1 - p0) > 0.5f ? j0 + 1 : j0;
-  const float from = stereoLayers(v, j)[8];
-  if (!(from > 0.0f)) return kStereoHole;  // the front never opened: its far side is not known
-  float rgba[4];
-  stereoRgba(v, j, kStereoFront, rgba);
-  for (int c = 0; c < 4; ++c) v.right[4 * (row + x) + c] = rgba[c];
+  float u = (float(x) + 0.5f - p0) / (p1 - p0);
+  u = u < 0.0f ? 0.0f : (u > 1.0f ? 1.0f : u);
+  const float f0 = stereoLayers(v, j0)[8], f1 = stereoLayers(v, j0 + 1)[8];
+  if (!(f0 > 0.0f) || !(f1 > 0.0f)) return kStereoHole;  // the front never opened: its far side is not known
+  const float from = f0 + (f1 - f0) * u;
+  float rgba[4], b[4];
+  stereoRgba(v, j0, kStereoFront, rgba);
+  stereoRgba(v, j0 + 1, kStereoFront, b);
+  for (int c = 0; c < 4; ++c) v.right[4 * (row + x) + c] = rgba[c] + (b[c] - rgba[c]) * u;
   *behindFrom = from;
   return kStereoHoleBehind;
 }
@@ -291,10 +295,10 @@ CANOPY_HD inline int stereoFillBehind(const StereoView& v, int64_t row, int x, u
 //   - kStereoHole: to be traced in full (nothing written);
 //   - kStereoHoleBehind (only where behindFrom is given, else kStereoHole): the winner is the
 //     front layer of a surface that reprojects (a pair span that does not spread, its two pixels'
-//     fronts alike) but is not solid, and what lies behind it is not known. The front layer of the
-//     pair's nearer pixel is written, and *behindFrom is the disparity of that layer's far side
-//     (where its pixel's back layer begins): only the ray behind it is traced, and composited under
-//     it (renderPixelT's kBehind).
+//     fronts alike) but is not solid, and what lies behind it is not known. The front layer is
+//     written, and *behindFrom is the disparity of its far side (where the back layer begins), both
+//     interpolated along the pair span: only the ray behind it is traced, and composited under it
+//     (renderPixelT's kBehind).
 CANOPY_HD inline int stereoResolveFill(const StereoView& v, int x, int y, float* behindFrom) {
   const int64_t row = int64_t(y) * v.width, i = row + x;
   const unsigned long long key = v.keys[i];
