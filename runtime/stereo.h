@@ -206,6 +206,16 @@ CANOPY_HD inline void stereoSplatBehind(const StereoView& v, int x, int y, Emit&
     });
 }
 
+// Where right-eye pixel x of the row lies along the pair span `key`: 0 at its first pixel's centre,
+// 1 at the second's (clamped).
+CANOPY_HD CANOPY_FORCEINLINE float stereoPairU(const StereoView& v, int64_t row, unsigned long long key, int x) {
+  const int source = stereoKeySource(key), L = stereoKeyLayer(key);
+  const int64_t j0 = row + source;
+  const float p0 = float(source) + 0.5f - stereoShift(v, j0, L), p1 = float(source) + 1.5f - stereoShift(v, j0 + 1, L);
+  const float u = (float(x) + 0.5f - p0) / (p1 - p0);
+  return u < 0.0f ? 0.0f : (u > 1.0f ? 1.0f : u);
+}
+
 // The RGBA a span key gives right-eye pixel x of the row: its layer's colour (interpolated between
 // the two pixels of a pair span); false where that layer spreads (a hole).
 CANOPY_HD inline bool stereoSpanRgba(const StereoView& v, int64_t row, unsigned long long key, int x, float rgba[4]) {
@@ -218,9 +228,7 @@ CANOPY_HD inline bool stereoSpanRgba(const StereoView& v, int64_t row, unsigned 
   if (!stereoCoherent(v, j1, L)) return false;
   float b[4];
   stereoRgba(v, j1, L, b);
-  const float p0 = float(source) + 0.5f - stereoShift(v, j0, L), p1 = float(source) + 1.5f - stereoShift(v, j1, L);
-  float u = (float(x) + 0.5f - p0) / (p1 - p0);
-  u = u < 0.0f ? 0.0f : (u > 1.0f ? 1.0f : u);
+  const float u = stereoPairU(v, row, key, x);
   for (int c = 0; c < 4; ++c) rgba[c] += (b[c] - rgba[c]) * u;
   return true;
 }
@@ -266,27 +274,20 @@ constexpr int kStereoResolved = 0, kStereoHole = 1, kStereoHoleBehind = 2;
 // crosses (bench/RESULTS.md, "Holes traced behind their front": 0.05, 0.1, 0.2 and no gate).
 constexpr float kStereoBehindAlphaStep = 0.1f;
 
-// kStereoHoleBehind's test and fill for right-eye pixel x of the row whose winning span `key` is
-// translucent with what lies behind it not known (stereoResolveFill): writes the front and
-// *behindFrom, or returns kStereoHole.
-CANOPY_HD inline int stereoFillBehind(const StereoView& v, int64_t row, int x, unsigned long long key, float* behindFrom) {
+// kStereoHoleBehind's test and fill for right-eye pixel x of the row whose winning span `key`, of
+// colour `front` (stereoSpanRgba), is translucent with what lies behind it not known
+// (stereoResolveFill): writes the front and *behindFrom (its far side interpolated along the pair
+// span as its colour is), or returns kStereoHole.
+CANOPY_HD inline int stereoFillBehind(const StereoView& v, int64_t row, int x, unsigned long long key, const float front[4],
+                                      float* behindFrom) {
   if (stereoKeyLayer(key) != kStereoFront || !(key & kStereoKeyPair)) return kStereoHole;
   const int64_t j0 = row + stereoKeySource(key);
   const float da = stereoLayers(v, j0)[7] - stereoLayers(v, j0 + 1)[7];
   if (da > kStereoBehindAlphaStep || da < -kStereoBehindAlphaStep) return kStereoHole;
-  // the front layer and its far side interpolated along the pair span, as its colour (stereoSpanRgba)
-  const float p0 = float(stereoKeySource(key)) + 0.5f - stereoShift(v, j0, kStereoFront);
-  const float p1 = float(stereoKeySource(key)) + 1.5f - stereoShift(v, j0 + 1, kStereoFront);
-  float u = (float(x) + 0.5f - p0) / (p1 - p0);
-  u = u < 0.0f ? 0.0f : (u > 1.0f ? 1.0f : u);
   const float f0 = stereoLayers(v, j0)[8], f1 = stereoLayers(v, j0 + 1)[8];
-  if (!(f0 > 0.0f) || !(f1 > 0.0f)) return kStereoHole;  // the front never opened: its far side is not known
-  const float from = f0 + (f1 - f0) * u;
-  float rgba[4], b[4];
-  stereoRgba(v, j0, kStereoFront, rgba);
-  stereoRgba(v, j0 + 1, kStereoFront, b);
-  for (int c = 0; c < 4; ++c) v.right[4 * (row + x) + c] = rgba[c] + (b[c] - rgba[c]) * u;
-  *behindFrom = from;
+  if (!(f0 > 0.0f) || !(f1 > 0.0f)) return kStereoHole;  // a front that never opened: its far side is not known
+  *behindFrom = f0 + (f1 - f0) * stereoPairU(v, row, key, x);
+  for (int c = 0; c < 4; ++c) v.right[4 * (row + x) + c] = front[c];
   return kStereoHoleBehind;
 }
 
@@ -320,7 +321,7 @@ CANOPY_HD inline int stereoResolveFill(const StereoView& v, int x, int y, float*
       known = stereoClearBehind(v, row, x);
     }
     known = known && stereoClearBetween(v, row, x, stereoKeySource(key), db);
-    if (!known) return behindFrom ? stereoFillBehind(v, row, x, key, behindFrom) : kStereoHole;
+    if (!known) return behindFrom ? stereoFillBehind(v, row, x, key, rgba, behindFrom) : kStereoHole;
     const float through = 1.0f - rgba[3];
     for (int c = 0; c < 4; ++c) rgba[c] += through * b[c];
   }
