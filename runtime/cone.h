@@ -489,28 +489,30 @@ CANOPY_HD inline void renderPixelT(const SceneView& s, const CameraView& c, int6
   if (kWithDepth) pixelLayers(r, cosAxis, disparityScale, stereo + kStereoPixelFloats * i);
 }
 
-// renderPixelT of the mode and scene (s.shade.shadows, s.litModels): with depth (stereo's traced
-// eye) when `depth` is set, as stereo's holes when `behind` is (renderPixelT's `stereo`).
+// renderPixelT of the scene's shadow path and light (s.shade.shadows, s.litModels) in stereo mode
+// kWithDepth / kBehind.
+template <bool kWithDepth, bool kBehind>
+CANOPY_HD inline void renderPixelOfScene(const SceneView& s, const CameraView& c, int64_t i, float* rgba, float* stereo,
+                                         float disparityScale) {
+  const bool cones = s.shade.shadows == kShadowsCone, light = s.litModels > 0;
+  if (cones)
+    light ? renderPixelT<true, true, kWithDepth, kBehind>(s, c, i, rgba, stereo, disparityScale)
+          : renderPixelT<true, false, kWithDepth, kBehind>(s, c, i, rgba, stereo, disparityScale);
+  else
+    light ? renderPixelT<false, true, kWithDepth, kBehind>(s, c, i, rgba, stereo, disparityScale)
+          : renderPixelT<false, false, kWithDepth, kBehind>(s, c, i, rgba, stereo, disparityScale);
+}
+
+// renderPixelT of the mode and scene: with depth (stereo's traced eye) when `depth` is set, as
+// stereo's holes when `behind` is (renderPixelT's `stereo`).
 CANOPY_HD inline void renderPixel(const SceneView& s, const CameraView& c, int64_t i, float* rgba, float* depth = nullptr,
                                   float disparityScale = 0.0f, float* behind = nullptr) {
-  const bool cones = s.shade.shadows == kShadowsCone, light = s.litModels > 0;
-  if (depth) {
-    if (cones)
-      light ? renderPixelT<true, true, true>(s, c, i, rgba, depth, disparityScale) : renderPixelT<true, false, true>(s, c, i, rgba, depth, disparityScale);
-    else
-      light ? renderPixelT<false, true, true>(s, c, i, rgba, depth, disparityScale) : renderPixelT<false, false, true>(s, c, i, rgba, depth, disparityScale);
-  } else if (behind) {
-    if (cones)
-      light ? renderPixelT<true, true, false, true>(s, c, i, rgba, behind, disparityScale)
-            : renderPixelT<true, false, false, true>(s, c, i, rgba, behind, disparityScale);
-    else
-      light ? renderPixelT<false, true, false, true>(s, c, i, rgba, behind, disparityScale)
-            : renderPixelT<false, false, false, true>(s, c, i, rgba, behind, disparityScale);
-  } else if (cones) {
-    light ? renderPixelT<true, true>(s, c, i, rgba) : renderPixelT<true, false>(s, c, i, rgba);
-  } else {
-    light ? renderPixelT<false, true>(s, c, i, rgba) : renderPixelT<false, false>(s, c, i, rgba);
-  }
+  if (depth)
+    renderPixelOfScene<true, false>(s, c, i, rgba, depth, disparityScale);
+  else if (behind)
+    renderPixelOfScene<false, true>(s, c, i, rgba, behind, disparityScale);
+  else
+    renderPixelOfScene<false, false>(s, c, i, rgba, nullptr, 0.0f);
 }
 
 }  // namespace canopy::play
