@@ -515,9 +515,12 @@ TEST(Stereo, AHoleTracedBehindItsFrontAddsWhatTheRayMeetsFromThereOn) {
     pl::renderPixel(v, right, i, far.data(), nullptr, scale, fromFar.data());
   }
   const float stopT = g.o.stopTransmittance;
-  int covered = 0;
+  int covered = 0, underGround = 0;
   for (int64_t i = 0; i < n; ++i) {
     covered += full[size_t(4 * i + 3)] > 0.02f ? 1 : 0;
+    float fp;
+    const pl::V3 d = pl::cameraRay(right, int(i % right.width), int(i / right.width), fp);
+    underGround += pl::groundHit(v.shade, right.position, d) < 1.0e4f ? 1 : 0;  // far: the ground before the start
     for (int c = 0; c < 4; ++c) {
       ASSERT_EQ(clear[size_t(4 * i + c)], full[size_t(4 * i + c)]) << i << " " << c;
       ASSERT_NEAR(near[size_t(4 * i + c)], front[c] + (1.0f - front[3]) * full[size_t(4 * i + c)], 1.0e-5f + stopT) << i << " " << c;
@@ -525,6 +528,9 @@ TEST(Stereo, AHoleTracedBehindItsFrontAddsWhatTheRayMeetsFromThereOn) {
     }
   }
   EXPECT_GT(covered, int(n / 2));  // crowns and the ground: the march behind the front was not empty
+  // far took both ways: rays under the ground before their start, and rays marched from 10 km
+  EXPECT_GT(underGround, 0);
+  EXPECT_LT(underGround, int(n));
 }
 
 TEST(Stereo, PixelDisparityIsTheWeightedMeanAndSpreadOfInverseDepth) {
