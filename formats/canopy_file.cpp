@@ -254,7 +254,9 @@ void checkHeader(ResidentParse& r, uint64_t fileBytes) {
     bad(P, "unsupported brick geometry (" + u64s(h.brickVoxels) + " voxels, " + u64s(h.brickBytes) + " bytes)");
   if (h.bricksPerPage != (h.pageBytes - sizeof(CanopyPageHeader)) / h.brickBytes)
     bad(P, "bricksPerPage " + u64s(h.bricksPerPage) + " inconsistent with the page size");
-  if (h.lightItemBytes != kCanopyLightItemBytes || h.lightItemsPerPage != (h.pageBytes - sizeof(CanopyPageHeader)) / h.lightItemBytes)
+  // 4.0's shared-exponent items, or the float16 items before (converted as pages load: canopyPreparePage)
+  if (h.lightItemBytes != (h.major >= 4 ? kCanopyLightItemBytes : kCanopyLightItemBytesHalf) ||
+      h.lightItemsPerPage != (h.pageBytes - sizeof(CanopyPageHeader)) / h.lightItemBytes)
     bad(P, "unsupported light item geometry (" + u64s(h.lightItemBytes) + " bytes, " + u64s(h.lightItemsPerPage) + " per page)");
   if (h.pagesOffset != h.residentBytes || h.pagesOffset % h.pageBytes != 0 || h.pagesOffset > fileBytes)
     bad(P, "pages offset " + u64s(h.pagesOffset) + " invalid");

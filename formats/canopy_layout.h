@@ -1,5 +1,5 @@
-// canopy_layout.h: the byte layout of the packed, streamable scene file (`.canopy`), version 2.0
-// (writes 1.x byte for byte when no model has detail levels; reads 1.0 to 2.0).
+// canopy_layout.h: the byte layout of the packed, streamable scene file (`.canopy`), version 4.0
+// (writes the oldest version that holds a file's content, byte for byte; reads 1.0 to 4.0).
 //
 // A .canopy file holds plant models (each a sparse GigaVoxels-style octree of bricks, thesis ch. 5),
 // instances of those models (model id + transform) and an optional coarse scene lighting lattice.
@@ -57,9 +57,12 @@
 // (light item b belongs to brick b; model.lightCount is 0 or brickCount). A light item holds the 19
 // base solutions (B00 ambient, B01..B18) x RGB on a 4^3 grid over its node (each light voxel two
 // brick voxels wide: lighting is smooth, and half resolution makes an item 3x, not 24x, a density
-// brick) plus a one-voxel border (6^3 stored), as IEEE float16: half values[19][3][216], sample
-// (x,y,z) at index x + 6 (y + 6 z), x = 0 and 5 the borders; 24624 B. Light page p of a model holds
-// items [p * lightItemsPerPage, ...) (2 per page). Light levels are the Haar averages (box filter):
+// brick) plus a one-voxel border (6^3 stored), each sample's RGB in one shared-exponent word
+// (canopy/rgb9e5.h: 9-bit mantissas, error <= 1/512 of the sample's largest channel): uint32
+// values[19][216], sample (x,y,z) at index x + 6 (y + 6 z), x = 0 and 5 the borders; 16416 B (4.0;
+// before 4.0 IEEE float16 planes, half values[19][3][216], 24624 B, which a reader converts when it
+// loads the page: canopyPreparePage). Light page p of a model holds items [p * lightItemsPerPage,
+// ...) (3 per page; 2 before 4.0). Light levels are the Haar averages (box filter):
 // the finest light grid (2 cells per voxel) is the mean of the source lighting over its 2x2x2
 // lattice cells; each coarser grid is the mean of the 2x2x2 voxels below it that lie in occupied
 // blocks. Border voxels come from the neighbouring block of the same level, or repeat the edge voxel
@@ -103,6 +106,10 @@
 // for a file with a detail model, and 1.x (as before, byte for byte) otherwise. 3.0 added uniform
 // sparse bricks (one density for all the stored voxels of an item: bit 1023 of its mask, which a 2.0
 // reader refuses as a voxel past the last); the writer writes 3.0 only for a file with such an item.
+// 4.0 stores light items as shared-exponent RGB words (16416 B, 3 per 64 KiB page) instead of
+// float16 planes (24624 B, 2 per page): a lit file is a third smaller in its light pages. The
+// writer writes 4.0 for a file with light items; a file without any keeps its older version (and
+// the header's 1.x-3.0 light item geometry) byte for byte.
 //
 // This header holds the layout alone: constants, the resident structures and the arithmetic that
 // finds a brick, a light item or a level in them. canopy_sample.h samples page images (host and
@@ -118,7 +125,9 @@ namespace canopy {
 // Constants
 // ------------------------------------------------------------------------------------------------
 constexpr char kCanopyMagic[8] = {'C', 'A', 'N', 'O', 'P', 'Y', 'P', 'K'};
-constexpr uint16_t kCanopyMajor = 3;  // 2.0: detail levels (a model's levels finer than its light lattice); 3.0: uniform sparse bricks
+// 2.0: detail levels (a model's levels finer than its light lattice); 3.0: uniform sparse bricks;
+// 4.0: shared-exponent light items
+constexpr uint16_t kCanopyMajor = 4;
 constexpr uint16_t kCanopyMinor = 0;
 // The 1.x minors this reader knows: 1.1: Haar light pages (optional; a 1.0 reader skips them),
 // kCanopyModelScatteredSun; 1.2: the scene lattice's sun bases (SceneSunLight; a 1.1 reader skips it)
@@ -135,7 +144,8 @@ constexpr uint32_t kCanopyLightSize = 4;       // interior light voxels per axis
 constexpr uint32_t kCanopyLightVoxels = kCanopyLightSize + 2;  // 6 with the border
 constexpr uint32_t kCanopyLightVoxelCount = kCanopyLightVoxels * kCanopyLightVoxels * kCanopyLightVoxels;
 constexpr uint32_t kCanopyLightChannels = kCanopyLightBases * 3;  // 57 planes per item
-constexpr uint32_t kCanopyLightItemBytes = kCanopyLightChannels * kCanopyLightVoxelCount * 2;  // 24624
+constexpr uint32_t kCanopyLightItemBytes = kCanopyLightBases * kCanopyLightVoxelCount * 4;  // 16416: uint32 [19][216]
+constexpr uint32_t kCanopyLightItemBytesHalf = kCanopyLightChannels * kCanopyLightVoxelCount * 2;  // 24624: before 4.0
 constexpr uint32_t kCanopyMaxDepth = 15;       // levels 0..15: up to 8 * 2^15 cells per axis
 constexpr uint32_t kCanopyNone = 0xFFFFFFFFu;  // "no child tile" / "no brick"
 
@@ -160,8 +170,8 @@ struct CanopyFileHeader {          // offset
   uint32_t brickBytes;             //  68  bytes per brick (8000)
   uint32_t bricksPerPage;          //  72  floor((pageBytes - 32) / brickBytes) = 8
   uint32_t flags;                  //  76  0 in 1.0
-  uint32_t lightItemBytes;         //  80  bytes per light item (24624)
-  uint32_t lightItemsPerPage;      //  84  floor((pageBytes - 32) / lightItemBytes) = 2
+  uint32_t lightItemBytes;         //  80  bytes per light item (16416; 24624 before 4.0)
+  uint32_t lightItemsPerPage;      //  84  floor((pageBytes - 32) / lightItemBytes) = 3 (2 before 4.0)
   uint8_t reserved[36];            //  88  zero
   uint32_t headerCrc;              // 124  CRC-32 of bytes [0, 124)
 };
@@ -208,7 +218,7 @@ struct CanopyNode {                // offset
 static_assert(sizeof(CanopyNode) == 16, "CanopyNode layout");
 
 enum CanopyModelFlags : uint32_t {
-  kCanopyModelHasLight = 1u,   // float16 light items, one per brick
+  kCanopyModelHasLight = 1u,   // light items, one per brick
   kCanopyModelHaarLight = 2u,  // also the .chaar's Haar bricks: the finest level's exact light (Haar pages, HaarIndex)
   // (1.1) The sun bases B01..B18 (items and Haar pages) hold only scattered light: canopy-lbsolve
   // removed their direct beam, which the player adds as its shadowed direct sun. Without it (1.0

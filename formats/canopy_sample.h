@@ -11,6 +11,7 @@
 
 #include "canopy/half.h"
 #include "canopy/hd.h"
+#include "canopy/rgb9e5.h"
 #include "formats/canopy_layout.h"
 #include "formats/haar_view.h"
 
@@ -147,6 +148,35 @@ inline void canopyFillBrickMasks(void* page, uint32_t pageBytes, uint32_t bricks
   }
 }
 
+// Converts a verified light page image of a file before 4.0 (float16 planes: half [19][3][216] per
+// item, 24624 B) in place to 4.0's items (uint32 [19][216] shared-exponent words, 16416 B) at 4.0's
+// stride, so that the sampler knows one form. NaN and negative halves become 0 (canopy/rgb9e5.h).
+inline void canopyConvertHalfLightPage(void* page) {
+  CanopyPageHeader ph;
+  std::memcpy(&ph, page, sizeof ph);
+  unsigned char* payload = static_cast<unsigned char*>(page) + sizeof(CanopyPageHeader);
+  uint16_t half[kCanopyLightItemBytesHalf / 2];
+  for (uint32_t i = 0; i < ph.itemCount; ++i) {  // item i's new bytes end before item i + 1's old bytes begin
+    std::memcpy(half, payload + size_t(i) * kCanopyLightItemBytesHalf, sizeof half);
+    for (uint32_t b = 0; b < kCanopyLightBases; ++b)
+      for (uint32_t v = 0; v < kCanopyLightVoxelCount; ++v) {
+        const uint16_t* rgb = half + size_t(3 * b) * kCanopyLightVoxelCount + v;
+        const uint32_t w = rgb9e5Encode(halfToFloat(rgb[0]), halfToFloat(rgb[kCanopyLightVoxelCount]), halfToFloat(rgb[2 * kCanopyLightVoxelCount]));
+        std::memcpy(payload + size_t(i) * kCanopyLightItemBytes + 4 * (size_t(b) * kCanopyLightVoxelCount + v), &w, 4);
+      }
+  }
+}
+
+// What a loader does to a verified page image (CanopyFile::readPage) before a sampler reads it: a
+// brick page gets its empty-cell masks (canopyFillBrickMasks), a light page of a file before 4.0
+// its items in 4.0's form (canopyConvertHalfLightPage). Other pages are unchanged.
+inline void canopyPreparePage(void* page, const CanopyFileHeader& h) {
+  CanopyPageHeader ph;
+  std::memcpy(&ph, page, sizeof ph);
+  if (ph.kind == uint32_t(CanopyPageKind::Brick)) canopyFillBrickMasks(page, h.pageBytes, h.bricksPerPage);
+  if (ph.kind == uint32_t(CanopyPageKind::Light) && h.lightItemBytes == kCanopyLightItemBytesHalf) canopyConvertHalfLightPage(page);
+}
+
 // ---- Sparse bricks (2.0: a detail model's detail levels; the item layout: canopy_layout.h) ------
 
 // The stored voxels of an item: its mask's set bits, without the uniform flag.
@@ -256,9 +286,10 @@ CANOPY_HD inline CanopySample canopySampleBrickInPage(const void* page, uint32_t
   return sparse ? canopySampleBrick(canopySparseBrickInPage(page, slot), lx, ly, lz) : canopySampleBrick(canopyBrickInPage(page, slot), lx, ly, lz);
 }
 
-// The light item `slot` (= item id % lightItemsPerPage) of a light page image.
-CANOPY_HD CANOPY_FORCEINLINE const uint16_t* canopyLightInPage(const void* page, uint32_t slot) {
-  return reinterpret_cast<const uint16_t*>(static_cast<const unsigned char*>(page) + sizeof(CanopyPageHeader) +
+// The light item `slot` (= item id % lightItemsPerPage) of a light page image: uint32 [19][216]
+// shared-exponent words (a page of a file before 4.0 after canopyPreparePage).
+CANOPY_HD CANOPY_FORCEINLINE const uint32_t* canopyLightInPage(const void* page, uint32_t slot) {
+  return reinterpret_cast<const uint32_t*>(static_cast<const unsigned char*>(page) + sizeof(CanopyPageHeader) +
                                            size_t(slot) * kCanopyLightItemBytes);
 }
 
@@ -290,29 +321,29 @@ CANOPY_HD inline CanopyLightCorners canopyLightCorners(float lx, float ly, float
   return k;
 }
 
-// Base `base` (0..18) of a light item at the corners k, RGB into rgb.
-CANOPY_HD CANOPY_FORCEINLINE void canopySampleLightAt(const uint16_t* item, uint32_t base, const CanopyLightCorners& k,
+// Base `base` (0..18) of a light item at the corners k, RGB into rgb. The eight words are loaded
+// before any weight is tested, so that the GPU has them in flight at once; corners of weight 0
+// add nothing.
+CANOPY_HD CANOPY_FORCEINLINE void canopySampleLightAt(const uint32_t* item, uint32_t base, const CanopyLightCorners& k,
                                                       float rgb[3]) {
-  for (int ch = 0; ch < 3; ++ch) {
-    const uint16_t* plane = item + size_t(base * 3 + uint32_t(ch)) * kCanopyLightVoxelCount;
-    float v = 0.0f;
-    for (int c = 0; c < 8; ++c) {
-      if (k.weight[c] == 0.0f) continue;
-      v += k.weight[c] * halfToFloat(plane[k.offset[c]]);
-    }
-    rgb[ch] = v;
+  const uint32_t* plane = item + size_t(base) * kCanopyLightVoxelCount;
+  uint32_t w[8];
+  for (int c = 0; c < 8; ++c) w[c] = plane[k.offset[c]];
+  rgb[0] = rgb[1] = rgb[2] = 0.0f;
+  for (int c = 0; c < 8; ++c) {
+    if (k.weight[c] == 0.0f) continue;
+    float v[3];
+    rgb9e5Decode(w[c], v);
+    rgb[0] += k.weight[c] * v[0];
+    rgb[1] += k.weight[c] * v[1];
+    rgb[2] += k.weight[c] * v[2];
   }
 }
 
 // Trilinear sample of base `base` (0..18) of a light item at node-local l in [0,1]^3, RGB into rgb.
-CANOPY_HD inline void canopySampleLight(const uint16_t* item, uint32_t base, float lx, float ly, float lz, float rgb[3]) {
+CANOPY_HD inline void canopySampleLight(const uint32_t* item, uint32_t base, float lx, float ly, float lz, float rgb[3]) {
   canopySampleLightAt(item, base, canopyLightCorners(lx, ly, lz), rgb);
 }
-
-// float -> IEEE binary16 for light items: canopy::floatToHalf (round to nearest even, NaN stays
-// NaN) with values beyond the half range clamped to +-65504 (lighting is never infinite). Readers
-// decode with canopy::halfToFloat.
-inline uint16_t canopyFloatToHalf(float f) { return floatToHalf(f > kHalfMax ? kHalfMax : (f < -kHalfMax ? -kHalfMax : f)); }
 
 // One step down the octree: x (the point in the current node, [0,1)^3) becomes the point in the
 // child that holds it, lo and size (the node's corner and edge in octree unit space) become the

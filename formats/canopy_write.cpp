@@ -109,6 +109,7 @@ struct Ranges {
   bool scatteredSun = false;  // a model flagged kCanopyModelScatteredSun (1.1)
   bool detail = false;        // a model with detail levels (2.0)
   bool uniform = false;       // a uniform sparse brick (3.0)
+  bool lit = false;           // a model with light items (4.0)
   uint32_t page = 0;          // the next page
 };
 
@@ -131,7 +132,8 @@ uint32_t placeBricksAndLight(const CanopyWriteModel& wm, CanopyModel& m, Ranges&
   const bool lit = wm.light && !wm.light->empty();
   const bool haar = wm.haar != nullptr;
   R.detail = R.detail || m.detailLevels != 0;
-  if (lit && (m.lightCount != lightBricks || wm.light->size() * 2 != size_t(m.lightCount) * kCanopyLightItemBytes))
+  R.lit = R.lit || lit;
+  if (lit && (m.lightCount != lightBricks || wm.light->size() * 4 != size_t(m.lightCount) * kCanopyLightItemBytes))
     throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has inconsistent light items");
   if (haar && !lit) throw invalidInput("canopy writer: model '" + std::string(m.name) + "' has Haar light but no light items");
   m.lightCount = lit ? m.lightCount : 0;
@@ -362,12 +364,13 @@ void writeHeader(const CanopyWriteInput& in, const Ranges& R, const Sections& S,
   const uint32_t pageBytes = g.pageBytes;
   CanopyFileHeader h{};
   std::memcpy(h.magic, kCanopyMagic, 8);
-  // A file with a uniform sparse brick is 3.0; with a detail model but none, 2.0. Otherwise: without
-  // a 1.1 feature (Haar light, scattered-only sun bases) a 1.0 file, byte for byte; with one but no
-  // 1.2 feature (the scene lattice's sun bases) a 1.1 file; else 1.2.
-  h.major = R.uniform ? 3 : R.detail ? 2 : 1;
-  h.minor = R.detail ? 0 : sceneSun ? 2 : R.haarIndex.empty() && !R.scatteredSun ? 0 : 1;
-  static_assert(kCanopyMajor == 3 && kCanopyMinor == 0 && kCanopyMinor1 == 2, "the writer's versions");
+  // A file with light items is 4.0; without, with a uniform sparse brick 3.0; with a detail model but
+  // none, 2.0. Otherwise: without a 1.1 feature (Haar light, scattered-only sun bases: both come with
+  // light items, so in practice never) a 1.0 file, byte for byte; with one but no 1.2 feature (the
+  // scene lattice's sun bases) a 1.1 file; else 1.2.
+  h.major = R.lit ? 4 : R.uniform ? 3 : R.detail ? 2 : 1;
+  h.minor = h.major > 1 ? 0 : sceneSun ? 2 : R.haarIndex.empty() && !R.scatteredSun ? 0 : 1;
+  static_assert(kCanopyMajor == 4 && kCanopyMinor == 0 && kCanopyMinor1 == 2, "the writer's versions");
   h.headerBytes = sizeof(CanopyFileHeader);
   h.pageBytes = pageBytes;
   h.pageCount = uint32_t(L.pages.size());
@@ -381,8 +384,9 @@ void writeHeader(const CanopyWriteInput& in, const Ranges& R, const Sections& S,
   h.brickVoxels = kCanopyBrickVoxels;
   h.brickBytes = kCanopyBrickBytes;
   h.bricksPerPage = g.perPage;
-  h.lightItemBytes = kCanopyLightItemBytes;
-  h.lightItemsPerPage = g.lightPerPage;
+  // The light item geometry of the version written (a file without light items keeps 1.x-3.0's).
+  h.lightItemBytes = h.major >= 4 ? kCanopyLightItemBytes : kCanopyLightItemBytesHalf;
+  h.lightItemsPerPage = (pageBytes - uint32_t(sizeof(CanopyPageHeader))) / h.lightItemBytes;
   h.headerCrc = crc32(0, &h, offsetof(CanopyFileHeader, headerCrc));
   std::memcpy(L.resident.data(), &h, sizeof h);
 

@@ -39,7 +39,7 @@ struct CanopyWriteModel {
   CanopyModel record{};                  // firstTile / firstBrickPage / ... are filled by the writer
   const std::vector<CanopyNode>* tiles = nullptr;      // 8 per tile
   const std::vector<unsigned char>* bricks = nullptr;  // record.brickCount * kCanopyBrickBytes
-  const std::vector<uint16_t>* light = nullptr;        // null/empty (density only) or record.lightCount items
+  const std::vector<uint32_t>* light = nullptr;        // null/empty (density only) or record.lightCount items
   // Optional Haar light (format 1.1: the finest level's exact light), for a lit model only.
   const CanopyHaarPages* haar = nullptr;
 };

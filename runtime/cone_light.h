@@ -85,8 +85,8 @@ CANOPY_HD inline void ambientOnly(const SceneView& s, SceneLightPair scene, floa
 // lines against 4.7 k) and the frame 257.7 ms; out of line 195.0 ms; out of line with its
 // coefficient loops rolled too (a fifth of the code) 377.9 ms (all with the sampler that rebuilt the
 // footprint's 8 texels as the decoder does). With the weighted-sum sampler (one loop over the
-// footprint's kept coefficients, haar_brick.h) the grove takes 17.3 ms, the float16 items
-// (--light fast) 16.4 ms (2026-12-01).
+// footprint's kept coefficients, haar_brick.h) the grove takes 17.3 ms, the light items
+// (--light fast, then float16) 16.4 ms (2026-12-01).
 // The sun radiance comes by value: a pointer into the kernel's parameters, passed to this
 // out-of-line function, made the whole lit kernel 10 % slower on the grove (measured: 18.0 against
 // 16.3 ms per 1080p frame on an H200), although --light fast never calls it.
@@ -120,7 +120,7 @@ CANOPY_HD CANOPY_PLAY_NOINLINE void sampleHaarLbLight(const unsigned char* item,
 // The LB indirect light from a light item at node-local l in [0,1]^3: the (up to) three sun bases
 // of the instance's lookup and B_0, each trilinear (canopySampleLight's interpolation, the corners
 // found once), then lbIndirect().
-CANOPY_HD inline void sampleLbLight(const uint16_t* item, const sun::Weights& w, float lx, float ly, float lz,
+CANOPY_HD inline void sampleLbLight(const uint32_t* item, const sun::Weights& w, float lx, float ly, float lz,
                                     const float sun[3], float ambient, SceneLightPair scene, float out[3]) {
   const CanopyLightCorners k = canopyLightCorners(lx, ly, lz);
   float bases[3][3];

@@ -15,7 +15,7 @@ struct Segment {
   float albedo[3];
   float tEnd;       // the value holds on [t, tEnd)
   // shading segments with matter only: where the indirect light is sampled
-  const uint16_t* lightItem;  // the light item (nullptr: density-only indirect term)
+  const uint32_t* lightItem;  // the light item (nullptr: density-only indirect term)
   float light[3];             // the sample's node-local coordinates in the light item's node (Haar: fx, fy, fz)
   float tSample;              // the sample's world ray parameter (scene factor)
   // Haar light (kHaarNone: not used): the item (nullptr: no light stored there) and the packed
@@ -94,7 +94,7 @@ CANOPY_HD CANOPY_FORCEINLINE float levelBox(const Descent& d, uint32_t level, fl
 CANOPY_HD CANOPY_FORCEINLINE const unsigned char* descentBrickPage(const SceneView& s, const Descent& d) {
   return d.brickPoolSlot >= 0 ? s.pool + size_t(d.brickPoolSlot) * s.pageBytes : nullptr;
 }
-CANOPY_HD CANOPY_FORCEINLINE const uint16_t* descentLightItem(const SceneView& s, const Descent& d) {
+CANOPY_HD CANOPY_FORCEINLINE const uint32_t* descentLightItem(const SceneView& s, const Descent& d) {
   return d.lightPoolSlot >= 0 ? canopyLightInPage(s.pool + size_t(d.lightPoolSlot) * s.pageBytes, d.lightSlotInPage) : nullptr;
 }
 
@@ -208,7 +208,7 @@ CANOPY_HD inline void segmentLight(const SceneView& s, const ModelView& m, const
   if (s.shade.exactLight && m.haarLight && d.level >= m.lightDepth) {
     // --light exact, the light lattice's level and the detail levels below it of a Haar-lit model:
     // the chaar brick at the sample's light lattice point, if its page is resident (else it is
-    // asked for and the float16 items serve).
+    // asked for and the light items serve).
     const float rc = float(m.lightRootCells);
     const CanopyHaarLocation at =
         canopyHaarLocate(m.haar, um.x * rc - 0.5f + float(m.origin[0]), um.y * rc - 0.5f + float(m.origin[1]), um.z * rc - 0.5f + float(m.origin[2]));

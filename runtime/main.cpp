@@ -63,7 +63,7 @@ void addShadowOptions(CLI::App& app, canopy::play::PlayOptions& o, CliValues& x)
 // The light, ground, convergence and loader options.
 void addLightOptions(CLI::App& app, canopy::play::PlayOptions& o, CliValues& x) {
   app.add_option("--light", x.lightMode,
-                 "fast: LB light from the float16 light items on every level; exact: at the finest level, from the .chaar's Haar "
+                 "fast: LB light from the light items on every level; exact: at the finest level, from the .chaar's Haar "
                  "bricks where the file has them (the .chaar's own samples; a little slower, docs/play.md)")
       ->check(CLI::IsMember({"fast", "exact"}))
       ->capture_default_str();

@@ -45,7 +45,7 @@ void Streamer::loaderMain() {
     try {
       unsigned char* page = staging_ + size_t(job.buffer) * pageBytes_;
       file_.readPage(job.page, page);
-      canopyFillBrickMasks(page, pageBytes_, file_.header().bricksPerPage);  // for cone.h's empty-cell skip
+      canopyPreparePage(page, file_.header());  // brick masks for the empty-cell skip; light items of files before 4.0
       job.ok = true;
     } catch (const std::exception& e) {
       job.ok = false;

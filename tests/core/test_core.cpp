@@ -1,19 +1,25 @@
-// Core utilities: hashes, atomic outputs, --device parsing, deterministic VDB bytes.
+// Core utilities: hashes, atomic outputs, --device parsing, deterministic VDB bytes, the
+// shared-exponent RGB codec.
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <limits>
+#include <random>
 #include <thread>
 
 #include "canopy/atomic_file.h"
 #include "canopy/device.h"
 #include "canopy/hash.h"
+#include "canopy/rgb9e5.h"
 #include "formats/lattice_vdb.h"
 
 namespace fs = std::filesystem;
@@ -40,6 +46,52 @@ std::string slurp(const fs::path& p) {
   return std::string(std::istreambuf_iterator<char>(f), {});
 }
 }  // namespace
+
+// RGB9E5 (canopy/rgb9e5.h): known words, clamping, the error bound over 1e-9..6e4, and canonical
+// words surviving decode + encode.
+TEST(Rgb9e5, KnownWordsAndClamping) {
+  using canopy::rgb9e5Encode;
+  float v[3];
+  EXPECT_EQ(rgb9e5Encode(0.0f, 0.0f, 0.0f), 0u);
+  EXPECT_EQ(rgb9e5Encode(1.0f, 1.0f, 1.0f), (16u << 27) | 256u | (256u << 9) | (256u << 18));
+  canopy::rgb9e5Decode(rgb9e5Encode(1.0f, 0.5f, 0.25f), v);
+  EXPECT_EQ(v[0], 1.0f);
+  EXPECT_EQ(v[1], 0.5f);
+  EXPECT_EQ(v[2], 0.25f);
+  const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+  canopy::rgb9e5Decode(rgb9e5Encode(nan, -1.0f, inf), v);
+  EXPECT_EQ(v[0], 0.0f);
+  EXPECT_EQ(v[1], 0.0f);
+  EXPECT_EQ(v[2], canopy::kRgb9e5Max);
+  canopy::rgb9e5Decode(rgb9e5Encode(1e30f, 0.0f, -inf), v);
+  EXPECT_EQ(v[0], 65408.0f);
+  EXPECT_EQ(v[2], 0.0f);
+  EXPECT_EQ(rgb9e5Encode(511.5f / 512.0f, 0.0f, 0.0f) >> 27, 16u);  // rounds up to 2^9: the next exponent
+  canopy::rgb9e5Decode(0xFFFFFFFFu, v);                              // every word is finite
+  EXPECT_EQ(v[0], canopy::kRgb9e5Max);
+}
+
+TEST(Rgb9e5, ErrorIsWithinAHalfUnitOfTheLargestChannel) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> logScale(-9.0, 4.8), spread(-3.0, 0.0);
+  for (int n = 0; n < 200000; ++n) {
+    const double s = std::pow(10.0, logScale(rng));
+    const float in[3] = {float(s * std::pow(10.0, spread(rng))), float(s * std::pow(10.0, spread(rng))), float(s)};
+    float out[3];
+    canopy::rgb9e5Decode(canopy::rgb9e5Encode(in[0], in[1], in[2]), out);
+    const double bound = std::max(double(in[2]) / 511.0, std::ldexp(1.0, -25));
+    for (int c = 0; c < 3; ++c) ASSERT_LE(std::abs(double(out[c]) - in[c]), bound) << in[0] << " " << in[1] << " " << in[2];
+  }
+  // A canonical word (the largest mantissa >= 256, or exponent 0) is its own encoding.
+  for (int n = 0; n < 200000; ++n) {
+    const uint32_t w = uint32_t(rng());
+    const uint32_t e = w >> 27, m = std::max({w & 511u, (w >> 9) & 511u, (w >> 18) & 511u});
+    if (e != 0 && m < 256) continue;
+    float v[3];
+    canopy::rgb9e5Decode(w, v);
+    ASSERT_EQ(canopy::rgb9e5Encode(v[0], v[1], v[2]), w) << std::hex << w;
+  }
+}
 
 TEST(Hash, Xxh64KnownVectors) {
   EXPECT_EQ(canopy::hash64("", 0), 0xEF46DB3751D8E999ULL);

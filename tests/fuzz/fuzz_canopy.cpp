@@ -1,6 +1,6 @@
 // fuzz_canopy.cpp: libFuzzer harness for the .canopy reader. Any input must either be rejected
 // with a canopy::Error or be read in full (every page, a descent and a brick sample per model, its
-// float16 light item and its Haar light, every scene light base) without a sanitizer report.
+// light item and its Haar light, every scene light base) without a sanitizer report.
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -54,13 +54,14 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
             }
           }
         }
-        if (r.node.brick >= M.lightCount) continue;  // float16 items: every brick, or those above the finest level
+        if (r.node.brick >= M.lightCount) continue;  // light items: every brick, or those above the detail levels
         const uint32_t lpp = f.header().lightItemsPerPage;
         try {
           f.readPage(canopy::canopyLightPage(M, r.node.brick, lpp), page.data());
         } catch (const canopy::Error&) {
           continue;
         }
+        canopy::canopyPreparePage(page.data(), f.header());  // float16 items of a file before 4.0 converted
         float rgb[3];
         canopy::canopySampleLight(canopy::canopyLightInPage(page.data(), r.node.brick % lpp), uint32_t(k) % canopy::kCanopyLightBases,
                                   r.local[0], r.local[1], r.local[2], rgb);

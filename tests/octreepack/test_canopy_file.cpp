@@ -1,9 +1,10 @@
 // test_canopy_file.cpp: the .canopy reader never trusts its input (built with ASan/UBSan: the
 // reader, writer and builder sources are compiled into this test).
-//   - the frozen 1.2 file in data/ still reads (its Haar light equal to the .chaar sampler's bit for
-//     bit, its 19-base scene light as written), and the writer still produces it byte for byte (a
-//     layout change must be deliberate: bump the version and add a new frozen file); the frozen
-//     1.1 and 1.0 files still read and are still written byte for byte;
+//   - the frozen 4.0 file in data/ reads (its light items as built, its Haar light equal to the
+//     .chaar sampler's bit for bit, its 19-base scene light as written), and the writer still
+//     produces it byte for byte (a layout change must be deliberate: bump the version and add a new
+//     frozen file); the frozen 3.0, 2.0, 1.2, 1.1 and 1.0 files still read (their float16 light
+//     items converted as pages load), and a file without light items is still written as before;
 //   - every truncated prefix, flipped bytes (header, table, sections, padding, pages), trailing
 //     bytes, bad magic and a newer major version are rejected with a one-line canopy::Error.
 #include <gtest/gtest.h>
@@ -30,7 +31,8 @@ namespace op = canopy::octreepack;
 
 namespace {
 
-// The frozen files of every version (3.0, 2.0, 1.2, 1.1, 1.0), which must still read.
+// The frozen files of every version (4.0, 3.0, 2.0, 1.2, 1.1, 1.0), which must still read.
+const std::string kFrozenV40 = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v4.0.canopy";
 const std::string kFrozen = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v1.2.canopy";
 const std::string kFrozenV30 = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v3.0.canopy";
 const std::string kFrozenV20 = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v2.0.canopy";
@@ -69,28 +71,28 @@ op::ModelSource detailSource(bool binary) {
   return s;
 }
 
-// The frozen files' content: a 20-cell synthetic plant (depth 2, density only), an 8-cell one with
-// analytic float16 lighting (depth 0) and three instances (1.0); 1.1 adds a fourth instance of a
-// third model lit by the frozen .chaar (float16 items of its decoded values and its Haar pages);
-// 1.2 adds a coarse scene light with its 19 bases (SceneSunLight's B01..B18); `detail` 1 (2.0) adds
-// a detail model and a fifth instance, 2 (3.0) also a second detail model whose finest level holds
-// density 1 wherever it is occupied (uniform sparse bricks) and a sixth instance.
-std::vector<unsigned char> smallFileBytes(int minor = 2, int detail = 0) {
-  const bool withHaar = minor >= 1;
+// The frozen files' content. Versions 1.0-3.0 (written with float16 light items) hold part of it:
+// a 20-cell synthetic plant (depth 2, density only), an 8-cell one with analytic lighting (depth 0)
+// and three instances (1.0); a fourth instance of a third model lit by the frozen .chaar (light
+// items of its decoded values and its Haar pages: 1.1); a coarse scene light with its 19 bases
+// (SceneSunLight's B01..B18: 1.2); a detail model and a fifth instance (2.0); a second detail model
+// whose finest level holds density 1 wherever it is occupied (uniform sparse bricks) and a sixth
+// instance (3.0). This writer writes all of it as the 4.0 file.
+std::vector<unsigned char> smallFileBytes() {
   const op::ModelSource src = op::testing::syntheticPlant(20, 2, "frozen", 0);
   const op::BuiltModel m = op::buildOctree(src, "frozen");
   const op::BuiltModel lit = op::buildOctree(op::testing::syntheticPlant(8, 0, "lit", 0), "lit", op::testing::analyticLight);
   const haar::ChaarData chaar = haar::readChaar(kFrozenChaar);
   const CanopyHaarPages haarPages = canopyHaarPagesFromChaar(chaar);
   const op::BuiltModel haarLit = op::buildOctree(haarModelSource(chaar), "haarlit", op::chaarLightFn(chaar.view()));
+  const op::BuiltModel detailModel = op::buildOctree(detailSource(false), "detail", op::testing::analyticLight);
+  const op::BuiltModel binaryModel = op::buildOctree(detailSource(true), "binary", op::testing::analyticLight);
   CanopyWriteInput in;
   in.models.push_back({m.record, &m.tiles, &m.bricks, nullptr});
   in.models.push_back({lit.record, &lit.tiles, &lit.bricks, &lit.light});
-  if (withHaar) in.models.push_back({haarLit.record, &haarLit.tiles, &haarLit.bricks, &haarLit.light, &haarPages});
-  const op::BuiltModel detailModel = op::buildOctree(detailSource(false), "detail", op::testing::analyticLight);
-  if (detail) in.models.push_back({detailModel.record, &detailModel.tiles, &detailModel.bricks, &detailModel.light});
-  const op::BuiltModel binaryModel = op::buildOctree(detailSource(true), "binary", op::testing::analyticLight);
-  if (detail >= 2) in.models.push_back({binaryModel.record, &binaryModel.tiles, &binaryModel.bricks, &binaryModel.light});
+  in.models.push_back({haarLit.record, &haarLit.tiles, &haarLit.bricks, &haarLit.light, &haarPages});
+  in.models.push_back({detailModel.record, &detailModel.tiles, &detailModel.bricks, &detailModel.light});
+  in.models.push_back({binaryModel.record, &binaryModel.tiles, &binaryModel.bricks, &binaryModel.light});
   CanopyInstance a{}, b{};
   a.modelToWorld[0] = a.modelToWorld[5] = a.modelToWorld[10] = 1.0f;
   b = a;
@@ -100,33 +102,27 @@ std::vector<unsigned char> smallFileBytes(int minor = 2, int detail = 0) {
   CanopyInstance d = a;
   d.model = 2;
   d.modelToWorld[11] = -6.0f;
-  in.instances = {a, b, c};
-  if (withHaar) in.instances.push_back(d);
   CanopyInstance e = a;
   e.model = 3;
   e.modelToWorld[7] = 5.0f;
-  if (detail) in.instances.push_back(e);
   CanopyInstance u = e;
   u.model = 4;
   u.modelToWorld[3] = -5.0f;
-  if (detail >= 2) in.instances.push_back(u);
-  in.metadata = detail ? R"({"tool":"test_canopy_file","note":"frozen .canopy )" + std::string(detail >= 2 ? "3" : "2") + R"(.0"})"
-                       : R"({"tool":"test_canopy_file","note":"frozen .canopy 1.)" + std::to_string(minor) + R"("})";
-  if (minor >= 2) {
-    in.hasSceneLight = true;
-    const double m[12] = {0.5, 0, 0, -1.0, 0, 0.5, 0, -0.25, 0, 0, 0.5, -7.0};
-    for (int i = 0; i < 12; ++i) in.sceneLight.indexToWorld[i] = m[i];
-    for (int a = 0; a < 3; ++a) in.sceneLight.min[a] = a - 1, in.sceneLight.dim[a] = kSceneDim[a];
-    in.sceneLightBases = kCanopyLightBases;
-    const uint32_t n = uint32_t(kSceneDim[0] * kSceneDim[1] * kSceneDim[2]);
-    for (uint32_t b = 0; b < kCanopyLightBases; ++b)
-      for (uint32_t i = 0; i < n; ++i) in.sceneLightValues.push_back(sceneLightValue(b, i));
-  }
+  in.instances = {a, b, c, d, e, u};
+  in.metadata = R"({"tool":"test_canopy_file","note":"frozen .canopy 4.0"})";
+  in.hasSceneLight = true;
+  const double w[12] = {0.5, 0, 0, -1.0, 0, 0.5, 0, -0.25, 0, 0, 0.5, -7.0};
+  for (int i = 0; i < 12; ++i) in.sceneLight.indexToWorld[i] = w[i];
+  for (int k = 0; k < 3; ++k) in.sceneLight.min[k] = k - 1, in.sceneLight.dim[k] = kSceneDim[k];
+  in.sceneLightBases = kCanopyLightBases;
+  const uint32_t n = uint32_t(kSceneDim[0] * kSceneDim[1] * kSceneDim[2]);
+  for (uint32_t base = 0; base < kCanopyLightBases; ++base)
+    for (uint32_t i = 0; i < n; ++i) in.sceneLightValues.push_back(sceneLightValue(base, i));
   return writeCanopyBytes(std::move(in));
 }
 
-// Checks that the density-only and the float16-lit models of a frozen file read as written.
-void checkDensityAndFloat16Models(CanopyFile& f) {
+// Checks that the density-only and the analytically lit models of a frozen file read as written.
+void checkDensityAndLitModels(CanopyFile& f) {
   ASSERT_GE(f.modelCount(), 2u);
   ASSERT_GE(f.instanceCount(), 3u);
   EXPECT_EQ(f.model(0).lightCount, 0u);
@@ -145,11 +141,13 @@ void checkDensityAndFloat16Models(CanopyFile& f) {
   }
   for (uint32_t i = 0; i < f.pageCount(); ++i) EXPECT_NO_THROW(f.readPage(i));
   // The lit model's root light item: voxel centres hold the mean of the analytic light over 2x2x2
-  // cells (float16: relative error <= 2^-11).
+  // cells, within the shared exponent's 1/512 of the sample's largest channel (and float16's 2^-11
+  // before 4.0, whose pages canopyPreparePage converts).
   const CanopyModel& L = f.model(1);
   ASSERT_EQ(L.depth, 0u);
-  const auto page = f.readPage(canopyLightPage(L, 0, f.header().lightItemsPerPage));
-  const uint16_t* item = canopyLightInPage(page.data(), 0);
+  auto page = f.readPage(canopyLightPage(L, 0, f.header().lightItemsPerPage));
+  canopyPreparePage(page.data(), f.header());
+  const uint32_t* item = canopyLightInPage(page.data(), 0);
   float tmp[kCanopyLightChannels];
   for (uint32_t base : {0u, 7u, 18u})
     for (int z = 0; z < 4; ++z)
@@ -161,7 +159,9 @@ void checkDensityAndFloat16Models(CanopyFile& f) {
         }
         float rgb[3];
         canopySampleLight(item, base, (float(x) + 0.5f) / 4, 1.5f / 4, (float(z) + 0.5f) / 4, rgb);
-        for (int ch = 0; ch < 3; ++ch) ASSERT_NEAR(rgb[ch], ref[ch], std::abs(ref[ch]) * 0.0005 + 1e-6) << base << " " << x << " " << z;
+        const double largest = std::max({std::abs(ref[0]), std::abs(ref[1]), std::abs(ref[2])});
+        for (int ch = 0; ch < 3; ++ch)
+          ASSERT_NEAR(rgb[ch], ref[ch], largest * (1.0 / 512 + 1.0 / 2048) + 1e-6) << base << " " << x << " " << z;
       }
 }
 
@@ -200,11 +200,12 @@ std::string expectRejected(const std::vector<unsigned char>& bytes, bool readPag
 // The 1.1 and 1.2 frozen files' Haar-lit model and their content otherwise (1.2: the scene light).
 void checkFrozenV11Content(CanopyFile& f);
 
-// A frozen file of the 1.2 content and more (regenerated deliberately from `content`, for a new
-// format version only, with CANOPY_WRITE_FROZEN=1), opened, its version and that content checked.
-CanopyFile openFrozen(const std::string& path, int major, int minor, const std::function<std::vector<unsigned char>()>& content) {
-  if (std::getenv("CANOPY_WRITE_FROZEN")) {
-    const auto bytes = content();
+// A frozen file of the 1.2 content and more, opened, its version and that content checked. The
+// current version's file (4.0) is regenerated from smallFileBytes() with CANOPY_WRITE_FROZEN=1, for
+// a new format version only.
+CanopyFile openFrozen(const std::string& path, int major, int minor) {
+  if (std::getenv("CANOPY_WRITE_FROZEN") && major == kCanopyMajor) {
+    const auto bytes = smallFileBytes();
     writeFileAtomic(path, bytes.data(), bytes.size());
   }
   CanopyFile f = CanopyFile::open(path);
@@ -214,9 +215,8 @@ CanopyFile openFrozen(const std::string& path, int major, int minor, const std::
   return f;
 }
 
-TEST(CanopyFile, FrozenSmallFileStillReads) {
-  CanopyFile f = openFrozen(kFrozen, 1, 2, [] { return smallFileBytes(); });
-  EXPECT_NE(f.metadata().find("frozen .canopy 1.2"), std::string::npos);
+// The scene light of the 1.2 content (frozen files 1.2 and later).
+void checkSceneLight(const CanopyFile& f) {
   // The scene light: B00 in SceneLight, B01..B18 in SceneSunLight, read back base-major.
   ASSERT_TRUE(f.hasSceneLight());
   EXPECT_EQ(f.sceneLightBases(), 19u);
@@ -231,15 +231,18 @@ TEST(CanopyFile, FrozenSmallFileStillReads) {
   ASSERT_NE(sun, nullptr);
   EXPECT_EQ(sun->itemCount, 18u);
   EXPECT_EQ(sun->itemBytes, n * 4);
-  // The writer still produces exactly these bytes.
-  EXPECT_EQ(readFile(kFrozen), smallFileBytes()) << "the .canopy layout changed: bump the version";
+}
+
+TEST(CanopyFile, FrozenSmallFileStillReads) {
+  CanopyFile f = openFrozen(kFrozen, 1, 2);
+  EXPECT_NE(f.metadata().find("frozen .canopy 1.2"), std::string::npos);
+  checkSceneLight(f);
 }
 
 // The 2.0 file: the 1.2 content plus a detail model (CanopyModel.detailLevels): light items for its
-// light levels only; it reads, and the writer still produces it byte for byte. Without the detail
-// model the same content is the 1.2 file (above).
-TEST(CanopyFile, FrozenVersion20FileStillReadsAndIsStillWritten) {
-  CanopyFile f = openFrozen(kFrozenV20, 2, 0, [] { return smallFileBytes(2, 1); });
+// light levels only; it reads. Without the detail model the same content is the 1.2 file (above).
+TEST(CanopyFile, FrozenVersion20FileStillReads) {
+  CanopyFile f = openFrozen(kFrozenV20, 2, 0);
   ASSERT_EQ(f.modelCount(), 4u);
   const CanopyModel& D = f.model(3);
   EXPECT_EQ(D.detailLevels, 1u);
@@ -250,7 +253,6 @@ TEST(CanopyFile, FrozenVersion20FileStillReadsAndIsStillWritten) {
   EXPECT_EQ(D.lightCount, lightBricks);
   EXPECT_LT(D.lightCount, D.brickCount);
   for (uint32_t i = 0; i < f.pageCount(); ++i) EXPECT_NO_THROW(f.readPage(i));
-  EXPECT_EQ(readFile(kFrozenV20), smallFileBytes(2, 1)) << "the .canopy layout changed: bump the version";
 }
 
 // A detail model's record is checked (valid CRCs): a 2.0 file's sections in a 1.x file, more detail
@@ -356,11 +358,10 @@ TEST(CanopyFile, SparseBrickPagesAreChecked) {
   }
 }
 
-// The 3.0 file: the 2.0 content plus a detail model of density 1 wherever it is occupied, whose
-// finest level is stored in uniform sparse bricks (one density per item). It reads, its sparse
-// bricks hold the built bricks' voxels, and the writer still produces it byte for byte.
-TEST(CanopyFile, FrozenVersion30FileStillReadsAndIsStillWritten) {
-  CanopyFile f = openFrozen(kFrozenV30, 3, 0, [] { return smallFileBytes(2, 2); });
+// The 3.0 content (the 2.0 content plus a detail model of density 1 wherever it is occupied, whose
+// finest level is stored in uniform sparse bricks: one density per item): its sparse bricks hold
+// the built bricks' voxels.
+void checkUniformDetailModel(CanopyFile& f) {
   ASSERT_EQ(f.modelCount(), 5u);
   const CanopyModel& U = f.model(4);
   EXPECT_EQ(U.detailLevels, 1u);
@@ -386,7 +387,54 @@ TEST(CanopyFile, FrozenVersion30FileStillReadsAndIsStillWritten) {
   }
   EXPECT_EQ(uniform, U.sparseBricks);  // every finest brick of a density-1 model (none holds a single voxel here)
   for (uint32_t i = 0; i < f.pageCount(); ++i) EXPECT_NO_THROW(f.readPage(i));
-  EXPECT_EQ(readFile(kFrozenV30), smallFileBytes(2, 2)) << "the .canopy layout changed: bump the version";
+}
+
+// The 3.0 file reads (its float16 light items converted as its pages load).
+TEST(CanopyFile, FrozenVersion30FileStillReads) {
+  CanopyFile f = openFrozen(kFrozenV30, 3, 0);
+  checkUniformDetailModel(f);
+}
+
+// The 4.0 file (the 3.0 content with shared-exponent light items) reads, its light items are the
+// builder's words, and the writer still produces it byte for byte.
+TEST(CanopyFile, FrozenVersion40FileReadsAndIsStillWritten) {
+  CanopyFile f = openFrozen(kFrozenV40, 4, 0);
+  EXPECT_NE(f.metadata().find("frozen .canopy 4.0"), std::string::npos);
+  EXPECT_EQ(f.header().lightItemBytes, kCanopyLightItemBytes);
+  EXPECT_EQ(f.header().lightItemsPerPage, 3u);
+  checkSceneLight(f);
+  checkUniformDetailModel(f);
+  const op::BuiltModel lit = op::buildOctree(op::testing::syntheticPlant(8, 0, "lit", 0), "lit", op::testing::analyticLight);
+  const CanopyModel& L = f.model(1);
+  ASSERT_EQ(L.lightCount, 1u);
+  auto page = f.readPage(canopyLightPage(L, 0, f.header().lightItemsPerPage));
+  const std::vector<unsigned char> before = page;
+  canopyPreparePage(page.data(), f.header());
+  EXPECT_EQ(page, before) << "a 4.0 light page is sampled as stored";
+  ASSERT_EQ(lit.light.size(), kCanopyLightItemBytes / 4);
+  EXPECT_EQ(std::memcmp(canopyLightInPage(page.data(), 0), lit.light.data(), kCanopyLightItemBytes), 0);
+  EXPECT_EQ(readFile(kFrozenV40), smallFileBytes()) << "the .canopy layout changed: bump the version";
+}
+
+// A file without light items keeps the version and the header's light item geometry it had before
+// 4.0, byte for byte: density-only content is written as 1.0 (2.0, 3.0 with detail levels).
+TEST(CanopyFile, AFileWithoutLightItemsKeepsItsOlderVersion) {
+  for (int detail = 0; detail <= 2; ++detail) {
+    CanopyWriteInput in;
+    const op::BuiltModel m = op::buildOctree(op::testing::syntheticPlant(20, 2, "frozen", 0), "frozen");
+    in.models.push_back({m.record, &m.tiles, &m.bricks, nullptr});
+    const op::BuiltModel d = op::buildOctree(detailSource(detail >= 2), "detail");
+    if (detail) in.models.push_back({d.record, &d.tiles, &d.bricks, nullptr});
+    CanopyInstance a{};
+    a.modelToWorld[0] = a.modelToWorld[5] = a.modelToWorld[10] = 1.0f;
+    in.instances = {a};
+    const std::vector<unsigned char> bytes = writeCanopyBytes(std::move(in));
+    CanopyFile f = CanopyFile::fromMemory(bytes.data(), bytes.size(), "unlit.canopy");
+    EXPECT_EQ(f.header().major, detail == 0 ? 1 : detail == 1 ? 2 : 3) << detail;
+    EXPECT_EQ(f.header().minor, 0) << detail;
+    EXPECT_EQ(f.header().lightItemBytes, kCanopyLightItemBytesHalf) << detail;
+    EXPECT_EQ(f.header().lightItemsPerPage, 2u) << detail;
+  }
 }
 
 // A uniform sparse brick (3.0) edited with valid checksums: without its flag its size no longer
@@ -411,9 +459,8 @@ TEST(CanopyFile, UniformSparseBricksAreChecked) {
   }
 }
 
-// The 1.1 file (before the scene light's sun bases) still reads, and a file without them is still
-// written as exactly that 1.1 file.
-TEST(CanopyFile, FrozenVersion11FileStillReadsAndIsStillWritten) {
+// The 1.1 file (before the scene light's sun bases) still reads.
+TEST(CanopyFile, FrozenVersion11FileStillReads) {
   CanopyFile f = CanopyFile::open(kFrozenV11);
   EXPECT_EQ(f.header().major, 1);
   EXPECT_EQ(f.header().minor, 1);
@@ -421,13 +468,12 @@ TEST(CanopyFile, FrozenVersion11FileStillReadsAndIsStillWritten) {
   EXPECT_FALSE(f.hasSceneLight());
   EXPECT_EQ(f.sceneLightBases(), 0u);
   EXPECT_NE(f.metadata().find("frozen .canopy 1.1"), std::string::npos);
-  EXPECT_EQ(readFile(kFrozenV11), smallFileBytes(1)) << "a file without the scene light's sun bases must stay a 1.1 file";
 }
 
 void checkFrozenV11Content(CanopyFile& f) {
   ASSERT_GE(f.modelCount(), 3u);
   ASSERT_GE(f.instanceCount(), 4u);
-  checkDensityAndFloat16Models(f);
+  checkDensityAndLitModels(f);
   // The Haar-lit model: its Haar light at any point equals the .chaar sampler's value, bit for bit.
   const CanopyModel& H = f.model(2);
   ASSERT_TRUE(H.flags & kCanopyModelHaarLight);
@@ -448,18 +494,16 @@ void checkFrozenV11Content(CanopyFile& f) {
   }
 }
 
-// The 1.0 file (before Haar light) still reads, with the same content, and a file without Haar
-// light is still written as exactly that 1.0 file.
-TEST(CanopyFile, FrozenVersion10FileStillReadsAndIsStillWritten) {
+// The 1.0 file (before Haar light) still reads, with the same content.
+TEST(CanopyFile, FrozenVersion10FileStillReads) {
   CanopyFile f = CanopyFile::open(kFrozenV1);
   EXPECT_EQ(f.header().major, 1);
   EXPECT_EQ(f.header().minor, 0);
   ASSERT_EQ(f.modelCount(), 2u);
   ASSERT_EQ(f.instanceCount(), 3u);
   EXPECT_TRUE(f.haarIndex().empty());
-  checkDensityAndFloat16Models(f);
+  checkDensityAndLitModels(f);
   EXPECT_NE(f.metadata().find("frozen .canopy 1.0"), std::string::npos);
-  EXPECT_EQ(readFile(kFrozenV1), smallFileBytes(0)) << "a file without Haar light must stay a 1.0 file";
 }
 
 // kCanopyModelScatteredSun (1.1): only on a lit model, and not in a 1.0 file (valid CRCs).
@@ -791,18 +835,34 @@ TEST(CanopyFile, QuantisedChaarPacksAsLightItemsAndItsHaarPagesAreRefused) {
   EXPECT_FALSE(m.light.empty());
 }
 
-TEST(CanopyFile, LightItemsAreSaturatingFloat16) {
-  EXPECT_EQ(canopy::canopyFloatToHalf(1.0f), 0x3c00);
-  EXPECT_EQ(canopy::canopyFloatToHalf(65504.0f), 0x7bff);
-  EXPECT_EQ(canopy::canopyFloatToHalf(65519.0f), 0x7bff);  // rounds down to the largest half
-  EXPECT_EQ(canopy::canopyFloatToHalf(65520.0f), 0x7bff);  // would round to infinity: clamped
-  EXPECT_EQ(canopy::canopyFloatToHalf(1e30f), 0x7bff);
-  EXPECT_EQ(canopy::canopyFloatToHalf(-std::numeric_limits<float>::infinity()), 0xfbff);
-  EXPECT_EQ(canopy::canopyFloatToHalf(std::numeric_limits<float>::quiet_NaN()), 0x7e00);
-  EXPECT_EQ(canopy::canopyFloatToHalf(5.9604645e-8f), 0x0001);  // smallest subnormal
-  EXPECT_EQ(canopy::canopyFloatToHalf(2.9802322e-8f), 0x0000);  // half of it: tie to even
-  EXPECT_EQ(canopy::canopyFloatToHalf(-0.0f), 0x8000);
-  EXPECT_EQ(canopy::canopyFloatToHalf(1.0f + 3.0f / 2048), 0x3c02);  // tie to even (up)
-  for (uint32_t h = 0; h < 0x7c00; ++h)  // every finite non-negative half survives the round trip
-    ASSERT_EQ(canopy::canopyFloatToHalf(canopy::halfToFloat(uint16_t(h))), h);
+// A light page of a file before 4.0 (float16 planes) becomes 4.0's items as it loads: each sample's
+// word is the encoding of its three halves, item by item at 4.0's stride; the file's bytes are
+// unchanged (the page read again still verifies).
+TEST(CanopyFile, Float16LightPagesAreConvertedAsTheyLoad) {
+  CanopyFile f = CanopyFile::open(kFrozenV30);
+  ASSERT_EQ(f.header().lightItemBytes, kCanopyLightItemBytesHalf);
+  uint32_t converted = 0;
+  for (uint32_t i = 0; i < f.pageCount(); ++i) {
+    if (f.pageEntry(i).kind != uint32_t(CanopyPageKind::Light)) continue;
+    const std::vector<unsigned char> raw = f.readPage(i);
+    std::vector<unsigned char> page = raw;
+    canopyPreparePage(page.data(), f.header());
+    for (uint32_t item = 0; item < f.pageEntry(i).itemCount; ++item) {
+      const unsigned char* half = raw.data() + sizeof(CanopyPageHeader) + size_t(item) * kCanopyLightItemBytesHalf;
+      const uint32_t* words = canopyLightInPage(page.data(), item);
+      for (uint32_t b = 0; b < kCanopyLightBases; ++b)
+        for (uint32_t v = 0; v < kCanopyLightVoxelCount; ++v) {
+          float rgb[3];
+          for (uint32_t ch = 0; ch < 3; ++ch) {
+            uint16_t h;
+            std::memcpy(&h, half + 2 * ((size_t(3 * b + ch)) * kCanopyLightVoxelCount + v), 2);
+            rgb[ch] = halfToFloat(h);
+          }
+          ASSERT_EQ(words[b * kCanopyLightVoxelCount + v], rgb9e5Encode(rgb[0], rgb[1], rgb[2])) << i << " " << item << " " << b << " " << v;
+        }
+      ++converted;
+    }
+    EXPECT_NO_THROW(f.readPage(i));
+  }
+  EXPECT_GE(converted, 4u);
 }

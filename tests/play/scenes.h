@@ -153,7 +153,7 @@ inline octreepack::ModelSource detailOf(const octreepack::ModelSource& src, uint
 }
 
 // writeLitScene with each model's lighting Haar-compressed first (chaarOf), as canopy-octreepack
-// packs PLANT.light.chaar: float16 light items of its decoded values on every level, and its bricks
+// packs PLANT.light.chaar: light items of its decoded values on every level, and its bricks
 // as Haar pages (the finest level's exact light, canopy-play --light exact).
 inline void writeHaarLitScene(const std::string& path, const std::vector<octreepack::ModelSource>& sources,
                               const std::vector<octreepack::LightFn>& lights, const std::vector<CanopyInstance>& instances, float T,

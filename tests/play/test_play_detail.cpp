@@ -1,7 +1,7 @@
 // test_play_detail.cpp: detail lattices (canopy-voxelize --detail; format 2.0's detailLevels): a
 // model whose density lattice is finer than its light lattice. The packer gives light items to the
 // light levels only; the player samples the light of a detail sample from the light lattice (the
-// float16 items of its light-level ancestor, or the Haar light at its light lattice point) and
+// light items of its light-level ancestor, or the Haar light at its light lattice point) and
 // counts extinction per light cell.
 #include <gtest/gtest.h>
 
@@ -92,7 +92,7 @@ double affineLightAt(double i, double j, double k, int base, int ch) {
 }
 
 // Writes the detail model lit by a lossless fp32 .chaar of affineLight over its light lattice
-// (float16 items for the light levels, and the Haar pages).
+// (light items for the light levels, and the Haar pages).
 void writeDetailPack(const std::string& path, const ModelSource& detail) {
   const canopy::haar::ChaarData chaar = pt::chaarOf(lightModel(detail), affineLight, 0.0f, canopy::haar::Precision::Fp32);
   canopy::CanopyHaarPages pages = canopy::canopyHaarPagesFromChaar(chaar);
@@ -148,17 +148,19 @@ TEST(DetailPack, LightLevelsAreTheLightLatticesOctree) {
   EXPECT_THROW(canopy::octreepack::buildOctree(bad, "bad"), canopy::Error);
 }
 
-// The file: a detail model whose finest level holds density 1 wherever it is occupied (as
-// canopy-voxelize --detail writes it) makes a 3.0 file (uniform sparse bricks); a file without a
-// detail model stays 1.x.
+// The file: a lit detail model whose finest level holds density 1 wherever it is occupied (as
+// canopy-voxelize --detail writes it) makes a 4.0 file (uniform sparse bricks are 3.0, light items
+// 4.0), the same model unlit a 3.0 file; a file without a detail model or light stays 1.x.
 TEST(DetailPack, ADetailModelMakesA30File) {
   const std::string dir = pt::tmpDir("detail");
   const ModelSource detail = detailModel();
   writeDetailPack(dir + "/leafy.canopy", detail);
   const canopy::CanopyFile f = canopy::CanopyFile::open(dir + "/leafy.canopy");
-  EXPECT_EQ(f.header().major, 3);
+  EXPECT_EQ(f.header().major, 4);
   EXPECT_EQ(f.header().minor, 0);
   EXPECT_EQ(f.model(0).detailLevels, uint32_t(kDetailLevels));
+  pt::writeScene(dir + "/dark.canopy", {detail}, {pt::instanceAt(0, 0, 0, 0)});
+  EXPECT_EQ(canopy::CanopyFile::open(dir + "/dark.canopy").header().major, 3);
   pt::writeScene(dir + "/light.canopy", {lightModel(detail)}, {pt::instanceAt(0, 0, 0, 0)});
   EXPECT_EQ(canopy::CanopyFile::open(dir + "/light.canopy").header().major, 1);
 }

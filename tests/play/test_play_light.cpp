@@ -102,14 +102,15 @@ void expectCorruptPageIsLitFromElsewhere(const std::string& good, uint32_t page,
 // sampleLbLight on a hand-made light item whose base k, channel c holds (k + x_index) * (c + 1):
 // linear along x, so the trilinear sample at node-local lx is exactly (k + 4 lx + 0.5) * (c + 1)
 // (light voxel centres (i + 0.5) / 4 are indices i + 1), and the result is lbIndirect of those
-// values with the lookup's bases. Values below 24 are exact in fp16 at 1/64 steps: 1e-5 tolerance.
+// values with the lookup's bases. Every value is exact in the shared-exponent words (multiples of 1/8
+// below 9: 1e-5 tolerance for the arithmetic).
 TEST(Light, SampleLbLightIsLbIndirectOfTheTrilinearBases) {
-  std::vector<uint16_t> item(canopy::kCanopyLightItemBytes / 2);
+  std::vector<uint32_t> item(canopy::kCanopyLightItemBytes / 4);
   for (uint32_t k = 0; k < canopy::kCanopyLightBases; ++k)
-    for (uint32_t c = 0; c < 3; ++c)
-      for (uint32_t v = 0; v < canopy::kCanopyLightVoxelCount; ++v)
-        item[(k * 3 + c) * canopy::kCanopyLightVoxelCount + v] =
-            canopy::canopyFloatToHalf(float(k + v % canopy::kCanopyLightVoxels) * float(c + 1) / 8.0f);
+    for (uint32_t v = 0; v < canopy::kCanopyLightVoxelCount; ++v) {
+      const float x = float(k + v % canopy::kCanopyLightVoxels);
+      item[k * canopy::kCanopyLightVoxelCount + v] = canopy::rgb9e5Encode(x / 8.0f, x * 2.0f / 8.0f, x * 3.0f / 8.0f);
+    }
   canopy::sun::Weights w;
   ASSERT_TRUE(canopy::sun::lookup(0.2f, -1.0f, 0.45f, w));
   const float sun[3] = {1.5f, 1.0f, 0.75f};
@@ -178,8 +179,7 @@ TEST(Light, SunBasesWithTheirBeamAreReported) {
   const std::string f = pt::tmpDir("light") + "/sphere-lit-total.canopy";
   pt::writeLitScene(f, {pt::sphereModel(24, 10, 0.3f)}, {pt::rampLight(kRgb)}, {pt::instanceAt(0, 0, 0, 0)}, /*scatteredSun=*/false);
   EXPECT_FALSE(canopy::CanopyFile::open(f).model(0).flags & canopy::kCanopyModelScatteredSun);
-  EXPECT_EQ(canopy::CanopyFile::open(f).header().minor, 0);  // no 1.1 feature used
-  EXPECT_EQ(canopy::CanopyFile::open(litSphere()).header().minor, 1);
+  EXPECT_TRUE(canopy::CanopyFile::open(litSphere()).model(0).flags & canopy::kCanopyModelScatteredSun);
   nlohmann::json r;
   render(pt::convergedView(f, 9, 9), &r);
   EXPECT_EQ(r["sun_bases"], "total");
@@ -359,11 +359,11 @@ TEST(Light, ExactHaarLightRendersLikeTheSameLightInFloat16Items) {
 }
 
 // Bases that vary along lattice x (+100% over the ball): the Haar items are sampled at the sample's
-// own lattice point. The float16 items (half resolution, box filtered, float16) give the same
+// own lattice point. The light items (half resolution, box filtered, shared-exponent RGB) give the same
 // image within their quantisation (a linear ramp survives the box filter): RMS below 1e-3 of the
 // peak (measured 2e-5 of it). A Haar lookup one lattice cell off along x would not: the control,
 // light shifted by one cell, differs by more than 3e-3 of the peak (measured 4.8e-3). The default
-// (--light fast) reads the float16 items of the same file and never asks for a Haar page.
+// (--light fast) reads the light items of the same file and never asks for a Haar page.
 TEST(Light, ExactHaarLightIsSampledAtTheSamplesLatticePoint) {
   pl::PlayOptions o = pt::convergedView("", 33, 33);
   o.sun = "0.3,0.8,-0.52";
@@ -389,7 +389,7 @@ TEST(Light, ExactHaarLightIsSampledAtTheSamplesLatticePoint) {
   double peak = 0;
   for (float v : ref) peak = std::max(peak, double(v));
   const double e = pt::imageRms(haar, ref), eOff = pt::imageRms(off, ref);
-  std::printf("Haar vs float16 items on a ramp: RMS %.3g (one cell off: %.3g), peak %.3g\n", e, eOff, peak);
+  std::printf("Haar vs light items on a ramp: RMS %.3g (one cell off: %.3g), peak %.3g\n", e, eOff, peak);
   EXPECT_GT(peak, 0.1);
   EXPECT_LT(e, 1e-3 * peak);
   EXPECT_GT(eOff, 3e-3 * peak);
@@ -403,7 +403,7 @@ TEST(Light, ExactHaarLightIsSampledAtTheSamplesLatticePoint) {
 // light: its indirect term is ambient * 1) times
 //   (I sum_v w_v (b_v + 1) * sunFactor + ambient / 18 * 0.6) * kRgb[c] / ambient,
 // sunFactor = sum_v w'_v (0.1 + 0.05 b'_v) from the sun's lookup in the scene lattice's axes (world
-// axes here, as the unrotated instance's: w' = w). The float16 items (--light fast) and the Haar
+// axes here, as the unrotated instance's: w' = w). The light items (--light fast) and the Haar
 // items (--light exact, lossless) alike: the same terms, each with its own factor. Tolerance as in
 // IndirectIsTheLookupWeightedSunBasesPlusAmbientB0 (float rounding: 2e-5 relative).
 TEST(Light, NineteenBaseSceneLightScalesTheSunTermByTheSunsBasesAndTheAmbientTermByB00) {
@@ -454,9 +454,9 @@ TEST(Light, NineteenBaseSceneLightScalesTheSunTermByTheSunsBasesAndTheAmbientTer
 }
 
 // A flipped byte in a Haar page: reported once, never cached, and the samples that wanted it use the
-// float16 items (constant bases: the same values), so the damaged frame equals the intact one
+// light items (constant bases: the same values), so the damaged frame equals the intact one
 // within float rounding.
-TEST(Light, CorruptHaarPageIsReportedAndLitFromTheFloat16Items) {
+TEST(Light, CorruptHaarPageIsReportedAndLitFromTheLightItems) {
   const canopy::CanopyFile f = canopy::CanopyFile::open(haarSphere());
   const canopy::CanopyModel& M = f.model(0);
   ASSERT_GE(M.haarPageCount, 1u);

@@ -215,7 +215,7 @@ TEST(SceneLight, CrownInItsNeighboursSunShadowReceivesLessScatteredLight) {
   pt::writeLitScene(pairFile, {crown()}, {light}, {A, B}, true, &pair);
   pt::writeLitScene(aFile, {crown()}, {light}, {A}, true, &aloneA);
   pt::writeLitScene(bFile, {crown()}, {light}, {B}, true, &aloneB);
-  EXPECT_EQ(canopy::CanopyFile::open(pairFile).header().minor, 2);
+  EXPECT_EQ(canopy::CanopyFile::open(pairFile).sceneLightBases(), 19u);  // the sun bases (SceneSunLight, 1.2 and later)
   const std::string cam = cameraFile(dir);
 
   // The same files with B00 alone (canopy-octreepack --scene-light-grid B00).

@@ -32,7 +32,7 @@ struct LightVdb {
 LightVdb readLightVdb(const std::string& path, const ModelSource& model);
 
 // Compressed lighting from canopy-haar (.chaar, 19 bases): fn samples it through the chaar decoder
-// at every lattice cell (0 outside the lattice; chaarLightFn) for the float16 light items, and with
+// at every lattice cell (0 outside the lattice; chaarLightFn) for the light items, and with
 // withHaar its bricks become Haar pages. Its lattice must equal `model`'s.
 LightVdb readChaarLight(const std::string& path, const ModelSource& model, bool withHaar = true);
 

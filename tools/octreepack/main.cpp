@@ -34,7 +34,7 @@ int main(int argc, char** argv) {
                  "as before format 1.2; e.g. B00)");
   app.add_flag("--ignore-light", o.ignoreLight, "Pack density only, even where a .chaar is given");
   app.add_flag("--no-haar-light", o.noHaarLight,
-               "Pack a .chaar's lighting as float16 light items only, without its Haar bricks (the finest level's exact light: "
+               "Pack a .chaar's lighting as light items only, without its Haar bricks (the finest level's exact light: "
                "canopy-play --light exact); a smaller file");
   app.fallthrough();  // (inherited by the subcommands) `info FILE --json` works too
   std::string infoPath, verifyPath;

@@ -272,8 +272,9 @@ void coarserLight(const Level& L, const Level& C, const std::vector<LightBlock>&
 // Items: interior + border (neighbour block of the same level, else the edge voxel repeated).
 // The fill of unavailable voxels happens on copies so that avail flags above stay exact.
 void lightItems(const std::vector<Level>& levels, const std::vector<std::vector<LightBlock>>& lights,
-                const std::vector<std::pair<uint32_t, uint64_t>>& bricks, std::vector<uint16_t>& out) {
-  out.assign(bricks.size() * size_t(kCh) * kCanopyLightVoxelCount, 0);
+                const std::vector<std::pair<uint32_t, uint64_t>>& bricks, std::vector<uint32_t>& out) {
+  constexpr size_t kItemWords = kCanopyLightItemBytes / 4;
+  out.assign(bricks.size() * kItemWords, 0);
   parallelFor(int64_t(bricks.size()), [&](int64_t bi) {
     const uint32_t level = bricks[size_t(bi)].first;
     const uint64_t key = bricks[size_t(bi)].second;
@@ -294,7 +295,7 @@ void lightItems(const std::vector<Level>& levels, const std::vector<std::vector<
       nb[i] = lights[level][it->second];
       fillUnavailable(nb[i]);
     }
-    uint16_t* item = out.data() + size_t(bi) * size_t(kCh) * kCanopyLightVoxelCount;
+    uint32_t* item = out.data() + size_t(bi) * kItemWords;
     for (int z = 0; z < int(kCanopyLightVoxels); ++z)
       for (int y = 0; y < int(kCanopyLightVoxels); ++y)
         for (int x = 0; x < int(kCanopyLightVoxels); ++x) {
@@ -307,7 +308,9 @@ void lightItems(const std::vector<Level>& levels, const std::vector<std::vector<
           }
           const int li = lightIndex((v[0] + kL) % kL, (v[1] + kL) % kL, (v[2] + kL) % kL);
           const size_t si = size_t(x) + kCanopyLightVoxels * (size_t(y) + kCanopyLightVoxels * size_t(z));
-          for (int c = 0; c < kCh; ++c) item[size_t(c) * kCanopyLightVoxelCount + si] = canopyFloatToHalf(nb[n].v[c][li]);
+          const LightBlock& B = nb[n];
+          for (uint32_t b = 0; b < kCanopyLightBases; ++b)
+            item[b * kCanopyLightVoxelCount + si] = rgb9e5Encode(B.v[3 * b][li], B.v[3 * b + 1][li], B.v[3 * b + 2][li]);
         }
   });
 }
@@ -316,7 +319,7 @@ void lightItems(const std::vector<Level>& levels, const std::vector<std::vector<
 // then one light item per brick.
 // `levels` are the light levels (0..depth - detailLevels); `bricks` the bricks that get items.
 void buildLight(const ModelSource& src, const std::string& what, const LightFn& light, const std::vector<Level>& levels,
-                const std::vector<std::pair<uint32_t, uint64_t>>& bricks, std::vector<uint16_t>& out) {
+                const std::vector<std::pair<uint32_t, uint64_t>>& bricks, std::vector<uint32_t>& out) {
   const size_t depth = levels.size() - 1;
   std::vector<std::vector<LightBlock>> lights(levels.size());
   finestLight(src, what, light, levels[depth], lights[depth]);

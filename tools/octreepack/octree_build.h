@@ -57,7 +57,7 @@ struct BuiltModel {
   CanopyModel record{};                         // firstTile/firstBrickPage etc. set by the writer
   std::vector<CanopyNode> tiles;                // 8 per tile, model-relative child indices
   std::vector<unsigned char> bricks;            // brickCount * kCanopyBrickBytes
-  std::vector<uint16_t> light;                  // empty, or brickCount light items (canopy_layout.h)
+  std::vector<uint32_t> light;                  // empty, or brickCount light items (canopy_layout.h)
   std::string sourceLabel;
   uint64_t occupiedCells = 0;
 };

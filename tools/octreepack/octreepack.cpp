@@ -231,6 +231,8 @@ nlohmann::json canopyInfo(const CanopyFile& f) {
   j["page_bytes"] = h.pageBytes;
   j["pages"] = h.pageCount;
   j["bricks_per_page"] = h.bricksPerPage;
+  // the light items' encoding (canopy_layout.h): shared-exponent RGB words from 4.0, float16 before
+  j["light_items"] = h.major >= 4 ? "rgb9e5" : "float16";
   j["instances"] = h.instanceCount;
   nlohmann::json sections = nlohmann::json::array();
   for (uint32_t i = 0; i < f.sectionCount(); ++i) {
@@ -315,7 +317,7 @@ std::string formatInfo(const nlohmann::json& j) {
     o << "model '" << m["name"].get<std::string>() << "': depth " << m["depth"].get<uint32_t>() << " (" << m["root_cells"].get<uint32_t>()
       << " cells/axis), " << m["nodes"].get<uint64_t>() << " nodes, " << m["bricks"].get<uint64_t>() << " bricks in "
       << m["brick_pages"].get<uint64_t>() << " pages, " << m["instances"].get<uint64_t>() << " instances, light: "
-      << (m["has_light"].get<bool>() ? "yes (" + std::to_string(m["light_pages"].get<uint64_t>()) + " pages of float16 items" +
+      << (m["has_light"].get<bool>() ? "yes (" + std::to_string(m["light_pages"].get<uint64_t>()) + " pages of " + j["light_items"].get<std::string>() + " items" +
                                            (m["haar_light"].get<bool>() ? "; the finest level's exact light: " + std::to_string(m["haar_items"].get<uint64_t>()) +
                                                                               " Haar bricks (" + m["haar_precision"].get<std::string>() + ") in " +
                                                                               std::to_string(m["haar_pages"].get<uint64_t>()) + " pages"

@@ -25,7 +25,7 @@ struct OctreepackOptions {
   // bases, the ambient term by B00). A name: that one float grid, the factor of all indirect light.
   std::string sceneLightGrid;
   bool ignoreLight = false;          // pack density only even where a .chaar is named
-  bool noHaarLight = false;          // a .chaar's bricks are not packed (float16 light items only)
+  bool noHaarLight = false;          // a .chaar's bricks are not packed (light items only)
 };
 
 // Packs; returns the JSON report (models, levels, bytes, seconds). Throws canopy::Error.
