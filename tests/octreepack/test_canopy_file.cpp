@@ -416,6 +416,28 @@ TEST(CanopyFile, FrozenVersion40FileReadsAndIsStillWritten) {
   EXPECT_EQ(readFile(kFrozenV40), smallFileBytes()) << "the .canopy layout changed: bump the version";
 }
 
+// The light item geometry must be its version's: a 4.0 file relabelled 3.0 and a 3.0 file relabelled
+// 4.0 (valid CRCs) are refused, as is a 4.0 header with another item size or count per page; so are
+// truncated 4.0 files.
+TEST(CanopyFile, LightItemGeometryMustMatchTheVersion) {
+  auto relabelled = [](const std::string& path, const std::function<void(CanopyFileHeader&)>& edit) {
+    std::vector<unsigned char> b = readFile(path);
+    CanopyFileHeader h;
+    std::memcpy(&h, b.data(), sizeof h);
+    edit(h);
+    std::memcpy(b.data(), &h, sizeof h);
+    reseal(b);
+    return expectRejected(b, false);
+  };
+  for (const std::string& m : {relabelled(kFrozenV40, [](CanopyFileHeader& h) { h.major = 3; }),
+                               relabelled(kFrozenV30, [](CanopyFileHeader& h) { h.major = 4; }),
+                               relabelled(kFrozenV40, [](CanopyFileHeader& h) { h.lightItemBytes += 4; }),
+                               relabelled(kFrozenV40, [](CanopyFileHeader& h) { h.lightItemsPerPage = 2; })})
+    EXPECT_NE(m.find("unsupported light item geometry"), std::string::npos) << m;
+  const std::vector<unsigned char> good = readFile(kFrozenV40);  // and truncated 4.0 files
+  for (size_t n = 0; n < good.size(); n += 4093) EXPECT_THROW(CanopyFile::fromMemory(good.data(), n, "trunc.canopy"), Error) << n;
+}
+
 // A file without light items keeps the version and the header's light item geometry it had before
 // 4.0, byte for byte: density-only content is written as 1.0 (2.0, 3.0 with detail levels).
 TEST(CanopyFile, AFileWithoutLightItemsKeepsItsOlderVersion) {
