@@ -3,9 +3,9 @@
 //
 // Bits 0-8 red, 9-17 green, 18-26 blue (9-bit mantissas, no implicit one), 27-31 the shared
 // exponent e (bias 15): a channel's value is mantissa * 2^(e - 24). The largest value is
-// 511/512 * 2^16 = 65408; the smallest non-zero 2^-24. Each channel is within half a unit of the
-// largest channel's mantissa: |error| <= 2^(e - 25) <= max(r, g, b) / 512. Every word decodes to a
-// finite value, so a corrupt word can give wrong light but never a NaN.
+// 511/512 * 2^16 = 65408; the smallest non-zero 2^-24. Each channel is within half a unit,
+// 2^(e - 25), which is at most max(r, g, b) / 511 (or 2^-25 for values below 2^-16). Every word
+// decodes to a finite value, so a corrupt word can give wrong light but never a NaN.
 //
 // Used for the light items of `.canopy` files from 4.0 (formats/canopy_layout.h): two thirds of the
 // bytes of three float16s, one load per sample instead of three.
