@@ -5,12 +5,12 @@
 //                       [--precision fp16|fp32]
 //
 // For each threshold T: canopy-haar PLANT.light.vdb --threshold T -> .chaar, canopy-octreepack
-// packs it (format 1.1: float16 light items of the decoded values on every level, and the .chaar's
-// bricks as Haar pages) and, for reference, the uncompressed light VDB (float16 items only).
-// Reported per packed file: the bytes of its float16 item pages and of its Haar pages, and the
+// packs it (format 4.0: light items of the decoded values on every level, and the .chaar's
+// bricks as Haar pages) and, for reference, the uncompressed light VDB (light items only).
+// Reported per packed file: the bytes of its light item pages and of its Haar pages, and the
 // error of the finest level's light against canopy-lbsolve's values (the light VDB) at every
 // occupied lattice cell, all 19 bases x RGB, as canopy-play samples it with --light fast (the
-// float16 items, canopySampleLight) and --light exact (the Haar pages, canopyHaarSampleAt): RMS and
+// light items, canopySampleLight) and --light exact (the Haar pages, canopyHaarSampleAt): RMS and
 // max absolute, relative to the largest value. The tools are run from the folder of this executable.
 #include <unistd.h>
 
@@ -41,7 +41,7 @@ struct Err {
 };
 
 // The finest level's light of the packed model 0 at every occupied cell vs the truth, from the
-// Haar pages (haar) or the float16 items: [0] all 19 bases, [1] the sun bases B01..B18 alone (with
+// Haar pages (haar) or the light items: [0] all 19 bases, [1] the sun bases B01..B18 alone (with
 // their own peak: lbsolve stores them without their direct beam, far smaller than B00).
 std::array<Err, 2> lightError(const canopy::CanopyFile& f, const op::ModelSource& src, const op::LightFn& truth, bool haar) {
   op::testing::PackedSampler S(f);
@@ -137,7 +137,7 @@ int main(int argc, char** argv) {
                       uint64_t(M.haarPageCount) * f.header().pageBytes, lightError(f, src, truth.fn, false),
                       hasHaar ? lightError(f, src, truth.fn, true) : std::array<Err, 2>{}, hasHaar});
     };
-    packAndMeasure("light VDB (float16 items only)", lightVdb, 0);
+    packAndMeasure("light VDB (light items only)", lightVdb, 0);
     std::stringstream ts(thresholds);
     for (std::string t; std::getline(ts, t, ',');) {
       const std::string chaar = work + "/plant.T" + t + "." + precision + ".chaar";
@@ -154,7 +154,7 @@ int main(int argc, char** argv) {
                 density.c_str(), double(plain.header().fileBytes) / 1e6);
     for (int part = 0; part < 2; ++part) {
       std::printf("%s\n\n", part == 0 ? "All 19 bases:" : "The sun bases B01..B18 alone (relative to their own peak):");
-      std::printf("| lighting input | .chaar MB | .canopy MB | float16 item pages MB | Haar pages MB | fast (items): RMS / peak | max / peak | exact (Haar): RMS / peak | max / peak |\n");
+      std::printf("| lighting input | .chaar MB | .canopy MB | light item pages MB | Haar pages MB | fast (items): RMS / peak | max / peak | exact (Haar): RMS / peak | max / peak |\n");
       std::printf("|---|---:|---:|---:|---:|---:|---:|---:|---:|\n");
       for (const Row& r : rows) {
         auto rel = [](const Err& e, bool rmsOf) {
