@@ -948,6 +948,7 @@ TEST(OctreepackLight, ChaarLightingEqualsTheDecoder) {
   EXPECT_EQ(M.haarItemCount, chaar.header.slotCount);
   const nlohmann::json info = op::canopyInfo(f);  // what `canopy-octreepack info --json` prints
   EXPECT_EQ(info["format_version"], "4.0");
+  EXPECT_EQ(info["light_items"], "rgb9e5");
   EXPECT_EQ(info["models"][0]["haar_light"], true);
   EXPECT_EQ(info["models"][0]["haar_items"], chaar.header.slotCount);
   EXPECT_EQ(info["models"][0]["haar_precision"], "fp16");
