@@ -106,7 +106,6 @@ struct Ranges {
   std::vector<uint32_t> haarIndex;
   std::vector<uint32_t> sparseIndex;            // (2.0) detail models' sparse brick locations
   std::vector<SparsePages> sparse;
-  bool scatteredSun = false;  // a model flagged kCanopyModelScatteredSun (1.1)
   bool detail = false;        // a model with detail levels (2.0)
   bool uniform = false;       // a uniform sparse brick (3.0)
   bool lit = false;           // a model with light items (4.0)
@@ -141,7 +140,6 @@ uint32_t placeBricksAndLight(const CanopyWriteModel& wm, CanopyModel& m, Ranges&
   m.lightPageCount = (m.lightCount + g.lightPerPage - 1) / g.lightPerPage;
   R.page += m.lightPageCount;
   m.flags = lit ? (m.flags | kCanopyModelHasLight) : (m.flags & ~uint32_t(kCanopyModelHasLight | kCanopyModelScatteredSun));
-  R.scatteredSun = R.scatteredSun || (m.flags & kCanopyModelScatteredSun) != 0;
   return denseBricks;
 }
 
@@ -365,11 +363,11 @@ void writeHeader(const CanopyWriteInput& in, const Ranges& R, const Sections& S,
   CanopyFileHeader h{};
   std::memcpy(h.magic, kCanopyMagic, 8);
   // A file with light items is 4.0; without, with a uniform sparse brick 3.0; with a detail model but
-  // none, 2.0. Otherwise: without a 1.1 feature (Haar light, scattered-only sun bases: both come with
-  // light items, so in practice never) a 1.0 file, byte for byte; with one but no 1.2 feature (the
-  // scene lattice's sun bases) a 1.1 file; else 1.2.
+  // none, 2.0; else 1.2 with the scene lattice's sun bases and 1.0 without, byte for byte as before.
+  // (1.1's features, Haar light and scattered-only sun bases, exist only with light items: a Haar
+  // model needs them, and the flag is cleared on a model without them.)
   h.major = R.lit ? 4 : R.uniform ? 3 : R.detail ? 2 : 1;
-  h.minor = h.major > 1 ? 0 : sceneSun ? 2 : R.haarIndex.empty() && !R.scatteredSun ? 0 : 1;
+  h.minor = h.major == 1 && sceneSun ? 2 : 0;
   static_assert(kCanopyMajor == 4 && kCanopyMinor == 0 && kCanopyMinor1 == 2, "the writer's versions");
   h.headerBytes = sizeof(CanopyFileHeader);
   h.pageBytes = pageBytes;
