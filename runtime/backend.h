@@ -22,9 +22,11 @@
 namespace canopy::play {
 
 // What a stereo second eye traced (Backend::reprojectRows): its holes, and of them those traced
-// only behind a reprojected front.
+// only behind a reprojected front; and the seconds its reprojection took (the splats, the resolve
+// and the hole list, until the holes' trace is launched).
 struct StereoCounts {
   uint64_t traced = 0, behind = 0;
+  double reprojectS = 0.0;
 };
 
 class Backend {
@@ -54,6 +56,10 @@ class Backend {
   // Copies eye `eye`'s rows `band` into rgba (width * height RGBA floats, premultiplied RGB,
   // alpha = 1 - T; the caller sizes it).
   virtual void readRows(std::vector<float>& rgba, int eye, Band band, int width) = 0;
+  // The order in which stereo's second eye traces its holes (CUDA only: kHoleOrder*, stereo.h's
+  // stereoHoleClass; kHoleOrderCost by default) and its kernel's occupancy (6: built for at least 6
+  // blocks of 128 per SM, the default; 0: unconstrained). Neither changes the image.
+  virtual void setStereoHoles(int order, int minBlocks) { (void)order, (void)minBlocks; }
   // The pixels one GPU warp renders: a w x h tile, w h = 32 (CUDA only; 8x4 by default).
   virtual void setPixelTile(int w, int h) { (void)w, (void)h; }
   // CUDA: the pixel kernel compiled for at least this many blocks of 128 threads per SM (6 or 8;

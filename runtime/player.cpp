@@ -369,6 +369,9 @@ void validateOptions(const PlayOptions& o) {
   if (!(o.sigma >= 0.0f) || !(o.stepFactor > 0.01f) || !(o.ambient >= 0.0f) || !(o.sunIntensity >= 0.0f) || !(o.shadowAperture >= 0.0f))
     throw usageError("--sigma, --ambient, --sun-intensity and --shadow-aperture must be >= 0 and --step > 0.01");
   if (o.warpTileWidth < 1 || o.warpTileWidth > 32 || 32 % o.warpTileWidth != 0) throw usageError("--warp-tile must be 1, 2, 4, 8, 16 or 32");
+  if (o.stereoHoleOrder != "tile" && o.stereoHoleOrder != "kind" && o.stereoHoleOrder != "cost")
+    throw usageError("--stereo-holes must be tile, kind or cost, got '" + o.stereoHoleOrder + "'");
+  if (o.stereoHoleBlocks != 0 && o.stereoHoleBlocks != 6) throw usageError("--stereo-hole-blocks must be 0 or 6");
   if (o.shadowMethod != "map" && o.shadowMethod != "cone") throw usageError("--shadows must be map or cone, got '" + o.shadowMethod + "'");
   if (!(o.stopTransmittance >= 0.0f && o.stopTransmittance <= 0.5f)) throw usageError("--stop-opacity must be in [0.5, 1]");
   if (!(o.shadowMapBias >= 0.0f && o.shadowMapBias <= 64.0f)) throw usageError("--shadow-map-bias must be in [0, 64]");
@@ -405,6 +408,7 @@ struct Tile {
   uint32_t missing = 0;           // this frame's last pass
   double firstEyeS = 0.0;         // this frame's render time: the traced eye
   double secondEyeS = 0.0;        // stereo's second eye (reprojection and holes, or traced in full)
+  double reprojectS = 0.0;        // of it, the reprojection (before the holes' trace)
   uint64_t traced = 0;            // second-eye pixels traced this frame (last pass)
   uint64_t tracedBehind = 0;      // of them, traced only behind a reprojected front
   std::vector<double> costMs;     // per frame, for the report
@@ -431,7 +435,7 @@ EyeCameras eyeCameras(const PlayOptions& o, const CameraView& centre) {
 void renderTileFrame(Tile& t, const PlayOptions& o, const HostScene& scene, const ShadeParams& shade, const EyeCameras& eyes, bool complete) {
   const bool stereo = eyes.disparityScale > 0.0f;
   const uint32_t frameStart = t.stamp + 1;
-  t.firstEyeS = t.secondEyeS = 0.0;
+  t.firstEyeS = t.secondEyeS = t.reprojectS = 0.0;
   t.traced = t.tracedBehind = 0;
   for (int pass = 0; pass < 64; ++pass) {
     ++t.stamp;
@@ -450,6 +454,7 @@ void renderTileFrame(Tile& t, const PlayOptions& o, const HostScene& scene, cons
         const StereoCounts c = t.backend->reprojectRows(scene, eyes.right, t.stamp, t.band, o.stereo);
         t.traced = c.traced;
         t.tracedBehind = c.behind;
+        t.reprojectS += c.reprojectS;
       }
       t.secondEyeS += secondsSince(t0);
     }
@@ -638,9 +643,10 @@ void logSummary(const PlayOptions& o, const nlohmann::json& r, const StreamStats
   if (r.contains("stereo")) {
     const auto& s = r["stereo"];
     std::snprintf(line, sizeof(line),
-                  "canopy-play: stereo (%s): second eye %.2f ms median (%.2fx the first eye), %.1f%% of its pixels traced (%.1f%% only behind a "
-                  "reprojected front)",
+                  "canopy-play: stereo (%s): second eye %.2f ms median (%.2fx the first eye; reprojection %.2f ms), %.1f%% of its pixels "
+                  "traced (%.1f%% only behind a reprojected front)",
                   std::string(s["fill"]).c_str(), double(s["second_eye_ms_median"]), double(s["second_over_first"]),
+                  double(s["reproject_ms_median"]),
                   100.0 * double(s["traced_fraction_mean"]), 100.0 * double(s["traced_behind_fraction_mean"]));
     logInfo(line);
   }
@@ -649,7 +655,7 @@ void logSummary(const PlayOptions& o, const nlohmann::json& r, const StreamStats
 // The frame loop's record: frame times, stereo's per-eye times and traced fractions, the first
 // complete frame.
 struct FrameLog {
-  std::vector<double> frameMs, firstEyeMs, secondEyeMs, tracedFraction, behindFraction;
+  std::vector<double> frameMs, firstEyeMs, secondEyeMs, reprojectMs, tracedFraction, behindFraction;
   double firstCompleteS = -1.0;
   uint64_t coldStartBytes = 0;  // streamed by the first complete frame
 };
@@ -674,12 +680,12 @@ std::vector<Tile> makeTiles(const PlayOptions& o, const Device& device, const Ca
 // next frame's balance).
 std::vector<double> recordFrame(const PlayOptions& o, const std::vector<Tile>& tiles, std::chrono::steady_clock::time_point t0, FrameLog& log) {
   uint32_t missing = 0;
-  double first = 0.0, second = 0.0;
+  double first = 0.0, second = 0.0, reproject = 0.0;
   uint64_t traced = 0, behind = 0;
   std::vector<double> cost;
   for (const Tile& t : tiles) {
     missing += t.missing;
-    first = std::max(first, t.firstEyeS), second = std::max(second, t.secondEyeS);
+    first = std::max(first, t.firstEyeS), second = std::max(second, t.secondEyeS), reproject = std::max(reproject, t.reprojectS);
     traced += t.traced;
     behind += t.tracedBehind;
     cost.push_back(t.firstEyeS + t.secondEyeS);
@@ -687,6 +693,7 @@ std::vector<double> recordFrame(const PlayOptions& o, const std::vector<Tile>& t
   if (o.stereoIpd > 0.0f) {
     log.firstEyeMs.push_back(1000.0 * first);
     log.secondEyeMs.push_back(1000.0 * second);
+    log.reprojectMs.push_back(1000.0 * reproject);
     log.tracedFraction.push_back(double(traced) / (double(o.width) * o.height));
     log.behindFraction.push_back(double(behind) / (double(o.width) * o.height));
   }
@@ -726,6 +733,7 @@ nlohmann::json stereoReport(const PlayOptions& o, const FrameLog& log) {
           {"first_eye_ms_median", first},
           {"second_eye_ms_median", second},
           {"second_over_first", first > 0 ? second / first : 0.0},
+          {"reproject_ms_median", percentile(log.reprojectMs, 0.5)},
           {"traced_fraction", log.tracedFraction},
           {"second_eye_ms", log.secondEyeMs}};
 }
@@ -757,6 +765,8 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
     if (o.countWork && tiles.size() == 1) t.backend->countWork(&work);
     t.backend->setPixelTile(o.warpTileWidth, tileH);
     t.backend->setPixelOccupancy(o.pixelMinBlocks);
+    t.backend->setStereoHoles(o.stereoHoleOrder == "tile" ? kHoleOrderTile : (o.stereoHoleOrder == "kind" ? kHoleOrderKind : kHoleOrderCost),
+                              o.stereoHoleBlocks);
   }
 
   FrameLog log;

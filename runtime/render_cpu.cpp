@@ -1,6 +1,7 @@
 // render_cpu.cpp: the CPU reference backend: TBB over pixels, every array in host memory, the same
 // renderPixel() (cone.h) as the CUDA kernel.
 #include <algorithm>
+#include <chrono>
 #include <cstring>
 
 #include "canopy/parallel.h"
@@ -76,6 +77,7 @@ class CpuBackend final : public Backend {
   }
   StereoCounts reprojectRows(const HostScene& scene, const CameraView& right, uint32_t stamp, Band band, const StereoParams& p) override {
     (void)scene, (void)stamp;  // the stamp and scene of view_, the last render of this pass
+    const auto t0 = std::chrono::steady_clock::now();
     const size_t pixels = size_t(right.width) * right.height;
     if (keys_.size() != pixels) keys_.resize(pixels), behind_.resize(pixels), cover_.resize(pixels), holeFrom_.resize(pixels);
     if (image_[1].size() != pixels * 4) image_[1].assign(pixels * 4, 0.0f);
@@ -105,11 +107,12 @@ class CpuBackend final : public Backend {
         holes.push_back(int64_t(band.y0) * right.width + int64_t(k));
         behind += holeFrom_[size_t(holes.back())] > 0.0f ? 1u : 0u;
       }
+    const double reprojectS = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     const SceneView v = view_;
     float* out = image_[1].data();
     float* from = holeFrom_.data();
     parallelFor(int64_t(holes.size()), [&](int64_t k) { renderPixel(v, right, holes[size_t(k)], out, nullptr, disparityScale_, from); }, 64);
-    return StereoCounts{holes.size(), behind};
+    return StereoCounts{holes.size(), behind, reprojectS};
   }
   void readStamps(std::vector<uint32_t>& slotUsed, std::vector<uint32_t>& pageWanted) override {
     slotUsed = slotUsed_;

@@ -550,6 +550,31 @@ TEST(Stereo, PixelDisparityIsTheWeightedMeanAndSpreadOfInverseDepth) {
 // The second eye, whole (player)
 // ---------------------------------------------------------------------------------------------
 
+// The classes the CUDA backend sorts the holes by (stereoHoleClass): one in tile order; holes traced
+// in full before those traced behind a front in kind order; and in cost order, within each kind,
+// the costlier (in octaves of the traced eye's cycles from 2^10) first; every class below "none".
+TEST(Stereo, HoleClassesOrderHolesByKindAndCostliestFirst) {
+  for (bool behind : {false, true})
+    for (uint32_t cycles : {0u, 1500u, 1u << 20, 0xFFFFFFFFu}) EXPECT_EQ(pl::stereoHoleClass(pl::kHoleOrderTile, behind, cycles), 0);
+  EXPECT_LT(pl::stereoHoleClass(pl::kHoleOrderKind, false, 1u << 30), pl::stereoHoleClass(pl::kHoleOrderKind, true, 0u));
+  EXPECT_EQ(pl::stereoHoleClass(pl::kHoleOrderKind, false, 5u), pl::stereoHoleClass(pl::kHoleOrderKind, false, 1u << 25));
+  // cost: full holes 0..14, behind 15..29; one class per octave from 2^10 to 2^24, the rest clamped
+  EXPECT_EQ(pl::stereoHoleClass(pl::kHoleOrderCost, false, 0u), 14);
+  EXPECT_EQ(pl::stereoHoleClass(pl::kHoleOrderCost, false, 2047u), 14);
+  EXPECT_EQ(pl::stereoHoleClass(pl::kHoleOrderCost, false, 2048u), 13);
+  EXPECT_EQ(pl::stereoHoleClass(pl::kHoleOrderCost, false, 1u << 24), 0);
+  EXPECT_EQ(pl::stereoHoleClass(pl::kHoleOrderCost, false, 0xFFFFFFFFu), 0);
+  EXPECT_EQ(pl::stereoHoleClass(pl::kHoleOrderCost, true, 0u), 29);
+  EXPECT_EQ(pl::stereoHoleClass(pl::kHoleOrderCost, true, 0xFFFFFFFFu), 15);
+  for (int order : {pl::kHoleOrderTile, pl::kHoleOrderKind, pl::kHoleOrderCost})
+    for (uint32_t cycles = 1; cycles != 0u && cycles < 0x80000000u; cycles *= 3) {
+      EXPECT_LT(pl::stereoHoleClass(order, true, cycles), pl::kStereoHoleClassNone);
+      EXPECT_LT(pl::stereoHoleClass(order, true, cycles), 1u << pl::kStereoHoleClassBits);
+      // costlier never later, within a kind
+      EXPECT_LE(pl::stereoHoleClass(order, false, cycles * 2u), pl::stereoHoleClass(order, false, cycles));
+    }
+}
+
 TEST(Render, ReprojectedEyeMatchesTheTracedEyeAndTracesOnlyItsHoles) {
   // The grove at 160x90 from 9 m with a 0.5 m eye separation (a large one: 8 px of disparity at
   // 9 m, so that edges uncover real holes at this size).
@@ -579,6 +604,11 @@ TEST(Render, ReprojectedEyeMatchesTheTracedEyeAndTracesOnlyItsHoles) {
   EXPECT_LT(e, 0.0065);
   // and it is a different picture from the left eye (the reprojection moved things)
   EXPECT_GT(pt::imageRms(right, left), 2.0 * e);
+  // the second eye's time splits into the reprojection and the holes' trace (none without holes)
+  const double reproject = r["stereo"]["reproject_ms_median"], second = r["stereo"]["second_eye_ms_median"];
+  EXPECT_GT(reproject, 0.0);
+  EXPECT_LE(reproject, second);
+  EXPECT_DOUBLE_EQ(double(rt["stereo"]["reproject_ms_median"]), 0.0);
 }
 
 TEST(Render, StereoSideBySideAndSeparateOutputs) {
