@@ -372,7 +372,7 @@ class CudaBackend final : public Backend {
                       StereoResolveKernel{sv, tilesX, tileW_, tileH_, band.y0, band.y1, holeOrder_, cycles_.data(), position_.data(), holeClass_.data(),
                                           holeFrom_.data(), holeCounts_.data()},
                       compute_, 256);
-    // the holes first (classes 0..30, stably: in tile order within a class), the other positions after them
+    // the holes first (classes 0..29, stably: in tile order within a class), the other positions after them
     size_t tempBytes = 0;
     CANOPY_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, tempBytes, holeClass_.data(), holeClassSorted_.data(), position_.data(), holeList_.data(),
                                                       threads, 0, kStereoHoleClassBits, compute_));
