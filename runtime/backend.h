@@ -57,7 +57,7 @@ class Backend {
   // alpha = 1 - T; the caller sizes it).
   virtual void readRows(std::vector<float>& rgba, int eye, Band band, int width) = 0;
   // The order in which stereo's second eye traces its holes (CUDA only: kHoleOrder*, stereo.h's
-  // stereoHoleClass; kHoleOrderCost by default) and its kernel's occupancy (6: built for at least 6
+  // stereoHoleHalf; kHoleOrderKind by default) and its kernel's occupancy (6: built for at least 6
   // blocks of 128 per SM, the default; 0: unconstrained). Neither changes the image.
   virtual void setStereoHoles(int order, int minBlocks) { (void)order, (void)minBlocks; }
   // The pixels one GPU warp renders: a w x h tile, w h = 32 (CUDA only; 8x4 by default).

@@ -53,7 +53,7 @@ void addShadowOptions(CLI::App& app, canopy::play::PlayOptions& o, CliValues& x)
   // Timing knobs for the benchmarks (same image, or the images before a change): hidden from --help,
   // documented in docs/play.md.
   app.add_option("--warp-tile", o.warpTileWidth, "CUDA: a warp renders a W x (32/W) pixel tile")->capture_default_str()->group("");
-  app.add_option("--stereo-holes", o.stereoHoleOrder, "CUDA: the order stereo's holes are traced in: tile, kind or cost")
+  app.add_option("--stereo-holes", o.stereoHoleOrder, "CUDA: the order stereo's holes are traced in: tile or kind")
       ->capture_default_str()
       ->group("");
   app.add_option("--stereo-hole-blocks", o.stereoHoleBlocks, "CUDA: the holes' kernel built for >= 6 blocks per SM, or 0: unconstrained")

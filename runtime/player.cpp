@@ -369,8 +369,8 @@ void validateOptions(const PlayOptions& o) {
   if (!(o.sigma >= 0.0f) || !(o.stepFactor > 0.01f) || !(o.ambient >= 0.0f) || !(o.sunIntensity >= 0.0f) || !(o.shadowAperture >= 0.0f))
     throw usageError("--sigma, --ambient, --sun-intensity and --shadow-aperture must be >= 0 and --step > 0.01");
   if (o.warpTileWidth < 1 || o.warpTileWidth > 32 || 32 % o.warpTileWidth != 0) throw usageError("--warp-tile must be 1, 2, 4, 8, 16 or 32");
-  if (o.stereoHoleOrder != "tile" && o.stereoHoleOrder != "kind" && o.stereoHoleOrder != "cost")
-    throw usageError("--stereo-holes must be tile, kind or cost, got '" + o.stereoHoleOrder + "'");
+  if (o.stereoHoleOrder != "tile" && o.stereoHoleOrder != "kind")
+    throw usageError("--stereo-holes must be tile or kind, got '" + o.stereoHoleOrder + "'");
   if (o.stereoHoleBlocks != 0 && o.stereoHoleBlocks != 6) throw usageError("--stereo-hole-blocks must be 0 or 6");
   if (o.shadowMethod != "map" && o.shadowMethod != "cone") throw usageError("--shadows must be map or cone, got '" + o.shadowMethod + "'");
   if (!(o.stopTransmittance >= 0.0f && o.stopTransmittance <= 0.5f)) throw usageError("--stop-opacity must be in [0.5, 1]");
@@ -765,8 +765,7 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
     if (o.countWork && tiles.size() == 1) t.backend->countWork(&work);
     t.backend->setPixelTile(o.warpTileWidth, tileH);
     t.backend->setPixelOccupancy(o.pixelMinBlocks);
-    t.backend->setStereoHoles(o.stereoHoleOrder == "tile" ? kHoleOrderTile : (o.stereoHoleOrder == "kind" ? kHoleOrderKind : kHoleOrderCost),
-                              o.stereoHoleBlocks);
+    t.backend->setStereoHoles(o.stereoHoleOrder == "tile" ? kHoleOrderTile : kHoleOrderKind, o.stereoHoleBlocks);
   }
 
   FrameLog log;

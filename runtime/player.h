@@ -47,7 +47,7 @@ struct PlayOptions {
   bool exactLight = false;           // --light exact: the finest level of Haar-lit models from their Haar pages (the .chaar's values)
   int pixelMinBlocks = 0;            // CUDA, map/no shadows: pixel kernel built for >= 6 or 8 blocks of 128 per SM, -1 unconstrained (0: the default, 6 without LB light, unconstrained with it)
   int warpTileWidth = 8;             // CUDA: a warp renders a warpTileWidth x (32 / warpTileWidth) tile
-  std::string stereoHoleOrder = "cost";  // CUDA: the order stereo's holes are traced in: tile, kind or cost (Backend::setStereoHoles)
+  std::string stereoHoleOrder = "kind";  // CUDA: the order stereo's holes are traced in: tile or kind (Backend::setStereoHoles)
   int stereoHoleBlocks = 6;              // CUDA: the holes' kernel built for >= 6 blocks of 128 per SM, or 0: unconstrained
   bool countWork = false;            // CPU only: count cones, steps, samples, shadow work (report "work")
   float background[3] = {0.60f, 0.72f, 0.85f};  // linear RGB behind the scene (PNG only)

@@ -10,7 +10,7 @@
 #include <chrono>
 #include <cstring>
 
-#include <cub/device/device_radix_sort.cuh>
+#include <cub/device/device_select.cuh>
 
 #include "canopy/parallel_cuda.cuh"
 #include "runtime/backend.h"
@@ -33,17 +33,10 @@ struct PixelKernel {
   float* stereo;             // renderPixelT's: kWithDepth, the layers per pixel (stereo's traced eye); kBehind, where
                              // each hole's trace starts (stereo's holes)
   float disparityScale;
-  uint32_t* cycles;          // kWithDepth: where not null, each pixel's clock cycles (stereo's hole order)
   __device__ void operator()(int64_t k) const {
     int x, y;
     if (!bandTilePixel(list ? int64_t(list[k]) : k, tilesX, tileW, tileH, camera.width, y0, y1, x, y)) return;
-    const int64_t i = int64_t(y) * camera.width + x;
-    const long long c0 = kWithDepth && cycles ? clock64() : 0ll;
-    renderPixelT<kWithCones, kWithLight, kWithDepth, kBehind>(scene, camera, i, out, stereo, disparityScale);
-    if (kWithDepth && cycles) {
-      const long long c = clock64() - c0;
-      cycles[i] = c < 0ll ? 0u : (c > 0xFFFFFFFFll ? 0xFFFFFFFFu : uint32_t(c));
-    }
+    renderPixelT<kWithCones, kWithLight, kWithDepth, kBehind>(scene, camera, int64_t(y) * camera.width + x, out, stereo, disparityScale);
   }
 };
 
@@ -73,10 +66,10 @@ void launchPixels(const PixelKernel<kWithCones, kWithLight, kWithDepth, kBehind>
 
 // Stereo (stereo.h): the traced eye's spans into the right eye's keys and cover counts (one thread
 // per traced pixel of the band), then each right-eye pixel resolved or marked a hole, and where its
-// trace starts (stereoResolveHole). Every tile position j gets a class (kStereoHoleClassNone where it is
-// no hole; the holes and those traced behind a reprojected front counted in counts[0] and
-// counts[1], one atomic per warp); a stable sort of the positions by class is the list of holes to
-// trace (stereoHoleClass, stereo.h).
+// trace starts (stereoResolveHole; the holes traced behind a reprojected front counted in
+// *behindCount, one atomic per warp). The marks: hole[half + j] = j for the tile position j of a
+// hole of the half stereoHoleHalf gives it, -1 elsewhere; compacted in order (DeviceSelect), they
+// are the list of pixels to trace, in tile order within a half, so a warp traces neighbouring holes.
 struct StereoSplatKernel {
   StereoView view;
   int y0;
@@ -102,32 +95,31 @@ struct StereoBehindKernel {
 struct StereoResolveKernel {
   StereoView view;
   int tilesX, tileW, tileH, y0, y1;
-  int order;
-  const uint32_t* cycles;  // kHoleOrderCost: the traced eye's cycles per pixel
-  int32_t* position;       // j
-  uint8_t* holeClass;      // the class of tile position j
+  int32_t* hole;
+  int64_t half;  // the marks' halves: hole[0, half) and hole[half, 2 half)
+  int order;     // kHoleOrder*
   float* from;
-  unsigned long long* counts;  // holes, holes traced behind a front
+  unsigned long long* behindCount;
   __device__ void operator()(int64_t j) const {
     int x, y;
     const bool inBand = bandTilePixel(j, tilesX, tileW, tileH, view.width, y0, y1, x, y);
     bool isHole = false, isBehind = false;
-    uint8_t cls = kStereoHoleClassNone;
     if (inBand) {
-      const int64_t i = int64_t(y) * view.width + x;
-      isHole = !stereoResolveHole(view, x, y, from + i);
-      isBehind = isHole && from[i] > 0.0f;
-      if (isHole) cls = stereoHoleClass(order, isBehind, order == kHoleOrderCost ? cycles[i] : 0u);
+      float* f = from + (int64_t(y) * view.width + x);
+      isHole = !stereoResolveHole(view, x, y, f);
+      isBehind = isHole && *f > 0.0f;
     }
-    position[j] = int32_t(j);
-    holeClass[j] = cls;
+    const int h = stereoHoleHalf(order, isBehind);
+    hole[j] = isHole && h == 0 ? int32_t(j) : -1;
+    hole[half + j] = isHole && h == 1 ? int32_t(j) : -1;
     const unsigned active = __activemask();
-    const unsigned holes = __ballot_sync(active, isHole), behind = __ballot_sync(active, isBehind);
-    if (int(threadIdx.x & 31u) == __ffs(int(active)) - 1) {
-      if (holes != 0u) atomicAdd(counts, static_cast<unsigned long long>(__popc(holes)));
-      if (behind != 0u) atomicAdd(counts + 1, static_cast<unsigned long long>(__popc(behind)));
-    }
+    const unsigned behind = __ballot_sync(active, isBehind);
+    if (behind != 0u && int(threadIdx.x & 31u) == __ffs(int(active)) - 1) atomicAdd(behindCount, static_cast<unsigned long long>(__popc(behind)));
   }
+};
+
+struct IsHole {
+  __host__ __device__ bool operator()(int32_t j) const { return j >= 0; }
 };
 
 struct ExtinctionKernel {
@@ -154,9 +146,10 @@ class CudaBackend final : public Backend {
   CudaBackend(const HostScene& scene, uint32_t slots, int device) : pageBytes_(scene.pageBytes), pageCount_(scene.pageCount) {
     device_ = device;
     CANOPY_CUDA_CHECK(cudaSetDevice(device));
+    holeCount_.resize(1);
+    behindCount_.resize(1);
     CANOPY_CUDA_CHECK(cudaStreamCreateWithFlags(&compute_, cudaStreamNonBlocking));
     CANOPY_CUDA_CHECK(cudaStreamCreateWithFlags(&copy_, cudaStreamNonBlocking));
-    holeCounts_.resize(2);
     for (int i = 0; i < 2; ++i) CANOPY_CUDA_CHECK(cudaEventCreateWithFlags(&tableCopied_[i], cudaEventDisableTiming));
     // node tiles: every model's, resident (they are the cache's page table of bricks)
     size_t tiles = 0;
@@ -256,7 +249,6 @@ class CudaBackend final : public Backend {
       if (disparity_.size() != pixels * kStereoPixelFloats) disparity_.resize(pixels * kStereoPixelFloats);
       depth = disparity_.data();
       disparityScale_ = disparityScale;
-      if (holeOrder_ == kHoleOrderCost && cycles_.size() != pixels) cycles_.resize(pixels);
     }
     SceneView v = hostSceneView(scene);
     v.models = models_.data();
@@ -313,15 +305,14 @@ class CudaBackend final : public Backend {
   void launchMode(const HostScene& scene, const ShadeParams& shade, const CameraView& camera, float* out, Band band, const int32_t* list,
                   int64_t threads, float* stereo, float disparityScale) {
     const int tilesX = (camera.width + tileW_ - 1) / tileW_;
-    uint32_t* cycles = kWithDepth && holeOrder_ == kHoleOrderCost ? cycles_.data() : nullptr;  // the holes' order
     if (shade.shadows == kShadowsCone) {
-      launchPixels<5>(PixelKernel<true, true, kWithDepth, kBehind>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, stereo, disparityScale, cycles},
+      launchPixels<5>(PixelKernel<true, true, kWithDepth, kBehind>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, stereo, disparityScale},
                       threads, compute_);
     } else if (scene.litModels > 0) {
-      launchMap(PixelKernel<false, true, kWithDepth, kBehind>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, stereo, disparityScale, cycles},
+      launchMap(PixelKernel<false, true, kWithDepth, kBehind>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, stereo, disparityScale},
                 threads);
     } else {
-      launchMap(PixelKernel<false, false, kWithDepth, kBehind>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, stereo, disparityScale, cycles},
+      launchMap(PixelKernel<false, false, kWithDepth, kBehind>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, stereo, disparityScale},
                 threads);
     }
   }
@@ -354,7 +345,7 @@ class CudaBackend final : public Backend {
     if (image_[1].size() != pixels * 4) image_[1].resize(pixels * 4);
     if (keys_.size() != pixels) keys_.resize(pixels), behind_.resize(pixels), cover_.resize(pixels), holeFrom_.resize(pixels);
     const size_t first = size_t(band.y0) * right.width, count = size_t(band.rows()) * right.width;
-    CANOPY_CUDA_CHECK(cudaMemsetAsync(holeCounts_.data(), 0, 2 * sizeof(unsigned long long), compute_));
+    CANOPY_CUDA_CHECK(cudaMemsetAsync(behindCount_.data(), 0, sizeof(unsigned long long), compute_));
     CANOPY_CUDA_CHECK(cudaMemsetAsync(keys_.data() + first, 0, count * sizeof(unsigned long long), compute_));
     CANOPY_CUDA_CHECK(cudaMemsetAsync(behind_.data() + first, 0, count * sizeof(unsigned long long), compute_));
     CANOPY_CUDA_CHECK(cudaMemsetAsync(cover_.data() + first, 0, count * sizeof(uint32_t), compute_));
@@ -364,26 +355,22 @@ class CudaBackend final : public Backend {
     cuda::parallelFor(int64_t(count), StereoBehindKernel{sv, band.y0}, compute_, 256);
     const int tilesX = (right.width + tileW_ - 1) / tileW_, tilesY = (band.rows() + tileH_ - 1) / tileH_;
     const int64_t threads = int64_t(tilesX) * tilesY * tileW_ * tileH_;
-    if (holeClass_.size() < size_t(threads)) {
-      holeClass_.resize(size_t(threads)), holeClassSorted_.resize(size_t(threads));
-      position_.resize(size_t(threads)), holeList_.resize(size_t(threads));
-    }
+    const int64_t marks = 2 * threads;
+    if (hole_.size() < size_t(marks)) hole_.resize(size_t(marks)), holeList_.resize(size_t(marks));
     cuda::parallelFor(threads,
-                      StereoResolveKernel{sv, tilesX, tileW_, tileH_, band.y0, band.y1, holeOrder_, cycles_.data(), position_.data(), holeClass_.data(),
-                                          holeFrom_.data(), holeCounts_.data()},
+                      StereoResolveKernel{sv, tilesX, tileW_, tileH_, band.y0, band.y1, hole_.data(), threads, holeOrder_, holeFrom_.data(),
+                                          behindCount_.data()},
                       compute_, 256);
-    // the holes first (classes 0..29, stably: in tile order within a class), the other positions after them
     size_t tempBytes = 0;
-    CANOPY_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, tempBytes, holeClass_.data(), holeClassSorted_.data(), position_.data(), holeList_.data(),
-                                                      threads, 0, kStereoHoleClassBits, compute_));
-    if (sortTemp_.size() < tempBytes) sortTemp_.resize(tempBytes);
-    CANOPY_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(sortTemp_.data(), tempBytes, holeClass_.data(), holeClassSorted_.data(), position_.data(),
-                                                      holeList_.data(), threads, 0, kStereoHoleClassBits, compute_));
-    unsigned long long counts[2] = {0, 0};
-    CANOPY_CUDA_CHECK(cudaMemcpyAsync(counts, holeCounts_.data(), sizeof counts, cudaMemcpyDeviceToHost, compute_));
+    CANOPY_CUDA_CHECK(cub::DeviceSelect::If(nullptr, tempBytes, hole_.data(), holeList_.data(), holeCount_.data(), marks, IsHole{}, compute_));
+    if (selectTemp_.size() < tempBytes) selectTemp_.resize(tempBytes);
+    CANOPY_CUDA_CHECK(cub::DeviceSelect::If(selectTemp_.data(), tempBytes, hole_.data(), holeList_.data(), holeCount_.data(), marks, IsHole{},
+                                            compute_));
+    int64_t holes = 0;
+    unsigned long long behind = 0;
+    CANOPY_CUDA_CHECK(cudaMemcpyAsync(&holes, holeCount_.data(), sizeof holes, cudaMemcpyDeviceToHost, compute_));
+    CANOPY_CUDA_CHECK(cudaMemcpyAsync(&behind, behindCount_.data(), sizeof behind, cudaMemcpyDeviceToHost, compute_));
     CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
-    const int64_t holes = int64_t(counts[0]);
-    const unsigned long long behind = counts[1];
     const double reprojectS = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     launchMode<false, true>(scene, view_.shade, right, image_[1].data(), band, holeList_.data(), holes, holeFrom_.data(), disparityScale_);
     CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
@@ -409,7 +396,7 @@ class CudaBackend final : public Backend {
   uint32_t pageBytes_, pageCount_, slots_ = 0;
   int tileW_ = 8, tileH_ = 4;
   int minBlocks_ = 0;
-  int holeOrder_ = kHoleOrderCost, holeMinBlocks_ = 6;  // setStereoHoles
+  int holeOrder_ = kHoleOrderKind, holeMinBlocks_ = 6;  // setStereoHoles
   cudaStream_t compute_ = nullptr, copy_ = nullptr;
   cudaEvent_t tableCopied_[2] = {nullptr, nullptr};
   int mirror_ = 0;
@@ -427,13 +414,12 @@ class CudaBackend final : public Backend {
   cuda::DeviceBuffer<float> image_[2], disparity_, shadowMap_, extinction_;
   cuda::DeviceBuffer<unsigned long long> keys_, behind_;  // stereo: per right-eye pixel, the nearest front span and the nearest span behind it (stereo.h)
   cuda::DeviceBuffer<uint32_t> cover_;
-  cuda::DeviceBuffer<int32_t> position_, holeList_;  // stereo: the tile positions, and sorted by class (the holes first)
-  cuda::DeviceBuffer<uint8_t> holeClass_, holeClassSorted_;
-  cuda::DeviceBuffer<uint32_t> cycles_;             // stereo, kHoleOrderCost: the traced eye's cycles per pixel
-  cuda::DeviceBuffer<unsigned long long> holeCounts_;  // stereo: the holes, and those traced behind a reprojected front
+  cuda::DeviceBuffer<int32_t> hole_, holeList_;   // stereo: the holes' marks by half and tile position, and compacted
+  cuda::DeviceBuffer<int64_t> holeCount_;
+  cuda::DeviceBuffer<unsigned long long> behindCount_;  // stereo: the holes traced behind a reprojected front
   cuda::DeviceBuffer<float> holeFrom_;                  // stereo: per right-eye hole, where its trace starts
   float disparityScale_ = 0.0f;                         // the traced eye's (renderRows)
-  cuda::DeviceBuffer<unsigned char> sortTemp_;
+  cuda::DeviceBuffer<unsigned char> selectTemp_;
   SceneView view_{};  // the last render's view (its stamp, shade and shadow map): the second eye's holes use it
   int device_ = 0;
   ExtinctionGridView grid_{};

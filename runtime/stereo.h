@@ -340,27 +340,14 @@ CANOPY_HD inline bool stereoResolveHole(const StereoView& v, int x, int y, float
   return stereoResolveFill(v, x, y, behind) == kStereoResolved;
 }
 
-// The order in which the holes are traced (the CUDA backend sorts them by stereoHoleClass, stably:
-// in warp-tile order within a class). It does not change the image.
-//   - kHoleOrderTile: one class, the tile order (a warp traces neighbouring holes);
+// The order in which the holes are traced: the CUDA backend lists them in two halves, the half of
+// each by stereoHoleHalf, in warp-tile order within a half. It does not change the image.
+//   - kHoleOrderTile: one half, the tile order (a warp traces neighbouring holes);
 //   - kHoleOrderKind: the holes traced in full, then those traced behind a front (a warp does not
-//     mix rays that start at the eye with rays that start deep in the scene);
-//   - kHoleOrderCost: within each kind, by the clock cycles the traced eye spent on the same pixel,
-//     costliest first, in octaves from 2^10 (the costliest warps start first and cheap ones fill
-//     the tail; a warp's lanes take alike time).
-constexpr int kHoleOrderTile = 0, kHoleOrderKind = 1, kHoleOrderCost = 2;
-constexpr uint8_t kStereoHoleClassNone = 31;  // not a hole: after every class (0..29)
-constexpr int kStereoHoleClassBits = 5;
-CANOPY_HD inline uint8_t stereoHoleClass(int order, bool behind, uint32_t cycles) {
-  if (order == kHoleOrderTile) return 0;
-  int c = behind ? 15 : 0;
-  if (order == kHoleOrderCost) {
-    int octave = 0;  // floor(log2(cycles)) - 10, at least 0
-    for (uint32_t v = cycles >> 11; v != 0u; v >>= 1) ++octave;
-    c += 14 - (octave > 14 ? 14 : octave);
-  }
-  return uint8_t(c);
-}
+//     mix rays that start at the eye with rays that start deep in the scene; bench/RESULTS.md,
+//     "Where the second eye's time goes").
+constexpr int kHoleOrderTile = 0, kHoleOrderKind = 1;
+CANOPY_HD CANOPY_FORCEINLINE int stereoHoleHalf(int order, bool behind) { return order == kHoleOrderKind && behind ? 1 : 0; }
 
 // The two eyes of a stereo pair around `centre`: parallel, `ipd` apart along its right axis.
 inline void stereoEyes(const CameraView& centre, float ipd, CameraView& left, CameraView& right) {

@@ -46,7 +46,7 @@ int main(int argc, char** argv) {
   app.add_option("--ipd", o.stereoIpd, "Eye separation (scene units)")->capture_default_str();
   app.add_option("--stereo-spread", o.stereo.maxSpread, "canopy-play --stereo-spread")->capture_default_str();
   app.add_option("--stereo-solid", o.stereo.solidAlpha, "canopy-play --stereo-solid")->capture_default_str();
-  app.add_option("--stereo-holes", o.stereoHoleOrder, "canopy-play --stereo-holes (CUDA: tile, kind or cost)")->capture_default_str();
+  app.add_option("--stereo-holes", o.stereoHoleOrder, "canopy-play --stereo-holes (CUDA: tile or kind)")->capture_default_str();
   app.add_option("--cache-mb", o.cacheMb, "Cache budget (MiB)")->capture_default_str();
   app.add_option("--shadows", o.shadowMethod, "map or cone")->capture_default_str();
   app.add_option("--error-frames", errorFrames, "Frames of the path where the image error is measured (converged)")->capture_default_str();

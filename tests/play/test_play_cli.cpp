@@ -186,7 +186,7 @@ TEST(PlayCli, ErrorsHaveDocumentedExitCodesAndLeaveNoOutput) {
       {"'" + sceneFile() + "' -o '" + out + "' --shadow-map-cells 0 --device cpu", 1, "--shadow-map-cells"},
       {"'" + sceneFile() + "' -o '" + out + "' --shadow-map-bias -1 --device cpu", 1, "--shadow-map-bias"},
       {"'" + sceneFile() + "' -o '" + out + "' --warp-tile 3 --device cpu", 1, "--warp-tile"},
-      {"'" + sceneFile() + "' -o '" + out + "' --stereo-holes random --device cpu", 1, "--stereo-holes must be tile, kind or cost"},
+      {"'" + sceneFile() + "' -o '" + out + "' --stereo-holes random --device cpu", 1, "--stereo-holes must be tile or kind"},
       {"'" + sceneFile() + "' -o '" + out + "' --stereo-hole-blocks 8 --device cpu", 1, "--stereo-hole-blocks must be 0 or 6"},
       {"'" + sceneFile() + "' -o '" + out + "' --light precise --device cpu", 1, "--light"},
       {"'" + sceneFile() + "' -o '" + out + "' --camera '" + farPath + "' --device cpu", 3,

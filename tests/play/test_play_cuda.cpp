@@ -193,8 +193,8 @@ TEST(PlayCuda, cuda_QuarterCacheCameraPathMatchesFullCacheAfterWarmUp) {
   EXPECT_LT(pt::imageRms(small, full), 1e-3) << r.dump();
 }
 
-// Stereo on the GPU (stereo.h: the splat with atomicMax/atomicAdd, the resolve, the holes sorted
-// by class and traced) against the CPU reference, on the lit forest from among the trees: the
+// Stereo on the GPU (stereo.h: the splat with atomicMax/atomicAdd, the resolve, the holes compacted
+// in two halves and traced) against the CPU reference, on the lit forest from among the trees: the
 // left eye as every GPU frame (RMS < 2e-3); the right eye likewise where both reprojected or both
 // traced the same pixels; the hole sets may differ at a few pixels where a disparity lies on a
 // threshold (nvcc's fast-math division): the traced fractions within 1 % of the pixels.
@@ -224,8 +224,8 @@ TEST(PlayCuda, cuda_StereoPairMatchesTheCpuReference) {
   EXPECT_LT(pt::imageRms(cl, gl), 2e-3);
   EXPECT_LT(pt::imageRms(cr, gr), 4e-3);
   EXPECT_GT(fractionWithin(cr, gr, 1e-2f), 0.98);
-  // the order the holes are traced in (the default sorts them by cost) changes no bit of either eye
-  for (const char* order : {"tile", "kind"}) {
+  // the order the holes are traced in (the default: by kind) changes no bit of either eye
+  for (const char* order : {"tile"}) {
     pl::PlayOptions t = o;
     t.stereoHoleOrder = order;
     std::vector<float> tl, tr;

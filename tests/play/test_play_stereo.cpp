@@ -550,29 +550,13 @@ TEST(Stereo, PixelDisparityIsTheWeightedMeanAndSpreadOfInverseDepth) {
 // The second eye, whole (player)
 // ---------------------------------------------------------------------------------------------
 
-// The classes the CUDA backend sorts the holes by (stereoHoleClass): one in tile order; holes traced
-// in full before those traced behind a front in kind order; and in cost order, within each kind,
-// the costlier (in octaves of the traced eye's cycles from 2^10) first; every class below "none".
-TEST(Stereo, HoleClassesOrderHolesByKindAndCostliestFirst) {
-  for (bool behind : {false, true})
-    for (uint32_t cycles : {0u, 1500u, 1u << 20, 0xFFFFFFFFu}) EXPECT_EQ(pl::stereoHoleClass(pl::kHoleOrderTile, behind, cycles), 0);
-  EXPECT_LT(pl::stereoHoleClass(pl::kHoleOrderKind, false, 1u << 30), pl::stereoHoleClass(pl::kHoleOrderKind, true, 0u));
-  EXPECT_EQ(pl::stereoHoleClass(pl::kHoleOrderKind, false, 5u), pl::stereoHoleClass(pl::kHoleOrderKind, false, 1u << 25));
-  // cost: full holes 0..14, behind 15..29; one class per octave from 2^10 to 2^24, the rest clamped
-  EXPECT_EQ(pl::stereoHoleClass(pl::kHoleOrderCost, false, 0u), 14);
-  EXPECT_EQ(pl::stereoHoleClass(pl::kHoleOrderCost, false, 2047u), 14);
-  EXPECT_EQ(pl::stereoHoleClass(pl::kHoleOrderCost, false, 2048u), 13);
-  EXPECT_EQ(pl::stereoHoleClass(pl::kHoleOrderCost, false, 1u << 24), 0);
-  EXPECT_EQ(pl::stereoHoleClass(pl::kHoleOrderCost, false, 0xFFFFFFFFu), 0);
-  EXPECT_EQ(pl::stereoHoleClass(pl::kHoleOrderCost, true, 0u), 29);
-  EXPECT_EQ(pl::stereoHoleClass(pl::kHoleOrderCost, true, 0xFFFFFFFFu), 15);
-  for (int order : {pl::kHoleOrderTile, pl::kHoleOrderKind, pl::kHoleOrderCost})
-    for (uint32_t cycles = 1; cycles != 0u && cycles < 0x80000000u; cycles *= 3) {
-      EXPECT_LT(pl::stereoHoleClass(order, true, cycles), pl::kStereoHoleClassNone);
-      EXPECT_LT(pl::stereoHoleClass(order, true, cycles), 1u << pl::kStereoHoleClassBits);
-      // costlier never later, within a kind
-      EXPECT_LE(pl::stereoHoleClass(order, false, cycles * 2u), pl::stereoHoleClass(order, false, cycles));
-    }
+// The halves the CUDA backend lists the holes in (stereoHoleHalf): one in tile order; in kind
+// order the holes traced in full first, those traced behind a front after them.
+TEST(Stereo, HoleHalvesPutTheHolesTracedInFullFirst) {
+  EXPECT_EQ(pl::stereoHoleHalf(pl::kHoleOrderTile, false), 0);
+  EXPECT_EQ(pl::stereoHoleHalf(pl::kHoleOrderTile, true), 0);
+  EXPECT_EQ(pl::stereoHoleHalf(pl::kHoleOrderKind, false), 0);
+  EXPECT_EQ(pl::stereoHoleHalf(pl::kHoleOrderKind, true), 1);
 }
 
 TEST(Render, ReprojectedEyeMatchesTheTracedEyeAndTracesOnlyItsHoles) {
