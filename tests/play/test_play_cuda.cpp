@@ -224,17 +224,16 @@ TEST(PlayCuda, cuda_StereoPairMatchesTheCpuReference) {
   EXPECT_LT(pt::imageRms(cl, gl), 2e-3);
   EXPECT_LT(pt::imageRms(cr, gr), 4e-3);
   EXPECT_GT(fractionWithin(cr, gr, 1e-2f), 0.98);
-  // the order the holes are traced in (the default: by kind) changes no bit of either eye
-  for (const char* order : {"tile"}) {
-    pl::PlayOptions t = o;
-    t.stereoHoleOrder = order;
-    std::vector<float> tl, tr;
-    const nlohmann::json rt = pl::play(t, cuda(), &tl, &tr);
-    EXPECT_DOUBLE_EQ(double(rt["stereo"]["traced_fraction_mean"]), fg) << order;
-    ASSERT_EQ(tr.size(), gr.size());
-    EXPECT_EQ(std::memcmp(tl.data(), gl.data(), gl.size() * sizeof(float)), 0) << order;
-    EXPECT_EQ(std::memcmp(tr.data(), gr.data(), gr.size() * sizeof(float)), 0) << order;
-  }
+  // the order the holes are traced in (the default: by kind; here one list in tile order) changes
+  // no bit of either eye
+  o.stereoHoleOrder = "tile";
+  std::vector<float> tl, tr;
+  const nlohmann::json rt = pl::play(o, cuda(), &tl, &tr);
+  EXPECT_DOUBLE_EQ(double(rt["stereo"]["traced_fraction_mean"]), fg);
+  ASSERT_EQ(tl.size(), gl.size());
+  ASSERT_EQ(tr.size(), gr.size());
+  EXPECT_EQ(std::memcmp(tl.data(), gl.data(), gl.size() * sizeof(float)), 0);
+  EXPECT_EQ(std::memcmp(tr.data(), gr.data(), gr.size() * sizeof(float)), 0);
 }
 
 // Bands on one GPU (--tiles 3 on cuda:0: three backends, three caches, three threads; what several
