@@ -50,7 +50,7 @@
 namespace canopy::play {
 
 struct StereoParams {
-  float maxSpread = 0.5f;    // disparity spread (px) above which a layer is traced in the second eye
+  float maxSpread = 0.65f;   // disparity spread (px) above which a layer is traced in the second eye (bench/RESULTS.md: the default)
   float maxJump = 1.0f;      // neighbours closer than this in disparity (px) are one surface
   float solidAlpha = 0.98f;  // a layer at least this opaque hides what lies behind it
   float faintAlpha = 0.02f;  // a layer less opaque than this is sky (disparity 0)

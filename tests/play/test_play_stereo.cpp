@@ -483,9 +483,10 @@ TEST(Stereo, TheTracedEyesFrontLayerNeverSpreadsAndTheLayersGiveThePixelBack) {
     for (int c = 0; c < 3; ++c) ASSERT_LE(l[4 + c], px[c] + 1e-6f) << i;
     if (px[3] - l[7] < 0.01f) continue;
     ++split;
-    EXPECT_LT(l[2], l[0] - o.stereo.maxSpread) << i;           // the back layer lies behind the front
-    EXPECT_LT(l[2], l[8]) << i;                                // behind the front's far side,
-    EXPECT_LE(l[8], l[0]) << i;                                // which lies behind the front's mean
+    // the back layer lies behind the front's far side, which lies behind the front's mean (by no
+    // set margin: the front's mean may lie near its far side)
+    EXPECT_LT(l[2], l[8]) << i;
+    EXPECT_LE(l[8], l[0]) << i;
   }
   std::printf("grove traced eye: %d covered pixels, %d with a back layer, %d front layers spread wider\n", covered, split, wide);
   EXPECT_GT(covered, int(n / 2));
