@@ -5,6 +5,7 @@ find_package(Threads REQUIRED)
 find_package(CLI11 REQUIRED)
 find_package(nlohmann_json REQUIRED)
 find_package(ZLIB REQUIRED)
+find_package(zstd CONFIG REQUIRED)  # libzstd-dev: 5.0's compressed .canopy pages
 find_package(PNG REQUIRED)
 
 # OpenVDB ships a Find module (and needs Boost.Iostreams through its config).

@@ -2,6 +2,7 @@
 // into the sanitized tests and the fuzzer. It never trusts the file: every size, offset, count and
 // pointer is checked before use, and every failure is a canopy::Error naming the file.
 #include "formats/canopy_file.h"
+#include "formats/page_coding.h"
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -49,6 +50,7 @@ constexpr SectionNames kSectionNames[] = {
     {CanopySectionKind::HaarIndex, "HaarIndex", "haar_index"},
     {CanopySectionKind::SparseIndex, "SparseIndex", "sparse_index"},
     {CanopySectionKind::SceneSunLight, "SceneSunLight", "scene_sun_light"},
+    {CanopySectionKind::PageExtents, "PageExtents", "page_extents"},
 };
 
 const char* sectionName(uint32_t kind) {
@@ -225,6 +227,7 @@ struct ResidentParse {
   std::string& metadata;
   std::vector<uint32_t>& haarIndex;
   std::vector<uint32_t>& sparseIndex;
+  std::vector<CanopyPageExtent>& extents;
   bool knownMinor = false;  // every section and page kind of the file is known (checkHeader)
   uint64_t tableEnd = 0;    // the end of the section table (checkHeader)
   uint64_t tileTotal = 0;   // NodeTiles' item count (copyTables)
@@ -260,7 +263,11 @@ void checkHeader(ResidentParse& r, uint64_t fileBytes) {
     bad(P, "unsupported light item geometry (" + u64s(h.lightItemBytes) + " bytes, " + u64s(h.lightItemsPerPage) + " per page)");
   if (h.pagesOffset != h.residentBytes || h.pagesOffset % h.pageBytes != 0 || h.pagesOffset > fileBytes)
     bad(P, "pages offset " + u64s(h.pagesOffset) + " invalid");
-  if ((fileBytes - h.pagesOffset) / h.pageBytes != h.pageCount || (fileBytes - h.pagesOffset) % h.pageBytes != 0)
+  // (5.0) compressed pages: their sizes are checked against the file with the PageExtents section
+  if (h.pageCoding != kCanopyPageRaw && (h.major < 5 || h.pageCoding != kCanopyPageZstd))
+    bad(P, "page coding " + u64s(h.pageCoding) + " is not valid in a " + std::to_string(h.major) + "." + std::to_string(h.minor) + " file");
+  if (h.pageCoding == kCanopyPageRaw &&
+      ((fileBytes - h.pagesOffset) / h.pageBytes != h.pageCount || (fileBytes - h.pagesOffset) % h.pageBytes != 0))
     bad(P, "page count " + u64s(h.pageCount) + " does not match the file size");
   if (h.residentBytes > (uint64_t(1) << 34)) bad(P, "resident part of " + u64s(h.residentBytes) + " bytes is absurd");
   r.tableEnd = sizeof(CanopyFileHeader) + uint64_t(h.sectionCount) * sizeof(CanopySection);
@@ -331,6 +338,34 @@ void copyTables(ResidentParse& r) {
   r.tiles = copyArray<CanopyNode>(r.resident, st.offset, st.itemCount * 8);
   r.pages = copyArray<CanopyPageEntry>(r.resident, sp.offset, sp.itemCount);
   r.tileTotal = st.itemCount;
+}
+
+// (5.0) The compressed pages' extents: present exactly with compressed pages, one per page, back to
+// back from pagesOffset in page order to the end of the file, each no larger than a page can
+// compress to and with a known filter.
+void readPageExtents(ResidentParse& r, uint64_t fileBytes) {
+  const std::string& P = r.P;
+  const CanopyFileHeader& h = r.h;
+  const CanopySection* se = r.file.findSection(CanopySectionKind::PageExtents);
+  if (h.pageCoding == kCanopyPageRaw) {
+    if (se) bad(P, "a file of raw pages has a PageExtents section");
+    return;
+  }
+  if (!se) bad(P, "missing section PageExtents (compressed pages)");
+  if (se->itemBytes != sizeof(CanopyPageExtent) || se->itemCount != h.pageCount)
+    bad(P, "section PageExtents holds " + u64s(se->itemCount) + " entries, not one per page (" + u64s(h.pageCount) + ")");
+  r.extents = copyArray<CanopyPageExtent>(r.resident, se->offset, se->itemCount);
+  const uint64_t bound = canopyPageStoredBound(h.pageBytes);
+  uint64_t at = h.pagesOffset;
+  for (size_t i = 0; i < r.extents.size(); ++i) {
+    const CanopyPageExtent& e = r.extents[i];
+    if (e.offset != at || e.storedBytes == 0 || e.storedBytes > bound || e.storedBytes > fileBytes - at)
+      bad(P, "page " + u64s(i) + " extent invalid (offset " + u64s(e.offset) + ", " + u64s(e.storedBytes) + " bytes)");
+    if (e.filter != 0 && e.filter != 2 && e.filter != 4) bad(P, "page " + u64s(i) + " has an unknown filter " + u64s(e.filter));
+    if (e.reserved != 0) bad(P, "page " + u64s(i) + " extent has non-zero reserved bytes");
+    at += e.storedBytes;
+  }
+  if (at != fileBytes) bad(P, "the compressed pages end at " + u64s(at) + ", not at the end of the file (" + u64s(fileBytes) + ")");
 }
 
 // The scene light (SceneLight, 1.2's SceneSunLight): lattice, sizes, values non-negative and finite.
@@ -643,7 +678,7 @@ void checkSparseLocations(const ResidentParse& r) {
 // this order: each stage may rely on what the earlier ones checked).
 void CanopyFile::parseResident(uint64_t fileBytes) {
   ResidentParse r{*this, path_, header_, resident_, sections_, models_, instances_, tiles_, pages_, hasSceneLight_,
-                  sceneLight_, sceneLightBases_, sceneLightValues_, metadata_, haarIndex_, sparseIndex_};
+                  sceneLight_, sceneLightBases_, sceneLightValues_, metadata_, haarIndex_, sparseIndex_, extents_};
   if (fileBytes < sizeof(CanopyFileHeader))
     bad(path_, "truncated: " + u64s(fileBytes) + " bytes, smaller than the 128-byte header");
   readAt(0, &header_, sizeof header_);
@@ -653,6 +688,7 @@ void CanopyFile::parseResident(uint64_t fileBytes) {
   checkSectionTable(r);
   checkPadding(r);
   copyTables(r);
+  readPageExtents(r, fileBytes);
   readSceneLight(r);
   readOptionalSections(r);
   for (uint32_t m = 0; m < models_.size(); ++m) {
@@ -792,7 +828,18 @@ CanopyLookup CanopyFile::descend(uint32_t m, float ux, float uy, float uz, uint3
 void CanopyFile::readPage(uint32_t index, void* dst) const {
   if (index >= pages_.size()) throw invalidInput(path_ + ": page " + u64s(index) + " out of range");
   const CanopyPageEntry& e = pages_[index];
-  readAt(header_.pagesOffset + uint64_t(index) * header_.pageBytes, dst, header_.pageBytes);
+  if (header_.pageCoding == kCanopyPageZstd) {
+    const CanopyPageExtent& x = extents_[index];
+    thread_local std::vector<unsigned char> stored;
+    stored.resize(x.storedBytes);
+    readAt(x.offset, stored.data(), stored.size());
+    if (crc32(0, stored.data(), stored.size()) != x.storedCrc) bad(path_, "page " + std::to_string(index) + ": stored bytes checksum mismatch");
+    const std::string problem =
+        canopyPageDecode(stored.data(), stored.size(), x.filter, static_cast<unsigned char*>(dst), header_.pageBytes);
+    if (!problem.empty()) bad(path_, "page " + std::to_string(index) + ": " + problem);
+  } else {
+    readAt(header_.pagesOffset + uint64_t(index) * header_.pageBytes, dst, header_.pageBytes);
+  }
   CanopyPageHeader ph;
   std::memcpy(&ph, dst, sizeof ph);
   const std::string name = "page " + std::to_string(index);

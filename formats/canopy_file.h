@@ -68,6 +68,10 @@ class CanopyFile {
   const std::vector<CanopyNode>& allTiles() const { return tiles_; }
   uint32_t pageCount() const { return uint32_t(pages_.size()); }
   const CanopyPageEntry& pageEntry(uint32_t i) const { return pages_[i]; }
+  // (5.0) Where page i's stored bytes lie (compressed pages: header().pageCoding == kCanopyPageZstd).
+  const std::vector<CanopyPageExtent>& pageExtents() const { return extents_; }
+  // The bytes the pages take in the file (pageCount x pageBytes, or their stored bytes).
+  uint64_t storedPageBytes() const { return header_.fileBytes - header_.pagesOffset; }
   bool hasSceneLight() const { return hasSceneLight_; }
   const CanopySceneLight& sceneLight() const { return sceneLight_; }
   // The scene lattice's bases: 1 (B00 only) or 19 (B00 and the SceneSunLight section's B01..B18);
@@ -94,8 +98,9 @@ class CanopyFile {
   // Descends model `m` (CPU convenience over canopyDescend).
   CanopyLookup descend(uint32_t m, float ux, float uy, float uz, uint32_t maxLevel = kCanopyMaxDepth) const;
 
-  // Reads page `index` into dst (pageBytes) with one pread and checks it against the page table and
-  // its CRC. Thread-safe (no shared file offset).
+  // Reads page `index` into dst (pageBytes) with one pread (of its stored bytes, decompressed, in a
+  // 5.0 file of compressed pages) and checks it against the page table and its CRC. Thread-safe (no
+  // shared file offset).
   void readPage(uint32_t index, void* dst) const;
   std::vector<unsigned char> readPage(uint32_t index) const;
 
@@ -122,6 +127,7 @@ class CanopyFile {
   std::string metadata_;
   std::vector<uint32_t> haarIndex_;
   std::vector<uint32_t> sparseIndex_;
+  std::vector<CanopyPageExtent> extents_;  // (5.0) compressed pages only
 };
 
 // Page check for `canopy-octreepack verify`: reads and checks every page of an opened file (whose

@@ -1,5 +1,5 @@
-// canopy_layout.h: the byte layout of the packed, streamable scene file (`.canopy`), version 4.0
-// (writes the oldest version that holds a file's content, byte for byte; reads 1.0 to 4.0).
+// canopy_layout.h: the byte layout of the packed, streamable scene file (`.canopy`), version 5.0
+// (writes the oldest version that holds a file's content, byte for byte; reads 1.0 to 5.0).
 //
 // A .canopy file holds plant models (each a sparse GigaVoxels-style octree of bricks, thesis ch. 5),
 // instances of those models (model id + transform) and an optional coarse scene lighting lattice.
@@ -20,8 +20,11 @@
 //                       SceneSunLight  float[18][dim]  (1.2, optional: the scene lattice's sun bases)
 //                       Metadata    UTF-8 JSON: tool version, inputs and their hashes (optional)
 //                       HaarIndex   uint32[]: Haar-lit models' group tables + brick locations (1.1)
-//   pagesOffset       page 0, page 1, ...        pageBytes each (65536), pagesOffset % pageBytes == 0
-//   fileBytes         end of file (== pagesOffset + pageCount * pageBytes; nothing may follow)
+//                       PageExtents CanopyPageExtent[pageCount]      24 B each (5.0, compressed pages only)
+//   pagesOffset       page 0, page 1, ...        pageBytes each (65536), pagesOffset % pageBytes == 0;
+//                                                compressed (5.0): each page's stored bytes, back to back
+//   fileBytes         end of file (== pagesOffset + pageCount * pageBytes, or + the stored bytes of
+//                     every page when compressed; nothing may follow)
 //
 //   resident part = [0, pagesOffset): header, section table, every section. All node tiles are
 //   resident (16 B per node; the whole resident part measured 0.1-0.7% of a file); bricks and
@@ -111,6 +114,16 @@
 // writer writes 4.0 for a file with light items; a file without any keeps its older version (and
 // the header's 1.x-3.0 light item geometry) byte for byte.
 //
+// 5.0 adds compressed pages (KTX2's supercompression, per page): with header.pageCoding ==
+// kCanopyPageZstd each page is stored as one Zstandard frame of its image, after a byte-plane
+// filter (CanopyPageExtent::filter: 0 none; 2 or 4: the image's 2- or 4-byte words split into
+// planes, plane b holding byte b of every word, plane after plane; the writer keeps the smallest of
+// the three), pages back to back from pagesOffset in index order, found through the PageExtents
+// section with the CRC of its stored bytes. A page decompresses to exactly pageBytes, and its header
+// and CRC are those of the page image, checked as before; streaming reads a page's stored bytes alone. The writer writes 5.0 only
+// for a compressed file (canopy-octreepack's default: a lit detail plant takes half the bytes); a
+// file of raw pages keeps its older version byte for byte.
+//
 // This header holds the layout alone: constants, the resident structures and the arithmetic that
 // finds a brick, a light item or a level in them. canopy_sample.h samples page images (host and
 // device); canopy_file.h is the host reader that validates a file (formats/canopy_file.cpp).
@@ -126,8 +139,8 @@ namespace canopy {
 // ------------------------------------------------------------------------------------------------
 constexpr char kCanopyMagic[8] = {'C', 'A', 'N', 'O', 'P', 'Y', 'P', 'K'};
 // 2.0: detail levels (a model's levels finer than its light lattice); 3.0: uniform sparse bricks;
-// 4.0: shared-exponent light items
-constexpr uint16_t kCanopyMajor = 4;
+// 4.0: shared-exponent light items; 5.0: compressed pages
+constexpr uint16_t kCanopyMajor = 5;
 constexpr uint16_t kCanopyMinor = 0;
 // The 1.x minors this reader knows: 1.1: Haar light pages (optional; a 1.0 reader skips them),
 // kCanopyModelScatteredSun; 1.2: the scene lattice's sun bases (SceneSunLight; a 1.1 reader skips it)
@@ -172,7 +185,8 @@ struct CanopyFileHeader {          // offset
   uint32_t flags;                  //  76  0 in 1.0
   uint32_t lightItemBytes;         //  80  bytes per light item (16416; 24624 before 4.0)
   uint32_t lightItemsPerPage;      //  84  floor((pageBytes - 32) / lightItemBytes) = 3 (2 before 4.0)
-  uint8_t reserved[36];            //  88  zero
+  uint32_t pageCoding;             //  88  kCanopyPageRaw, or (5.0) kCanopyPageZstd; 0 before 5.0
+  uint8_t reserved[32];            //  92  zero
   uint32_t headerCrc;              // 124  CRC-32 of bytes [0, 124)
 };
 static_assert(sizeof(CanopyFileHeader) == 128, "CanopyFileHeader layout");
@@ -193,7 +207,24 @@ enum class CanopySectionKind : uint32_t {
   // model.firstSparseIndex: entry i is detail brick (denseBricks + i)'s location, its sparse page
   // within the model's sparse pages << 12 | its item in that page.
   SparseIndex = 9,
+  // (5.0; exactly when header.pageCoding == kCanopyPageZstd) CanopyPageExtent[pageCount]: where
+  // each page's stored bytes lie.
+  PageExtents = 10,
 };
+
+// How pages are stored (header.pageCoding).
+constexpr uint32_t kCanopyPageRaw = 0;   // page images, pageBytes each
+constexpr uint32_t kCanopyPageZstd = 1;  // (5.0) one Zstandard frame per page, after its filter
+
+// (5.0) Where page i's stored bytes lie: offset == pagesOffset + the stored bytes of pages 0..i-1.
+struct CanopyPageExtent {          // offset
+  uint64_t offset;                 //   0  from the start of the file
+  uint32_t storedBytes;            //   8  the Zstandard frame's size
+  uint32_t filter;                 //  12  0, 2 or 4: the byte planes of the image's 2- or 4-byte words
+  uint32_t storedCrc;              //  16  CRC-32 of the stored bytes (checked before they are decoded)
+  uint32_t reserved;               //  20  zero
+};
+static_assert(sizeof(CanopyPageExtent) == 24, "CanopyPageExtent layout");
 
 struct CanopySection {             // offset
   uint32_t kind;                   //   0  CanopySectionKind

@@ -1,6 +1,7 @@
 // canopy_write.cpp: see canopy_write.h.
 #include "formats/canopy_write.h"
 #include "formats/item_pages.h"
+#include "formats/page_coding.h"
 
 #include <algorithm>
 #include <cstddef>
@@ -305,8 +306,9 @@ bool addSceneLightBlobs(const CanopyWriteInput& in, std::vector<Blob>& blobs) {
 }
 
 // The resident sections, in file order; sceneSun: whether the scene lattice's sun bases are among them.
+// extents: (5.0) the compressed pages' extents (PageExtents), or null for raw pages.
 std::vector<Blob> residentBlobs(const CanopyWriteInput& in, const Ranges& R, const std::vector<CanopyPageEntry>& pages,
-                                bool& sceneSun) {
+                                const std::vector<CanopyPageExtent>* extents, bool& sceneSun) {
   std::vector<Blob> blobs;
   blobs.push_back(blobOf(CanopySectionKind::Models, R.models.data(), sizeof(CanopyModel), uint32_t(R.models.size())));
   blobs.push_back(blobOf(CanopySectionKind::Instances, in.instances.data(), sizeof(CanopyInstance), uint32_t(in.instances.size())));
@@ -317,6 +319,8 @@ std::vector<Blob> residentBlobs(const CanopyWriteInput& in, const Ranges& R, con
     blobs.push_back(blobOf(CanopySectionKind::HaarIndex, R.haarIndex.data(), sizeof(uint32_t), uint32_t(R.haarIndex.size())));
   if (!R.sparseIndex.empty())
     blobs.push_back(blobOf(CanopySectionKind::SparseIndex, R.sparseIndex.data(), sizeof(uint32_t), uint32_t(R.sparseIndex.size())));
+  if (extents)
+    blobs.push_back(blobOf(CanopySectionKind::PageExtents, extents->data(), sizeof(CanopyPageExtent), uint32_t(extents->size())));
   if (!in.metadata.empty()) {
     Blob b{CanopySectionKind::Metadata, 0, 1, {}, canopySectionLabel(uint32_t(CanopySectionKind::Metadata))};
     b.bytes.assign(in.metadata.begin(), in.metadata.end());
@@ -356,7 +360,7 @@ Sections placeSections(const std::vector<Blob>& blobs, uint32_t pageBytes, Layou
 
 // The file header (version, sizes, checksums) into the resident image, and the stats.
 void writeHeader(const CanopyWriteInput& in, const Ranges& R, const Sections& S, bool sceneSun, const PageGeometry& g,
-                 Layout& L) {
+                 const std::vector<CanopyPageExtent>* extents, Layout& L) {
   const std::vector<CanopySection>& table = S.table;
   const uint64_t pagesOffset = S.pagesOffset;
   const uint32_t pageBytes = g.pageBytes;
@@ -366,15 +370,22 @@ void writeHeader(const CanopyWriteInput& in, const Ranges& R, const Sections& S,
   // none, 2.0; else 1.2 with the scene lattice's sun bases and 1.0 without, byte for byte as before.
   // (1.1's features, Haar light and scattered-only sun bases, exist only with light items: a Haar
   // model needs them, and the flag is cleared on a model without them.)
-  h.major = R.lit ? 4 : R.uniform ? 3 : R.detail ? 2 : 1;
+  // Compressed pages (the PageExtents section) are 5.0 whatever else the file holds.
+  h.major = extents ? 5 : R.lit ? 4 : R.uniform ? 3 : R.detail ? 2 : 1;
   h.minor = h.major == 1 && sceneSun ? 2 : 0;
-  static_assert(kCanopyMajor == 4 && kCanopyMinor == 0 && kCanopyMinor1 == 2, "the writer's versions");
+  static_assert(kCanopyMajor == 5 && kCanopyMinor == 0 && kCanopyMinor1 == 2, "the writer's versions");
+  h.pageCoding = extents ? kCanopyPageZstd : kCanopyPageRaw;
   h.headerBytes = sizeof(CanopyFileHeader);
   h.pageBytes = pageBytes;
   h.pageCount = uint32_t(L.pages.size());
   h.pagesOffset = pagesOffset;
   h.residentBytes = pagesOffset;
-  h.fileBytes = pagesOffset + uint64_t(h.pageCount) * pageBytes;
+  uint64_t pageArea = uint64_t(h.pageCount) * pageBytes;
+  if (extents) {
+    pageArea = 0;
+    for (const CanopyPageExtent& e : *extents) pageArea += e.storedBytes;
+  }
+  h.fileBytes = pagesOffset + pageArea;
   h.sectionCount = uint32_t(table.size());
   h.sectionTableCrc = crc32(0, table.data(), table.size() * sizeof(CanopySection));
   h.modelCount = uint32_t(R.models.size());
@@ -391,19 +402,74 @@ void writeHeader(const CanopyWriteInput& in, const Ranges& R, const Sections& S,
   L.stats.fileBytes = h.fileBytes;
   L.stats.residentBytes = h.residentBytes;
   L.stats.pageCount = h.pageCount;
-  L.stats.sections.push_back({"pages", uint64_t(h.pageCount) * pageBytes});
+  L.stats.sections.push_back({"pages", pageArea});
+  L.stats.pageBytes = uint64_t(h.pageCount) * pageBytes;
+  L.stats.pageCoding = h.pageCoding;
+}
+
+// The resident image of the page table `pages` (and, compressed, their extents: null gives the
+// compressed layout with every extent zero, which has the same size).
+void residentImage(const CanopyWriteInput& in, const Ranges& R, const PageGeometry& g, const std::vector<CanopyPageExtent>* extents,
+                   Layout& L) {
+  std::vector<CanopyPageExtent> zero;
+  if (in.pageCoding == kCanopyPageZstd && !extents) {
+    zero.assign(L.pages.size(), CanopyPageExtent{});
+    extents = &zero;
+  }
+  if (in.pageCoding != kCanopyPageZstd) extents = nullptr;
+  L.stats.sections.clear();
+  bool sceneSun = false;
+  const std::vector<Blob> blobs = residentBlobs(in, R, L.pages, extents, sceneSun);
+  const Sections S = placeSections(blobs, g.pageBytes, L);
+  writeHeader(in, R, S, sceneSun, g, extents, L);
 }
 
 // Builds the page table of the assigned ranges R (CRCs need page contents: `emitPage` is called for
-// every page) and the resident image.
+// every page) and the resident image (compressed: with every extent zero).
 Layout layout(const CanopyWriteInput& in, const Ranges& R, const PageGeometry& g, const EmitPage& emitPage) {
   Layout L;
   buildPages(in, R, g, emitPage, L.pages);
-  bool sceneSun = false;
-  const std::vector<Blob> blobs = residentBlobs(in, R, L.pages, sceneSun);
-  const Sections S = placeSections(blobs, g.pageBytes, L);
-  writeHeader(in, R, S, sceneSun, g, L);
+  residentImage(in, R, g, nullptr, L);
   return L;
+}
+
+// (5.0) Compresses the pages given in index order, a batch at a time on all cores (each page on its
+// own, so the bytes do not depend on the threads), and hands their stored bytes on in order:
+// write(bytes, n). The extents of the pages so far, from pagesOffset on.
+class PageCompressor {
+ public:
+  PageCompressor(uint32_t pageBytes, int level, uint64_t pagesOffset, std::function<void(const unsigned char*, size_t)> write)
+      : pageBytes_(pageBytes), level_(level), at_(pagesOffset), write_(std::move(write)) {}
+  void add(const std::vector<unsigned char>& img) {
+    images_.push_back(img);
+    if (images_.size() == kBatch) flush();
+  }
+  void flush() {
+    std::vector<std::vector<unsigned char>> stored(images_.size());
+    std::vector<uint32_t> filter(images_.size());
+    parallelFor(int64_t(images_.size()), [&](int64_t i) { filter[size_t(i)] = canopyPageEncode(images_[size_t(i)].data(), pageBytes_, level_, stored[size_t(i)]); }, 1);
+    for (size_t i = 0; i < images_.size(); ++i) {
+      extents.push_back(CanopyPageExtent{at_, uint32_t(stored[i].size()), filter[i], crc32(0, stored[i].data(), stored[i].size()), 0u});
+      at_ += stored[i].size();
+      write_(stored[i].data(), stored[i].size());
+    }
+    images_.clear();
+  }
+  std::vector<CanopyPageExtent> extents;
+
+ private:
+  static constexpr size_t kBatch = 256;  // 16 MiB of page images
+  uint32_t pageBytes_;
+  int level_;
+  uint64_t at_;
+  std::function<void(const unsigned char*, size_t)> write_;
+  std::vector<std::vector<unsigned char>> images_;
+};
+
+void checkCoding(const CanopyWriteInput& in) {
+  if (in.pageCoding != kCanopyPageRaw && in.pageCoding != kCanopyPageZstd) throw invalidInput("canopy writer: unknown page coding");
+  if (in.pageCoding == kCanopyPageZstd && (in.zstdLevel < 1 || in.zstdLevel > 19))
+    throw invalidInput("canopy writer: the Zstandard level must be 1..19");
 }
 
 }  // namespace
@@ -417,16 +483,35 @@ CanopyWriteStats writeCanopyFile(const std::string& path, CanopyWriteInput input
   // been built. Pass 1 lays out without output (resident image); pass 2 streams the pages to their
   // offsets; both passes must agree byte for byte. The ranges (and the sparse items they hold) are
   // assigned once.
+  // Compressed pages (5.0): the extents are known only once every page is compressed; the resident
+  // part has the same size with every extent zero, so pass 2 streams the stored pages from the same
+  // offset and the resident part is written last, with the extents.
+  checkCoding(input);
   const PageGeometry g;
   const Ranges R = assignModelRanges(input, g);
   const Layout probe = layout(input, R, g, nullptr);
   const uint64_t pagesOffset = probe.resident.size();
   ok = std::fwrite(probe.resident.data(), 1, probe.resident.size(), f) == probe.resident.size();
   if (ok && std::fseek(f, long(pagesOffset), SEEK_SET) != 0) ok = false;
-  Layout L = layout(input, R, g, [&](uint32_t index, std::vector<unsigned char>& img) {
-    if (ok) ok = std::fwrite(img.data(), 1, img.size(), f) == img.size();
+  const auto write = [&](const unsigned char* p, size_t n) {
+    if (ok) ok = std::fwrite(p, 1, n, f) == n;
+  };
+  PageCompressor packer(g.pageBytes, input.zstdLevel, pagesOffset, write);
+  const bool zstd = input.pageCoding == kCanopyPageZstd;
+  Layout L = layout(input, R, g, [&](uint32_t, std::vector<unsigned char>& img) {
+    if (zstd)
+      packer.add(img);
+    else
+      write(img.data(), img.size());
   });
   if (ok && L.resident != probe.resident) ok = false;  // deterministic layout: both passes agree
+  if (zstd) {
+    packer.flush();
+    residentImage(input, R, g, &packer.extents, L);
+    if (L.resident.size() != pagesOffset) ok = false;
+    if (ok && std::fseek(f, 0, SEEK_SET) != 0) ok = false;
+    write(L.resident.data(), L.resident.size());
+  }
   if (std::fclose(f) != 0) ok = false;
   if (!ok) throw ioError(path + ": write failed (disk full?)");
   out.commit();
@@ -434,11 +519,27 @@ CanopyWriteStats writeCanopyFile(const std::string& path, CanopyWriteInput input
 }
 
 std::vector<unsigned char> writeCanopyBytes(CanopyWriteInput input, CanopyWriteStats* stats) {
-  std::vector<std::vector<unsigned char>> pages;
+  checkCoding(input);
+  std::vector<unsigned char> pageArea;
   const PageGeometry g;
-  Layout L = layout(input, assignModelRanges(input, g), g, [&](uint32_t, std::vector<unsigned char>& img) { pages.push_back(img); });
+  const Ranges R = assignModelRanges(input, g);
+  const auto write = [&](const unsigned char* p, size_t n) { pageArea.insert(pageArea.end(), p, p + n); };
+  const bool zstd = input.pageCoding == kCanopyPageZstd;
+  PageCompressor packer(g.pageBytes, input.zstdLevel, 0, write);
+  Layout L = layout(input, R, g, [&](uint32_t, std::vector<unsigned char>& img) {
+    if (zstd)
+      packer.add(img);
+    else
+      write(img.data(), img.size());
+  });
+  if (zstd) {
+    packer.flush();
+    const uint64_t pagesOffset = L.resident.size();
+    for (CanopyPageExtent& e : packer.extents) e.offset += pagesOffset;
+    residentImage(input, R, g, &packer.extents, L);
+  }
   std::vector<unsigned char> bytes = std::move(L.resident);
-  for (const auto& p : pages) bytes.insert(bytes.end(), p.begin(), p.end());
+  bytes.insert(bytes.end(), pageArea.begin(), pageArea.end());
   if (stats) *stats = L.stats;
   return bytes;
 }

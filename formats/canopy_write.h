@@ -54,6 +54,10 @@ struct CanopyWriteInput {
   uint32_t sceneLightBases = 1;
   std::vector<float> sceneLightValues;   // sceneLightBases x dim.x*dim.y*dim.z, base-major (B00 first)
   std::string metadata;                  // UTF-8 JSON; empty = no Metadata section
+  // How pages are stored: kCanopyPageRaw (the oldest version that holds the content) or
+  // kCanopyPageZstd (5.0: one Zstandard frame per page at zstdLevel, 1..19).
+  uint32_t pageCoding = kCanopyPageRaw;
+  int zstdLevel = 15;
 };
 
 struct CanopyWriteStats {
@@ -64,7 +68,9 @@ struct CanopyWriteStats {
     std::string name;
     uint64_t bytes;
   };
-  std::vector<Section> sections;         // resident sections, then "pages"
+  std::vector<Section> sections;         // resident sections, then "pages" (their stored bytes)
+  uint64_t pageBytes = 0;                // the pages' images: pageCount x the page size
+  uint32_t pageCoding = kCanopyPageRaw;  // as written
 };
 
 // Throws canopy::Error (Io for an unwritable path, InvalidInput for inconsistent input).

@@ -14,6 +14,7 @@
 #include <functional>
 #include <limits>
 #include <random>
+#include <set>
 #include <string>
 #include <tuple>
 
@@ -23,6 +24,7 @@
 #include "formats/canopy_file.h"
 #include "formats/canopy_write.h"
 #include "formats/chaar.h"
+#include "formats/page_coding.h"
 #include "tests/octreepack/packed_sampler.h"
 #include "tests/octreepack/synthetic.h"
 
@@ -32,6 +34,7 @@ namespace op = canopy::octreepack;
 namespace {
 
 // The frozen files of every version (4.0, 3.0, 2.0, 1.2, 1.1, 1.0), which must still read.
+const std::string kFrozenV50 = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v5.0.canopy";
 const std::string kFrozenV40 = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v4.0.canopy";
 const std::string kFrozen = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v1.2.canopy";
 const std::string kFrozenV30 = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v3.0.canopy";
@@ -77,8 +80,9 @@ op::ModelSource detailSource(bool binary) {
 // items of its decoded values and its Haar pages: 1.1); a coarse scene light with its 19 bases
 // (SceneSunLight's B01..B18: 1.2); a detail model and a fifth instance (2.0); a second detail model
 // whose finest level holds density 1 wherever it is occupied (uniform sparse bricks) and a sixth
-// instance (3.0). This writer writes all of it as the 4.0 file.
-std::vector<unsigned char> smallFileBytes() {
+// instance (3.0). This writer writes all of it as the 4.0 file, and with compressed pages (`coding`
+// kCanopyPageZstd) as the 5.0 file.
+std::vector<unsigned char> smallFileBytes(uint32_t coding = kCanopyPageRaw) {
   const op::ModelSource src = op::testing::syntheticPlant(20, 2, "frozen", 0);
   const op::BuiltModel m = op::buildOctree(src, "frozen");
   const op::BuiltModel lit = op::buildOctree(op::testing::syntheticPlant(8, 0, "lit", 0), "lit", op::testing::analyticLight);
@@ -118,6 +122,7 @@ std::vector<unsigned char> smallFileBytes() {
   const uint32_t n = uint32_t(kSceneDim[0] * kSceneDim[1] * kSceneDim[2]);
   for (uint32_t base = 0; base < kCanopyLightBases; ++base)
     for (uint32_t i = 0; i < n; ++i) in.sceneLightValues.push_back(sceneLightValue(base, i));
+  in.pageCoding = coding;
   return writeCanopyBytes(std::move(in));
 }
 
@@ -201,11 +206,11 @@ std::string expectRejected(const std::vector<unsigned char>& bytes, bool readPag
 void checkFrozenV11Content(CanopyFile& f);
 
 // A frozen file of the 1.2 content and more, opened, its version and that content checked. The
-// current version's file (4.0) is regenerated from smallFileBytes() with CANOPY_WRITE_FROZEN=1, for
-// a new format version only.
+// current version's file (5.0, compressed pages) is regenerated from smallFileBytes() with
+// CANOPY_WRITE_FROZEN=1, for a new format version only.
 CanopyFile openFrozen(const std::string& path, int major, int minor) {
   if (std::getenv("CANOPY_WRITE_FROZEN") && major == kCanopyMajor) {
-    const auto bytes = smallFileBytes();
+    const auto bytes = smallFileBytes(kCanopyPageZstd);
     writeFileAtomic(path, bytes.data(), bytes.size());
   }
   CanopyFile f = CanopyFile::open(path);
@@ -414,6 +419,136 @@ TEST(CanopyFile, FrozenVersion40FileReadsAndIsStillWritten) {
   ASSERT_EQ(lit.light.size(), kCanopyLightItemBytes / 4);
   EXPECT_EQ(std::memcmp(canopyLightInPage(page.data(), 0), lit.light.data(), kCanopyLightItemBytes), 0);
   EXPECT_EQ(readFile(kFrozenV40), smallFileBytes()) << "the .canopy layout changed: bump the version";
+}
+
+// 5.0: the same content with compressed pages. Its pages decode to the 4.0 file's page images, bit
+// for bit; it is smaller; the writer's bytes are the same on every run (each page compressed on its
+// own); the frozen 5.0 file (another libzstd may compress to other bytes) reads as written.
+TEST(CanopyFile, CompressedPagesDecodeToTheRawPages) {
+  const uint32_t h32k = 32768;
+  const std::vector<unsigned char> raw = smallFileBytes(), zstd = smallFileBytes(kCanopyPageZstd);
+  EXPECT_EQ(zstd, smallFileBytes(kCanopyPageZstd)) << "compressed pages are deterministic";
+  CanopyFile r = CanopyFile::fromMemory(raw.data(), raw.size(), "raw");
+  CanopyFile z = CanopyFile::fromMemory(zstd.data(), zstd.size(), "zstd");
+  CanopyFile frozen = openFrozen(kFrozenV50, 5, 0);
+  EXPECT_EQ(r.header().major, 4);
+  EXPECT_EQ(r.header().pageCoding, kCanopyPageRaw);
+  EXPECT_EQ(z.header().pageCoding, kCanopyPageZstd);
+  EXPECT_EQ(frozen.header().pageCoding, kCanopyPageZstd);
+  ASSERT_EQ(z.pageCount(), r.pageCount());
+  ASSERT_EQ(frozen.pageCount(), r.pageCount());
+  ASSERT_EQ(z.pageExtents().size(), size_t(z.pageCount()));
+  EXPECT_TRUE(r.pageExtents().empty());
+  std::printf("the small file: %zu bytes raw, %zu compressed (pages %llu -> %llu)\n", raw.size(), zstd.size(),
+              (unsigned long long)r.storedPageBytes(), (unsigned long long)z.storedPageBytes());
+  EXPECT_LT(z.storedPageBytes(), r.storedPageBytes() / 2);
+  for (uint32_t i = 0; i < r.pageCount(); ++i) {
+    const auto page = r.readPage(i);
+    ASSERT_EQ(z.readPage(i), page) << i;
+    ASSERT_EQ(frozen.readPage(i), page) << i;
+  }
+  EXPECT_TRUE(verifyCanopyPages(z).empty());
+  // every filter round-trips (the writer keeps the smallest; here each is forced), and a page of
+  // float words whose high bytes repeat (a ramp) compresses smaller in byte planes
+  std::vector<unsigned char> page(h32k), back(h32k), stored;
+  for (uint32_t i = 0; i < h32k / 4; ++i) {
+    const float v = 1.0f + float(i) * 1.0e-4f;  // a ramp: its high bytes repeat, its low bytes do not
+    std::memcpy(page.data() + 4 * i, &v, 4);
+  }
+  size_t plain = 0, planes = 0;
+  for (int filter : {0, 2, 4}) {
+    ASSERT_EQ(canopyPageEncode(page.data(), h32k, 9, stored, filter), uint32_t(filter));
+    ASSERT_EQ(canopyPageDecode(stored.data(), stored.size(), uint32_t(filter), back.data(), h32k), "");
+    ASSERT_EQ(back, page) << filter;
+    if (filter == 0) plain = stored.size();
+    if (filter == 4) planes = stored.size();
+  }
+  EXPECT_LT(planes, plain);
+  EXPECT_EQ(canopyPageEncode(page.data(), h32k, 9, stored), 4u) << "the smallest is kept";
+  EXPECT_NE(canopyPageDecode(stored.data(), stored.size(), 3, back.data(), h32k).find("unknown page filter"), std::string::npos);
+  EXPECT_NE(canopyPageDecode(stored.data(), stored.size(), 4, back.data(), h32k / 2).find("not one Zstandard frame"), std::string::npos);
+  checkSceneLight(z);
+  checkUniformDetailModel(z);
+}
+
+// A compressed file cut anywhere is truncated, and a flip anywhere is caught: in the header and
+// tables by their CRCs, in the stored pages by their stored bytes' CRC (before they are decoded).
+TEST(CanopyFile, CompressedPagesRejectEveryTruncationAndFlip) {
+  const std::vector<unsigned char> good = smallFileBytes(kCanopyPageZstd);
+  for (size_t n = 0; n < good.size(); n += (n < 4096 ? 1 : 7)) {
+    try {
+      CanopyFile f = CanopyFile::fromMemory(good.data(), n, "bad.canopy");
+      FAIL() << "prefix of " << n << " bytes accepted";
+    } catch (const Error& e) {
+      ASSERT_EQ(e.code(), ExitCode::InvalidInput) << e.what();
+      ASSERT_NE(std::string(e.what()).find("truncated"), std::string::npos) << e.what();
+    }
+  }
+  CanopyFileHeader h;
+  std::memcpy(&h, good.data(), sizeof h);
+  std::vector<unsigned char> bad = good;
+  size_t pageFlips = 0;
+  for (size_t i = 0; i < good.size(); i += (i < sizeof h + h.sectionCount * sizeof(CanopySection) ? 1 : (i < h.pagesOffset ? 11 : 13))) {
+    bad[i] ^= 0x01;
+    const std::string m = expectRejected(bad);
+    bad[i] ^= 0x01;
+    if (i >= h.pagesOffset) {
+      ++pageFlips;
+      EXPECT_NE(m.find("stored bytes checksum mismatch"), std::string::npos) << m;
+    }
+  }
+  EXPECT_GT(pageFlips, 500u);
+}
+
+// Crafted extents and codings with every CRC valid: each refused with its reason; and a stored
+// page that is not one frame of a page, with its stored CRC made valid, refused when it is read.
+TEST(CanopyFile, CompressedPageExtentsAreCheckedEvenWithValidChecksums) {
+  const std::vector<unsigned char> good = smallFileBytes(kCanopyPageZstd);
+  CanopyFileHeader h;
+  std::memcpy(&h, good.data(), sizeof h);
+  CanopyFile f = CanopyFile::fromMemory(good.data(), good.size(), "good");
+  const CanopySection* se = f.findSection(CanopySectionKind::PageExtents);
+  ASSERT_NE(se, nullptr);
+  const auto edited = [&](auto edit) {
+    std::vector<unsigned char> b = good;
+    edit(b);
+    reseal(b);
+    return expectRejected(b, false);
+  };
+  const auto extentAt = [&](std::vector<unsigned char>& b, uint32_t i) { return reinterpret_cast<CanopyPageExtent*>(b.data() + se->offset) + i; };
+  EXPECT_NE(edited([&](auto& b) { extentAt(b, 1)->offset += 1; }).find("extent invalid"), std::string::npos);
+  EXPECT_NE(edited([&](auto& b) { extentAt(b, 2)->storedBytes = 0; }).find("extent invalid"), std::string::npos);
+  EXPECT_NE(edited([&](auto& b) { extentAt(b, 0)->storedBytes = uint32_t(canopyPageStoredBound(h.pageBytes) + 1); }).find("extent invalid"),
+            std::string::npos);
+  EXPECT_NE(edited([&](auto& b) { extentAt(b, 0)->filter = 3; }).find("unknown filter"), std::string::npos);
+  EXPECT_NE(edited([&](auto& b) { extentAt(b, 0)->reserved = 1; }).find("reserved"), std::string::npos);
+  // the last page shorter by a byte: the pages end before the file does
+  EXPECT_NE(edited([&](auto& b) { extentAt(b, h.pageCount - 1)->storedBytes -= 1; }).find("not at the end of the file"), std::string::npos);
+  const auto header = [&](auto edit) {
+    return edited([&](std::vector<unsigned char>& b) {
+      CanopyFileHeader x;
+      std::memcpy(&x, b.data(), sizeof x);
+      edit(x);
+      x.headerCrc = crc32(0, &x, offsetof(CanopyFileHeader, headerCrc));
+      std::memcpy(b.data(), &x, sizeof x);
+    });
+  };
+  EXPECT_NE(header([](CanopyFileHeader& x) { x.pageCoding = 2; }).find("page coding 2"), std::string::npos);
+  EXPECT_NE(header([](CanopyFileHeader& x) { x.major = 4; }).find("page coding 1 is not valid in a 4.0 file"), std::string::npos);
+  // compressed pages without their extents, and a raw file with extents
+  EXPECT_NE(header([](CanopyFileHeader& x) { x.pageCoding = kCanopyPageRaw; }).find("page count"), std::string::npos);
+  // a stored page replaced by another page's frame (its own CRC made valid): decodes to the wrong page
+  std::vector<unsigned char> swapped = good;
+  {
+    CanopyPageExtent* e = reinterpret_cast<CanopyPageExtent*>(swapped.data() + se->offset);
+    // page 0's stored bytes hold page 0 of the same size but one byte of its frame changed: it no
+    // longer decodes (or decodes to another image); the stored CRC is made to match it
+    swapped[size_t(e[0].offset + e[0].storedBytes / 2)] ^= 0x40;
+    e[0].storedCrc = crc32(0, swapped.data() + e[0].offset, e[0].storedBytes);
+    reseal(swapped);
+  }
+  const std::string m = expectRejected(swapped);
+  EXPECT_NE(m.find("page 0: "), std::string::npos) << m;
 }
 
 // The light item geometry must be its version's: a 4.0 file relabelled 3.0 and a 3.0 file relabelled

@@ -36,6 +36,14 @@ int main(int argc, char** argv) {
   app.add_flag("--no-haar-light", o.noHaarLight,
                "Pack a .chaar's lighting as light items only, without its Haar bricks (the finest level's exact light: "
                "canopy-play --light exact); a smaller file");
+  app.add_option("--pages", o.pageCoding,
+                 "zstd: every page compressed on its own (format 5.0; a lit detail plant takes half the bytes, pages decompress "
+                 "as they stream); raw: page images as before 5.0, for older readers")
+      ->check(CLI::IsMember({"zstd", "raw"}))
+      ->capture_default_str();
+  app.add_option("--zstd-level", o.zstdLevel, "Zstandard level of --pages zstd (higher: smaller and slower to pack; the same speed to read)")
+      ->check(CLI::Range(1, 19))
+      ->capture_default_str();
   app.fallthrough();  // (inherited by the subcommands) `info FILE --json` works too
   std::string infoPath, verifyPath;
   CLI::App* info = app.add_subcommand("info", "Print models, levels, node/brick/page counts and bytes per section");

@@ -207,6 +207,8 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
   meta["models"] = sources;
   progress.done();
   w.metadata = meta.dump();
+  w.pageCoding = o.pageCoding == "raw" ? kCanopyPageRaw : kCanopyPageZstd;
+  w.zstdLevel = o.zstdLevel;
   const CanopyWriteStats stats = writeCanopyFile(o.output, std::move(w));
 
   nlohmann::json report = canopyInfo(CanopyFile::open(o.output));
@@ -216,7 +218,8 @@ nlohmann::json octreepack(const OctreepackOptions& o) {
   for (const auto& b : built) cells += b.occupiedCells;
   report["occupied_cells"] = cells;
   logInfo("canopy-octreepack: wrote " + o.output + " (" + std::to_string(stats.fileBytes) + " bytes, resident " +
-          std::to_string(stats.residentBytes) + ", " + std::to_string(stats.pageCount) + " pages)");
+          std::to_string(stats.residentBytes) + ", " + std::to_string(stats.pageCount) + " pages" +
+          (stats.pageCoding == kCanopyPageZstd ? ", compressed from " + std::to_string(stats.pageBytes) + " bytes" : std::string()) + ")");
   return report;
 }
 
@@ -230,6 +233,10 @@ nlohmann::json canopyInfo(const CanopyFile& f) {
   j["resident_fraction"] = h.fileBytes ? double(h.residentBytes) / double(h.fileBytes) : 0.0;
   j["page_bytes"] = h.pageBytes;
   j["pages"] = h.pageCount;
+  // (5.0) how the pages are stored, and the bytes they take against their images'
+  j["page_coding"] = h.pageCoding == kCanopyPageZstd ? "zstd" : "raw";
+  j["pages_stored_bytes"] = f.storedPageBytes();
+  j["pages_image_bytes"] = uint64_t(h.pageCount) * h.pageBytes;
   j["bricks_per_page"] = h.bricksPerPage;
   // the light items' encoding (canopy_layout.h): shared-exponent RGB words from 4.0, float16 before
   j["light_items"] = h.major >= 4 ? "rgb9e5" : "float16";
@@ -239,7 +246,7 @@ nlohmann::json canopyInfo(const CanopyFile& f) {
     const CanopySection& s = f.section(i);
     sections.push_back({{"name", canopySectionLabel(s.kind)}, {"offset", s.offset}, {"bytes", s.bytes}, {"items", s.itemCount}});
   }
-  sections.push_back({{"name", "pages"}, {"offset", h.pagesOffset}, {"bytes", uint64_t(h.pageCount) * h.pageBytes}, {"items", h.pageCount}});
+  sections.push_back({{"name", "pages"}, {"offset", h.pagesOffset}, {"bytes", f.storedPageBytes()}, {"items", h.pageCount}});
   j["sections"] = sections;
   nlohmann::json models = nlohmann::json::array();
   for (uint32_t m = 0; m < f.modelCount(); ++m) {
@@ -303,7 +310,11 @@ std::string formatInfo(const nlohmann::json& j) {
   o << j["file"].get<std::string>() << ": .canopy " << j["format_version"].get<std::string>() << ", "
     << j["file_bytes"].get<uint64_t>() << " bytes, resident " << j["resident_bytes"].get<uint64_t>() << " ("
     << 100.0 * j["resident_fraction"].get<double>() << "%), " << j["pages"].get<uint64_t>() << " pages of "
-    << j["page_bytes"].get<uint64_t>() << " bytes, " << j["instances"].get<uint64_t>() << " instances\n";
+    << j["page_bytes"].get<uint64_t>() << " bytes";
+  if (j["page_coding"].get<std::string>() == "zstd")
+    o << " compressed (zstd) to " << j["pages_stored_bytes"].get<uint64_t>() << " bytes ("
+      << 100.0 * double(j["pages_stored_bytes"].get<uint64_t>()) / double(std::max<uint64_t>(1, j["pages_image_bytes"].get<uint64_t>())) << "%)";
+  o << ", " << j["instances"].get<uint64_t>() << " instances\n";
   o << "sections:\n";
   for (const auto& s : j["sections"])
     o << "  " << s["name"].get<std::string>() << ": " << s["bytes"].get<uint64_t>() << " bytes at " << s["offset"].get<uint64_t>() << "\n";

@@ -26,6 +26,8 @@ struct OctreepackOptions {
   std::string sceneLightGrid;
   bool ignoreLight = false;          // pack density only even where a .chaar is named
   bool noHaarLight = false;          // a .chaar's bricks are not packed (light items only)
+  std::string pageCoding = "zstd";   // zstd: compressed pages (format 5.0); raw: page images (the older versions)
+  int zstdLevel = 15;                // 1..19
 };
 
 // Packs; returns the JSON report (models, levels, bytes, seconds). Throws canopy::Error.
