@@ -447,8 +447,11 @@ class PageCompressor {
   void flush() {
     std::vector<std::vector<unsigned char>> stored(images_.size());
     std::vector<uint32_t> filter(images_.size());
-    parallelFor(int64_t(images_.size()), [&](int64_t i) { filter[size_t(i)] = canopyPageEncode(images_[size_t(i)].data(), pageBytes_, level_, stored[size_t(i)]); }, 1);
+    parallelFor(
+        int64_t(images_.size()),
+        [&](int64_t i) { filter[size_t(i)] = canopyPageEncode(images_[size_t(i)].data(), pageBytes_, level_, stored[size_t(i)]); }, 1);
     for (size_t i = 0; i < images_.size(); ++i) {
+      if (stored[i].empty()) throw runtimeError("canopy writer: Zstandard could not compress a page");
       extents.push_back(CanopyPageExtent{at_, uint32_t(stored[i].size()), filter[i], crc32(0, stored[i].data(), stored[i].size()), 0u});
       at_ += stored[i].size();
       write_(stored[i].data(), stored[i].size());
