@@ -70,8 +70,9 @@ class CanopyFile {
   const CanopyPageEntry& pageEntry(uint32_t i) const { return pages_[i]; }
   // (5.0) Where page i's stored bytes lie (compressed pages: header().pageCoding == kCanopyPageZstd).
   const std::vector<CanopyPageExtent>& pageExtents() const { return extents_; }
-  // The bytes the pages take in the file (pageCount x pageBytes, or their stored bytes).
+  // The bytes the pages take in the file (pageCount x pageBytes, or their stored bytes), and page i's.
   uint64_t storedPageBytes() const { return header_.fileBytes - header_.pagesOffset; }
+  uint64_t storedBytes(uint32_t i) const { return extents_.empty() ? header_.pageBytes : extents_[i].storedBytes; }
   bool hasSceneLight() const { return hasSceneLight_; }
   const CanopySceneLight& sceneLight() const { return sceneLight_; }
   // The scene lattice's bases: 1 (B00 only) or 19 (B00 and the SceneSunLight section's B01..B18);

@@ -509,7 +509,7 @@ StreamStats sumStats(const std::vector<Tile>& tiles) {
   StreamStats s;
   for (const Tile& t : tiles) {
     const StreamStats& a = t.streamer->stats();
-    s.pagesUsed += a.pagesUsed, s.pagesMissed += a.pagesMissed, s.pagesLoaded += a.pagesLoaded, s.bytesLoaded += a.bytesLoaded;
+    s.pagesUsed += a.pagesUsed, s.pagesMissed += a.pagesMissed, s.pagesLoaded += a.pagesLoaded, s.bytesLoaded += a.bytesLoaded, s.bytesRead += a.bytesRead;
     s.pagesDeferred += a.pagesDeferred, s.corruptPages += a.corruptPages, s.loadSeconds += a.loadSeconds, s.evictions += a.evictions;
   }
   return s;
@@ -601,6 +601,8 @@ nlohmann::json playReport(const PlayOptions& o, const CanopyFile& file, const Ho
                    : scene.totalSunModels == scene.litModels ? "total" : "mixed";
   r["pages_streamed"] = st.pagesLoaded;
   r["mb_streamed"] = double(st.bytesLoaded) / (1024.0 * 1024.0);
+  // what those pages took in the file (their stored bytes: less than mb_streamed with compressed pages)
+  r["file_mb_read"] = double(st.bytesRead) / (1024.0 * 1024.0);
   r["cold_start_mb"] = double(coldStartBytes) / (1024.0 * 1024.0);
   // the streaming rate of the cold start: what the first complete frame needed, over its time
   // (open, scene build, every pass and every page read and upload included)

@@ -107,6 +107,7 @@ void Streamer::beginPass(uint32_t frameStart) {
     uploadedBuffers_.push_back(j.buffer);
     ++stats_.pagesLoaded;
     stats_.bytesLoaded += pageBytes_;
+    stats_.bytesRead += file_.storedBytes(j.page);
     changed = true;
   }
   if (changed) backend_.setPageTable(cache_.table());

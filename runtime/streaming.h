@@ -26,7 +26,8 @@ struct StreamStats {
   uint64_t pagesUsed = 0;       // distinct pages sampled, summed over passes (hits)
   uint64_t pagesMissed = 0;     // distinct pages wanted but missing, summed over passes
   uint64_t pagesLoaded = 0;     // pages read, checked and uploaded
-  uint64_t bytesLoaded = 0;
+  uint64_t bytesLoaded = 0;     // their images' bytes
+  uint64_t bytesRead = 0;       // the bytes read from the file for them (less with compressed pages)
   uint64_t pagesDeferred = 0;   // loads dropped because every slot was in use
   uint64_t corruptPages = 0;
   double loadSeconds = 0.0;     // summed time of the loader threads' reads

@@ -53,9 +53,9 @@ inline double imageRms(const std::vector<float>& a, const std::vector<float>& b)
   return std::sqrt(s / double(a.size()));
 }
 
-// Builds every model and writes `path`.
+// Builds every model and writes `path` (raw pages, or compressed: kCanopyPageZstd).
 inline void writeScene(const std::string& path, const std::vector<octreepack::ModelSource>& sources,
-                       const std::vector<CanopyInstance>& instances) {
+                       const std::vector<CanopyInstance>& instances, uint32_t pageCoding = kCanopyPageRaw) {
   std::vector<octreepack::BuiltModel> built;
   built.reserve(sources.size());
   for (const auto& s : sources) built.push_back(octreepack::buildOctree(s, s.name));
@@ -63,6 +63,7 @@ inline void writeScene(const std::string& path, const std::vector<octreepack::Mo
   for (auto& b : built) w.models.push_back({b.record, &b.tiles, &b.bricks});
   w.instances = instances;
   w.metadata = "{\"tool\":\"tests/play\"}";
+  w.pageCoding = pageCoding;
   writeCanopyFile(path, std::move(w));
 }
 

@@ -56,14 +56,22 @@ bool exists(const std::string& p) {
   return ::stat(p.c_str(), &st) == 0;
 }
 
-const std::string& sceneFile() {
-  static const std::string p = [] {
-    const std::string f = pt::tmpDir("cli") + "/ball.canopy";
-    const float albedo[3] = {0.2f, 0.6f, 0.1f};
-    pt::writeScene(f, {pt::sphereModel(24, 10, 0.4f, 0.1f, albedo)}, {pt::instanceAt(0, 0, 0, 0)});
-    return f;
-  }();
-  return p;
+// The ball (raw pages; `compressed`: the same with compressed pages, format 5.0).
+const std::string& sceneFile(bool compressed = false) {
+  static const std::string p[2] = {[] {
+                                     const std::string f = pt::tmpDir("cli") + "/ball.canopy";
+                                     const float albedo[3] = {0.2f, 0.6f, 0.1f};
+                                     pt::writeScene(f, {pt::sphereModel(24, 10, 0.4f, 0.1f, albedo)}, {pt::instanceAt(0, 0, 0, 0)});
+                                     return f;
+                                   }(),
+                                   [] {
+                                     const std::string f = pt::tmpDir("cli") + "/ball-zstd.canopy";
+                                     const float albedo[3] = {0.2f, 0.6f, 0.1f};
+                                     pt::writeScene(f, {pt::sphereModel(24, 10, 0.4f, 0.1f, albedo)}, {pt::instanceAt(0, 0, 0, 0)},
+                                                    canopy::kCanopyPageZstd);
+                                     return f;
+                                   }()};
+  return p[compressed ? 1 : 0];
 }
 
 }  // namespace
@@ -83,13 +91,23 @@ TEST(PlayCli, WritesAPngOfTheRequestedSizeThatIsNotBlank) {
   const nlohmann::json j = nlohmann::json::parse(r.out);
   EXPECT_EQ(j["frames"], 1);
   EXPECT_EQ(j["device"], "cpu");
-  for (const char* k : {"frame_ms_median", "frame_ms_p95", "cache_hit_rate", "pages_streamed", "mb_streamed", "stream_mb_per_s"})
+  for (const char* k : {"frame_ms_median", "frame_ms_p95", "cache_hit_rate", "pages_streamed", "mb_streamed", "file_mb_read", "stream_mb_per_s"})
     EXPECT_TRUE(j.contains(k)) << k;
   EXPECT_NE(r.err.find("median"), std::string::npos) << r.err;  // the summary on stderr
   // the same input gives the same bytes (a converged frame does not depend on loader timing)
   const std::string again = pt::tmpDir("cli") + "/ball-again.png";
   ASSERT_EQ(run("'" + sceneFile() + "' -o '" + again + "' --size 40x30 --device cpu --quiet").code, 0);
   EXPECT_EQ(canopy::readFile(out), canopy::readFile(again));
+  // raw pages: the file bytes read are the pages' images; compressed pages (5.0): fewer bytes read,
+  // the same image
+  EXPECT_EQ(j["file_mb_read"], j["mb_streamed"]);
+  const std::string packed = pt::tmpDir("cli") + "/ball-zstd.png";
+  const CliRun z = run("'" + sceneFile(true) + "' -o '" + packed + "' --size 40x30 --device cpu --json --quiet");
+  ASSERT_EQ(z.code, 0) << z.err;
+  const nlohmann::json jz = nlohmann::json::parse(z.out);
+  EXPECT_EQ(jz["mb_streamed"], j["mb_streamed"]);
+  EXPECT_LT(jz["file_mb_read"].get<double>(), 0.5 * jz["mb_streamed"].get<double>());
+  EXPECT_EQ(canopy::readFile(packed), canopy::readFile(out));
 }
 
 // --no-empty-skip marches the brick cells that the skip would pass over (the ball's bricks on its
