@@ -40,7 +40,7 @@
 #                    at 1.8 m eye height (120 frames, 1080p, 1 GiB cache): canopy-play mono, mono in two
 #                    bands on one GPU (--tiles 2), and bench-stereo (IPD 0.064 m: the second eye
 #                    reprojected against traced in full, its time and image error) at --stereo-spread
-#                    0.5 (default), 0.75 and 1, and on a high orbit.
+#                    0.5, 0.65 (default), 0.75 and 1, and on a high orbit.
 #   forest           canopy-play on real-plant forests built by the Make rules (the stereo phase's build
 #                    and walk), each run 120 frames, 1 GiB cache, --json: one table in $OUT/forest.md,
 #                    the reports forest_*.json, each camera's last frame as forest-*.png (480x270):
@@ -297,7 +297,7 @@ if has stereo && need canopy-voxelize canopy-lbsolve canopy-haar canopy-octreepa
     python3 -c 'import json, sys; r = json.load(open(sys.argv[1])); print("forest walk 1080p mono, bands", sys.argv[2], r["frame_ms_median"], r["frame_ms_p95"], r["first_complete_frame_s"], [b["rows"] for b in r["bands"]], [round(b["ms_median"], 2) for b in r["bands"]])' \
       "$O/forest_walk_tiles$tiles.json" "$tiles"
   done
-  for spread in 0.5 0.75 1; do
+  for spread in 0.5 0.65 0.75 1; do
     run "stereo_walk_$spread.md" timeout 600 bench-stereo "$f" --camera "$walk" --device cuda --size 1920x1080 --frames 120 --ipd 0.064 \
       --cache-mb 1024 --error-frames 0,40,80 --stereo-spread "$spread" --png "$O/stereo-walk-$spread"
     tail -1 "$O/stereo_walk_$spread.md"

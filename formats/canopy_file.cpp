@@ -149,6 +149,7 @@ CanopyFile& CanopyFile::operator=(CanopyFile&& o) noexcept {
     metadata_ = std::move(o.metadata_);
     haarIndex_ = std::move(o.haarIndex_);
     sparseIndex_ = std::move(o.sparseIndex_);
+    extents_ = std::move(o.extents_);
   }
   return *this;
 }
@@ -264,7 +265,8 @@ void checkHeader(ResidentParse& r, uint64_t fileBytes) {
   if (h.pagesOffset != h.residentBytes || h.pagesOffset % h.pageBytes != 0 || h.pagesOffset > fileBytes)
     bad(P, "pages offset " + u64s(h.pagesOffset) + " invalid");
   // (5.0) compressed pages: their sizes are checked against the file with the PageExtents section
-  if (h.pageCoding != kCanopyPageRaw && (h.major < 5 || h.pageCoding != kCanopyPageZstd))
+  // 5.0 is the version of compressed pages: a raw file keeps its older version (the writer's rule)
+  if (h.major < 5 ? h.pageCoding != kCanopyPageRaw : h.pageCoding != kCanopyPageZstd)
     bad(P, "page coding " + u64s(h.pageCoding) + " is not valid in a " + std::to_string(h.major) + "." + std::to_string(h.minor) + " file");
   if (h.pageCoding == kCanopyPageRaw &&
       ((fileBytes - h.pagesOffset) / h.pageBytes != h.pageCount || (fileBytes - h.pagesOffset) % h.pageBytes != 0))
@@ -361,7 +363,7 @@ void readPageExtents(ResidentParse& r, uint64_t fileBytes) {
     const CanopyPageExtent& e = r.extents[i];
     if (e.offset != at || e.storedBytes == 0 || e.storedBytes > bound || e.storedBytes > fileBytes - at)
       bad(P, "page " + u64s(i) + " extent invalid (offset " + u64s(e.offset) + ", " + u64s(e.storedBytes) + " bytes)");
-    if (e.filter != 0 && e.filter != 2 && e.filter != 4) bad(P, "page " + u64s(i) + " has an unknown filter " + u64s(e.filter));
+    if (!canopyPageFilterValid(e.filter)) bad(P, "page " + u64s(i) + " has an unknown filter " + u64s(e.filter));
     if (e.reserved != 0) bad(P, "page " + u64s(i) + " extent has non-zero reserved bytes");
     at += e.storedBytes;
   }

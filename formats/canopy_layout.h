@@ -117,8 +117,8 @@
 // 5.0 adds compressed pages (KTX2's supercompression, per page): with header.pageCoding ==
 // kCanopyPageZstd each page is stored as one Zstandard frame of its image, after a byte-plane
 // filter (CanopyPageExtent::filter: 0 none; 2 or 4: the image's 2- or 4-byte words split into
-// planes, plane b holding byte b of every word, plane after plane; the writer keeps the smallest of
-// the three), pages back to back from pagesOffset in index order, found through the PageExtents
+// planes, plane b holding byte b of every word, plane after plane; the writer picks the one whose
+// frame is smallest at level 1), pages back to back from pagesOffset in index order, found through the PageExtents
 // section with the CRC of its stored bytes. A page decompresses to exactly pageBytes, and its header
 // and CRC are those of the page image, checked as before; streaming reads a page's stored bytes alone. The writer writes 5.0 only
 // for a compressed file (canopy-octreepack's default: a lit detail plant takes half the bytes); a

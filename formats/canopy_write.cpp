@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <cstring>
 #include <functional>
+#include <memory>
 
 #include "canopy/atomic_file.h"
 #include "canopy/errors.h"
@@ -477,45 +478,60 @@ void checkCoding(const CanopyWriteInput& in) {
 
 }  // namespace
 
-CanopyWriteStats writeCanopyFile(const std::string& path, CanopyWriteInput input) {
-  AtomicOutput out(path);
-  std::FILE* f = std::fopen(out.tempPath().c_str(), "wb");
-  if (!f) throw ioError(path + ": cannot write output");
-  bool ok = true;
-  // The resident part holds the page table (page CRCs), so it is known only after every page has
-  // been built. Pass 1 lays out without output (resident image); pass 2 streams the pages to their
-  // offsets; both passes must agree byte for byte. The ranges (and the sparse items they hold) are
-  // assigned once.
-  // Compressed pages (5.0): the extents are known only once every page is compressed; the resident
-  // part has the same size with every extent zero, so pass 2 streams the stored pages from the same
-  // offset and the resident part is written last, with the extents.
-  checkCoding(input);
-  const PageGeometry g;
-  const Ranges R = assignModelRanges(input, g);
-  const Layout probe = layout(input, R, g, nullptr);
-  const uint64_t pagesOffset = probe.resident.size();
-  ok = std::fwrite(probe.resident.data(), 1, probe.resident.size(), f) == probe.resident.size();
-  if (ok && std::fseek(f, long(pagesOffset), SEEK_SET) != 0) ok = false;
-  const auto write = [&](const unsigned char* p, size_t n) {
-    if (ok) ok = std::fwrite(p, 1, n, f) == n;
-  };
-  PageCompressor packer(g.pageBytes, input.zstdLevel, pagesOffset, write);
-  const bool zstd = input.pageCoding == kCanopyPageZstd;
-  Layout L = layout(input, R, g, [&](uint32_t, std::vector<unsigned char>& img) {
+namespace {
+
+// Pass 2: builds the pages again and hands them on in index order, compressed (5.0) or not, to
+// write(bytes, n), the first at pagesOffset (pass 1's resident size: the resident part has the
+// same size with every extent zero). Returns the layout, its resident image with the compressed
+// pages' extents.
+Layout writePages(const CanopyWriteInput& in, const Ranges& R, const PageGeometry& g, uint64_t pagesOffset,
+                  const std::function<void(const unsigned char*, size_t)>& write) {
+  const bool zstd = in.pageCoding == kCanopyPageZstd;
+  PageCompressor packer(g.pageBytes, in.zstdLevel, pagesOffset, write);
+  Layout L = layout(in, R, g, [&](uint32_t, std::vector<unsigned char>& img) {
     if (zstd)
       packer.add(img);
     else
       write(img.data(), img.size());
   });
-  if (ok && L.resident != probe.resident) ok = false;  // deterministic layout: both passes agree
   if (zstd) {
     packer.flush();
-    residentImage(input, R, g, &packer.extents, L);
-    if (L.resident.size() != pagesOffset) ok = false;
-    if (ok && std::fseek(f, 0, SEEK_SET) != 0) ok = false;
-    write(L.resident.data(), L.resident.size());
+    residentImage(in, R, g, &packer.extents, L);
   }
-  if (std::fclose(f) != 0) ok = false;
+  return L;
+}
+
+}  // namespace
+
+CanopyWriteStats writeCanopyFile(const std::string& path, CanopyWriteInput input) {
+  checkCoding(input);
+  AtomicOutput out(path);
+  std::unique_ptr<std::FILE, int (*)(std::FILE*)> f(std::fopen(out.tempPath().c_str(), "wb"), &std::fclose);
+  if (!f) throw ioError(path + ": cannot write output");
+  // The resident part holds the page table (page CRCs), so it is known only after every page has
+  // been built. Pass 1 lays out without output (resident image); pass 2 streams the pages to their
+  // offsets; both passes must agree. The ranges (and the sparse items they hold) are assigned once.
+  // Compressed pages (5.0): the extents are known only once every page is compressed, so the
+  // resident part is written again last, with them.
+  const PageGeometry g;
+  const Ranges R = assignModelRanges(input, g);
+  const Layout probe = layout(input, R, g, nullptr);
+  const uint64_t pagesOffset = probe.resident.size();
+  bool ok = std::fwrite(probe.resident.data(), 1, probe.resident.size(), f.get()) == probe.resident.size();
+  if (ok && std::fseek(f.get(), long(pagesOffset), SEEK_SET) != 0) ok = false;
+  const auto write = [&](const unsigned char* p, size_t n) {
+    if (ok) ok = std::fwrite(p, 1, n, f.get()) == n;
+  };
+  const Layout L = writePages(input, R, g, pagesOffset, write);
+  // deterministic layout: both passes agree (compressed: but for the extents, in a section of the same size)
+  if (input.pageCoding == kCanopyPageZstd) {
+    if (L.resident.size() != pagesOffset) ok = false;
+    if (ok && std::fseek(f.get(), 0, SEEK_SET) != 0) ok = false;
+    write(L.resident.data(), L.resident.size());
+  } else if (L.resident != probe.resident) {
+    ok = false;
+  }
+  if (std::fclose(f.release()) != 0) ok = false;
   if (!ok) throw ioError(path + ": write failed (disk full?)");
   out.commit();
   return L.stats;
@@ -523,24 +539,11 @@ CanopyWriteStats writeCanopyFile(const std::string& path, CanopyWriteInput input
 
 std::vector<unsigned char> writeCanopyBytes(CanopyWriteInput input, CanopyWriteStats* stats) {
   checkCoding(input);
-  std::vector<unsigned char> pageArea;
   const PageGeometry g;
   const Ranges R = assignModelRanges(input, g);
-  const auto write = [&](const unsigned char* p, size_t n) { pageArea.insert(pageArea.end(), p, p + n); };
-  const bool zstd = input.pageCoding == kCanopyPageZstd;
-  PageCompressor packer(g.pageBytes, input.zstdLevel, 0, write);
-  Layout L = layout(input, R, g, [&](uint32_t, std::vector<unsigned char>& img) {
-    if (zstd)
-      packer.add(img);
-    else
-      write(img.data(), img.size());
-  });
-  if (zstd) {
-    packer.flush();
-    const uint64_t pagesOffset = L.resident.size();
-    for (CanopyPageExtent& e : packer.extents) e.offset += pagesOffset;
-    residentImage(input, R, g, &packer.extents, L);
-  }
+  const uint64_t pagesOffset = layout(input, R, g, nullptr).resident.size();
+  std::vector<unsigned char> pageArea;
+  Layout L = writePages(input, R, g, pagesOffset, [&](const unsigned char* p, size_t n) { pageArea.insert(pageArea.end(), p, p + n); });
   std::vector<unsigned char> bytes = std::move(L.resident);
   bytes.insert(bytes.end(), pageArea.begin(), pageArea.end());
   if (stats) *stats = L.stats;

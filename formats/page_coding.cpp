@@ -36,10 +36,11 @@ size_t canopyPageStoredBound(uint32_t pageBytes) { return ZSTD_compressBound(pag
 uint32_t canopyPageEncode(const unsigned char* page, uint32_t pageBytes, int level, std::vector<unsigned char>& stored, int onlyFilter) {
   thread_local std::unique_ptr<ZSTD_CCtx, CCtxFree> cctx(ZSTD_createCCtx());
   thread_local std::vector<unsigned char> planes, frame;
+  stored.clear();
+  if (!cctx) return 0;  // an empty `stored`: the writer reports it
   const size_t bound = ZSTD_compressBound(pageBytes);
   planes.resize(pageBytes);
   frame.resize(bound);
-  stored.clear();
   // The filter is chosen at level 1 (a fraction of a higher level's time; measured on a lit detail
   // plant the file is 0.8 % larger than with every filter tried at level 15, and packs in 60 % of the
   // time), then the page is
@@ -63,8 +64,13 @@ uint32_t canopyPageEncode(const unsigned char* page, uint32_t pageBytes, int lev
 }
 
 std::string canopyPageDecode(const unsigned char* stored, size_t storedBytes, uint32_t filter, unsigned char* dst, uint32_t pageBytes) {
-  if (filter != 0 && filter != 2 && filter != 4) return "unknown page filter " + std::to_string(filter);
+  if (!canopyPageFilterValid(filter)) return "unknown page filter " + std::to_string(filter);
+  // a frame of today's format only (a hostile file must not reach the legacy formats' decoders)
+  uint32_t magic = 0;
+  if (storedBytes >= 4) std::memcpy(&magic, stored, 4);
+  if (magic != ZSTD_MAGICNUMBER) return "stored page is not a Zstandard frame (magic number)";
   thread_local std::unique_ptr<ZSTD_DCtx, DCtxFree> dctx(ZSTD_createDCtx());
+  if (!dctx) return "out of memory for a Zstandard decoder";
   thread_local std::vector<unsigned char> planes;
   unsigned char* out = dst;
   if (filter != 0) {

@@ -8,6 +8,7 @@
 //   - every truncated prefix, flipped bytes (header, table, sections, padding, pages), trailing
 //     bytes, bad magic and a newer major version are rejected with a one-line canopy::Error.
 #include <gtest/gtest.h>
+#include <tbb/global_control.h>
 
 #include <cstdlib>
 #include <cstring>
@@ -427,9 +428,17 @@ TEST(CanopyFile, FrozenVersion40FileReadsAndIsStillWritten) {
 TEST(CanopyFile, CompressedPagesDecodeToTheRawPages) {
   const uint32_t h32k = 32768;
   const std::vector<unsigned char> raw = smallFileBytes(), zstd = smallFileBytes(kCanopyPageZstd);
-  EXPECT_EQ(zstd, smallFileBytes(kCanopyPageZstd)) << "compressed pages are deterministic";
+  {
+    const tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    EXPECT_EQ(zstd, smallFileBytes(kCanopyPageZstd)) << "compressed pages do not depend on the threads";
+  }
   CanopyFile r = CanopyFile::fromMemory(raw.data(), raw.size(), "raw");
-  CanopyFile z = CanopyFile::fromMemory(zstd.data(), zstd.size(), "zstd");
+  // (a compressed file moved into another keeps its extents)
+  CanopyFile z = CanopyFile::fromMemory(raw.data(), raw.size(), "raw");
+  {
+    CanopyFile opened = CanopyFile::fromMemory(zstd.data(), zstd.size(), "zstd");
+    z = std::move(opened);
+  }
   CanopyFile frozen = openFrozen(kFrozenV50, 5, 0);
   EXPECT_EQ(r.header().major, 4);
   EXPECT_EQ(r.header().pageCoding, kCanopyPageRaw);
@@ -535,20 +544,37 @@ TEST(CanopyFile, CompressedPageExtentsAreCheckedEvenWithValidChecksums) {
   };
   EXPECT_NE(header([](CanopyFileHeader& x) { x.pageCoding = 2; }).find("page coding 2"), std::string::npos);
   EXPECT_NE(header([](CanopyFileHeader& x) { x.major = 4; }).find("page coding 1 is not valid in a 4.0 file"), std::string::npos);
-  // compressed pages without their extents, and a raw file with extents
-  EXPECT_NE(header([](CanopyFileHeader& x) { x.pageCoding = kCanopyPageRaw; }).find("page count"), std::string::npos);
-  // a stored page replaced by another page's frame (its own CRC made valid): decodes to the wrong page
-  std::vector<unsigned char> swapped = good;
-  {
-    CanopyPageExtent* e = reinterpret_cast<CanopyPageExtent*>(swapped.data() + se->offset);
-    // page 0's stored bytes hold page 0 of the same size but one byte of its frame changed: it no
-    // longer decodes (or decodes to another image); the stored CRC is made to match it
-    swapped[size_t(e[0].offset + e[0].storedBytes / 2)] ^= 0x40;
-    e[0].storedCrc = crc32(0, swapped.data() + e[0].offset, e[0].storedBytes);
-    reseal(swapped);
-  }
-  const std::string m = expectRejected(swapped);
-  EXPECT_NE(m.find("page 0: "), std::string::npos) << m;
+  // 5.0 is the version of compressed pages: a 5.0 header of raw pages is refused
+  EXPECT_NE(header([](CanopyFileHeader& x) { x.pageCoding = kCanopyPageRaw; }).find("page coding 0 is not valid in a 5.0 file"),
+            std::string::npos);
+  // compressed pages without their extents (the section relabelled as a kind this reader skips)
+  EXPECT_NE(edited([&](std::vector<unsigned char>& b) {
+              for (uint32_t i = 0; i < h.sectionCount; ++i) {
+                CanopySection s;
+                std::memcpy(&s, b.data() + sizeof h + i * sizeof s, sizeof s);
+                if (s.kind == uint32_t(CanopySectionKind::PageExtents)) s.kind = 99;
+                std::memcpy(b.data() + sizeof h + i * sizeof s, &s, sizeof s);
+              }
+            }).find("missing section PageExtents"),
+            std::string::npos);
+  // A stored page edited with its stored CRC made valid: refused when it is decoded. One byte in
+  // the middle of page 0's frame: it no longer decodes, or decodes to an image its page CRC refuses;
+  // a legacy Zstandard magic number (v0.7) at its start: refused before any decoder sees it.
+  const auto storedEdit = [&](auto edit) {
+    std::vector<unsigned char> b = good;
+    CanopyPageExtent* e = reinterpret_cast<CanopyPageExtent*>(b.data() + se->offset);
+    edit(b.data() + e[0].offset, e[0].storedBytes);
+    e[0].storedCrc = crc32(0, b.data() + e[0].offset, e[0].storedBytes);
+    reseal(b);
+    return expectRejected(b);
+  };
+  const std::string middle = storedEdit([](unsigned char* p, uint32_t n) { p[n / 2] ^= 0x40; });
+  EXPECT_NE(middle.find("page 0: "), std::string::npos) << middle;
+  const std::string legacy = storedEdit([](unsigned char* p, uint32_t) {
+    const uint32_t v07 = 0xFD2FB527u;
+    std::memcpy(p, &v07, 4);
+  });
+  EXPECT_NE(legacy.find("page 0: stored page is not a Zstandard frame (magic number)"), std::string::npos) << legacy;
 }
 
 // The light item geometry must be its version's: a 4.0 file relabelled 3.0 and a 3.0 file relabelled

@@ -505,9 +505,8 @@ TEST(OctreepackCli, VerifyFailsOnCorruptTruncatedAndNewerFiles) {
   };
   canopy::CanopyFileHeader h;
   std::memcpy(&h, good.data(), sizeof h);
-  // A flipped byte in the last page (raw: in its middle, which only its CRC catches; compressed, as
-  // canopy-octreepack writes by default: in its Zstandard frame, which then does not decode or
-  // decodes to a page its CRC refuses).
+  // A flipped byte in the last page (compressed, as canopy-octreepack writes by default: in its
+  // Zstandard frame, which the CRC of its stored bytes catches before it is decoded).
   ASSERT_EQ(h.pageCoding, canopy::kCanopyPageZstd);
   std::vector<unsigned char> flipped = good;
   flipped.at(good.size() - 16) ^= 0x10;
