@@ -264,8 +264,8 @@ void checkHeader(ResidentParse& r, uint64_t fileBytes) {
     bad(P, "unsupported light item geometry (" + u64s(h.lightItemBytes) + " bytes, " + u64s(h.lightItemsPerPage) + " per page)");
   if (h.pagesOffset != h.residentBytes || h.pagesOffset % h.pageBytes != 0 || h.pagesOffset > fileBytes)
     bad(P, "pages offset " + u64s(h.pagesOffset) + " invalid");
-  // (5.0) compressed pages: their sizes are checked against the file with the PageExtents section
-  // 5.0 is the version of compressed pages: a raw file keeps its older version (the writer's rule)
+  // 5.0 is the version of compressed pages (a raw file keeps its older version: the writer's rule);
+  // their sizes are checked against the file with the PageExtents section (readPageExtents)
   if (h.major < 5 ? h.pageCoding != kCanopyPageRaw : h.pageCoding != kCanopyPageZstd)
     bad(P, "page coding " + u64s(h.pageCoding) + " is not valid in a " + std::to_string(h.major) + "." + std::to_string(h.minor) + " file");
   if (h.pageCoding == kCanopyPageRaw &&

@@ -41,10 +41,9 @@ uint32_t canopyPageEncode(const unsigned char* page, uint32_t pageBytes, int lev
   const size_t bound = ZSTD_compressBound(pageBytes);
   planes.resize(pageBytes);
   frame.resize(bound);
-  // The filter is chosen at level 1 (a fraction of a higher level's time; measured on a lit detail
-  // plant the file is 0.8 % larger than with every filter tried at level 15, and packs in 60 % of the
-  // time), then the page is
-  // compressed at `level` with it.
+  // The filter is chosen at level 1, then the page is compressed at `level` with it (measured on a
+  // lit detail plant at level 15: the file 0.8 % larger than with every filter tried at 15, packed in
+  // 63 % of the time on 2 cores).
   const auto source = [&](uint32_t filter) {
     if (filter == 0) return page;
     splitPlanes(page, planes.data(), pageBytes, filter);

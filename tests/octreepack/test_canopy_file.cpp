@@ -201,6 +201,38 @@ std::string expectRejected(const std::vector<unsigned char>& bytes, bool readPag
   return "";
 }
 
+// Every prefix of `good` (all of the first `every` bytes, then every `step`th) is refused as truncated.
+void expectPrefixesTruncated(const std::vector<unsigned char>& good, size_t every, size_t step) {
+  for (size_t n = 0; n < good.size(); n += (n < every ? 1 : step)) {
+    try {
+      CanopyFile f = CanopyFile::fromMemory(good.data(), n, "bad.canopy");
+      FAIL() << "prefix of " << n << " bytes accepted";
+    } catch (const Error& e) {
+      ASSERT_EQ(e.code(), ExitCode::InvalidInput) << e.what();
+      ASSERT_NE(std::string(e.what()).find("truncated"), std::string::npos) << e.what();
+    }
+  }
+}
+
+// A bit flipped at each of `positions` of `good` is refused (expectRejected, pages read); one in the
+// pages (from pagesOffset on) names `pageProblem`. More than 500 page flips are tried.
+void expectFlipsRejected(const std::vector<unsigned char>& good, const std::vector<size_t>& positions, const std::string& pageProblem) {
+  CanopyFileHeader h;
+  std::memcpy(&h, good.data(), sizeof h);
+  size_t pageFlips = 0;
+  std::vector<unsigned char> bad = good;
+  for (size_t i : positions) {
+    bad[i] ^= 0x01;  // flipped in place and restored: no copy per case
+    const std::string m = expectRejected(bad);
+    bad[i] ^= 0x01;
+    if (i >= h.pagesOffset) {
+      ++pageFlips;
+      EXPECT_NE(m.find(pageProblem), std::string::npos) << m;
+    }
+  }
+  EXPECT_GT(pageFlips, 500u);
+}
+
 }  // namespace
 
 // The 1.1 and 1.2 frozen files' Haar-lit model and their content otherwise (1.2: the scene light).
@@ -484,29 +516,15 @@ TEST(CanopyFile, CompressedPagesDecodeToTheRawPages) {
 // tables by their CRCs, in the stored pages by their stored bytes' CRC (before they are decoded).
 TEST(CanopyFile, CompressedPagesRejectEveryTruncationAndFlip) {
   const std::vector<unsigned char> good = smallFileBytes(kCanopyPageZstd);
-  for (size_t n = 0; n < good.size(); n += (n < 4096 ? 1 : 7)) {
-    try {
-      CanopyFile f = CanopyFile::fromMemory(good.data(), n, "bad.canopy");
-      FAIL() << "prefix of " << n << " bytes accepted";
-    } catch (const Error& e) {
-      ASSERT_EQ(e.code(), ExitCode::InvalidInput) << e.what();
-      ASSERT_NE(std::string(e.what()).find("truncated"), std::string::npos) << e.what();
-    }
-  }
+  expectPrefixesTruncated(good, 4096, 7);
   CanopyFileHeader h;
   std::memcpy(&h, good.data(), sizeof h);
-  std::vector<unsigned char> bad = good;
-  size_t pageFlips = 0;
-  for (size_t i = 0; i < good.size(); i += (i < sizeof h + h.sectionCount * sizeof(CanopySection) ? 1 : (i < h.pagesOffset ? 11 : 13))) {
-    bad[i] ^= 0x01;
-    const std::string m = expectRejected(bad);
-    bad[i] ^= 0x01;
-    if (i >= h.pagesOffset) {
-      ++pageFlips;
-      EXPECT_NE(m.find("stored bytes checksum mismatch"), std::string::npos) << m;
-    }
-  }
-  EXPECT_GT(pageFlips, 500u);
+  // every byte of the header and section table, every 11th of the rest of the resident part, every
+  // 13th of the stored pages
+  std::vector<size_t> positions;
+  for (size_t i = 0; i < good.size(); i += (i < sizeof h + h.sectionCount * sizeof(CanopySection) ? 1 : (i < h.pagesOffset ? 11 : 13)))
+    positions.push_back(i);
+  expectFlipsRejected(good, positions, "stored bytes checksum mismatch");
 }
 
 // Crafted extents and codings with every CRC valid: each refused with its reason; and a stored
@@ -737,15 +755,7 @@ TEST(CanopyFile, Version11KeepsWhatA10ReaderRequires) {
 
 TEST(CanopyFile, EveryTruncatedPrefixIsRejected) {
   const std::vector<unsigned char> good = readFile(kFrozen);
-  for (size_t n = 0; n < good.size(); ++n) {
-    try {
-      CanopyFile f = CanopyFile::fromMemory(good.data(), n, "bad.canopy");
-      FAIL() << "prefix of " << n << " bytes accepted";
-    } catch (const Error& e) {
-      ASSERT_EQ(e.code(), ExitCode::InvalidInput) << e.what();
-      ASSERT_NE(std::string(e.what()).find("truncated"), std::string::npos) << e.what();
-    }
-  }
+  expectPrefixesTruncated(good, good.size(), 1);
 }
 
 TEST(CanopyFile, TrailingBytesAndBadMagicAreRejected) {
@@ -794,18 +804,7 @@ TEST(CanopyFile, FlippedBytesAreCaught) {
     if (i < tableEnd || inPageHeader || (i < h.pagesOffset && i % 11 == 0) || (i >= h.pagesOffset && i % 61 == 0))
       positions.push_back(i);
   }
-  size_t pageFlips = 0;
-  std::vector<unsigned char> bad = good;
-  for (size_t i : positions) {
-    bad[i] ^= 0x01;  // flipped in place and restored: no copy per case
-    const std::string m = expectRejected(bad);
-    bad[i] ^= 0x01;
-    if (i >= h.pagesOffset) {
-      ++pageFlips;
-      EXPECT_NE(m.find("page"), std::string::npos) << m;
-    }
-  }
-  EXPECT_GT(pageFlips, 500u);
+  expectFlipsRejected(good, positions, "page");
 }
 
 // A node pointing outside its model (with every CRC made valid again) is caught by the structure
