@@ -52,6 +52,13 @@
 #                      same plants and walk, 1920x1080; the ratio of its median to the 400 walk's
 #                    - the 400 walk at 1920x1080 with a 256 MiB cache (a quarter), then 64 MiB (FOREST_CACHES
 #                      "256 64": the 400 forest's pages, ~216 MB at 128^3, fit in 256): medians and ratios
+#   detail           oak_medium through the Make rules with a detail lattice (`make plants DETAIL=...`, one
+#                    plant, DEVICE=cuda): light 128 / detail 1024 and light 136 / detail 1088, the make
+#                    timed, the .canopy's bytes; then the 1080p close-ups (120 frames, 1 GiB cache, two
+#                    rounds alternated) that frame the tree's 16 m height with two lenses: 40° at 22 m
+#                    and 30° at 29.87 m (distance = 8.0 m / tan(fov / 2)); one table in $OUT/detail.md.
+#                    The sampled voxels' widths in pixels are a CPU count (bench/RESULTS.md, "Detail
+#                    lattices").
 #   profile-lbsolve  Nsight Compute on one pull launch in the middle of a solve (clocks and caches
 #                    left alone): duration and DRAM bytes per lattice node against the model's 156 B.
 #   profile-play     Nsight Compute on one forest-orbit frame's pixel kernel of PROFILE_BIN (build it
@@ -85,6 +92,8 @@
 #   FOREST_SIZES      the forest phase's frame sizes, default "1920x1080 3840x2160" (the first is the
 #                     size of the large forest and small-cache runs); FRAMES (120) frames per run;
 #                     FOREST_CACHES: the small-cache runs' budgets in MiB (default "256 64")
+#   DETAIL_CONFIGS    the detail phase's plants, LIGHT:DETAIL (default "128:1024 136:1088"); DETAIL_SHOTS its
+#                     close-ups, DETAIL:FOV:DISTANCE (default "1024:40:22 1024:30:29.87 1088:40:22")
 #   BENCH_DEVICE      default cuda; cpu builds the forests and runs the forest phase on the CPU, to
 #                     check the phase end to end on a machine without a GPU, at tiny settings:
 #                     BENCH_DEVICE=cpu FOREST_RESOLUTION=32 FOREST_N=40 FOREST_BIG_N=400 \
@@ -123,7 +132,7 @@ OAK=$SHARED/assets/plants/oak_medium.glb
 PHASES=${PHASES:-tests lbsolve haar octreepack grove play}
 has() { [[ " $PHASES " == *" $1 "* ]]; }
 for p in $PHASES; do
-  case $p in tests|lbsolve|haar|octreepack|grove|play|stereo|forest|profile-lbsolve|profile-play) ;;
+  case $p in tests|lbsolve|haar|octreepack|grove|play|stereo|forest|detail|profile-lbsolve|profile-play) ;;
     *) echo "run-gpu.sh: unknown phase '$p'" >&2; exit 1 ;;
   esac
 done
@@ -401,6 +410,55 @@ print(f"\n{frames} frames a run, `canopy-play FOREST --device {dev} --size WxH -
 PY
   cat "$t"
   echo "forest phase: $((SECONDS - t0)) s"
+fi
+
+if has detail && need canopy-voxelize canopy-lbsolve canopy-haar canopy-octreepack canopy-play; then
+  step detail
+  t0=$SECONDS
+  mkdir -p "$W/detail-in" && ln -sf "$OAK" "$W/detail-in/oak_medium.glb"
+  configs=${DETAIL_CONFIGS:-128:1024 136:1088}
+  for rd in $configs; do
+    r=${rd%:*} d=${rd#*:} dir=$W/detail-$d
+    rm -rf "$dir"
+    s0=$(date +%s.%N)
+    if timeout 600 make -j8 -C pipelines plants PLANTS="$W/detail-in" BIN="$BIN" O="$dir" DEVICE="$dev" RESOLUTION="$r" \
+        DETAIL="$d" > "$O/detail-${d}_make.log" 2>&1; then
+      echo "oak_medium light $r / detail $d: make $(awk "BEGIN{printf \"%.2f\", $(date +%s.%N) - $s0}") s," \
+        "$(stat -c %s "$dir/plants/oak_medium.canopy") B"
+      canopy-octreepack info "$dir/plants/oak_medium.canopy" --json > "$O/detail-${d}_info.json" 2>&1
+    else
+      fail "make plants DETAIL=$d (see $O/detail-${d}_make.log)"
+    fi
+  done
+  shots=${DETAIL_SHOTS:-1024:40:22 1024:30:29.87 1088:40:22}
+  for round in 1 2; do
+    for s in $shots; do
+      IFS=: read -r d fov dist <<< "$s"
+      f=$W/detail-$d/plants/oak_medium.canopy
+      [[ -f $f ]] && run "detail_${d}_fov${fov}_$round.json" canopy-play "$f" --device "$dev" --size 1920x1080 --frames "${FRAMES:-120}" \
+        --cache-mb 1024 --camera "orbit:elevation=5,distance=$dist,turns=0.25,fov=$fov" --json -q
+    done
+  done
+  python3 - "$O" "$configs" "$shots" >> "$O/detail.md" <<'PY'
+import json, os, sys
+out, configs, shots = sys.argv[1], sys.argv[2].split(), sys.argv[3].split()
+print("| light / detail | `.canopy` MB | lens, distance | median ms (two runs) | p95 ms | first complete frame s |")
+print("|---|---:|---|---|---|---|")
+light = {c.split(":")[1]: c.split(":")[0] for c in configs}
+for s in shots:
+    d, fov, dist = s.split(":")
+    try:
+        runs = [json.load(open(f"{out}/detail_{d}_fov{fov}_{r}.json")) for r in (1, 2)]
+        info = json.load(open(f"{out}/detail-{d}_info.json"))
+    except (OSError, ValueError):
+        print(f"| {light[d]} / {d} | | {fov}°, {dist} m | (no report) | | |")
+        continue
+    j = lambda k, f: " / ".join(f.format(r[k]) for r in runs)
+    print(f"| {light[d]} / {d} | {info['file_bytes'] / 1e6:.1f} | {fov}°, {dist} m | {j('frame_ms_median', '{:.2f}')} | "
+          f"{j('frame_ms_p95', '{:.2f}')} | {j('first_complete_frame_s', '{:.2f}')} |")
+PY
+  cat "$O/detail.md"
+  echo "detail phase: $((SECONDS - t0)) s"
 fi
 
 if has profile-lbsolve && need bench_lbsolve; then
