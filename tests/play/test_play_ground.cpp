@@ -216,6 +216,34 @@ TEST(Scene, MarchExtentIsTheBoxOfTheLeavesWithMatter) {
 // CPU's --count-work). The statistic counts the level the rule chooses (segmentLevel, as the
 // renderer calls it), not a coarser resident ancestor used while pages stream: the frames here are
 // converged, where the two are the same.
+// docs/play.md, "Choosing a plant's detail for a close-up": two lenses framing the ball's height to
+// the frame height see its centre's voxels at the same width; the wider lens comes nearer, so its
+// front's voxels are wider (by d / (d - r) of each), and each stays within its formula.
+TEST(LevelOfDetail, TheLensDecidesTheCloseUpsWidestVoxel) {
+  const double r = kRadius * kCell;  // 1.8 m
+  double widest[2] = {0, 0};
+  for (const int i : {0, 1}) {
+    const double fov = i == 0 ? 40.0 : 20.0, half = fov * M_PI / 360.0;
+    const double distance = (r + kCell) / std::tan(half), pixelAngle = 2.0 * std::tan(half) / 64.0;
+    pl::PlayOptions o = pt::convergedView(oneBall(), 64, 64,
+                                          "orbit:azimuth=0,elevation=0,turns=0,fov=" + std::to_string(fov) + ",distance=" + std::to_string(distance));
+    o.ground = "none";
+    o.countWork = true;
+    nlohmann::json rep;
+    render(o, &rep);
+    const nlohmann::json& v = rep["work"]["voxel_px"];
+    ASSERT_GT(uint64_t(v["segments"]), 100u) << fov;
+    widest[i] = double(v["max"]);
+    // the formula at the lattice box's front face: shading segments begin where a brick does, and the
+    // ball's outer bricks reach the box
+    const double front = kCell / ((distance - 0.5 * kEdge * kCell) * pixelAngle);
+    std::printf("fov %.0f at %.2f m: widest voxel %.3f px (front %.3f px)\n", fov, distance, widest[i], front);
+    EXPECT_LE(widest[i], front * 1.01) << fov;
+    EXPECT_GT(widest[i], 0.8 * front) << fov;
+  }
+  EXPECT_GT(widest[0], widest[1] * 1.05);
+}
+
 TEST(LevelOfDetail, VoxelIsNoWiderThanThePixelWhereTheLatticeAllows) {
   const double pixelAngle = 2.0 * std::tan(20.0 * M_PI / 180.0) / 64.0;
   for (const double distance : {60.0, 2.2}) {
