@@ -25,7 +25,8 @@ int main(int argc, char** argv) {
       throw canopy::invalidInput(got + ": " + std::to_string(w0) + "x" + std::to_string(h0) + ", the reference " + ref + " is " +
                                  std::to_string(w1) + "x" + std::to_string(h1));
     const canopy::play::bench::ImageError e = canopy::play::bench::imageError(a, b);
-    std::printf("%s vs %s: RMS %.6g (%.3f %% of the covered mean RGB)\n", got.c_str(), ref.c_str(), e.rms, 100.0 * e.relative);
+    if (!tool.common().json)  // stdout holds the report alone under --json
+      std::printf("%s vs %s: RMS %.6g (%.3f %% of the covered mean RGB)\n", got.c_str(), ref.c_str(), e.rms, 100.0 * e.relative);
     tool.report() = {{"got", got}, {"reference", ref}, {"rms", e.rms}, {"relative", e.relative}, {"size", {w0, h0}}};
   });
 }
