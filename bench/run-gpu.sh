@@ -52,12 +52,6 @@
 #                      same plants and walk, 1920x1080; the ratio of its median to the 400 walk's
 #                    - the 400 walk at 1920x1080 with a 256 MiB cache (a quarter), then 64 MiB (FOREST_CACHES
 #                      "256 64": the 400 forest's pages, ~216 MB at 128^3, fit in 256): medians and ratios
-#   adaptive         canopy-play --adaptive TOL on the stereo phase's real forest (400 instances, 128^3
-#                    plants), three cameras (the forest phase's high and low orbits, the walk), 1920x1080
-#                    and 3840x2160, FRAMES (120) frames, 1 GiB cache, for each of ADAPTIVE_TOLS (default
-#                    "0 0.01 0.02 0.04"; 0 traces every pixel): the median frame, its ratio to TOL 0's,
-#                    the traced fraction; and the converged first frame of each camera against TOL 0's
-#                    (bench-image-diff: RMS relative to the covered mean RGB). One table in $OUT/adaptive.md.
 #   detail           oak_medium through the Make rules with a detail lattice (`make plants DETAIL=...`, one
 #                    plant, DEVICE=cuda): light 128 / detail 1024 and light 136 / detail 1088, the make
 #                    timed, the .canopy's bytes; then the 1080p close-ups (120 frames, 1 GiB cache, two
@@ -98,7 +92,6 @@
 #   FOREST_SIZES      the forest phase's frame sizes, default "1920x1080 3840x2160" (the first is the
 #                     size of the large forest and small-cache runs); FRAMES (120) frames per run;
 #                     FOREST_CACHES: the small-cache runs' budgets in MiB (default "256 64")
-#   ADAPTIVE_TOLS     the adaptive phase's tolerances, the first the reference (default "0 0.01 0.02 0.04")
 #   DETAIL_CONFIGS    the detail phase's plants, LIGHT:DETAIL (default "128:1024 136:1088"); DETAIL_SHOTS its
 #                     close-ups, DETAIL:FOV:DISTANCE (default "1024:40:22 1024:30:29.87 1088:40:22")
 #   BENCH_DEVICE      default cuda; cpu builds the forests and runs the forest phase on the CPU, to
@@ -139,7 +132,7 @@ OAK=$SHARED/assets/plants/oak_medium.glb
 PHASES=${PHASES:-tests lbsolve haar octreepack grove play}
 has() { [[ " $PHASES " == *" $1 "* ]]; }
 for p in $PHASES; do
-  case $p in tests|lbsolve|haar|octreepack|grove|play|stereo|forest|adaptive|detail|profile-lbsolve|profile-play) ;;
+  case $p in tests|lbsolve|haar|octreepack|grove|play|stereo|forest|detail|profile-lbsolve|profile-play) ;;
     *) echo "run-gpu.sh: unknown phase '$p'" >&2; exit 1 ;;
   esac
 done
@@ -417,58 +410,6 @@ print(f"\n{frames} frames a run, `canopy-play FOREST --device {dev} --size WxH -
 PY
   cat "$t"
   echo "forest phase: $((SECONDS - t0)) s"
-fi
-
-if has adaptive && need canopy-voxelize canopy-lbsolve canopy-haar canopy-octreepack canopy-play bench-image-diff; then
-  step adaptive
-  t0=$SECONDS
-  f=$(forest_canopy "${FOREST_N:-400}" "${FOREST_RADIUS:-100}")
-  [[ -f $f ]] || forest_build "${FOREST_N:-400}" "${FOREST_RADIUS:-100}"
-  read -ra sizes <<< "${FOREST_SIZES:-1920x1080 3840x2160}"
-  tols=${ADAPTIVE_TOLS:-0 0.01 0.02 0.04}
-  for cam in high low walk; do
-    case $cam in
-      high) spec=orbit:elevation=25,distance=300,turns=0.25 ;;
-      low) spec=orbit:elevation=10,distance=90,turns=0.25 ;;
-      walk) spec=$walk ;;
-    esac
-    for size in "${sizes[@]}"; do
-      for tol in $tols; do
-        id=$cam-$size-$tol
-        run "adaptive_$id.json" timeout 300 canopy-play "$f" --device "$dev" --size "$size" --frames "${FRAMES:-120}" --cache-mb 1024 \
-          --camera "$spec" --adaptive "$tol" --json -q
-        run "adaptive_$id.exr.log" timeout 300 canopy-play "$f" --device "$dev" --size "$size" --frames 1 --converge --cache-mb 1024 \
-          --camera "$spec" --adaptive "$tol" -o "$W/adaptive_$id.exr" -q
-        [[ $tol == "${tols%% *}" ]] || run "adaptive_$id.diff.json" bench-image-diff "$W/adaptive_$id.exr" "$W/adaptive_$cam-$size-${tols%% *}.exr" --json -q
-      done
-    done
-  done
-  python3 - "$O" "$tols" "${sizes[*]}" >> "$O/adaptive.md" <<'PY'
-import json, sys
-out, tols, sizes = sys.argv[1], sys.argv[2].split(), sys.argv[3].split()
-def load(name):
-    try:
-        return json.load(open(f"{out}/{name}"))
-    except (OSError, ValueError):
-        return None
-print("| camera | size | --adaptive | median ms (p95) | / full trace | pixels traced | RMS vs full trace (first frame, converged) |")
-print("|---|---|---|---|---|---|---|")
-for cam in ("high", "low", "walk"):
-    for size in sizes:
-        base = load(f"adaptive_{cam}-{size}-{tols[0]}.json")
-        for tol in tols:
-            r = load(f"adaptive_{cam}-{size}-{tol}.json")
-            if r is None:
-                print(f"| {cam} | {size} | {tol} | (no report) | | | |")
-                continue
-            d = load(f"adaptive_{cam}-{size}-{tol}.diff.json")
-            traced = r.get("adaptive", {}).get("traced_fraction_mean", 1.0)
-            ratio = f"{r['frame_ms_median'] / base['frame_ms_median']:.3f}" if base else ""
-            rms = f"{100 * d['relative']:.2f} %" if d else ""
-            print(f"| {cam} | {size} | {tol} | {r['frame_ms_median']:.2f} ({r['frame_ms_p95']:.2f}) | {ratio} | {100 * traced:.1f} % | {rms} |")
-PY
-  cat "$O/adaptive.md"
-  echo "adaptive phase: $((SECONDS - t0)) s"
 fi
 
 if has detail && need canopy-voxelize canopy-lbsolve canopy-haar canopy-octreepack canopy-play; then

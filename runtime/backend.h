@@ -67,12 +67,6 @@ class Backend {
   virtual void setPixelOccupancy(int minBlocks) { (void)minBlocks; }
   // Counts the work of the following renders into `work` (CPU reference only; others ignore it).
   virtual void countWork(WorkCounters* work) { (void)work; }
-  // Adaptive sampling (adaptive.h) of the renders of eye 0 without depth: tol > 0 traces the
-  // lattice, fills each other pixel whose cell's corners agree within tol and traces the rest; 0
-  // (the default) traces every pixel.
-  void setAdaptive(float tol) { adaptive_ = tol; }
-  // The pixels the last renderRows traced (the band's without adaptive sampling).
-  uint64_t lastTraced() const { return lastTraced_; }
   // The last render's sun transmittance map (kShadowsMap; dim all 1 otherwise).
   const ShadowMapView& lastShadowMap() const { return lastShadowMap_; }
 
@@ -87,8 +81,6 @@ class Backend {
 
  protected:
   ShadowMapView lastShadowMap_{};
-  float adaptive_ = 0.0f;
-  uint64_t lastTraced_ = 0;
 };
 
 std::unique_ptr<Backend> makeCpuBackend(const HostScene& scene, uint32_t slots);

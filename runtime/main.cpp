@@ -39,11 +39,6 @@ void addFrameOptions(CLI::App& app, canopy::play::PlayOptions& o, CliValues& x) 
   app.add_option("--lod-bias", o.lodBias, "Added to the footprint's level (negative = coarser)")->capture_default_str();
   app.add_option("--stop-opacity", x.stopOpacity, "A cone stops at this opacity; at most 1 - this of a pixel's light is dropped")
       ->default_str("0.999")->check(CLI::Range(0.5, 1.0));
-  app.add_option("--adaptive", o.adaptive,
-                 "Adaptive sampling: trace every second pixel of every second row, fill each other pixel from the four traced "
-                 "corners of its 2x2 cell where they differ by at most this in every channel (linear RGBA), trace it elsewhere; "
-                 "0: trace every pixel (docs/play.md)")
-      ->capture_default_str();
 }
 
 // The shadow options, and the benchmarks' timing knobs (hidden from --help).

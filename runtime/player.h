@@ -32,7 +32,6 @@ struct PlayOptions {
   float stepFactor = 0.5f;           // brick step, in voxels of the chosen level
   float lodBias = 0.0f;
   float stopTransmittance = kStopT;   // a cone stops below this transmittance (--stop-opacity 1 - this); the rest is dropped
-  float adaptive = 0.0f;             // > 0: adaptive sampling at this tolerance (adaptive.h; one eye only); 0: every pixel traced
   float shadowAperture = 0.03f;      // shadow cone growth per unit length (soft shadows, coarser
                                      // levels and longer steps far from the receiver)
   bool shadows = true;

@@ -5,7 +5,6 @@
 #include <cstring>
 
 #include "canopy/parallel.h"
-#include "runtime/adaptive.h"
 #include "runtime/backend.h"
 
 namespace canopy::play {
@@ -74,32 +73,7 @@ class CpuBackend final : public Backend {
       disparityScale_ = disparityScale;
     }
     const int64_t first = int64_t(band.y0) * camera.width;
-    if (adaptive_ > 0.0f && !depth) {
-      renderAdaptive(v, camera, band, out);
-    } else {
-      parallelFor(int64_t(band.rows()) * camera.width, [&](int64_t i) { renderPixel(v, camera, first + i, out, depth, disparityScale); }, 64);
-      lastTraced_ = uint64_t(band.rows()) * uint64_t(camera.width);
-    }
-  }
-  // adaptive.h: the lattice, then each other pixel filled or marked, then the marked ones traced.
-  void renderAdaptive(const SceneView& v, const CameraView& camera, Band band, float* out) {
-    const int w = camera.width, lw = adaptiveLatticeWidth(w), ly0 = adaptiveLatticeFirst(band.y0);
-    const int64_t lattice = int64_t(lw) * (adaptiveLatticeEnd(band.y1, camera.height) - ly0);
-    parallelFor(lattice, [&](int64_t i) {
-      const int x = 2 * int(i % lw), y = 2 * (ly0 + int(i / lw));
-      renderPixel(v, camera, int64_t(y) * w + x, out, nullptr, 0.0f);
-    }, 64);
-    hole_.assign(size_t(band.rows()) * w, 0);
-    parallelFor(band.rows(), [&](int64_t r) {
-      const int y = band.y0 + int(r);
-      for (int x = 0; x < w; ++x)
-        hole_[size_t(r) * w + x] = !adaptiveOnLattice(x, y) && !adaptiveFill(out, w, camera.height, x, y, adaptive_);
-    }, 1);
-    holes_.clear();
-    for (size_t k = 0; k < hole_.size(); ++k)
-      if (hole_[k]) holes_.push_back(int64_t(band.y0) * w + int64_t(k));
-    parallelFor(int64_t(holes_.size()), [&](int64_t k) { renderPixel(v, camera, holes_[size_t(k)], out, nullptr, 0.0f); }, 64);
-    lastTraced_ = uint64_t(lattice) + holes_.size();
+    parallelFor(int64_t(band.rows()) * camera.width, [&](int64_t i) { renderPixel(v, camera, first + i, out, depth, disparityScale); }, 64);
   }
   StereoCounts reprojectRows(const HostScene& scene, const CameraView& right, uint32_t stamp, Band band, const StereoParams& p) override {
     (void)scene, (void)stamp;  // the stamp and scene of view_, the last render of this pass
@@ -157,8 +131,6 @@ class CpuBackend final : public Backend {
   std::vector<uint32_t> slotUsed_, pageWanted_;
   std::vector<float> image_[2], disparity_, shadowMap_, extinction_;
   std::vector<float> holeFrom_;  // stereo: per right-eye hole, where its trace starts (stereoResolveHole)
-  std::vector<uint8_t> hole_;    // adaptive sampling: the band's pixels to trace after the lattice
-  std::vector<int64_t> holes_;   // and their indices
   float disparityScale_ = 0.0f;  // the traced eye's (renderRows)
   std::vector<unsigned long long> keys_, behind_;
   std::vector<uint32_t> cover_;

@@ -13,7 +13,6 @@
 #include <cub/device/device_select.cuh>
 
 #include "canopy/parallel_cuda.cuh"
-#include "runtime/adaptive.h"
 #include "runtime/backend.h"
 
 namespace canopy::play {
@@ -34,12 +33,9 @@ struct PixelKernel {
   float* stereo;             // renderPixelT's: kWithDepth, the layers per pixel (stereo's traced eye); kBehind, where
                              // each hole's trace starts (stereo's holes)
   float disparityScale;
-  bool lattice;              // adaptive sampling's first pass: position k of the lattice (adaptive.h; tilesX its)
   __device__ void operator()(int64_t k) const {
     int x, y;
-    if (lattice ? !adaptiveLatticePixel(k, tilesX, tileW, tileH, camera.width, y0, y1, camera.height, x, y)
-                : !bandTilePixel(list ? int64_t(list[k]) : k, tilesX, tileW, tileH, camera.width, y0, y1, x, y))
-      return;
+    if (!bandTilePixel(list ? int64_t(list[k]) : k, tilesX, tileW, tileH, camera.width, y0, y1, x, y)) return;
     renderPixelT<kWithCones, kWithLight, kWithDepth, kBehind>(scene, camera, int64_t(y) * camera.width + x, out, stereo, disparityScale);
   }
 };
@@ -119,22 +115,6 @@ struct StereoResolveKernel {
     const unsigned active = __activemask();
     const unsigned behind = __ballot_sync(active, isBehind);
     if (behind != 0u && int(threadIdx.x & 31u) == __ffs(int(active)) - 1) atomicAdd(behindCount, static_cast<unsigned long long>(__popc(behind)));
-  }
-};
-
-// Adaptive sampling (adaptive.h), after the lattice's trace: per tile position j of the band, the
-// pixel filled from its cell, or marked (mark[j] = j; -1 elsewhere) to be traced, the marks then
-// compacted as stereo's holes are.
-struct AdaptiveFillKernel {
-  float* rgba;
-  int width, height, tilesX, tileW, tileH, y0, y1;
-  float tol;
-  int32_t* mark;
-  __device__ void operator()(int64_t j) const {
-    int x, y;
-    const bool trace = bandTilePixel(j, tilesX, tileW, tileH, width, y0, y1, x, y) && !adaptiveOnLattice(x, y) &&
-                       !adaptiveFill(rgba, width, height, x, y, tol);
-    mark[j] = trace ? int32_t(j) : -1;
   }
 };
 
@@ -313,55 +293,26 @@ class CudaBackend final : public Backend {
     // one kernel per shadow path and per light (renderPixelT): the map's kernel for a scene
     // without lit models has neither shadow-cone nor LB light code
     float* out = image_[eye].data();
-    lastTraced_ = uint64_t(band.rows()) * uint64_t(camera.width);
     if (depth)
       launchMode<true>(scene, shade, camera, out, band, nullptr, threads, depth, disparityScale);
-    else if (adaptive_ > 0.0f)
-      renderAdaptive(scene, shade, camera, out, band, tilesX, threads);
     else
       launchMode<false>(scene, shade, camera, out, band, nullptr, threads, nullptr, 0.0f);
     CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
-  }
-  // adaptive.h: the lattice, then each other pixel filled or marked, then the marked ones traced.
-  void renderAdaptive(const HostScene& scene, const ShadeParams& shade, const CameraView& camera, float* out, Band band, int tilesX,
-                      int64_t threads) {
-    const int latticeTilesX = (adaptiveLatticeWidth(camera.width) + tileW_ - 1) / tileW_;
-    const int latticeRows = adaptiveLatticeEnd(band.y1, camera.height) - adaptiveLatticeFirst(band.y0);
-    const int latticeTilesY = (latticeRows + tileH_ - 1) / tileH_;
-    launchMode<false>(scene, shade, camera, out, band, nullptr, int64_t(latticeTilesX) * latticeTilesY * tileW_ * tileH_, nullptr, 0.0f, true);
-    if (hole_.size() < size_t(threads)) hole_.resize(size_t(threads)), holeList_.resize(size_t(threads));
-    cuda::parallelFor(threads, AdaptiveFillKernel{out, camera.width, camera.height, tilesX, tileW_, tileH_, band.y0, band.y1, adaptive_, hole_.data()}, compute_, 256);
-    const int64_t holes = compactHoles(threads);
-    launchMode<false>(scene, shade, camera, out, band, holeList_.data(), holes, nullptr, 0.0f);
-    lastTraced_ = uint64_t(adaptiveLatticeWidth(camera.width)) * uint64_t(latticeRows) + uint64_t(holes);
-  }
-  // The marks hole_[0, marks) that are >= 0, in order, into holeList_; returns their count (waits
-  // for the compute stream).
-  int64_t compactHoles(int64_t marks) {
-    size_t tempBytes = 0;
-    CANOPY_CUDA_CHECK(cub::DeviceSelect::If(nullptr, tempBytes, hole_.data(), holeList_.data(), holeCount_.data(), marks, IsHole{}, compute_));
-    if (selectTemp_.size() < tempBytes) selectTemp_.resize(tempBytes);
-    CANOPY_CUDA_CHECK(cub::DeviceSelect::If(selectTemp_.data(), tempBytes, hole_.data(), holeList_.data(), holeCount_.data(), marks, IsHole{},
-                                            compute_));
-    int64_t holes = 0;
-    CANOPY_CUDA_CHECK(cudaMemcpyAsync(&holes, holeCount_.data(), sizeof holes, cudaMemcpyDeviceToHost, compute_));
-    CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
-    return holes;
   }
   // The pixel kernel of the mode (shadow path, LB light, stereo's depth or holes) over `threads`
   // tile positions of the band (or list[0, threads) of them), with view_.
   template <bool kWithDepth, bool kBehind = false>
   void launchMode(const HostScene& scene, const ShadeParams& shade, const CameraView& camera, float* out, Band band, const int32_t* list,
-                  int64_t threads, float* stereo, float disparityScale, bool lattice = false) {
-    const int tilesX = ((lattice ? adaptiveLatticeWidth(camera.width) : camera.width) + tileW_ - 1) / tileW_;
+                  int64_t threads, float* stereo, float disparityScale) {
+    const int tilesX = (camera.width + tileW_ - 1) / tileW_;
     if (shade.shadows == kShadowsCone) {
-      launchPixels<5>(PixelKernel<true, true, kWithDepth, kBehind>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, stereo, disparityScale, lattice},
+      launchPixels<5>(PixelKernel<true, true, kWithDepth, kBehind>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, stereo, disparityScale},
                       threads, compute_);
     } else if (scene.litModels > 0) {
-      launchMap(PixelKernel<false, true, kWithDepth, kBehind>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, stereo, disparityScale, lattice},
+      launchMap(PixelKernel<false, true, kWithDepth, kBehind>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, stereo, disparityScale},
                 threads);
     } else {
-      launchMap(PixelKernel<false, false, kWithDepth, kBehind>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, stereo, disparityScale, lattice},
+      launchMap(PixelKernel<false, false, kWithDepth, kBehind>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, stereo, disparityScale},
                 threads);
     }
   }
@@ -410,9 +361,16 @@ class CudaBackend final : public Backend {
                       StereoResolveKernel{sv, tilesX, tileW_, tileH_, band.y0, band.y1, hole_.data(), threads, holeOrder_, holeFrom_.data(),
                                           behindCount_.data()},
                       compute_, 256);
+    size_t tempBytes = 0;
+    CANOPY_CUDA_CHECK(cub::DeviceSelect::If(nullptr, tempBytes, hole_.data(), holeList_.data(), holeCount_.data(), marks, IsHole{}, compute_));
+    if (selectTemp_.size() < tempBytes) selectTemp_.resize(tempBytes);
+    CANOPY_CUDA_CHECK(cub::DeviceSelect::If(selectTemp_.data(), tempBytes, hole_.data(), holeList_.data(), holeCount_.data(), marks, IsHole{},
+                                            compute_));
+    int64_t holes = 0;
     unsigned long long behind = 0;
+    CANOPY_CUDA_CHECK(cudaMemcpyAsync(&holes, holeCount_.data(), sizeof holes, cudaMemcpyDeviceToHost, compute_));
     CANOPY_CUDA_CHECK(cudaMemcpyAsync(&behind, behindCount_.data(), sizeof behind, cudaMemcpyDeviceToHost, compute_));
-    const int64_t holes = compactHoles(marks);
+    CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
     const double reprojectS = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     launchMode<false, true>(scene, view_.shade, right, image_[1].data(), band, holeList_.data(), holes, holeFrom_.data(), disparityScale_);
     CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
@@ -456,8 +414,7 @@ class CudaBackend final : public Backend {
   cuda::DeviceBuffer<float> image_[2], disparity_, shadowMap_, extinction_;
   cuda::DeviceBuffer<unsigned long long> keys_, behind_;  // stereo: per right-eye pixel, the nearest front span and the nearest span behind it (stereo.h)
   cuda::DeviceBuffer<uint32_t> cover_;
-  cuda::DeviceBuffer<int32_t> hole_, holeList_;   // stereo's holes' marks by half and tile position (adaptive sampling's by tile
-                                                  // position), and compacted
+  cuda::DeviceBuffer<int32_t> hole_, holeList_;   // stereo: the holes' marks by half and tile position, and compacted
   cuda::DeviceBuffer<int64_t> holeCount_;
   cuda::DeviceBuffer<unsigned long long> behindCount_;  // stereo: the holes traced behind a reprojected front
   cuda::DeviceBuffer<float> holeFrom_;                  // stereo: per right-eye hole, where its trace starts

@@ -1,12 +1,10 @@
-// test_play_stereo.cpp: stereo pairs by reprojection (runtime/stereo.h), adaptive sampling
-// (runtime/adaptive.h) and frames cut into bands over several renderers (runtime/tiles.h), on the
-// CPU reference.
+// test_play_stereo.cpp: stereo pairs by reprojection (runtime/stereo.h) and frames cut into bands
+// over several renderers (runtime/tiles.h), on the CPU reference.
 //
 // The per-element reprojection is tested on hand-made rows whose answer is known (a wall moves by
 // its disparity, an edge leaves a hole as wide as the disparity step, a spread or a translucent
 // overlap is traced); the whole second eye against the same eye traced in full (its traced pixels
-// bit for bit, the reprojected ones within a stated RMS); adaptive sampling's fill per element and
-// its frame against the full trace; bands against one band, bit for bit.
+// bit for bit, the reprojected ones within a stated RMS); bands against one band, bit for bit.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -17,7 +15,6 @@
 
 #include "canopy/errors.h"
 #include "formats/canopy_file.h"
-#include "runtime/adaptive.h"
 #include "runtime/image_io.h"
 #include "runtime/player.h"
 #include "runtime/stereo.h"
@@ -631,109 +628,4 @@ TEST(Render, StereoSideBySideAndSeparateOutputs) {
   } catch (const canopy::Error& e) {
     EXPECT_EQ(e.code(), canopy::ExitCode::Usage) << e.what();
   }
-}
-
-// ---------------------------------------------------------------------------------------------
-// Adaptive sampling (adaptive.h)
-// ---------------------------------------------------------------------------------------------
-
-TEST(Adaptive, ACellWhoseCornersAgreeIsTheirBilinearMeanAndAnyOtherIsTraced) {
-  const int w = 5, h = 5;
-  std::vector<float> img(size_t(w) * h * 4, -1.0f);  // -1: not written
-  auto px = [&](int x, int y) { return img.data() + (size_t(y) * w + x) * 4; };
-  auto set = [&](int x, int y, float v, float a) { float* p = px(x, y); p[0] = p[1] = p[2] = v, p[3] = a; };
-  // the cell (0, 0)-(2, 2): corners 0.2, 0.3, 0.4, 0.5 (alpha 1)
-  set(0, 0, 0.2f, 1.0f), set(2, 0, 0.3f, 1.0f), set(0, 2, 0.4f, 1.0f), set(2, 2, 0.5f, 1.0f);
-  EXPECT_FALSE(pl::adaptiveFill(img.data(), w, h, 1, 1, 0.29f));  // 0.3 apart
-  EXPECT_EQ(px(1, 1)[0], -1.0f);                                  // left alone
-  ASSERT_TRUE(pl::adaptiveFill(img.data(), w, h, 1, 1, 0.3f));
-  EXPECT_FLOAT_EQ(px(1, 1)[0], 0.35f);  // the four corners' mean
-  EXPECT_FLOAT_EQ(px(1, 1)[3], 1.0f);
-  ASSERT_TRUE(pl::adaptiveFill(img.data(), w, h, 1, 0, 0.3f));
-  EXPECT_FLOAT_EQ(px(1, 0)[0], 0.25f);  // on a lattice row: between its two neighbours
-  ASSERT_TRUE(pl::adaptiveFill(img.data(), w, h, 0, 1, 0.3f));
-  EXPECT_FLOAT_EQ(px(0, 1)[0], 0.3f);
-  // the opacity counts as a channel: a crown's edge against the sky is traced
-  set(2, 2, 0.5f, 0.5f);
-  EXPECT_FALSE(pl::adaptiveFill(img.data(), w, h, 1, 1, 0.3f));
-  EXPECT_TRUE(pl::adaptiveFill(img.data(), w, h, 1, 1, 0.5f));
-  // a NaN corner: traced around
-  px(2, 2)[1] = std::nanf("");
-  EXPECT_FALSE(pl::adaptiveFill(img.data(), w, h, 1, 1, 1e30f));
-  // the last column and row (cells not whole in a 4 x 4 frame) are traced
-  std::vector<float> flat(size_t(4) * 4 * 4, 0.25f);
-  EXPECT_TRUE(pl::adaptiveFill(flat.data(), 4, 4, 1, 1, 0.0f));
-  EXPECT_FALSE(pl::adaptiveFill(flat.data(), 4, 4, 3, 1, 1.0f));
-  EXPECT_FALSE(pl::adaptiveFill(flat.data(), 4, 4, 1, 3, 1.0f));
-}
-
-TEST(Adaptive, EachBandTracesTheLatticeRowsOfItsCells) {
-  // Every off-lattice pixel of a band whose cell is whole in the frame has its four corners among
-  // the lattice pixels that band traces; no lattice pixel is traced twice by one band.
-  for (const int height : {10, 11, 45}) {
-    const int width = 13, tileW = 8, tileH = 4;
-    for (const std::vector<pl::Band>& bands : {pl::equalBands(height, 1, tileH), pl::equalBands(height, 3, tileH), pl::equalBands(height, 4, 1)}) {
-      for (const pl::Band& b : bands) {
-        const int tilesX = (pl::adaptiveLatticeWidth(width) + tileW - 1) / tileW;
-        const int rows = pl::adaptiveLatticeEnd(b.y1, height) - pl::adaptiveLatticeFirst(b.y0);
-        const int64_t positions = int64_t(tilesX) * ((rows + tileH - 1) / tileH) * tileW * tileH;
-        std::vector<int> traced(size_t(width) * height, 0);
-        for (int64_t j = 0; j < positions; ++j) {
-          int x = -1, y = -1;
-          if (!pl::adaptiveLatticePixel(j, tilesX, tileW, tileH, width, b.y0, b.y1, height, x, y)) continue;
-          ASSERT_TRUE(x >= 0 && x < width && y >= 0 && y < height && pl::adaptiveOnLattice(x, y)) << x << "," << y;
-          ++traced[size_t(y) * width + x];
-        }
-        for (int y = b.y0; y < b.y1; ++y)
-          for (int x = 0; x < width; ++x) {
-            if (pl::adaptiveOnLattice(x, y)) {
-              EXPECT_EQ(traced[size_t(y) * width + x], 1) << height << ": " << x << "," << y;
-              continue;
-            }
-            const int cx = x & ~1, cy = y & ~1;
-            if (cx + 2 >= width || cy + 2 >= height) continue;
-            for (int c = 0; c < 4; ++c)
-              EXPECT_EQ(traced[size_t(cy + 2 * (c / 2)) * width + cx + 2 * (c % 2)], 1) << height << " band " << b.y0 << ": " << x << "," << y;
-          }
-      }
-    }
-  }
-}
-
-TEST(Render, AdaptiveSamplingTracesAFractionOfThePixelsNearTheFullTrace) {
-  // The grove at 160x90: the lattice (a quarter) plus the cells whose corners differ, against every
-  // pixel traced. Measured 2026-12-05: at 0.02, 47.1 % traced, RMS 2.9e-4 (premultiplied RGBA);
-  // at 1e-4, 50.6 % traced and the image exact (only cells of equal corners, the sky, filled).
-  pl::PlayOptions o = groveView(160, 90);
-  std::vector<float> full, loose, tight, bands;
-  pl::play(o, Device{}, &full);
-  o.adaptive = 0.02f;
-  const nlohmann::json r = pl::play(o, Device{}, &loose);
-  o.adaptive = 1e-4f;
-  const nlohmann::json rt = pl::play(o, Device{}, &tight);
-  const double f = r["adaptive"]["traced_fraction_mean"], ft = rt["adaptive"]["traced_fraction_mean"];
-  const double e = pt::imageRms(loose, full), et = pt::imageRms(tight, full);
-  std::printf("adaptive 0.02: traced %.3f, RMS %.5f; 1e-4: traced %.3f, RMS %.5f\n", f, e, ft, et);
-  EXPECT_DOUBLE_EQ(double(r["adaptive"]["tolerance"]), double(0.02f));
-  EXPECT_GE(f, 0.25);  // the lattice at least
-  EXPECT_LT(f, 0.6);
-  EXPECT_GT(ft, f);
-  EXPECT_LT(et, e);
-  EXPECT_LT(et, 1e-5);
-  EXPECT_GT(e, 0.0);
-  EXPECT_LT(e, 5e-4);
-  // bands give the same image (each band traces the lattice rows of its cells)
-  o.adaptive = 0.02f;
-  o.tiles = 3;
-  const nlohmann::json rb = pl::play(o, Device{}, &bands);
-  ASSERT_EQ(rb["bands"].size(), 3u);
-  ASSERT_EQ(bands.size(), loose.size());
-  EXPECT_EQ(std::memcmp(bands.data(), loose.data(), loose.size() * sizeof(float)), 0) << "rms " << pt::imageRms(bands, loose);
-  // one eye only, and a tolerance >= 0
-  o.tiles = 0;
-  o.stereoIpd = 0.1f;
-  EXPECT_THROW(pl::play(o, Device{}), canopy::Error);
-  o.stereoIpd = 0.0f;
-  o.adaptive = -0.1f;
-  EXPECT_THROW(pl::play(o, Device{}), canopy::Error);
 }
