@@ -52,6 +52,12 @@
 #                      same plants and walk, 1920x1080; the ratio of its median to the 400 walk's
 #                    - the 400 walk at 1920x1080 with a 256 MiB cache (a quarter), then 64 MiB (FOREST_CACHES
 #                      "256 64": the 400 forest's pages, ~216 MB at 128^3, fit in 256): medians and ratios
+#   dials            canopy-play's quality dials on the stereo phase's real forest (400 instances, 128^3
+#                    plants): the three cameras of the forest phase at FOREST_SIZES, FRAMES (120) frames, 1
+#                    GiB cache, with the defaults and with each of DIALS (flag sets separated by ';', default
+#                    "--step 1;--stop-opacity 0.99;--step 1 --stop-opacity 0.99"): the median frame, its
+#                    ratio to the defaults', and the converged first frame of each camera against the
+#                    defaults' (bench-image-diff: RMS relative to the covered mean RGB); $OUT/dials.md.
 #   detail           oak_medium through the Make rules with a detail lattice (`make plants DETAIL=...`, one
 #                    plant, DEVICE=cuda): light 128 / detail 1024 and light 136 / detail 1088, the make
 #                    timed, the .canopy's bytes; then the 1080p close-ups (120 frames, 1 GiB cache, two
@@ -92,6 +98,7 @@
 #   FOREST_SIZES      the forest phase's frame sizes, default "1920x1080 3840x2160" (the first is the
 #                     size of the large forest and small-cache runs); FRAMES (120) frames per run;
 #                     FOREST_CACHES: the small-cache runs' budgets in MiB (default "256 64")
+#   DIALS             the dials phase's flag sets, ';' between them (each against the defaults)
 #   DETAIL_CONFIGS    the detail phase's plants, LIGHT:DETAIL (default "128:1024 136:1088"); DETAIL_SHOTS its
 #                     close-ups, DETAIL:FOV:DISTANCE (default "1024:40:22 1024:30:29.87 1088:40:22")
 #   BENCH_DEVICE      default cuda; cpu builds the forests and runs the forest phase on the CPU, to
@@ -132,7 +139,7 @@ OAK=$SHARED/assets/plants/oak_medium.glb
 PHASES=${PHASES:-tests lbsolve haar octreepack grove play}
 has() { [[ " $PHASES " == *" $1 "* ]]; }
 for p in $PHASES; do
-  case $p in tests|lbsolve|haar|octreepack|grove|play|stereo|forest|detail|profile-lbsolve|profile-play) ;;
+  case $p in tests|lbsolve|haar|octreepack|grove|play|stereo|forest|dials|detail|profile-lbsolve|profile-play) ;;
     *) echo "run-gpu.sh: unknown phase '$p'" >&2; exit 1 ;;
   esac
 done
@@ -410,6 +417,59 @@ print(f"\n{frames} frames a run, `canopy-play FOREST --device {dev} --size WxH -
 PY
   cat "$t"
   echo "forest phase: $((SECONDS - t0)) s"
+fi
+
+if has dials && need canopy-voxelize canopy-lbsolve canopy-haar canopy-octreepack canopy-play bench-image-diff; then
+  step dials
+  t0=$SECONDS
+  f=$(forest_canopy "${FOREST_N:-400}" "${FOREST_RADIUS:-100}")
+  [[ -f $f ]] || forest_build "${FOREST_N:-400}" "${FOREST_RADIUS:-100}"
+  read -ra sizes <<< "${FOREST_SIZES:-1920x1080 3840x2160}"
+  IFS=';' read -ra dials <<< "${DIALS:---step 1;--stop-opacity 0.99;--step 1 --stop-opacity 0.99}"
+  dials=("" "${dials[@]}")
+  for cam in high low walk; do
+    case $cam in
+      high) spec=orbit:elevation=25,distance=300,turns=0.25 ;;
+      low) spec=orbit:elevation=10,distance=90,turns=0.25 ;;
+      walk) spec=$walk ;;
+    esac
+    for size in "${sizes[@]}"; do
+      for k in "${!dials[@]}"; do
+        read -ra flags <<< "${dials[$k]}"
+        id=$cam-$size-$k
+        run "dials_$id.json" timeout 300 canopy-play "$f" --device "$dev" --size "$size" --frames "${FRAMES:-120}" --cache-mb 1024 \
+          --camera "$spec" "${flags[@]}" --json -q
+        run "dials_$id.exr.log" timeout 300 canopy-play "$f" --device "$dev" --size "$size" --frames 1 --converge --cache-mb 1024 \
+          --camera "$spec" "${flags[@]}" -o "$W/dials_$id.exr" -q
+        ((k == 0)) || run "dials_$id.diff.json" bench-image-diff "$W/dials_$id.exr" "$W/dials_$cam-$size-0.exr" --json -q
+      done
+    done
+  done
+  (IFS=';'; python3 - "$O" "${dials[*]}" "${sizes[*]// /;}" >> "$O/dials.md") <<'PY'
+import json, sys
+out, dials, sizes = sys.argv[1], sys.argv[2].split(";"), sys.argv[3].split(";")
+def load(name):
+    try:
+        return json.load(open(f"{out}/{name}"))
+    except (OSError, ValueError):
+        return None
+print("| camera | size | flags | median ms (p95) | / defaults | RMS vs defaults (first frame, converged) |")
+print("|---|---|---|---|---|---|")
+for cam in ("high", "low", "walk"):
+    for size in sizes:
+        base = load(f"dials_{cam}-{size}-0.json")
+        for k, flags in enumerate(dials):
+            r = load(f"dials_{cam}-{size}-{k}.json")
+            if r is None:
+                print(f"| {cam} | {size} | {flags or '(defaults)'} | (no report) | | |")
+                continue
+            d = load(f"dials_{cam}-{size}-{k}.diff.json")
+            ratio = f"{r['frame_ms_median'] / base['frame_ms_median']:.3f}" if base else ""
+            rms = f"{100 * d['relative']:.2f} %" if d else ""
+            print(f"| {cam} | {size} | {flags or '(defaults)'} | {r['frame_ms_median']:.2f} ({r['frame_ms_p95']:.2f}) | {ratio} | {rms} |")
+PY
+  cat "$O/dials.md"
+  echo "dials phase: $((SECONDS - t0)) s"
 fi
 
 if has detail && need canopy-voxelize canopy-lbsolve canopy-haar canopy-octreepack canopy-play; then
