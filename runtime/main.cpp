@@ -80,7 +80,10 @@ void addLightOptions(CLI::App& app, canopy::play::PlayOptions& o, CliValues& x) 
   app.add_option("--ground-albedo", x.groundAlbedo, "The ground's albedo: R,G,B or one value, linear, in [0, 1]")->capture_default_str();
   app.add_flag("--converge", o.converge, "Per frame, render passes until no loadable page is missing (reference quality)");
   app.add_flag("--no-warm-start", x.coldStart, "Render the first frame in real-time mode too (node means until pages arrive)");
-  app.add_option("--loader-threads", o.loaderThreads, "Page reader threads")->capture_default_str()->check(CLI::Range(1, 64));
+  app.add_option("--loader-threads", o.loaderThreads,
+                 "Page reader threads per band (0: the host's hardware threads shared by the bands, 2 to 16 each)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 64));
 }
 
 // The stereo and band options.

@@ -382,6 +382,7 @@ void validateOptions(const PlayOptions& o) {
   if (!(o.stereo.maxSpread >= 0.0f && o.stereo.maxSpread <= 1.0e3f)) throw usageError("--stereo-spread must be in [0, 1000] pixels");
   if (!(o.stereo.solidAlpha >= 0.0f && o.stereo.solidAlpha <= 1.0f)) throw usageError("--stereo-solid must be in [0, 1]");
   if (o.tiles < 0 || o.tiles > 64) throw usageError("--tiles must be 0..64");
+  if (o.loaderThreads < 0 || o.loaderThreads > 64) throw usageError("--loader-threads must be 0..64 (0: the host's threads)");
   float groundY;
   parseGround(o.ground, groundY);
   for (float a : o.groundAlbedo)
@@ -586,6 +587,7 @@ nlohmann::json playReport(const PlayOptions& o, const CanopyFile& file, const Ho
   const uint64_t lookups = st.pagesUsed + st.pagesMissed;
   r["cache_hit_rate"] = lookups ? double(st.pagesUsed) / double(lookups) : 1.0;
   r["cache_slots"] = slots;  // per band
+  r["loader_threads"] = loaderThreadsFor(o.loaderThreads, int(tiles.size()));  // per band
   r["cache_mb"] = double(uint64_t(slots) * file.header().pageBytes) / (1024.0 * 1024.0);
   r["scene_page_mb"] = double(scene.brickPageBytes + scene.lightPageBytes + scene.haarPageBytes) / (1024.0 * 1024.0);
   r["light_page_mb"] = double(scene.lightPageBytes) / (1024.0 * 1024.0);
@@ -662,6 +664,16 @@ struct FrameLog {
   uint64_t coldStartBytes = 0;  // streamed by the first complete frame
 };
 
+}  // namespace
+
+int loaderThreadsFor(int requested, int bands) {
+  if (requested > 0) return requested;
+  const int host = int(std::thread::hardware_concurrency());
+  return std::clamp(host / std::max(bands, 1), 2, 16);
+}
+
+namespace {
+
 // One band per renderer (or --tiles bands over them, round robin), each with its own cache.
 std::vector<Tile> makeTiles(const PlayOptions& o, const Device& device, const CanopyFile& file, const HostScene& scene, uint32_t slots,
                             int tileH) {
@@ -673,7 +685,8 @@ std::vector<Tile> makeTiles(const PlayOptions& o, const Device& device, const Ca
     t.device = devices[k % devices.size()];
     t.band = bands0[k];
     t.backend = t.device >= 0 ? makeCudaBackend(scene, slots, t.device) : makeCpuBackend(scene, slots);
-    t.streamer = std::make_unique<Streamer>(file, *t.backend, slots, std::min<uint32_t>(o.stagingPages, std::max<uint32_t>(slots, 1)), o.loaderThreads);
+    t.streamer = std::make_unique<Streamer>(file, *t.backend, slots, std::min<uint32_t>(o.stagingPages, std::max<uint32_t>(slots, 1)),
+                                            loaderThreadsFor(o.loaderThreads, int(bands0.size())));
   }
   return tiles;
 }

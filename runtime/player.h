@@ -58,7 +58,7 @@ struct PlayOptions {
   bool converge = false;             // per frame, render passes until no loadable page is missing
   bool warmStart = true;             // the first frame converges (a complete first image), the
                                      // rest are real-time (one pass, loads land in later frames)
-  int loaderThreads = 2;
+  int loaderThreads = 0;             // page reader threads per band; 0: loaderThreadsFor's (the host's threads)
   uint32_t stagingPages = 256;       // pages read ahead per pass at most (16 MiB pinned)
   // Stereo (stereo.h): --stereo IPD renders a left and a right eye IPD scene units apart; the left
   // is traced, the right reprojected from it with its holes traced (stereoFill "reproject"), or
@@ -88,6 +88,11 @@ std::vector<FrameSetup> framePlan(const PlayOptions& o, const HostScene& scene);
 // which this function formats itself (the pattern never reaches printf). Throws Usage naming the
 // pattern for anything else (%s, %n, two conversions, ...) and for several frames without a pattern.
 std::string frameFileName(const std::string& pattern, int frame, int frames);
+
+// The page reader threads of each band: `requested` where > 0, else the host's hardware threads
+// shared by the bands, at least 2 and at most 16 each (decoding and checking pages is the cold
+// start's cost: bench/RESULTS.md, "Detail lattices").
+int loaderThreadsFor(int requested, int bands);
 
 // Runs everything; `lastImage` (optional) receives the last frame's RGBA (with --stereo the left
 // eye's, and `lastRight` the right eye's). A run that fails removes the frames it has written, so a

@@ -16,6 +16,7 @@
 #include <fstream>
 #include <random>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "canopy/atomic_file.h"
@@ -742,6 +743,26 @@ TEST(Render, SmallCacheStreamsAForestAndConvergesToTheFullCacheImage) {
   const std::vector<float> want = render(ref, &full);
   EXPECT_EQ(int(full["evictions"]), 0);
   EXPECT_LT(pt::imageRms(last, want), 1e-6) << small.dump();
+}
+
+TEST(Render, LoaderThreadsChangeTheColdStartNotTheConvergedFrame) {
+  EXPECT_EQ(pl::loaderThreadsFor(3, 1), 3);
+  const int host = int(std::thread::hardware_concurrency());
+  EXPECT_EQ(pl::loaderThreadsFor(0, 1), std::clamp(host, 2, 16));
+  EXPECT_EQ(pl::loaderThreadsFor(0, 3), std::clamp(host / 3, 2, 16));
+  EXPECT_EQ(pl::loaderThreadsFor(0, 1000), 2);
+  pl::PlayOptions o = pt::convergedView(closeForestFile(), 48, 32);
+  o.loaderThreads = 1;
+  nlohmann::json one, many;
+  const std::vector<float> a = render(o, &one);
+  o.loaderThreads = 7;
+  const std::vector<float> b = render(o, &many);
+  EXPECT_EQ(int(one["loader_threads"]), 1);
+  EXPECT_EQ(int(many["loader_threads"]), 7);
+  ASSERT_EQ(a.size(), b.size());
+  EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(float)), 0);
+  o.loaderThreads = 65;
+  EXPECT_THROW(render(o), canopy::Error);
 }
 
 // ---------------------------------------------------------------------------------------------
