@@ -207,15 +207,6 @@ TEST(Scene, MarchExtentIsTheBoxOfTheLeavesWithMatter) {
   }
 }
 
-// The level of detail rule (docs/play.md, "Level of detail"): a shading segment samples the
-// coarsest level whose voxel is no wider than the pixel's footprint there, and never finer than the
-// finest. Seen from far (a pixel wider than the ball's 0.1 m cells at every sample), every voxel is
-// at most a pixel wide (measured max 0.61); seen close (0.4 m from its front, 64 px over 40 degrees:
-// a pixel is 4.5 mm there), the finest level is the limit and its voxels cover up to ~22 pixels
-// (measured max 25.5 over the ball's depth), which the statistic reports (countVoxelFootprint; the
-// CPU's --count-work). The statistic counts the level the rule chooses (segmentLevel, as the
-// renderer calls it), not a coarser resident ancestor used while pages stream: the frames here are
-// converged, where the two are the same.
 // docs/play.md, "Choosing a plant's detail for a close-up": two lenses framing the ball's height to
 // the frame height see its centre's voxels at the same width; the wider lens comes nearer, so its
 // front's voxels are wider (by d / (d - r) of each), and each stays within its formula.
@@ -244,6 +235,15 @@ TEST(LevelOfDetail, TheLensDecidesTheCloseUpsWidestVoxel) {
   EXPECT_GT(widest[0], widest[1] * 1.05);
 }
 
+// The level of detail rule (docs/play.md, "Level of detail"): a shading segment samples the
+// coarsest level whose voxel is no wider than the pixel's footprint there, and never finer than the
+// finest. Seen from far (a pixel wider than the ball's 0.1 m cells at every sample), every voxel is
+// at most a pixel wide (measured max 0.61); seen close (0.4 m from its front, 64 px over 40 degrees:
+// a pixel is 4.5 mm there), the finest level is the limit and its voxels cover up to ~22 pixels
+// (measured max 25.5 over the ball's depth), which the statistic reports (countVoxelFootprint; the
+// CPU's --count-work). The statistic counts the level the rule chooses (segmentLevel, as the
+// renderer calls it), not a coarser resident ancestor used while pages stream: the frames here are
+// converged, where the two are the same.
 TEST(LevelOfDetail, VoxelIsNoWiderThanThePixelWhereTheLatticeAllows) {
   const double pixelAngle = 2.0 * std::tan(20.0 * M_PI / 180.0) / 64.0;
   for (const double distance : {60.0, 2.2}) {
