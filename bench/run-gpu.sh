@@ -174,6 +174,8 @@ oak() {  # oak N: oak_medium voxelised at N^3 and lit on the GPU, once per run: 
 seconds() { python3 -c 'import json, sys; print(round(json.load(open(sys.argv[1]))["seconds"], 3))' "$1"; }
 dev=${BENCH_DEVICE:-cuda}
 walk=$W/forest-walk.json  # the forests' walk: eye level (1.8 m), straight through the middle, looking ahead and slightly up
+high=orbit:elevation=25,distance=300,turns=0.25  # the forests' high orbit: the whole forest in view (at 150 m its near edge and sides are cut)
+low=orbit:elevation=10,distance=90,turns=0.25    # and low orbit
 forest_canopy() {  # forest_canopy N RADIUS: the path of forest_build's forest
   echo "$W/forest${FOREST_RESOLUTION:-128}/forest/forest-n$1-r$2.canopy"
 }
@@ -359,8 +361,6 @@ if has forest && need canopy-voxelize canopy-lbsolve canopy-haar canopy-octreepa
   f=$(forest_canopy "$n" "$r") big=$(forest_canopy "$bn" "$br")
   forest_build "$n" "$r"
   forest_build "$bn" "$br"
-  high=orbit:elevation=25,distance=300,turns=0.25  # the whole forest in view (at 150 m its near edge and sides are cut)
-  low=orbit:elevation=10,distance=90,turns=0.25
   t=$O/forest.md
   { echo "| scene | camera | size | median ms | p95 ms | first complete frame s | last frame |"
     echo "|---|---|---|---|---|---|---|"; } > "$t"
@@ -428,11 +428,7 @@ if has dials && need canopy-voxelize canopy-lbsolve canopy-haar canopy-octreepac
   IFS=';' read -ra dials <<< "${DIALS:---step 1;--stop-opacity 0.99;--step 1 --stop-opacity 0.99}"
   dials=("" "${dials[@]}")
   for cam in high low walk; do
-    case $cam in
-      high) spec=orbit:elevation=25,distance=300,turns=0.25 ;;
-      low) spec=orbit:elevation=10,distance=90,turns=0.25 ;;
-      walk) spec=$walk ;;
-    esac
+    spec=${!cam}
     for size in "${sizes[@]}"; do
       for k in "${!dials[@]}"; do
         read -ra flags <<< "${dials[$k]}"
@@ -445,7 +441,7 @@ if has dials && need canopy-voxelize canopy-lbsolve canopy-haar canopy-octreepac
       done
     done
   done
-  (IFS=';'; python3 - "$O" "${dials[*]}" "${sizes[*]// /;}" >> "$O/dials.md") <<'PY'
+  (IFS=';'; python3 - "$O" "${dials[*]}" "${sizes[*]}" >> "$O/dials.md") <<'PY'
 import json, sys
 out, dials, sizes = sys.argv[1], sys.argv[2].split(";"), sys.argv[3].split(";")
 def load(name):
