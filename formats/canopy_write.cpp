@@ -436,11 +436,11 @@ Layout layout(const CanopyWriteInput& in, const Ranges& R, const PageGeometry& g
 
 // (5.0) Compresses the pages given in index order, a batch at a time on all cores (each page on its
 // own, so the bytes do not depend on the threads), and hands their stored bytes on in order:
-// write(bytes, n). The extents of the pages so far, from pagesOffset on.
+// write(bytes, n). The extents of the pages so far, their offsets from the first page's start.
 class PageCompressor {
  public:
-  PageCompressor(uint32_t pageBytes, int level, uint64_t pagesOffset, std::function<void(const unsigned char*, size_t)> write)
-      : pageBytes_(pageBytes), level_(level), at_(pagesOffset), write_(std::move(write)) {}
+  PageCompressor(uint32_t pageBytes, int level, std::function<void(const unsigned char*, size_t)> write)
+      : pageBytes_(pageBytes), level_(level), write_(std::move(write)) {}
   void add(const std::vector<unsigned char>& img) {
     images_.push_back(img);
     if (images_.size() == kBatch) flush();
@@ -465,7 +465,7 @@ class PageCompressor {
   static constexpr size_t kBatch = 256;  // 16 MiB of page images
   uint32_t pageBytes_;
   int level_;
-  uint64_t at_;
+  uint64_t at_ = 0;
   std::function<void(const unsigned char*, size_t)> write_;
   std::vector<std::vector<unsigned char>> images_;
 };
@@ -476,18 +476,14 @@ void checkCoding(const CanopyWriteInput& in) {
     throw invalidInput("canopy writer: the Zstandard level must be 1..19");
 }
 
-}  // namespace
-
-namespace {
-
-// Pass 2: builds the pages again and hands them on in index order, compressed (5.0) or not, to
-// write(bytes, n), the first at pagesOffset (pass 1's resident size: the resident part has the
-// same size with every extent zero). Returns the layout, its resident image with the compressed
-// pages' extents.
-Layout writePages(const CanopyWriteInput& in, const Ranges& R, const PageGeometry& g, uint64_t pagesOffset,
+// Builds the pages and hands them on in index order, compressed (5.0) or not, to write(bytes, n),
+// the first to lie at the end of the resident part. Returns the layout, its resident image with the
+// compressed pages' extents (the resident part has the same size with every extent zero, which is
+// how layout() first lays it out: that size is where the pages begin).
+Layout writePages(const CanopyWriteInput& in, const Ranges& R, const PageGeometry& g,
                   const std::function<void(const unsigned char*, size_t)>& write) {
   const bool zstd = in.pageCoding == kCanopyPageZstd;
-  PageCompressor packer(g.pageBytes, in.zstdLevel, pagesOffset, write);
+  PageCompressor packer(g.pageBytes, in.zstdLevel, write);
   Layout L = layout(in, R, g, [&](uint32_t, std::vector<unsigned char>& img) {
     if (zstd)
       packer.add(img);
@@ -496,6 +492,7 @@ Layout writePages(const CanopyWriteInput& in, const Ranges& R, const PageGeometr
   });
   if (zstd) {
     packer.flush();
+    for (CanopyPageExtent& e : packer.extents) e.offset += L.resident.size();
     residentImage(in, R, g, &packer.extents, L);
   }
   return L;
@@ -522,10 +519,13 @@ CanopyWriteStats writeCanopyFile(const std::string& path, CanopyWriteInput input
   const auto write = [&](const unsigned char* p, size_t n) {
     if (ok) ok = std::fwrite(p, 1, n, f.get()) == n;
   };
-  const Layout L = writePages(input, R, g, pagesOffset, write);
-  // deterministic layout: both passes agree (compressed: but for the extents, in a section of the same size)
+  const Layout L = writePages(input, R, g, write);
+  // deterministic layout: both passes agree (compressed: but for the extents, in a section of the
+  // same size; the page tables, which hold every page's CRC, agree)
   if (input.pageCoding == kCanopyPageZstd) {
-    if (L.resident.size() != pagesOffset) ok = false;
+    if (L.resident.size() != pagesOffset || L.pages.size() != probe.pages.size() ||
+        std::memcmp(L.pages.data(), probe.pages.data(), L.pages.size() * sizeof(CanopyPageEntry)) != 0)
+      ok = false;
     if (ok && std::fseek(f.get(), 0, SEEK_SET) != 0) ok = false;
     write(L.resident.data(), L.resident.size());
   } else if (L.resident != probe.resident) {
@@ -540,10 +540,9 @@ CanopyWriteStats writeCanopyFile(const std::string& path, CanopyWriteInput input
 std::vector<unsigned char> writeCanopyBytes(CanopyWriteInput input, CanopyWriteStats* stats) {
   checkCoding(input);
   const PageGeometry g;
-  const Ranges R = assignModelRanges(input, g);
-  const uint64_t pagesOffset = layout(input, R, g, nullptr).resident.size();
   std::vector<unsigned char> pageArea;
-  Layout L = writePages(input, R, g, pagesOffset, [&](const unsigned char* p, size_t n) { pageArea.insert(pageArea.end(), p, p + n); });
+  Layout L = writePages(input, assignModelRanges(input, g), g,
+                        [&](const unsigned char* p, size_t n) { pageArea.insert(pageArea.end(), p, p + n); });
   std::vector<unsigned char> bytes = std::move(L.resident);
   bytes.insert(bytes.end(), pageArea.begin(), pageArea.end());
   if (stats) *stats = L.stats;

@@ -49,11 +49,11 @@ uint32_t canopyPageEncode(const unsigned char* page, uint32_t pageBytes, int lev
     splitPlanes(page, planes.data(), pageBytes, filter);
     return static_cast<const unsigned char*>(planes.data());
   };
-  uint32_t best = 0;
+  uint32_t best = onlyFilter >= 0 ? uint32_t(onlyFilter) : 0u;
   size_t smallest = 0;
   for (uint32_t filter : {0u, 2u, 4u}) {
-    if (onlyFilter >= 0 && filter != uint32_t(onlyFilter)) continue;
-    const size_t n = ZSTD_compressCCtx(cctx.get(), frame.data(), bound, source(filter), pageBytes, onlyFilter >= 0 ? level : 1);
+    if (onlyFilter >= 0) break;  // forced: compressed once, below
+    const size_t n = ZSTD_compressCCtx(cctx.get(), frame.data(), bound, source(filter), pageBytes, 1);
     if (ZSTD_isError(n)) continue;  // never for a valid level and a bound-sized buffer
     if (smallest == 0 || n < smallest) smallest = n, best = filter;
   }

@@ -664,16 +664,6 @@ struct FrameLog {
   uint64_t coldStartBytes = 0;  // streamed by the first complete frame
 };
 
-}  // namespace
-
-int loaderThreadsFor(int requested, int bands) {
-  if (requested > 0) return requested;
-  const int host = int(std::thread::hardware_concurrency());
-  return std::clamp(host / std::max(bands, 1), 2, 16);
-}
-
-namespace {
-
 // One band per renderer (or --tiles bands over them, round robin), each with its own cache.
 std::vector<Tile> makeTiles(const PlayOptions& o, const Device& device, const CanopyFile& file, const HostScene& scene, uint32_t slots,
                             int tileH) {
@@ -754,6 +744,12 @@ nlohmann::json stereoReport(const PlayOptions& o, const FrameLog& log) {
 }
 
 }  // namespace
+
+int loaderThreadsFor(int requested, int bands) {
+  if (requested > 0) return requested;
+  const int host = int(std::thread::hardware_concurrency());
+  return std::clamp(host / std::max(bands, 1), 2, 16);
+}
 
 nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<float>* lastImage, std::vector<float>* lastRight) {
   const auto t0 = std::chrono::steady_clock::now();

@@ -34,7 +34,7 @@ namespace op = canopy::octreepack;
 
 namespace {
 
-// The frozen files of every version (4.0, 3.0, 2.0, 1.2, 1.1, 1.0), which must still read.
+// The frozen files of every version (5.0, 4.0, 3.0, 2.0, 1.2, 1.1, 1.0), which must still read.
 const std::string kFrozenV50 = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v5.0.canopy";
 const std::string kFrozenV40 = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v4.0.canopy";
 const std::string kFrozen = std::string(CANOPY_SOURCE_DIR) + "/tests/octreepack/data/small-v1.2.canopy";

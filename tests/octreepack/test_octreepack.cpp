@@ -293,6 +293,8 @@ TEST(Octreepack, SceneJsonPacksModelsInstancesAndSceneLight) {
   o.scene = dir + "/scene.json";
   o.sceneLight = dir + "/scene_light.vdb";
   o.output = dir + "/scene.canopy";
+  o.pageCoding = "lz4";
+  EXPECT_THROW(op::octreepack(o), canopy::Error);  // zstd or raw only
   o.pageCoding = "raw";  // the version the content needs (compressed pages are 5.0 whatever they hold)
   const nlohmann::json report = op::octreepack(o);
   CanopyFile f = CanopyFile::open(o.output);

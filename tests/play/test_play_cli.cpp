@@ -58,19 +58,13 @@ bool exists(const std::string& p) {
 
 // The ball (raw pages; `compressed`: the same with compressed pages, format 5.0).
 const std::string& sceneFile(bool compressed = false) {
-  static const std::string p[2] = {[] {
-                                     const std::string f = pt::tmpDir("cli") + "/ball.canopy";
-                                     const float albedo[3] = {0.2f, 0.6f, 0.1f};
-                                     pt::writeScene(f, {pt::sphereModel(24, 10, 0.4f, 0.1f, albedo)}, {pt::instanceAt(0, 0, 0, 0)});
-                                     return f;
-                                   }(),
-                                   [] {
-                                     const std::string f = pt::tmpDir("cli") + "/ball-zstd.canopy";
-                                     const float albedo[3] = {0.2f, 0.6f, 0.1f};
-                                     pt::writeScene(f, {pt::sphereModel(24, 10, 0.4f, 0.1f, albedo)}, {pt::instanceAt(0, 0, 0, 0)},
-                                                    canopy::kCanopyPageZstd);
-                                     return f;
-                                   }()};
+  static const auto ball = [](const char* name, uint32_t coding) {
+    const std::string f = pt::tmpDir("cli") + "/" + name;
+    const float albedo[3] = {0.2f, 0.6f, 0.1f};
+    pt::writeScene(f, {pt::sphereModel(24, 10, 0.4f, 0.1f, albedo)}, {pt::instanceAt(0, 0, 0, 0)}, coding);
+    return f;
+  };
+  static const std::string p[2] = {ball("ball.canopy", canopy::kCanopyPageRaw), ball("ball-zstd.canopy", canopy::kCanopyPageZstd)};
   return p[compressed ? 1 : 0];
 }
 

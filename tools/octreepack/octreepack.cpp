@@ -179,6 +179,7 @@ PackedModel packModel(const OctreepackOptions& o, const SceneModel& m, size_t i)
 
 nlohmann::json octreepack(const OctreepackOptions& o) {
   const auto t0 = std::chrono::steady_clock::now();
+  if (o.pageCoding != "zstd" && o.pageCoding != "raw") throw usageError("--pages must be zstd or raw, got '" + o.pageCoding + "'");
   nlohmann::json meta = {{"tool", "canopy-octreepack"}, {"version", versionString()}};
   const Scene scene = packScene(o, meta);
 
