@@ -67,7 +67,8 @@
 #                    lattices").
 #   profile-lbsolve  Nsight Compute on one pull launch in the middle of a solve (clocks and caches
 #                    left alone): duration and DRAM bytes per lattice node against the model's 156 B.
-#   profile-play     Nsight Compute on one forest-orbit frame's pixel kernel of PROFILE_BIN (build it
+#   profile-play     Nsight Compute on one forest-orbit frame's pixel kernel of PROFILE_BIN (PROFILE_SCENE=real:
+#                    the real forest of the dials phase, mid-walk, built if missing) (build it
 #                    with -lineinfo for the per-line table: bench/play/variant.sh li -lineinfo), the
 #                    hottest source lines (bench/play/ncu_lines.py) and the kernel's SASS.
 #
@@ -549,7 +550,13 @@ if has profile-play; then
   pb=${PROFILE_BIN:-canopy-play}
   ncu=$(command -v ncu || ls /usr/local/cuda/bin/ncu 2>/dev/null || true)
   forest=$W/play-1/forest.canopy
-  if [[ ! -f $forest ]] && need bench-play; then  # the play phase's forest, or a short run that writes it
+  camera=orbit:elevation=30,distance=55
+  if [[ ${PROFILE_SCENE:-synthetic} == real ]]; then  # the real forest (built as the dials phase builds it), mid-walk
+    forest=$(forest_canopy "${FOREST_N:-400}" "${FOREST_RADIUS:-100}")
+    [[ -f $forest ]] || forest_build "${FOREST_N:-400}" "${FOREST_RADIUS:-100}"
+    camera=$W/walk-mid.json
+    echo '{"keyframes":[{"frame":0,"position":[0,1.8,0],"target":[30,3.0,6],"fov":60}]}' > "$camera"
+  elif [[ ! -f $forest ]] && need bench-play; then  # the play phase's forest, or a short run that writes it
     run play_profile_scene.md timeout 300 bench-play "$W/play-1" --device cuda --size 1920x1080 --frames 2 --cache-mb 1024 --shadows map
   fi
   if [[ -z $ncu ]]; then fail "profile-play: no ncu on this machine"; elif need "$pb" && [[ -f $forest ]]; then
@@ -559,7 +566,7 @@ if has profile-play; then
       --section SpeedOfLight --section Occupancy --section WarpStateStats --section LaunchStats --section MemoryWorkloadAnalysis \
       --section MemoryWorkloadAnalysis_Tables --section ComputeWorkloadAnalysis --section InstructionStats --section SourceCounters \
       -o "$W/prof" -f "$BIN/$pb" "$forest" --device cuda --size 1920x1080 --frames 10 \
-      --camera orbit:elevation=30,distance=55 -o "$W/ncu-frames/f_%04d.exr" > "$O/ncu_play_run.txt" 2>&1 || fail "ncu on $pb (see ncu_play_run.txt)"
+      --camera "$camera" -o "$W/ncu-frames/f_%04d.exr" > "$O/ncu_play_run.txt" 2>&1 || fail "ncu on $pb (see ncu_play_run.txt)"
     if [[ -f $W/prof.ncu-rep ]]; then
       "$ncu" -i "$W/prof.ncu-rep" --page details > "$O/ncu_play.txt" 2>&1
       "$ncu" -i "$W/prof.ncu-rep" --page source --csv --print-source cuda,sass > "$W/source-both.csv" 2>&1 || echo "no cuda,sass source page (build with -lineinfo)"

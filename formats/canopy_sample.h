@@ -245,8 +245,9 @@ CANOPY_HD inline CanopySample canopySampleVoxels(const Voxels& b, float lx, floa
     f[a] = t - fl;
   }
   // The 16 loads first, unconditionally (every corner is inside the brick: i0 <= kCanopyBrickVoxels
-  // - 2), so that the GPU has them all in flight at once; corners of weight 0 are then skipped
-  // as before.
+  // - 2), so that the GPU has them all in flight at once; then every corner is summed without a
+  // branch: one of weight 0 adds +0 to each sum (the sums that skipping it gave, for the finite,
+  // non-negative densities a verified page holds).
   float cd[8];
   uint32_t cm[8];
   for (int c = 0; c < 8; ++c) {
@@ -257,7 +258,6 @@ CANOPY_HD inline CanopySample canopySampleVoxels(const Voxels& b, float lx, floa
   for (int c = 0; c < 8; ++c) {
     const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
     const float wt = (dx ? f[0] : 1.0f - f[0]) * (dy ? f[1] : 1.0f - f[1]) * (dz ? f[2] : 1.0f - f[2]);
-    if (wt == 0.0f) continue;
     const float d = cd[c];
     const CanopySample m = canopyUnpack(d, cm[c]);
     dens += wt * d;
@@ -297,7 +297,7 @@ CANOPY_HD CANOPY_FORCEINLINE const uint32_t* canopyLightInPage(const void* page,
 // computed once for all the bases sampled at one point (the player samples four).
 struct CanopyLightCorners {
   uint32_t offset[8];  // voxel index of corner c (x + 6 (y + 6 z)), c = dx + 2 dy + 4 dz
-  float weight[8];     // its trilinear weight (0: the corner is skipped)
+  float weight[8];     // its trilinear weight (0: the corner adds +0)
 };
 
 CANOPY_HD inline CanopyLightCorners canopyLightCorners(float lx, float ly, float lz) {
@@ -322,8 +322,8 @@ CANOPY_HD inline CanopyLightCorners canopyLightCorners(float lx, float ly, float
 }
 
 // Base `base` (0..18) of a light item at the corners k, RGB into rgb. The eight words are loaded
-// before any weight is tested, so that the GPU has them in flight at once; corners of weight 0
-// add nothing.
+// before any is used, so that the GPU has them in flight at once. Every corner is summed, without a
+// branch: one of weight 0 adds +0 (a decoded word is finite and >= 0), the sum that skipping it gave.
 CANOPY_HD CANOPY_FORCEINLINE void canopySampleLightAt(const uint32_t* item, uint32_t base, const CanopyLightCorners& k,
                                                       float rgb[3]) {
   const uint32_t* plane = item + size_t(base) * kCanopyLightVoxelCount;
@@ -331,7 +331,6 @@ CANOPY_HD CANOPY_FORCEINLINE void canopySampleLightAt(const uint32_t* item, uint
   for (int c = 0; c < 8; ++c) w[c] = plane[k.offset[c]];
   rgb[0] = rgb[1] = rgb[2] = 0.0f;
   for (int c = 0; c < 8; ++c) {
-    if (k.weight[c] == 0.0f) continue;
     float v[3];
     rgb9e5Decode(w[c], v);
     rgb[0] += k.weight[c] * v[0];

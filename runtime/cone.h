@@ -242,7 +242,7 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t boundStep(const SceneView& s, const Instan
 // The second pass: evaluates the hits of `evaluate` at t (instanceSegment) into the step's sums.
 template <bool kWithLight>
 CANOPY_HD CANOPY_FORCEINLINE void evaluateHits(const SceneView& s, InstanceWalk& w, V3 o, V3 d, float t, float pixelAngle,
-                                               uint32_t evaluate, StepSums& q) {
+                                               uint32_t evaluate, float grow, StepSums& q) {
   const float footprint = t * pixelAngle;
   while (evaluate != 0) {
     const uint32_t h = lowestSetBit(evaluate);
@@ -250,7 +250,7 @@ CANOPY_HD CANOPY_FORCEINLINE void evaluateHits(const SceneView& s, InstanceWalk&
     Hit& hit = w.hits[h];
     const InstanceView& inst = s.instances[hit.instance];
     const Segment g = instanceSegment(s, inst, o, d, t, hit.tout, footprint, true, w.caches[h],
-                                      s.shade.holdEmpty ? &hit.hold : nullptr);
+                                      s.shade.holdEmpty ? &hit.hold : nullptr, grow);
     if (hit.hold.until > t) {  // a new hold: its level condition becomes a bound on t
       const float limit = levelHoldsUntil(s, inst, s.models[inst.model].depth, pixelAngle, hit.hold.level);
       hit.hold.until = limit < hit.hold.until ? limit : hit.hold.until;
@@ -267,6 +267,16 @@ CANOPY_HD CANOPY_FORCEINLINE void evaluateHits(const SceneView& s, InstanceWalk&
       q.kIndirect[c] += ka * ind[c];
     }
   }
+}
+
+// How much a primary cone's brick steps grow at transmittance T (ShadeParams::stepGrowthT): 1 while
+// T >= stepGrowthT, then stepGrowthT / T, at most stepGrowthMax. A sample's share of the pixel is
+// at most T, so the error of a longer step there is weighted by T: the growth keeps T x step
+// about constant (the sampling rate falls as what is left to see does).
+CANOPY_HD CANOPY_FORCEINLINE float stepGrowth(const ShadeParams& shade, float T) {
+  if (!(T < shade.stepGrowthT)) return 1.0f;
+  const float g = shade.stepGrowthT / T;
+  return g < shade.stepGrowthMax ? g : shade.stepGrowthMax;
 }
 
 // The sun's transmittance at the primary cone's samples, and the shadow cone whose value later
@@ -370,12 +380,24 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
   float t = tStart;
   float T = T0;
   SunAtSample sun;
+  uint32_t lodK = 0;
   while (true) {
     walkRetire(w, t);
     if (w.live == 0 && w.done) break;
     StepSums q = {w.done ? tMax : w.tCellExit, 0.0f, {0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}, false, 3.0e38f};
+    float grow = stepGrowth(s.shade, T);
+    float angle = pixelAngle;
+    if (s.shade.lodGrowth) {
+      const uint32_t k = grow >= 4.0f ? 2u : (grow >= 2.0f ? 1u : 0u);
+      if (k != lodK) {  // holds assumed the finer level: drop them
+        for (uint32_t m = w.live; m != 0; m &= m - 1u) w.hits[lowestSetBit(m)].hold.until = -3.0e38f;
+        lodK = k;
+      }
+      angle = pixelAngle * float(1u << k);
+      grow = 1.0f;
+    }
     const uint32_t evaluate = boundStep<kWithCones>(s, w, t, q);
-    evaluateHits<kWithLight>(s, w, o, d, t, pixelAngle, evaluate, q);
+    evaluateHits<kWithLight>(s, w, o, d, t, angle, evaluate, grow, q);
     if (!q.active && w.live == 0) {
       if (w.done) break;
       t = w.tCellExit;

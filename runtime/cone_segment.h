@@ -307,11 +307,15 @@ CANOPY_HD inline bool emptyRunEnd(const Empty& empty, V3 uo, V3 ud, V3 u, const 
   GridDda w;
   gridStart(w, j, brickLo, cellSize, uo, ud);
   for (;;) {
-    const int a = gridAxis(w);
-    tEnd = w.tNext[a];
-    w.cell[a] += w.step[a];
-    if (w.step[a] == 0 || w.cell[a] < 0 || w.cell[a] > n - 1 || !empty(w.cell[0], w.cell[1], w.cell[2])) return true;
-    w.tNext[a] = gridCrossing(brickLo[a], q, w.cell[a], w.step[a], comp(uo, a), comp(ud, a));
+    const bool end = onAxis(gridAxis(w), [&](auto axis) {
+      constexpr int a = decltype(axis)::value;
+      tEnd = w.tNext[a];
+      w.cell[a] += w.step[a];
+      if (w.step[a] == 0 || w.cell[a] < 0 || w.cell[a] > n - 1 || !empty(w.cell[0], w.cell[1], w.cell[2])) return true;
+      w.tNext[a] = gridCrossing(brickLo[a], q, w.cell[a], w.step[a], comp(uo, a), comp(ud, a));
+      return false;
+    });
+    if (end) return true;
   }
 }
 
@@ -355,6 +359,7 @@ struct SegmentRay {
   float eps;            // a thousandth of a cell, but at least a few float ulps of t
   float cellsPerWorld;  // lattice cells per world unit along the ray
   float tExit;          // where the ray leaves the descent's node (>= t + eps)
+  float grow;           // the steps' growth (stepGrowth, >= 1): a brick step is grow x stepFactor voxels, a uniform node's piece grow x kMaxConstantCells cells
 };
 
 // Holds an empty segment that ends at tEnd (EmptyHold): a later step before `until` keeps k = 0
@@ -376,7 +381,7 @@ CANOPY_HD CANOPY_FORCEINLINE Segment constantSegment(const SceneView& s, const M
   g.albedo[0] = c.albedo[0], g.albedo[1] = c.albedo[1], g.albedo[2] = c.albedo[2];
   float tEnd = r.tExit;
   if (shading && c.density > 0.0f) {  // a shadow cone integrates it in one go
-    const float maxLen = kMaxConstantCells / r.cellsPerWorld;
+    const float maxLen = kMaxConstantCells * r.grow / r.cellsPerWorld;
     tEnd = tEnd < r.t + maxLen ? tEnd : r.t + maxLen;
   }
   g.tEnd = tEnd < r.tout ? tEnd : r.tout;
@@ -419,7 +424,7 @@ CANOPY_HD CANOPY_FORCEINLINE Segment brickSegment(const SceneView& s, const Mode
   Segment g;
   CANOPY_PLAY_COUNT(s, brickSamples, 1);
   const float voxelCells = float(m.rootCells >> 3) * levelSize(d.level);  // this level's voxel, in cells
-  float tEnd = r.t + s.shade.stepFactor * voxelCells / r.cellsPerWorld;
+  float tEnd = r.t + s.shade.stepFactor * r.grow * voxelCells / r.cellsPerWorld;
   tEnd = tEnd < r.tExit ? tEnd : r.tExit;
   tEnd = tEnd < r.tout ? tEnd : r.tout;
   const V3 um = r.uo + r.ud * (0.5f * (r.t + tEnd));
@@ -438,13 +443,14 @@ CANOPY_HD CANOPY_FORCEINLINE Segment brickSegment(const SceneView& s, const Mode
 // for an empty leaf's segment, else cleared (see EmptyHold).
 CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView& inst, V3 o, V3 dir, float t,
                                          float tout, float footprint, bool shading, DescentCache& cache,
-                                         EmptyHold* hold = nullptr) {
+                                         EmptyHold* hold = nullptr, float grow = 1.0f) {
   const ModelView& m = s.models[inst.model];
   SegmentRay r;
   r.uo = applyPoint(inst.worldToUnit, o);
   r.ud = applyVector(inst.worldToUnit, dir);
   r.t = t;
   r.tout = tout;
+  r.grow = grow;
   r.cellsPerWorld = length(r.ud) * float(m.rootCells);
   r.eps = fmaxf(1e-3f / r.cellsPerWorld, fabsf(t) * 1e-6f);
   const uint32_t level = segmentLevel(s, inst, m.depth, footprint);

@@ -145,15 +145,19 @@ CANOPY_HD inline void walkAdvance(const SceneView& s, InstanceWalk& w, V3 o, V3 
     w.done = true;
     return;
   }
-  const int a = gridAxis(w.dda);
-  w.dda.cell[a] += w.dda.step[a];
-  w.dda.tNext[a] += w.tDelta[a];
-  if (w.dda.cell[a] < 0 || w.dda.cell[a] >= s.gridDim[a]) {
+  const int face = onAxis(gridAxis(w.dda), [&](auto axis) {  // constant indices (grid_dda.h onAxis)
+    constexpr int a = decltype(axis)::value;
+    w.dda.cell[a] += w.dda.step[a];
+    w.dda.tNext[a] += w.tDelta[a];
+    if (w.dda.cell[a] < 0 || w.dda.cell[a] >= s.gridDim[a]) return -1;
+    return 2 * a + (w.dda.step[a] > 0 ? 0 : 1);
+  });
+  if (face < 0) {
     w.done = true;
     w.tCellExit = w.tGridExit;
     return;
   }
-  walkAddCell(s, w, o, d, tNow, 2 * a + (w.dda.step[a] > 0 ? 0 : 1));
+  walkAddCell(s, w, o, d, tNow, face);
   const float tx = gridExit(w.dda);
   w.tCellExit = tx < w.tGridExit ? tx : w.tGridExit;
 }

@@ -42,6 +42,19 @@ CANOPY_HD CANOPY_FORCEINLINE int gridAxis(const GridDda& w) {
   return w.tNext[2] < w.tNext[a] ? 2 : a;
 }
 
+// f(Axis<a>{}) for the axis a (0, 1 or 2): the axis as a compile-time constant (Axis<A>::value), so
+// that a walk's per-axis update indexes its arrays by constants: indexed by a run-time axis, nvcc
+// keeps a GridDda in local memory (the pixel kernel's empty-cell walk and instance-grid walk were
+// 5 % of its stalls on local-memory loads, docs/performance.md).
+template <int A>
+struct Axis {
+  static constexpr int value = A;
+};
+template <class F>
+CANOPY_HD CANOPY_FORCEINLINE auto onAxis(int a, F&& f) {
+  return a == 0 ? f(Axis<0>{}) : (a == 1 ? f(Axis<1>{}) : f(Axis<2>{}));
+}
+
 // Where the ray leaves the current cell.
 CANOPY_HD CANOPY_FORCEINLINE float gridExit(const GridDda& w) {
   const float t = w.tNext[0] < w.tNext[1] ? w.tNext[0] : w.tNext[1];

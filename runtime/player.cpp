@@ -315,6 +315,9 @@ ShadeParams shadeParams(const PlayOptions& o) {
   shade.stepFactor = o.stepFactor;
   shade.lodBias = o.lodBias;
   shade.stopT = o.stopTransmittance;
+  shade.stepGrowthT = o.stepGrowthT;
+  shade.stepGrowthMax = o.stepGrowthMax;
+  shade.lodGrowth = o.lodGrowth ? 1 : 0;
   shade.shadowAperture = o.shadowAperture;
   // Without the direct term no shadow is needed (--no-direct-sun: the indirect light alone).
   shade.shadows = !o.shadows || !o.directSun ? kShadowsOff : (o.shadowMethod == "cone" ? kShadowsCone : kShadowsMap);

@@ -31,6 +31,9 @@ struct PlayOptions {
   bool directSun = true;             // false (--no-direct-sun): only the indirect (LB and ambient) light
   float stepFactor = 0.5f;           // brick step, in voxels of the chosen level
   float lodBias = 0.0f;
+  float stepGrowthT = 0.0f;          // --step-growth: brick steps grow below this transmittance (0: never; ShadeParams)
+  float stepGrowthMax = 4.0f;        // --step-growth-max: by at most this factor
+  bool lodGrowth = false;
   float stopTransmittance = kStopT;   // a cone stops below this transmittance (--stop-opacity 1 - this); the rest is dropped
   float shadowAperture = 0.03f;      // shadow cone growth per unit length (soft shadows, coarser
                                      // levels and longer steps far from the receiver)

@@ -73,6 +73,11 @@ struct ShadeParams {
   float stepFactor;         // brick step in voxels of the chosen level
   float lodBias;            // added to the chosen level (negative = coarser)
   float stopT;              // a cone stops when its transmittance falls below this (kStopT: opacity 0.999)
+  // A primary cone's brick steps grow once its transmittance T falls below stepGrowthT: by
+  // min(stepGrowthMax, stepGrowthT / T) (stepGrowth, cone.h). 0: never.
+  float stepGrowthT;
+  float stepGrowthMax;
+  int lodGrowth;            // 1: the growth's power of two coarsens the level instead (experiment)
   float shadowAperture;     // shadow cone: footprint growth per unit length (radians)
   int shadows;              // kShadowsOff (Tshadow = 1), kShadowsMap or kShadowsCone
   float shadowMapCells;     // kShadowsMap: extinction grid voxel in lattice cells of the finest instance

@@ -127,6 +127,7 @@ int main(int argc, char** argv) {
       if (method.find("tile16") != std::string::npos) o.warpTileWidth = 16;  // "map-tile16": 16x2 pixel tiles
       if (method.find("stop99") != std::string::npos) o.stopTransmittance = 0.01f;  // quality dials (image changes)
       if (method.find("step1") != std::string::npos) o.stepFactor = 1.0f;
+      if (method.find("grow") != std::string::npos) o.stepGrowthT = 0.1f;  // -grow: steps grow below T 0.1, up to 4x
       if (method.find("lod1") != std::string::npos) o.lodBias = -1.0f;
       const std::string shadowMethod = method.substr(0, method.find('-'));
       o.shadows = shadowMethod != "off";

@@ -71,6 +71,23 @@ TEST(Rgb9e5, KnownWordsAndClamping) {
   EXPECT_EQ(v[0], canopy::kRgb9e5Max);
 }
 
+// The decode builds each channel from float bits (no integer conversion): every exponent and every
+// mantissa of every channel gives exactly mantissa x 2^(e - 24), the format's definition.
+TEST(Rgb9e5, DecodeIsTheMantissaTimesThePowerOfTwo) {
+  for (uint32_t e = 0; e < 32; ++e)
+    for (uint32_t m = 0; m < 512; ++m)
+      for (uint32_t c = 0; c < 3; ++c) {
+        const uint32_t other = (m * 7u + 3u) & 511u;  // the other channels vary too
+        const uint32_t w = e << 27 | m << (9 * c) | other << (9 * ((c + 1) % 3));
+        float v[3];
+        canopy::rgb9e5Decode(w, v);
+        ASSERT_EQ(v[c], std::ldexp(float(m), int(e) - 24)) << e << " " << m << " " << c;
+        ASSERT_EQ(v[(c + 1) % 3], std::ldexp(float(other), int(e) - 24)) << e << " " << m << " " << c;
+        ASSERT_EQ(v[(c + 2) % 3], 0.0f);
+        ASSERT_FALSE(std::signbit(v[(c + 2) % 3]));
+      }
+}
+
 TEST(Rgb9e5, ErrorIsWithinAHalfUnitOfTheLargestChannel) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> logScale(-9.0, 4.8), spread(-3.0, 0.0);

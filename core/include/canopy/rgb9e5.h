@@ -20,12 +20,16 @@ namespace canopy {
 
 constexpr float kRgb9e5Max = 65408.0f;  // 511/512 * 2^16
 
-// The three channels of a shared-exponent word. Exact: mantissa * 2^(e - 24), a normal float.
+// The three channels of a shared-exponent word. Exact: mantissa * 2^(e - 24), a normal float (or
+// 0). No integer-to-float conversion (a slow pipe on the GPU, and a player's light sample decodes
+// 32 words): with E = e + 126, the float of bits E << 23 | m is 2^(E - 127) + m 2^(E - 150), so
+// subtracting the float of bits E << 23 leaves m 2^(e - 24) exactly (both in one binade).
 CANOPY_HD CANOPY_FORCEINLINE void rgb9e5Decode(uint32_t w, float rgb[3]) {
-  const float scale = bitsToFloat(((w >> 27) + 103u) << 23);  // 2^(e - 24): exponent field e - 24 + 127
-  rgb[0] = float(w & 511u) * scale;
-  rgb[1] = float((w >> 9) & 511u) * scale;
-  rgb[2] = float((w >> 18) & 511u) * scale;
+  const uint32_t e = ((w >> 27) + 126u) << 23;
+  const float base = bitsToFloat(e);
+  rgb[0] = bitsToFloat(e | (w & 511u)) - base;
+  rgb[1] = bitsToFloat(e | ((w >> 9) & 511u)) - base;
+  rgb[2] = bitsToFloat(e | ((w >> 18) & 511u)) - base;
 }
 
 // Nearest word for r, g, b (the extension's algorithm, round half up): values below 0 and NaN
