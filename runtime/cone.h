@@ -380,24 +380,12 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
   float t = tStart;
   float T = T0;
   SunAtSample sun;
-  uint32_t lodK = 0;
   while (true) {
     walkRetire(w, t);
     if (w.live == 0 && w.done) break;
     StepSums q = {w.done ? tMax : w.tCellExit, 0.0f, {0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}, false, 3.0e38f};
-    float grow = stepGrowth(s.shade, T);
-    float angle = pixelAngle;
-    if (s.shade.lodGrowth) {
-      const uint32_t k = grow >= 4.0f ? 2u : (grow >= 2.0f ? 1u : 0u);
-      if (k != lodK) {  // holds assumed the finer level: drop them
-        for (uint32_t m = w.live; m != 0; m &= m - 1u) w.hits[lowestSetBit(m)].hold.until = -3.0e38f;
-        lodK = k;
-      }
-      angle = pixelAngle * float(1u << k);
-      grow = 1.0f;
-    }
     const uint32_t evaluate = boundStep<kWithCones>(s, w, t, q);
-    evaluateHits<kWithLight>(s, w, o, d, t, angle, evaluate, grow, q);
+    evaluateHits<kWithLight>(s, w, o, d, t, pixelAngle, evaluate, stepGrowth(s.shade, T), q);
     if (!q.active && w.live == 0) {
       if (w.done) break;
       t = w.tCellExit;

@@ -40,7 +40,6 @@ void addFrameOptions(CLI::App& app, canopy::play::PlayOptions& o, CliValues& x) 
   app.add_option("--step-growth", o.stepGrowthT,
                  "Brick steps grow once a cone's transmittance falls below this: by T' / T, at most --step-growth-max (0: never)")
       ->capture_default_str()->check(CLI::Range(0.0, 1.0));
-  app.add_flag("--lod-growth", o.lodGrowth, "experiment");
   app.add_option("--step-growth-max", o.stepGrowthMax, "The most brick steps grow (--step-growth)")->capture_default_str()->check(CLI::Range(1.0, 64.0));
   app.add_option("--stop-opacity", x.stopOpacity, "A cone stops at this opacity; at most 1 - this of a pixel's light is dropped")
       ->default_str("0.999")->check(CLI::Range(0.5, 1.0));

@@ -317,7 +317,6 @@ ShadeParams shadeParams(const PlayOptions& o) {
   shade.stopT = o.stopTransmittance;
   shade.stepGrowthT = o.stepGrowthT;
   shade.stepGrowthMax = o.stepGrowthMax;
-  shade.lodGrowth = o.lodGrowth ? 1 : 0;
   shade.shadowAperture = o.shadowAperture;
   // Without the direct term no shadow is needed (--no-direct-sun: the indirect light alone).
   shade.shadows = !o.shadows || !o.directSun ? kShadowsOff : (o.shadowMethod == "cone" ? kShadowsCone : kShadowsMap);
@@ -377,6 +376,8 @@ void validateOptions(const PlayOptions& o) {
   if (o.stereoHoleBlocks != 0 && o.stereoHoleBlocks != 6) throw usageError("--stereo-hole-blocks must be 0 or 6");
   if (o.shadowMethod != "map" && o.shadowMethod != "cone") throw usageError("--shadows must be map or cone, got '" + o.shadowMethod + "'");
   if (!(o.stopTransmittance >= 0.0f && o.stopTransmittance <= 0.5f)) throw usageError("--stop-opacity must be in [0.5, 1]");
+  if (!(o.stepGrowthT >= 0.0f && o.stepGrowthT <= 1.0f)) throw usageError("--step-growth must be in [0, 1]");
+  if (!(o.stepGrowthMax >= 1.0f && o.stepGrowthMax <= 64.0f)) throw usageError("--step-growth-max must be in [1, 64]");
   if (!(o.shadowMapBias >= 0.0f && o.shadowMapBias <= 64.0f)) throw usageError("--shadow-map-bias must be in [0, 64]");
   if (!(o.shadowMapCells >= 0.25f && o.shadowMapCells <= 1024.0f) || o.shadowMapMaxVoxels < 27 || o.shadowMapMaxVoxels > (1u << 28))
     throw usageError("--shadow-map-cells must be in [0.25, 1024] and --shadow-map-voxels in [27, 2^28]");

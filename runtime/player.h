@@ -33,7 +33,6 @@ struct PlayOptions {
   float lodBias = 0.0f;
   float stepGrowthT = 0.0f;          // --step-growth: brick steps grow below this transmittance (0: never; ShadeParams)
   float stepGrowthMax = 4.0f;        // --step-growth-max: by at most this factor
-  bool lodGrowth = false;
   float stopTransmittance = kStopT;   // a cone stops below this transmittance (--stop-opacity 1 - this); the rest is dropped
   float shadowAperture = 0.03f;      // shadow cone growth per unit length (soft shadows, coarser
                                      // levels and longer steps far from the receiver)

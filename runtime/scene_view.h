@@ -77,7 +77,6 @@ struct ShadeParams {
   // min(stepGrowthMax, stepGrowthT / T) (stepGrowth, cone.h). 0: never.
   float stepGrowthT;
   float stepGrowthMax;
-  int lodGrowth;            // 1: the growth's power of two coarsens the level instead (experiment)
   float shadowAperture;     // shadow cone: footprint growth per unit length (radians)
   int shadows;              // kShadowsOff (Tshadow = 1), kShadowsMap or kShadowsCone
   float shadowMapCells;     // kShadowsMap: extinction grid voxel in lattice cells of the finest instance

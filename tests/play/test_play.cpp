@@ -503,6 +503,42 @@ TEST(Render, EmptyCellSkipMovesOnlyTheSamplePhase) {
   }
 }
 
+// --step-growth T0 (cone.h stepGrowth): a cone's brick steps grow by T0 / T once its transmittance T
+// falls below T0. The march is the default one up to the first step that starts below T0, so each
+// pixel's alpha moves by less than T0 (both end between 1 - T0 and 1) and its colour by at most T0 x
+// the brightest sample behind that point; with T0 at or below the stop transmittance the cone stops first and
+// the image is the default one bit for bit. Same 12-tree forest as above: from among the trees
+// (crowns deep enough to fall below T0) fewer brick samples, the image within 2e-3 RMS.
+TEST(Render, StepGrowthChangesOnlyWhatLiesBehindDenseMatter) {
+  const std::string file = closeForestFile();
+  pl::PlayOptions o = pt::convergedView(file, 48, 32);
+  o.camera = "orbit:azimuth=50,elevation=10,distance=4,turns=0";
+  o.countWork = true;
+  nlohmann::json fixedReport, grownReport;
+  const std::vector<float> fixed = render(o, &fixedReport);
+  o.stepGrowthT = o.stopTransmittance;
+  EXPECT_EQ(render(o), fixed);
+  const float t0 = 0.1f;
+  o.stepGrowthT = t0;
+  const std::vector<float> grown = render(o, &grownReport);
+  ASSERT_EQ(grown.size(), fixed.size());
+  float brightest = 0.0f, maxAlpha = 0.0f, maxRgb = 0.0f;
+  for (size_t i = 0; i < fixed.size(); i += 4) {
+    for (int c = 0; c < 3; ++c) {
+      brightest = std::max(brightest, fixed[i + 3] > 0.0f ? fixed[i + c] / fixed[i + 3] : 0.0f);
+      maxRgb = std::max(maxRgb, std::abs(grown[i + c] - fixed[i + c]));
+    }
+    maxAlpha = std::max(maxAlpha, std::abs(grown[i + 3] - fixed[i + 3]));
+  }
+  const double samples = double(grownReport["work"]["brick_samples"]), samplesBefore = double(fixedReport["work"]["brick_samples"]);
+  std::printf("RMS %.2e, max alpha %.2e, max rgb %.2e (brightest mean %.3f), brick samples %.0f -> %.0f\n", pt::imageRms(grown, fixed),
+              maxAlpha, maxRgb, brightest, samplesBefore, samples);
+  EXPECT_LT(maxAlpha, t0);
+  EXPECT_GT(maxAlpha, 0.0f);
+  EXPECT_LT(pt::imageRms(grown, fixed), 2e-3);
+  EXPECT_LT(samples, 0.97 * samplesBefore);
+}
+
 TEST(Render, OverlappingInstancesAddTheirExtinction) {
   // two copies of the ball at the same place composite like one ball of twice the density
   const std::string two = pt::tmpDir("scenes") + "/two-spheres.canopy";

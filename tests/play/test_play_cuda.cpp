@@ -112,8 +112,8 @@ std::string sceneLitForestFile() {
 // Haar-lit with --light exact (the finest level's light from Haar pages, canopyHaarSampleAt on the
 // device), then lit with a 19-base scene light (format 1.2: the sun factor rebuilt on the host and
 // uploaded per frame as the sun moves over three frames; the last frame is compared), then the
-// Haar-lit forest on detail lattices (format 2.0: fast light and map, exact light and cones), all
-// in one test case.
+// Haar-lit forest on detail lattices (format 2.0: fast light and map, exact light and cones), then
+// the lit forest with --step-growth 0.2, all in one test case.
 TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
   if (canopy::cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA device";
   struct Case {
@@ -123,12 +123,14 @@ TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
     const char* shadows;  // the sun transmittance map (default) or the per-sample shadow cones
     bool exact = false;   // --light exact (the Haar-lit file's Haar pages)
     bool movingSun = false;  // three frames, the sun orbiting (the scene light's sun factor changes per frame)
+    float stepGrowth = 0.0f;  // --step-growth (brick steps grow behind dense matter)
   };
   const std::string lit = litForestFile(), unlit = forestFile(), haar = haarForestFile(), sceneLit = sceneLitForestFile(),
                     detail = detailForestFile();
   for (const Case& k : {Case{unlit, true, 0, "map"}, Case{unlit, true, 0, "cone"}, Case{lit, true, 2, "map"}, Case{lit, false, 2, "map"},
                         Case{haar, true, 2, "map", true}, Case{haar, false, 2, "map", true}, Case{sceneLit, true, 2, "map", false, true},
-                        Case{sceneLit, false, 2, "map", false, true}, Case{detail, true, 2, "map", false}, Case{detail, true, 2, "cone", true}}) {
+                        Case{sceneLit, false, 2, "map", false, true}, Case{detail, true, 2, "map", false}, Case{detail, true, 2, "cone", true},
+                        Case{lit, true, 2, "map", false, false, 0.2f}}) {
     pl::PlayOptions o;
     o.input = k.file;
     o.shadowMethod = k.shadows;
@@ -137,6 +139,7 @@ TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
     o.converge = true;
     o.directSun = k.direct;
     o.exactLight = k.exact;
+    o.stepGrowthT = k.stepGrowth;
     if (k.litModels) o.sun = "0.3,0.8,-0.52";
     if (k.movingSun) o.sun = "orbit:azimuth=40,elevation=35,turns=0.3", o.frames = 3;
     // the whole forest (coarse levels), and a close view among the trees (finest bricks,
