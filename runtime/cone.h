@@ -102,8 +102,9 @@ CANOPY_HD CANOPY_FORCEINLINE void addDepthSample(ConeResult& r, float w, float i
 CANOPY_HD inline float shadowTransmittance(const SceneView& s, V3 p, float footprint0) {
   const V3 d = s.shade.toSun;
   CANOPY_PLAY_COUNT(s, shadowCones, 1);
+  HitSlots slots;
   InstanceWalk w;
-  walkBegin(s, w, p, d, 0.0f, 3.0e38f);
+  walkBegin(s, w, slots, p, d, 0.0f, 3.0e38f);
   float T = 1.0f;
   float t = 0.0f;
   while (true) {
@@ -375,8 +376,9 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
   const float tGround = groundHit(s.shade, o, d);
   const bool ground = tGround < tMax;
   if (ground) tMax = tGround;
+  HitSlots slots;
   InstanceWalk w;
-  walkBegin(s, w, o, d, tStart, tMax);
+  walkBegin(s, w, slots, o, d, tStart, tMax);
   float t = tStart;
   float T = T0;
   SunAtSample sun;

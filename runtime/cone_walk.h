@@ -37,9 +37,17 @@ CANOPY_HD CANOPY_FORCEINLINE void hitHead(const Hit& h, float& tin, float& until
 // listed by the cell just behind. So no membership scan is needed, except after a hit was dropped
 // from a full list (`dropped`): from then on each cell's whole list is scanned against the hits,
 // as a dropped instance is found again from a later cell it overlaps.
-struct InstanceWalk {
+// The slots themselves live apart from the walk's other state (HitSlots), reached through two
+// pointers: indexed by a run-time slot they must be in local memory on the GPU, and in one
+// aggregate with them nvcc kept the walk's scalars (live, the DDA, the exits) there too, loaded at
+// every step (the pixel kernel's local-memory loads on the real forest's walk, Nsight Compute).
+struct HitSlots {
   Hit hits[kHitCapacity];
   DescentCache caches[kHitCapacity];  // caches[i]: hits[i]'s last descent along the ray (empty when added)
+};
+struct InstanceWalk {
+  Hit* hits;                          // a HitSlots' (walkBegin)
+  DescentCache* caches;
   uint32_t live;                      // bit i: hits[i] is pending or active
   float minTout;                      // <= every live hit's tout
   GridDda dda;       // the instance grid's cell and plane crossings (grid_dda.h)
@@ -104,8 +112,10 @@ CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 
   }
 }
 
-// Starts the walk for the ray o + t d, t in [tStart, tEnd].
-CANOPY_HD inline void walkBegin(const SceneView& s, InstanceWalk& w, V3 o, V3 d, float tStart, float tEnd) {
+// Starts the walk for the ray o + t d, t in [tStart, tEnd], its hits in `slots`.
+CANOPY_HD inline void walkBegin(const SceneView& s, InstanceWalk& w, HitSlots& slots, V3 o, V3 d, float tStart, float tEnd) {
+  w.hits = slots.hits;
+  w.caches = slots.caches;
   w.live = 0;
   w.minTout = 3.0e38f;
   w.done = true;

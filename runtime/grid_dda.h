@@ -38,8 +38,8 @@ CANOPY_HD CANOPY_FORCEINLINE void gridStart(GridDda& w, const int cell[3], const
 
 // The axis whose plane the ray crosses first.
 CANOPY_HD CANOPY_FORCEINLINE int gridAxis(const GridDda& w) {
-  const int a = w.tNext[1] < w.tNext[0] ? 1 : 0;
-  return w.tNext[2] < w.tNext[a] ? 2 : a;
+  const bool y = w.tNext[1] < w.tNext[0];  // constant indices only (onAxis)
+  return w.tNext[2] < (y ? w.tNext[1] : w.tNext[0]) ? 2 : (y ? 1 : 0);
 }
 
 // f(Axis<a>{}) for the axis a (0, 1 or 2): the axis as a compile-time constant (Axis<A>::value), so

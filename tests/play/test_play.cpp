@@ -882,9 +882,10 @@ TEST(InstanceWalk, FaceListsAddTheSameHitsAsWholeListsWithAMembershipScan) {
   for (int r = 0; r < 3000; ++r) {
     const pl::V3 o = pl::v3(40.0f * u(rng), 2.0f + 8.0f * (u(rng) + 1.0f), 40.0f * u(rng));
     const pl::V3 d = pl::normalize(pl::v3(-o.x + 10.0f * u(rng), -o.y + 2.0f * u(rng), -o.z + 10.0f * u(rng)));
+    pl::HitSlots slotsA, slotsB;
     pl::InstanceWalk a, b;
-    pl::walkBegin(counted, a, o, d, 0.0f, 3.0e38f);
-    pl::walkBegin(s, b, o, d, 0.0f, 3.0e38f);
+    pl::walkBegin(counted, a, slotsA, o, d, 0.0f, 3.0e38f);
+    pl::walkBegin(s, b, slotsB, o, d, 0.0f, 3.0e38f);
     b.dropped = true;  // the whole lists with the membership scan from the second cell on
     std::vector<uint32_t> seen;
     for (int step = 0; step < 1000; ++step) {
