@@ -38,7 +38,7 @@ void addFrameOptions(CLI::App& app, canopy::play::PlayOptions& o, CliValues& x) 
   app.add_option("--step", o.stepFactor, "Brick step in voxels of the chosen level")->capture_default_str();
   app.add_option("--lod-bias", o.lodBias, "Added to the footprint's level (negative = coarser)")->capture_default_str();
   app.add_option("--step-growth", o.stepGrowthT,
-                 "Brick steps grow once a cone's transmittance falls below this: by T' / T, at most --step-growth-max (0: never)")
+                 "Brick steps grow once a cone's transmittance T falls below this T0: by T0 / T, at most --step-growth-max (0: never)")
       ->capture_default_str()->check(CLI::Range(0.0, 1.0));
   app.add_option("--step-growth-max", o.stepGrowthMax, "The most brick steps grow (--step-growth)")->capture_default_str()->check(CLI::Range(1.0, 64.0));
   app.add_option("--stop-opacity", x.stopOpacity, "A cone stops at this opacity; at most 1 - this of a pixel's light is dropped")
