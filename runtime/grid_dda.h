@@ -10,6 +10,8 @@
 #pragma once
 #include <math.h>
 
+#include <type_traits>
+
 #include "runtime/cone_math.h"
 
 namespace canopy::play {
@@ -42,17 +44,14 @@ CANOPY_HD CANOPY_FORCEINLINE int gridAxis(const GridDda& w) {
   return w.tNext[2] < (y ? w.tNext[1] : w.tNext[0]) ? 2 : (y ? 1 : 0);
 }
 
-// f(Axis<a>{}) for the axis a (0, 1 or 2): the axis as a compile-time constant (Axis<A>::value), so
-// that a walk's per-axis update indexes its arrays by constants: indexed by a run-time axis, nvcc
-// keeps a GridDda in local memory (the pixel kernel's empty-cell walk and instance-grid walk were
-// 5 % of its stalls on local-memory loads, docs/performance.md).
-template <int A>
-struct Axis {
-  static constexpr int value = A;
-};
+// f(std::integral_constant<int, a>{}) for the axis a (0, 1 or 2): the axis as a compile-time
+// constant, so that a walk's per-axis update indexes its arrays by constants: indexed by a run-time
+// axis, nvcc keeps a GridDda in local memory (the pixel kernel's empty-cell walk and instance-grid
+// walk, docs/performance.md "The real forest's walk in Nsight").
 template <class F>
 CANOPY_HD CANOPY_FORCEINLINE auto onAxis(int a, F&& f) {
-  return a == 0 ? f(Axis<0>{}) : (a == 1 ? f(Axis<1>{}) : f(Axis<2>{}));
+  using std::integral_constant;
+  return a == 0 ? f(integral_constant<int, 0>{}) : (a == 1 ? f(integral_constant<int, 1>{}) : f(integral_constant<int, 2>{}));
 }
 
 // Where the ray leaves the current cell.
