@@ -348,6 +348,53 @@ CANOPY_HD CANOPY_FORCEINLINE void addGround(const SceneView& s, V3 o, V3 d, floa
   }
 }
 
+// Where a primary cone of `pixelAngle` leaves the instances for the far field (3e38: never):
+// shade.farStart where it is a distance (> 0), else (auto) where the cone's footprint reaches the
+// far field's voxel, the coarsest level's voxel of the coarsest instance: beyond it every instance
+// would be sampled at its coarsest level, with voxels narrower than the footprint.
+CANOPY_HD inline float farFieldStart(const SceneView& s, float pixelAngle) {
+  if (!s.far.values || s.shade.farStart < 0.0f) return 3.0e38f;
+  if (s.shade.farStart > 0.0f) return s.shade.farStart;
+  return pixelAngle > 0.0f ? s.far.voxel / pixelAngle : 3.0e38f;
+}
+
+// The far field's part of a primary cone: [t0, t1) clipped to the grid, in steps of stepFactor
+// far-field voxels, each one trilinear sample of the prefiltered extinction and albedo, shaded as a
+// step of the instances is (shadeStep: the frame's shadow, the density-only indirect term with the
+// scene lattice's ambient factor, as a model without LB light has), until T falls below the stop.
+template <bool kWithCones, bool kWithDepth>
+CANOPY_HD inline void marchFarField(const SceneView& s, V3 o, V3 d, float pixelAngle, float t0, float t1, float& T, SunAtSample& sun,
+                                    ConeResult& r, float window) {
+  const FarFieldView& f = s.far;
+  // the box of the voxel centres (trilinear reads 0 outside it)
+  const V3 lo = v3(f.lo[0], f.lo[1], f.lo[2]);
+  const V3 hi = lo + v3(float(f.dim[0] - 1), float(f.dim[1] - 1), float(f.dim[2] - 1)) * f.voxel;
+  float tIn, tOut;
+  rayBox(o, d, lo, hi, tIn, tOut);
+  float t = t0 > tIn ? t0 : tIn;
+  const float tEnd = t1 < tOut ? t1 : tOut;
+  const float ds = s.shade.stepFactor * f.voxel;
+  while (t < tEnd && !(T < s.shade.stopT)) {
+    StepSums q = {t + ds < tEnd ? t + ds : tEnd, 0.0f, {0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}, true, 3.0e38f};
+    CANOPY_PLAY_COUNT(s, farSteps, 1);
+    const V3 p = o + d * (0.5f * (t + q.next));
+    float v[kFarFieldChannels];
+    gridTrilinear<kFarFieldChannels>(f.values, f.lo, f.voxel, f.dim, p, v);
+    if (v[0] > 0.0f) {
+      float ind[3];
+      ambientOnly(s, sceneLightFactors(s.light, p), ind);
+      q.k = v[0];
+      for (int c = 0; c < 3; ++c) {
+        q.kAlbedo[c] = v[1 + c];
+        q.kIndirect[c] = v[1 + c] * ind[c];
+      }
+      const float alpha = shadeStep<kWithCones, kWithDepth>(s, o, d, t, pixelAngle, q, T, sun, r, window);
+      T *= 1.0f - alpha;
+    }
+    t = q.next;
+  }
+}
+
 // One primary cone: origin o, unit direction d, footprint(t) = footprint0 + t * pixelAngle.
 // kWithCones: compiled with the shadow-cone path (kShadowsCone); without it that mode is treated
 // as kShadowsOff, so the CUDA kernel of the other modes carries neither the shadow cone's instance
@@ -357,7 +404,8 @@ CANOPY_HD CANOPY_FORCEINLINE void addGround(const SceneView& s, V3 o, V3 d, floa
 // kLayerOpenWeight or more (addDepthSample).
 // A ray that meets the ground (groundHit) before tMax is marched up to it (the parts of instances
 // below the plane are cut) and ends there: what is left of its transmittance shows the ground
-// (groundRadiance), and the result is opaque.
+// (groundRadiance), and the result is opaque. With a far field the instances are marched up to
+// farFieldStart and the far field from there (marchFarField).
 // The march starts at tStart with transmittance T0 (a stereo hole behind a reprojected layer: behind
 // it, with what that layer lets through, so that the march stops where the whole ray's would).
 // Each step: retire the hits that ended, bound the step and evaluate the hits that need it
@@ -376,16 +424,18 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
   const float tGround = groundHit(s.shade, o, d);
   const bool ground = tGround < tMax;
   if (ground) tMax = tGround;
+  const float tFar = farFieldStart(s, pixelAngle);
+  const float tNear = tFar < tMax ? tFar : tMax;  // the instances' part of the ray
   HitSlots slots;
   InstanceWalk w;
-  walkBegin(s, w, slots, o, d, tStart, tMax);
+  walkBegin(s, w, slots, o, d, tStart, tNear);
   float t = tStart;
   float T = T0;
   SunAtSample sun;
   while (true) {
     walkRetire(w, t);
     if (w.live == 0 && w.done) break;
-    StepSums q = {w.done ? tMax : w.tCellExit, 0.0f, {0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}, false, 3.0e38f};
+    StepSums q = {w.done ? tNear : w.tCellExit, 0.0f, {0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}, false, 3.0e38f};
     const uint32_t evaluate = boundStep<kWithCones>(s, w, t, q);
     evaluateHits<kWithLight>(s, w, o, d, t, pixelAngle, evaluate, stepGrowth(s.shade, T), q);
     if (!q.active && w.live == 0) {
@@ -394,15 +444,17 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
       walkAdvance(s, w, o, d, t);
       continue;
     }
-    if (q.next > tMax) q.next = tMax;
+    if (q.next > tNear) q.next = tNear;
     CANOPY_PLAY_COUNT(s, primarySteps, 1);
     if (q.k == 0.0f) CANOPY_PLAY_COUNT(s, emptySteps, 1);
     const float alpha = shadeStep<kWithCones, kWithDepth>(s, o, d, t, pixelAngle, q, T, sun, r, window);
     T *= 1.0f - alpha;
     t = q.next;
-    if (T < s.shade.stopT || t >= tMax) break;
+    if (T < s.shade.stopT || t >= tNear) break;
     while (!w.done && t >= w.tCellExit) walkAdvance(s, w, o, d, t);
   }
+  if (tNear < tMax && !(T < s.shade.stopT))
+    marchFarField<kWithCones, kWithDepth>(s, o, d, pixelAngle, tNear > tStart ? tNear : tStart, tMax, T, sun, r, window);
   if (ground) {
     addGround<kWithCones, kWithDepth>(s, o, d, tGround, pixelAngle, T, r, window);
     T = 0.0f;

@@ -41,6 +41,10 @@ void addFrameOptions(CLI::App& app, canopy::play::PlayOptions& o, CliValues& x) 
                  "Brick steps grow once a cone's transmittance T falls below this T0: by T0 / T, at most --step-growth-max (0: never)")
       ->capture_default_str()->check(CLI::Range(0.0, 1.0));
   app.add_option("--step-growth-max", o.stepGrowthMax, "The most brick steps grow (--step-growth)")->capture_default_str()->check(CLI::Range(1.0, 64.0));
+  app.add_option("--far-field", o.farField,
+                 "auto: instances up to where a pixel's footprint exceeds the coarsest voxel of every instance, a prefiltered scene "
+                 "volume beyond (its cost no longer grows with the instances passed); off: instances everywhere; or a distance D: the volume from D on")
+      ->capture_default_str();
   app.add_option("--stop-opacity", x.stopOpacity, "A cone stops at this opacity; at most 1 - this of a pixel's light is dropped")
       ->default_str("0.999")->check(CLI::Range(0.5, 1.0));
 }

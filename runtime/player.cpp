@@ -306,6 +306,17 @@ std::vector<FrameSetup> framePlan(const PlayOptions& o, const HostScene& scene) 
   return plan;
 }
 
+// --far-field: -1 off, 0 auto, > 0 the distance (ShadeParams::farStart).
+static float parseFarField(const std::string& spec) {
+  if (spec == "off") return -1.0f;
+  if (spec == "auto") return 0.0f;
+  double v = 0;
+  char tail;
+  if (std::sscanf(spec.c_str(), "%lf%c", &v, &tail) != 1 || !(v > 0.0 && v <= double(kMaxWorldCoordinate)))
+    throw usageError("--far-field '" + spec + "': expected auto, off or a distance D (scene units, 0 < D <= 1e9)");
+  return float(v);
+}
+
 ShadeParams shadeParams(const PlayOptions& o) {
   ShadeParams shade{};
   shade.sun[0] = shade.sun[1] = shade.sun[2] = o.sunIntensity;
@@ -328,6 +339,7 @@ ShadeParams shadeParams(const PlayOptions& o) {
   shade.exactLight = o.exactLight ? 1 : 0;
   shade.shadowMapMaxVoxels = o.shadowMapMaxVoxels;
   shade.stereoLayer = o.stereoIpd > 0.0f ? 2.0f * o.stereo.maxSpread : 0.0f;  // a front layer is coherent (stereo.h)
+  shade.farStart = parseFarField(o.farField);
   return shade;
 }
 
@@ -389,6 +401,7 @@ void validateOptions(const PlayOptions& o) {
   if (o.loaderThreads < 0 || o.loaderThreads > 64) throw usageError("--loader-threads must be 0..64 (0: the host's threads)");
   float groundY;
   parseGround(o.ground, groundY);
+  parseFarField(o.farField);
   for (float a : o.groundAlbedo)
     if (!(a >= 0.0f && a <= 1.0f)) throw usageError("--ground-albedo must be R,G,B (or one value) in [0, 1]");
 }
@@ -566,6 +579,7 @@ nlohmann::json workReport(const WorkCounters& work, uint64_t passes) {
           {"zero_brick_samples", work.zeroBrickSamples},
           {"empty_block_skips", work.emptyBlockSkips},
           {"hit_drops", work.hitDrops},
+          {"far_steps", work.farSteps},
           {"voxel_px", voxelPixelsReport(work)}};
 }
 
@@ -624,6 +638,14 @@ nlohmann::json playReport(const PlayOptions& o, const CanopyFile& file, const Ho
     r["ground"] = {{"y", shade.groundY}, {"from", o.ground == "auto" ? "auto" : "option"}, {"albedo", {shade.groundAlbedo[0], shade.groundAlbedo[1], shade.groundAlbedo[2]}}};
   else
     r["ground"] = nullptr;
+  if (shade.farStart >= 0.0f && !scene.empty) {
+    const FarFieldView f = planFarField(scene);
+    r["far_field"] = {{"dim", {f.dim[0], f.dim[1], f.dim[2]}},
+                      {"voxel", f.voxel},
+                      {"from", shade.farStart > 0.0f ? nlohmann::json(shade.farStart) : nlohmann::json("auto")}};
+  } else {
+    r["far_field"] = nullptr;
+  }
   if (shade.shadows == kShadowsMap) {
     const ShadowMapView& m = tiles[0].backend->lastShadowMap();
     r["shadow_map"] = {{"dim", {m.dim[0], m.dim[1], m.dim[2]}}, {"voxel", m.voxel}};

@@ -33,6 +33,10 @@ struct PlayOptions {
   float lodBias = 0.0f;
   float stepGrowthT = 0.0f;          // --step-growth: brick steps grow below this transmittance (0: never; ShadeParams)
   float stepGrowthMax = 4.0f;        // --step-growth-max: by at most this factor
+  // The far field (cone.h marchFarField): "auto" (from where a cone's footprint reaches the
+  // coarsest level's voxel of the coarsest instance), "off" (instances everywhere) or a distance D
+  // (scene units, > 0): the prefiltered scene volume from D on.
+  std::string farField = "auto";
   float stopTransmittance = kStopT;   // a cone stops below this transmittance (--stop-opacity 1 - this); the rest is dropped
   float shadowAperture = 0.03f;      // shadow cone growth per unit length (soft shadows, coarser
                                      // levels and longer steps far from the receiver)

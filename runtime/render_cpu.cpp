@@ -60,6 +60,18 @@ class CpuBackend final : public Backend {
       parallelFor(columns, [&](int64_t c) { buildShadowMapColumn(m, g, sub, c); }, 16);
       if (work_) work_->shadowMapSteps += uint64_t(columns) * uint64_t(m.dim[2]) * uint64_t(sub);
     }
+    if (shade.farStart >= 0.0f && farFieldReachable(scene, shade, camera, planFarField(scene).voxel)) {
+      // the far field: once per scene (it depends on the instances and sigma only), once a cone can reach it
+      if (farValues_.empty() || farSigma_ != shade.sigma) {
+        far_ = planFarField(scene);
+        farValues_.assign(size_t(far_.dim[0]) * far_.dim[1] * far_.dim[2] * kFarFieldChannels, 0.0f);
+        far_.values = farValues_.data();
+        const FarFieldView f = far_;
+        parallelFor(int64_t(f.dim[0]) * f.dim[1] * f.dim[2], [&](int64_t i) { buildFarFieldVoxel(v, f, i); }, 256);
+        farSigma_ = shade.sigma;
+      }
+      v.far = far_;
+    }
     lastShadowMap_ = v.shadowMap;
     view_ = v;
     const size_t pixels = size_t(camera.width) * camera.height;
@@ -129,7 +141,7 @@ class CpuBackend final : public Backend {
   std::vector<unsigned char> pool_, staging_;
   std::vector<int32_t> table_;
   std::vector<uint32_t> slotUsed_, pageWanted_;
-  std::vector<float> image_[2], disparity_, shadowMap_, extinction_;
+  std::vector<float> image_[2], disparity_, shadowMap_, extinction_, farValues_;
   std::vector<float> holeFrom_;  // stereo: per right-eye hole, where its trace starts (stereoResolveHole)
   float disparityScale_ = 0.0f;  // the traced eye's (renderRows)
   std::vector<unsigned long long> keys_, behind_;
@@ -138,6 +150,8 @@ class CpuBackend final : public Backend {
   ExtinctionGridView grid_{};
   float gridSigma_ = -1.0f, gridCells_ = -1.0f;
   uint32_t gridCap_ = 0;
+  FarFieldView far_{};
+  float farSigma_ = -1.0f;
   WorkCounters* work_ = nullptr;
 };
 

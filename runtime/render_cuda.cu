@@ -128,6 +128,12 @@ struct ExtinctionKernel {
   __device__ void operator()(int64_t i) const { buildExtinctionVoxel(scene, grid, i); }
 };
 
+struct FarFieldKernel {
+  SceneView scene;
+  FarFieldView far;
+  __device__ void operator()(int64_t i) const { buildFarFieldVoxel(scene, far, i); }
+};
+
 struct ShadowMapKernel {
   ShadowMapView map;
   ExtinctionGridView grid;
@@ -286,6 +292,19 @@ class CudaBackend final : public Backend {
       v.shadowMap.T = shadowMap_.data();
       cuda::parallelFor(columns, ShadowMapKernel{v.shadowMap, grid_, sub}, compute_, 128);
     }
+    if (shade.farStart >= 0.0f && farFieldReachable(scene, shade, camera, planFarField(scene).voxel)) {
+      // the far field: once per scene (it depends on the instances and sigma only), once a cone can reach it
+      if (farValues_.size() == 0 || farSigma_ != shade.sigma) {
+        far_ = planFarField(scene);
+        const int64_t n = int64_t(far_.dim[0]) * far_.dim[1] * far_.dim[2];
+        CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
+        farValues_.resize(size_t(n) * kFarFieldChannels);
+        far_.values = farValues_.data();
+        cuda::parallelFor(n, FarFieldKernel{v, far_}, compute_, 128);
+        farSigma_ = shade.sigma;
+      }
+      v.far = far_;
+    }
     lastShadowMap_ = v.shadowMap;
     view_ = v;
     const int tilesX = (camera.width + tileW_ - 1) / tileW_, tilesY = (band.rows() + tileH_ - 1) / tileH_;
@@ -411,7 +430,7 @@ class CudaBackend final : public Backend {
   cuda::DeviceBuffer<unsigned char> pool_;
   cuda::DeviceBuffer<int32_t> table_;
   cuda::DeviceBuffer<uint32_t> slotUsed_, pageWanted_;
-  cuda::DeviceBuffer<float> image_[2], disparity_, shadowMap_, extinction_;
+  cuda::DeviceBuffer<float> image_[2], disparity_, shadowMap_, extinction_, farValues_;
   cuda::DeviceBuffer<unsigned long long> keys_, behind_;  // stereo: per right-eye pixel, the nearest front span and the nearest span behind it (stereo.h)
   cuda::DeviceBuffer<uint32_t> cover_;
   cuda::DeviceBuffer<int32_t> hole_, holeList_;   // stereo: the holes' marks by half and tile position, and compacted
@@ -425,6 +444,8 @@ class CudaBackend final : public Backend {
   ExtinctionGridView grid_{};
   float gridSigma_ = -1.0f, gridCells_ = -1.0f;
   uint32_t gridCap_ = 0;
+  FarFieldView far_{};
+  float farSigma_ = -1.0f;
   unsigned char* staging_ = nullptr;
   int32_t* tableHost_[2] = {nullptr, nullptr};
 };

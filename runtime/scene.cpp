@@ -438,6 +438,41 @@ ExtinctionGridView planExtinctionGrid(const HostScene& s, const ShadeParams& sha
   return g;
 }
 
+FarFieldView planFarField(const HostScene& s) {
+  FarFieldView g{};
+  g.dim[0] = g.dim[1] = g.dim[2] = 1;
+  g.voxel = 1.0f;
+  if (s.empty) return g;
+  double voxel = 0.0;
+  for (const InstanceView& i : s.instances) {
+    // the coarsest level's voxel (rootCells / 8 cells), or the finest node where that is wider (the
+    // grid is built from node means: node tiles are resident, bricks may not be)
+    const ModelView& m = s.models[i.model];
+    voxel = std::max(voxel, std::max(double(m.rootCells) / 8.0, double(m.rootCells >> m.depth)) * double(i.cellWorld));
+  }
+  double extent[3];
+  for (int a = 0; a < 3; ++a) extent[a] = double(s.boundsHi[a]) - s.boundsLo[a];
+  const double h = fitVoxel(extent, std::max(voxel, 1e-6), kFarFieldMaxVoxels, g.dim);
+  g.voxel = float(h);
+  for (int a = 0; a < 3; ++a) g.lo[a] = float(s.boundsLo[a] - h);  // voxel 1's centre at the low corner
+  return g;
+}
+
+bool farFieldReachable(const HostScene& s, const ShadeParams& shade, const CameraView& camera, float voxel) {
+  if (s.empty || shade.farStart < 0.0f) return false;
+  // the nearest start of any pixel's cone: the largest footprint per unit t is the pixel angle
+  // (off-axis pixels subtend less, cameraRay)
+  const double start = shade.farStart > 0.0f ? double(shade.farStart) : double(voxel) / double(camera.pixelAngle);
+  double far2 = 0.0;  // the farthest corner of the scene's bounds from the eye
+  for (int c = 0; c < 8; ++c) {
+    const double d[3] = {double((c & 1) ? s.boundsHi[0] : s.boundsLo[0]) - camera.position.x,
+                         double((c & 2) ? s.boundsHi[1] : s.boundsLo[1]) - camera.position.y,
+                         double((c & 4) ? s.boundsHi[2] : s.boundsLo[2]) - camera.position.z};
+    far2 = std::max(far2, d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+  }
+  return std::sqrt(far2) > 0.99 * start;  // a margin for stereo's second eye, which uses the first eye's far field
+}
+
 ShadowMapView planShadowMap(const HostScene& s, const ShadeParams& shade, const ExtinctionGridView& grid, int& sub) {
   ShadowMapView m{};
   m.dim[0] = m.dim[1] = m.dim[2] = 1;

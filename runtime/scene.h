@@ -70,6 +70,19 @@ HostScene buildScene(const CanopyFile& file);
 // cell, grown until the grid has at most shade.shadowMapMaxVoxels voxels. k is left null.
 ExtinctionGridView planExtinctionGrid(const HostScene& scene, const ShadeParams& shade);
 
+// The scene's far field (cone.h marchFarField): world axes over the scene's bounds with one empty
+// voxel of margin on every side; voxel edge the coarsest level's voxel (rootCells / 8 cells) of the
+// instance whose such voxel is the widest, grown until the grid has at most kFarFieldMaxVoxels
+// voxels. values is left null.
+constexpr uint32_t kFarFieldMaxVoxels = 1u << 22;  // 64 MiB of 4 floats
+FarFieldView planFarField(const HostScene& scene);
+
+// Whether a primary cone of `camera` can reach the far field of `voxel` (shade.farStart, or where
+// the footprint reaches the voxel: farFieldStart) inside the scene's bounds; the backends build the
+// far field only once one can (the image is the same: a cone that reaches no far field marches the
+// instances to its end).
+bool farFieldReachable(const HostScene& scene, const ShadeParams& shade, const CameraView& camera, float voxel);
+
 // The frame's sun transmittance map: its light-space frame (w = -toSun; u, v orthonormal,
 // continuous in the sun direction except where -toSun comes within 26 degrees of the x axis, where
 // the helper axis switches from x to z), the box around the scene's bounds with one empty voxel of

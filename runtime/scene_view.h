@@ -94,6 +94,9 @@ struct ShadeParams {
   // Stereo's traced eye (kWithDepth): a pixel's front layer holds its samples within this many
   // pixels of disparity of its first one (ConeResult::frontSums; stereo.h); 0: no layers.
   float stereoLayer;
+  // The far field (FarFieldView): < 0 off (instances everywhere); 0 (auto) from where a primary
+  // cone's footprint reaches the far field's voxel (farFieldStart); > 0 from this distance on.
+  float farStart;
 };
 
 // How a sample's sun transmittance Tshadow is found (ShadeParams::shadows).
@@ -115,11 +118,25 @@ struct ShadowMapView {
   float bias;               // lookups move this far towards the sun (world), see shadowMapLookup
 };
 
+// The far field (cone.h marchFarField): the scene prefiltered once per scene by the backend, a grid
+// in world axes whose voxel is the coarsest level's voxel of the coarsest instance (planFarField),
+// holding at each voxel centre the node-mean extinction of every instance there and that times its
+// albedo (buildFarFieldVoxel). A primary cone marches the instances up to the far field's start and
+// this grid beyond it, so its cost there no longer depends on how many instances it passes.
+constexpr int kFarFieldChannels = 4;  // k, k x albedo (RGB): per world unit
+struct FarFieldView {
+  float* values;  // kFarFieldChannels per voxel, x fastest; nullptr: no far field
+  float lo[3];    // world position of voxel (0, 0, 0)'s centre
+  float voxel;    // voxel edge (world)
+  int32_t dim[3];
+};
+
 // Work done by the CPU reference (bench-play --count-work; never counted on the GPU).
 struct WorkCounters {
   uint64_t cones, primarySteps, shadedSamples, segments, descents, brickSamples, shadowCones, shadowSteps, shadowMapLookups,
       shadowMapSteps, heldSegments, emptySteps, zeroBrickSamples, emptyBlockSkips,
-      hitDrops;  // hits dropped from a full hit list (InstanceWalk)
+      hitDrops,  // hits dropped from a full hit list (InstanceWalk)
+      farSteps;  // steps of primary cones through the far field (marchFarField)
   // The level of detail rule at work (countVoxelFootprint): shading segments by the width of the
   // chosen level's voxel over the pixel's footprint there (in pixels): <= 1, <= 1.5, <= 4, above;
   // and the largest ratio (its float's bits).
@@ -154,6 +171,7 @@ struct SceneView {
   SceneLightView light;
   ShadeParams shade;
   ShadowMapView shadowMap;       // kShadowsMap: this pass's sun transmittance map
+  FarFieldView far;              // the far field (values nullptr: none, instances everywhere)
   WorkCounters* work;            // CPU only, optional (nullptr: not counted)
 };
 

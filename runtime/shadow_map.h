@@ -28,8 +28,9 @@ struct ExtinctionGridView {
 };
 
 // The node-mean extinction of every instance at world point x (per world unit), nodes of edge at
-// most `maxNode` (world).
-CANOPY_HD inline float sceneMeanExtinctionAt(const SceneView& s, V3 x, float maxNode) {
+// most `maxNode` (world). kAlbedo (optional): each instance's extinction times its node's albedo is
+// added to it (the far field's second to fourth channels).
+CANOPY_HD inline float sceneMeanExtinctionAt(const SceneView& s, V3 x, float maxNode, float* kAlbedo = nullptr) {
   if (s.instanceCount == 0) return 0.0f;
   int c[3];
   for (int a = 0; a < 3; ++a) {
@@ -51,7 +52,11 @@ CANOPY_HD inline float sceneMeanExtinctionAt(const SceneView& s, V3 x, float max
     const float L = ceilf(log2f(rootWorld / maxNode));
     const uint32_t level = L <= 0.0f ? 0u : (L >= float(m.depth) ? m.depth : uint32_t(L));
     const CanopyLookup n = canopyDescend(m.tiles, m.tileCount, m.root, m.depth, u.x, u.y, u.z, level);
-    k += s.shade.sigma * canopyUnpack(n.node.density, n.node.material).density / (inst.cellWorld / m.extinctionScale);  // per light cell
+    const CanopySample c = canopyUnpack(n.node.density, n.node.material);
+    const float ki = s.shade.sigma * c.density / (inst.cellWorld / m.extinctionScale);  // per light cell
+    k += ki;
+    if (kAlbedo)
+      for (int ch = 0; ch < 3; ++ch) kAlbedo[ch] += ki * c.albedo[ch];
   }
   return k;
 }
@@ -71,27 +76,58 @@ CANOPY_HD inline void buildExtinctionVoxel(const SceneView& s, const ExtinctionG
   g.k[i] = 0.125f * k;
 }
 
-// Trilinear extinction at world point p (0 outside the grid, whose border voxels are empty).
-CANOPY_HD inline float extinctionAt(const ExtinctionGridView& g, V3 p) {
-  const float inv = 1.0f / g.voxel;
+// Trilinear values at world point p of a grid of N channels per voxel (x fastest; voxel (0, 0, 0)'s
+// centre at lo): out[] = 0 outside the grid, whose border voxels are empty, and false returned.
+template <int N>
+CANOPY_HD inline bool gridTrilinear(const float* values, const float lo[3], float voxel, const int32_t dim[3], V3 p, float out[N]) {
+  const float inv = 1.0f / voxel;
   int i0[3];
   float f[3];
   for (int a = 0; a < 3; ++a) {
-    const float x = (comp(p, a) - g.lo[a]) * inv;
-    if (!(x >= 0.0f) || !(x < float(g.dim[a] - 1))) return 0.0f;
+    const float x = (comp(p, a) - lo[a]) * inv;
+    if (!(x >= 0.0f) || !(x < float(dim[a] - 1))) {
+      for (int c = 0; c < N; ++c) out[c] = 0.0f;
+      return false;
+    }
     const float fl = floorf(x);
     i0[a] = int(fl);
     f[a] = x - fl;
   }
-  const int64_t sy = g.dim[0], sz = int64_t(g.dim[0]) * g.dim[1];
-  const float* b = g.k + i0[0] + sy * i0[1] + sz * i0[2];
-  const float c00 = b[0] + (b[1] - b[0]) * f[0];
-  const float c10 = b[sy] + (b[sy + 1] - b[sy]) * f[0];
-  const float c01 = b[sz] + (b[sz + 1] - b[sz]) * f[0];
-  const float c11 = b[sz + sy] + (b[sz + sy + 1] - b[sz + sy]) * f[0];
-  const float c0 = c00 + (c10 - c00) * f[1];
-  const float c1 = c01 + (c11 - c01) * f[1];
-  return c0 + (c1 - c0) * f[2];
+  const int64_t sx = N, sy = int64_t(N) * dim[0], sz = sy * dim[1];
+  const float* b = values + sx * i0[0] + sy * i0[1] + sz * i0[2];
+  for (int c = 0; c < N; ++c, ++b) {
+    const float c00 = b[0] + (b[sx] - b[0]) * f[0];
+    const float c10 = b[sy] + (b[sy + sx] - b[sy]) * f[0];
+    const float c01 = b[sz] + (b[sz + sx] - b[sz]) * f[0];
+    const float c11 = b[sz + sy] + (b[sz + sy + sx] - b[sz + sy]) * f[0];
+    const float c0 = c00 + (c10 - c00) * f[1];
+    const float c1 = c01 + (c11 - c01) * f[1];
+    out[c] = c0 + (c1 - c0) * f[2];
+  }
+  return true;
+}
+
+// Trilinear extinction at world point p (0 outside the grid, whose border voxels are empty).
+CANOPY_HD inline float extinctionAt(const ExtinctionGridView& g, V3 p) {
+  float k;
+  gridTrilinear<1>(g.k, g.lo, g.voxel, g.dim, p, &k);
+  return k;
+}
+
+// The far field's voxel i (x fastest): the mean of 2x2x2 samples at +-voxel/4 about its centre of
+// the node-mean extinction and extinction x albedo of every instance there, nodes of edge at most a
+// voxel (so a voxel averages the nodes the size of its instance's coarsest voxels: what the
+// instance's own coarsest level holds there).
+CANOPY_HD inline void buildFarFieldVoxel(const SceneView& s, const FarFieldView& g, int64_t i) {
+  const int x = int(i % g.dim[0]);
+  const int y = int((i / g.dim[0]) % g.dim[1]);
+  const int z = int(i / (int64_t(g.dim[0]) * g.dim[1]));
+  const V3 c = v3(g.lo[0] + float(x) * g.voxel, g.lo[1] + float(y) * g.voxel, g.lo[2] + float(z) * g.voxel);
+  float ka[3] = {0.0f, 0.0f, 0.0f};
+  const float k = sceneMeanExtinctionAt(s, c, g.voxel, ka);
+  float* v = g.values + kFarFieldChannels * i;
+  v[0] = k;
+  for (int ch = 0; ch < 3; ++ch) v[1 + ch] = ka[ch];
 }
 
 // The world point of map voxel (u, v, w)'s centre.
