@@ -375,7 +375,8 @@ CANOPY_HD inline void marchFarField(const SceneView& s, V3 o, V3 d, float pixelA
   const float tEnd = t1 < tOut ? t1 : tOut;
   const float ds = s.shade.stepFactor * f.voxel;
   while (t < tEnd && !(T < s.shade.stopT)) {
-    StepSums q = {t + ds < tEnd ? t + ds : tEnd, 0.0f, {0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}, true, 3.0e38f};
+    // minCell: the far field's voxel (a shadow cone's value serves samples within 1.5 of it)
+    StepSums q = {t + ds < tEnd ? t + ds : tEnd, 0.0f, {0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}, true, f.voxel};
     CANOPY_PLAY_COUNT(s, farSteps, 1);
     const V3 p = o + d * (0.5f * (t + q.next));
     float v[kFarFieldChannels];

@@ -71,9 +71,9 @@ HostScene buildScene(const CanopyFile& file);
 ExtinctionGridView planExtinctionGrid(const HostScene& scene, const ShadeParams& shade);
 
 // The scene's far field (cone.h marchFarField): world axes over the scene's bounds with one empty
-// voxel of margin on every side; voxel edge the coarsest level's voxel (rootCells / 8 cells) of the
-// instance whose such voxel is the widest, grown until the grid has at most kFarFieldMaxVoxels
-// voxels. values is left null.
+// voxel of margin on every side; voxel edge the coarsest level's voxel (rootCells / 8 cells), or the
+// finest node where that is wider, of the instance whose such voxel is the widest, grown until the
+// grid has at most kFarFieldMaxVoxels voxels. values is left null.
 constexpr uint32_t kFarFieldMaxVoxels = 1u << 22;  // 64 MiB of 4 floats
 FarFieldView planFarField(const HostScene& scene);
 
