@@ -358,42 +358,41 @@ CANOPY_HD inline float farFieldStart(const SceneView& s, float pixelAngle) {
   return pixelAngle > 0.0f ? s.far.voxel / pixelAngle : 3.0e38f;
 }
 
-// The far field's part of a primary cone: [t0, t1) clipped to the grid, in steps of stepFactor
-// far-field voxels, each one trilinear sample of the prefiltered extinction and albedo, shaded as a
-// step of the instances is (shadeStep: the frame's shadow, the density-only indirect term with the
-// scene lattice's ambient factor, as a model without LB light has), until T falls below the stop.
-template <bool kWithCones, bool kWithDepth>
-CANOPY_HD inline void marchFarField(const SceneView& s, V3 o, V3 d, float pixelAngle, float t0, float t1, float& T, SunAtSample& sun,
-                                    ConeResult& r, float window) {
-  const FarFieldView& f = s.far;
-  // the box of the voxel centres (trilinear reads 0 outside it)
+// The far field's part of a primary cone from t0 to t1: false where the ray misses the grid's box
+// (its voxel centres: trilinear reads 0 outside it) there, else true with [t, tEnd) the part inside.
+CANOPY_HD inline bool farFieldSpan(const FarFieldView& f, V3 o, V3 d, float t0, float t1, float& t, float& tEnd) {
   const V3 lo = v3(f.lo[0], f.lo[1], f.lo[2]);
   const V3 hi = lo + v3(float(f.dim[0] - 1), float(f.dim[1] - 1), float(f.dim[2] - 1)) * f.voxel;
   float tIn, tOut;
   rayBox(o, d, lo, hi, tIn, tOut);
-  float t = t0 > tIn ? t0 : tIn;
-  const float tEnd = t1 < tOut ? t1 : tOut;
+  t = t0 > tIn ? t0 : tIn;
+  tEnd = t1 < tOut ? t1 : tOut;
+  return t < tEnd;
+}
+
+// One step of a primary cone through the far field from t (before tEnd): stepFactor far-field
+// voxels, one trilinear sample of the prefiltered extinction and albedo at its middle, as the step
+// sums shadeStep takes (the indirect term the density-only one, ambient times the scene lattice's
+// ambient factor, as a model without LB light has; minCell the far field's voxel, so a shadow
+// cone's value serves samples within 1.5 of it).
+CANOPY_HD inline StepSums farFieldStep(const SceneView& s, V3 o, V3 d, float t, float tEnd) {
+  const FarFieldView& f = s.far;
   const float ds = s.shade.stepFactor * f.voxel;
-  while (t < tEnd && !(T < s.shade.stopT)) {
-    // minCell: the far field's voxel (a shadow cone's value serves samples within 1.5 of it)
-    StepSums q = {t + ds < tEnd ? t + ds : tEnd, 0.0f, {0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}, true, f.voxel};
-    CANOPY_PLAY_COUNT(s, farSteps, 1);
-    const V3 p = o + d * (0.5f * (t + q.next));
-    float v[kFarFieldChannels];
-    gridTrilinear<kFarFieldChannels>(f.values, f.lo, f.voxel, f.dim, p, v);
-    if (v[0] > 0.0f) {
-      float ind[3];
-      ambientOnly(s, sceneLightFactors(s.light, p), ind);
-      q.k = v[0];
-      for (int c = 0; c < 3; ++c) {
-        q.kAlbedo[c] = v[1 + c];
-        q.kIndirect[c] = v[1 + c] * ind[c];
-      }
-      const float alpha = shadeStep<kWithCones, kWithDepth>(s, o, d, t, pixelAngle, q, T, sun, r, window);
-      T *= 1.0f - alpha;
+  StepSums q = {t + ds < tEnd ? t + ds : tEnd, 0.0f, {0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}, true, f.voxel};
+  CANOPY_PLAY_COUNT(s, farSteps, 1);
+  const V3 p = o + d * (0.5f * (t + q.next));
+  float v[kFarFieldChannels];
+  gridTrilinear<kFarFieldChannels>(f.values, f.lo, f.voxel, f.dim, p, v);
+  if (v[0] > 0.0f) {
+    float ind[3];
+    ambientOnly(s, sceneLightFactors(s.light, p), ind);
+    q.k = v[0];
+    for (int c = 0; c < 3; ++c) {
+      q.kAlbedo[c] = v[1 + c];
+      q.kIndirect[c] = v[1 + c] * ind[c];
     }
-    t = q.next;
   }
+  return q;
 }
 
 // One primary cone: origin o, unit direction d, footprint(t) = footprint0 + t * pixelAngle.
@@ -433,29 +432,50 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
   float t = tStart;
   float T = T0;
   SunAtSample sun;
+  // The far field's part, once the instances' has ended (one loop and one shadeStep for both, so
+  // that the far field adds little to the kernel): farEnd > 0 while it is marched.
+  float farEnd = -1.0f;
   while (true) {
-    walkRetire(w, t);
-    if (w.live == 0 && w.done) break;
-    StepSums q = {w.done ? tNear : w.tCellExit, 0.0f, {0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}, false, 3.0e38f};
-    const uint32_t evaluate = boundStep<kWithCones>(s, w, t, q);
-    evaluateHits<kWithLight>(s, w, o, d, t, pixelAngle, evaluate, stepGrowth(s.shade, T), q);
-    if (!q.active && w.live == 0) {
-      if (w.done) break;
-      t = w.tCellExit;
-      walkAdvance(s, w, o, d, t);
-      continue;
+    StepSums q;
+    if (farEnd < 0.0f) {
+      walkRetire(w, t);
+      bool ended = w.live == 0 && w.done;
+      if (!ended) {
+        q = {w.done ? tNear : w.tCellExit, 0.0f, {0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}, false, 3.0e38f};
+        const uint32_t evaluate = boundStep<kWithCones>(s, w, t, q);
+        evaluateHits<kWithLight>(s, w, o, d, t, pixelAngle, evaluate, stepGrowth(s.shade, T), q);
+        if (!q.active && w.live == 0) {
+          ended = w.done;
+          if (!ended) {
+            t = w.tCellExit;
+            walkAdvance(s, w, o, d, t);
+            continue;
+          }
+        }
+      }
+      if (ended) {  // no instance left before tNear: the far field from tNear on, if any
+        if (!(tNear < tMax) || !farFieldSpan(s.far, o, d, tNear > t ? tNear : t, tMax, t, farEnd)) break;
+        continue;
+      }
+      if (q.next > tNear) q.next = tNear;
+      CANOPY_PLAY_COUNT(s, primarySteps, 1);
+      if (q.k == 0.0f) CANOPY_PLAY_COUNT(s, emptySteps, 1);
+    } else {
+      if (!(t < farEnd)) break;
+      q = farFieldStep(s, o, d, t, farEnd);
     }
-    if (q.next > tNear) q.next = tNear;
-    CANOPY_PLAY_COUNT(s, primarySteps, 1);
-    if (q.k == 0.0f) CANOPY_PLAY_COUNT(s, emptySteps, 1);
     const float alpha = shadeStep<kWithCones, kWithDepth>(s, o, d, t, pixelAngle, q, T, sun, r, window);
     T *= 1.0f - alpha;
     t = q.next;
-    if (T < s.shade.stopT || t >= tNear) break;
-    while (!w.done && t >= w.tCellExit) walkAdvance(s, w, o, d, t);
+    if (T < s.shade.stopT) break;
+    if (farEnd < 0.0f) {
+      if (t >= tNear) {
+        if (!(tNear < tMax) || !farFieldSpan(s.far, o, d, t, tMax, t, farEnd)) break;
+        continue;
+      }
+      while (!w.done && t >= w.tCellExit) walkAdvance(s, w, o, d, t);
+    }
   }
-  if (tNear < tMax && !(T < s.shade.stopT))
-    marchFarField<kWithCones, kWithDepth>(s, o, d, pixelAngle, tNear > tStart ? tNear : tStart, tMax, T, sun, r, window);
   if (ground) {
     addGround<kWithCones, kWithDepth>(s, o, d, tGround, pixelAngle, T, r, window);
     T = 0.0f;
