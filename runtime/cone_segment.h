@@ -174,6 +174,70 @@ CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m,
   return d;
 }
 
+// The descent of descendResident read from the model's descent table (ModelView::levelNodes): the
+// node (one load, instead of a load per level), its level and the brick whose light the path ends
+// with, where that is the same Descent field for field, or one that instanceSegment() uses alike:
+// true and d set where
+//   - the node has a brick and it is resident: every brick field is the full descent's (its own
+//     brick overrides the ancestors');
+//   - the node has no brick (an empty leaf, or a uniform node): instanceSegment() then returns its
+//     constant segment, which reads the node, its box, its level and the light fields only; the
+//     brick fields, which the full descent may have set from ancestors, are left unset;
+// and, with light wanted from a lit model, the path's light brick (the node's own, or for a uniform
+// node or a detail level's node the deepest brick ancestor at most at the light depth) has its
+// light page resident (then missingLightPage is none and coarsestLightPage the root's, as the full
+// descent finds them). Else false (a missing brick or light page, a level beyond the table), and
+// the caller descends from the root.
+CANOPY_HD inline bool descendByTable(const SceneView& s, const ModelView& m, V3 u, uint32_t maxLevel, bool wantLight, Descent& d) {
+  if (maxLevel >= m.tableLevels) return false;
+  float x[3] = {u.x, u.y, u.z};
+  const float scale = pow2i(int(maxLevel));
+  const uint32_t n = 1u << maxLevel;
+  uint32_t c[3];
+  for (int a = 0; a < 3; ++a) {
+    x[a] = x[a] < 0.0f ? 0.0f : (x[a] >= 1.0f ? 0.99999994f : x[a]);
+    c[a] = uint32_t(x[a] * scale);  // exact: a power-of-two scale, truncated (the descent's child bits)
+  }
+  const size_t e = ((size_t(1) << (3 * maxLevel)) - 1) / 7 + c[0] + n * (c[1] + size_t(n) * c[2]);
+  const CanopyNode node = loadNode(m.levelNodes + e);
+  const uint32_t levels = m.levelOf[e], level = levels & 15u;
+  d.node = node;
+  d.level = uint8_t(level);
+  d.maxLevel = uint8_t(maxLevel);
+  const float size = levelSize(level), up = pow2i(int(level));
+  for (int a = 0; a < 3; ++a) d.lo[a] = floorf(x[a] * up) * size;  // the sum of the descent's halvings, exact
+  d.brickLevel = d.lightLevel = 0;
+  d.brickPoolSlot = -1;
+  d.brickSlotInPage = 0;
+  d.missingPage = kCanopyNone;
+  d.lightPoolSlot = -1;
+  d.lightSlotInPage = 0;
+  d.missingLightPage = kCanopyNone;
+  d.coarsestLightPage = kCanopyNone;
+  if (node.brick != kCanopyNone) {
+    uint32_t page, inPage;
+    const int32_t slot = residentSlot(s, m, node.brick, page, inPage);
+    if (slot < 0) return false;
+    d.brickPoolSlot = slot;
+    d.brickSlotInPage = uint16_t(inPage);
+    d.brickLevel = uint8_t(level);
+  } else if (node.density == 0.0f) {
+    return true;  // an empty leaf: no segment of it is shaded
+  }
+  if (!(wantLight && m.hasLight)) return true;
+  const uint32_t lightBrick = m.lightBricks[e];
+  if (lightBrick == kCanopyNone || m.rootLightPage == kCanopyNone) return false;
+  uint32_t lightInPage;
+  const uint32_t lpage = m.firstLightPage + divide(s.lightItemsPerPage, lightBrick, lightInPage);
+  const int32_t lslot = s.pageSlot[lpage];
+  if (lslot < 0) return false;
+  d.lightPoolSlot = lslot;
+  d.lightSlotInPage = uint16_t(lightInPage);
+  d.lightLevel = uint8_t(levels >> 4);
+  d.coarsestLightPage = m.rootLightPage;
+  return true;
+}
+
 // The last descent of one instance along one ray: a later point inside the node reached, with the
 // same level asked for, reaches the same node with the same resident bricks (the page table does
 // not change during a pass), so instanceSegment() reuses it instead of descending from the root
@@ -458,7 +522,10 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
   if (hold) hold->until = -3.0e38f;
   CANOPY_PLAY_COUNT(s, segments, 1);
   if (!s.shade.descentCache || !descentCovers(cache, up, level)) {
-    cache.d = descendResident(s, m, up, level, shading);
+    if (s.shade.descentTable && descendByTable(s, m, up, level, shading, cache.d))
+      CANOPY_PLAY_COUNT(s, tableDescents, 1);
+    else
+      cache.d = descendResident(s, m, up, level, shading);
     CANOPY_PLAY_COUNT(s, descents, 1);
   }
   const Descent& d = cache.d;

@@ -68,6 +68,9 @@ void addShadowOptions(CLI::App& app, canopy::play::PlayOptions& o, CliValues& x)
       ->capture_default_str()
       ->group("");
   app.add_flag("--no-descent-cache", x.noDescentCache, "Descend the octree from the root for every segment (same image; for timing)")->group("");
+  app.add_flag("--descent-table", o.descentTable,
+               "Read a descent's node from the model's table of nodes per level where that gives the same descent (same image; for timing)")
+      ->group("");
   app.add_flag("--no-empty-skip", x.noEmptySkip,
                "March the empty cells of bricks in half-voxel steps instead of skipping them (the sample phase changes by 0.1-0.4 % RMS; for comparison)")
       ->group("");

@@ -334,6 +334,7 @@ ShadeParams shadeParams(const PlayOptions& o) {
   shade.shadowMapCells = o.shadowMapCells;
   shade.shadowMapBias = o.shadowMapBias;
   shade.descentCache = o.descentCache ? 1 : 0;
+  shade.descentTable = o.descentTable ? 1 : 0;
   shade.holdEmpty = o.holdEmpty ? 1 : 0;
   shade.skipEmptyBlocks = o.skipEmptyBlocks ? 1 : 0;
   shade.exactLight = o.exactLight ? 1 : 0;
@@ -580,6 +581,7 @@ nlohmann::json workReport(const WorkCounters& work, uint64_t passes) {
           {"empty_block_skips", work.emptyBlockSkips},
           {"hit_drops", work.hitDrops},
           {"far_steps", work.farSteps},
+          {"table_descents", work.tableDescents},
           {"voxel_px", voxelPixelsReport(work)}};
 }
 

@@ -172,6 +172,14 @@ class CudaBackend final : public Backend {
       if (models[m].haarLight) models[m].haar.index = haarIndex_.data() + scene.modelFirstHaarIndex[m];
       if (models[m].sparseIndex) models[m].sparseIndex = sparseIndex_.data() + scene.modelFirstSparseIndex[m];
     }
+    uploadVector(levelNodes_, scene.levelNodes);
+    uploadVector(levelOf_, scene.levelOf);
+    uploadVector(lightBricks_, scene.lightBricks);
+    for (size_t m = 0; m < models.size(); ++m) {
+      models[m].levelNodes = levelNodes_.data() + scene.modelFirstLevelNode[m];
+      models[m].levelOf = levelOf_.data() + scene.modelFirstLevelNode[m];
+      models[m].lightBricks = lightBricks_.data() + scene.modelFirstLevelNode[m];
+    }
     uploadVector(models_, models);
     uploadVector(gridStart_, scene.gridStart);
     uploadVector(gridItems_, scene.gridItems);
@@ -422,6 +430,9 @@ class CudaBackend final : public Backend {
   cuda::DeviceBuffer<CanopyNode> tiles_;
   cuda::DeviceBuffer<uint32_t> sparseIndex_;  // CanopyFile::sparseIndex(): the detail models' sparse brick locations
   cuda::DeviceBuffer<uint32_t> haarIndex_;  // CanopyFile::haarIndex(): the Haar-lit models' group tables and locations
+  cuda::DeviceBuffer<CanopyNode> levelNodes_;  // the models' descent tables (HostScene::levelNodes)
+  cuda::DeviceBuffer<uint8_t> levelOf_;
+  cuda::DeviceBuffer<uint32_t> lightBricks_;
   cuda::DeviceBuffer<ModelView> models_;
   cuda::DeviceBuffer<InstanceView> instances_;
   cuda::DeviceBuffer<uint32_t> gridStart_, gridItems_, gridFaceStart_, gridFaceItems_;

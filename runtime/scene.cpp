@@ -343,6 +343,56 @@ void addSceneLight(const CanopyFile& f, HostScene& s) {
 
 }  // namespace
 
+// Each model's descent table (ModelView::levelNodes): level by level, a cell's node is its parent
+// cell's child where the parent cell's node sits at the parent level and has children (the step a
+// descent takes), else the parent cell's node (a leaf ends the descent there).
+void addDescentTables(HostScene& s, uint32_t lightItemsPerPage) {
+  for (ModelView& m : s.models) {
+    const uint32_t levels = std::min(m.depth + 1, kDescentTableLevels);
+    const size_t first = s.levelNodes.size();
+    s.modelFirstLevelNode.push_back(uint32_t(first));
+    size_t count = 0;
+    for (uint32_t L = 0; L < levels; ++L) count += size_t(1) << (3 * L);
+    s.levelNodes.resize(first + count);
+    s.levelOf.resize(first + count);
+    s.lightBricks.resize(first + count);
+    s.levelNodes[first] = m.root;
+    s.levelOf[first] = 0;
+    s.lightBricks[first] = m.root.brick;  // level 0 <= lightDepth
+    size_t parentAt = first, at = first + 1;
+    for (uint32_t L = 1; L < levels; ++L) {
+      const uint32_t n = 1u << L, pn = n >> 1;
+      for (uint32_t z = 0; z < n; ++z)
+        for (uint32_t y = 0; y < n; ++y)
+          for (uint32_t x = 0; x < n; ++x) {
+            const size_t p = parentAt + (x >> 1) + pn * ((y >> 1) + pn * size_t(z >> 1));
+            const CanopyNode& parent = s.levelNodes[p];
+            const bool steps = (s.levelOf[p] & 15u) == L - 1 && parent.child != kCanopyNone && parent.child < m.tileCount;
+            const size_t e = at + x + n * (y + n * size_t(z));
+            s.levelNodes[e] = steps ? m.tiles[size_t(parent.child) * 8 + ((x & 1) | (y & 1) << 1 | (z & 1) << 2)] : parent;
+            s.levelOf[e] = s.levelOf[p];
+            s.lightBricks[e] = s.lightBricks[p];
+            if (steps) {
+              s.levelOf[e] = uint8_t((s.levelOf[p] & 0xF0u) | L);
+              if (s.levelNodes[e].brick != kCanopyNone && L <= m.lightDepth) {
+                s.levelOf[e] = uint8_t(L << 4 | L);
+                s.lightBricks[e] = s.levelNodes[e].brick;
+              }
+            }
+          }
+      parentAt = at;
+      at += size_t(n) * n * n;
+    }
+    m.tableLevels = levels;
+    m.rootLightPage = m.hasLight && m.root.brick != kCanopyNone ? m.firstLightPage + m.root.brick / lightItemsPerPage : kCanopyNone;
+  }
+  for (size_t i = 0; i < s.models.size(); ++i) {
+    s.models[i].levelNodes = s.levelNodes.data() + s.modelFirstLevelNode[i];
+    s.models[i].levelOf = s.levelOf.data() + s.modelFirstLevelNode[i];
+    s.models[i].lightBricks = s.lightBricks.data() + s.modelFirstLevelNode[i];
+  }
+}
+
 HostScene buildScene(const CanopyFile& f) {
   HostScene s;
   const CanopyFileHeader& h = f.header();
@@ -354,6 +404,7 @@ HostScene buildScene(const CanopyFile& f) {
   s.sparseIndex = &f.sparseIndex();
   std::vector<M34> latticeToModel, modelToUnit;
   addModels(f, s, latticeToModel, modelToUnit);
+  addDescentTables(s, h.lightItemsPerPage);
   double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
   addInstances(f, s, latticeToModel, modelToUnit, lo, hi);
   buildInstanceGrid(s, lo, hi);

@@ -18,12 +18,23 @@
 namespace canopy::play {
 
 struct HostScene {
+  // Moved, never copied: the models' descent-table pointers point into levelNodes and levelOf.
+  HostScene() = default;
+  HostScene(HostScene&&) = default;
+  HostScene& operator=(HostScene&&) = default;
+  HostScene(const HostScene&) = delete;
+  HostScene& operator=(const HostScene&) = delete;
   std::vector<ModelView> models;          // tiles point into the CanopyFile's resident tiles
   std::vector<uint32_t> modelFirstTile;   // each model's first tile in CanopyFile::allTiles()
   std::vector<uint32_t> modelFirstHaarIndex;  // each Haar-lit model's first entry in haarIndex
   const std::vector<uint32_t>* haarIndex = nullptr;  // CanopyFile::haarIndex() (models' haar.index point into it)
   std::vector<uint32_t> modelFirstSparseIndex;  // each model's first entry in sparseIndex
   const std::vector<uint32_t>* sparseIndex = nullptr;  // CanopyFile::sparseIndex() (models' sparseIndex point into it)
+  // The models' descent tables (ModelView::levelNodes, levelOf), model after model.
+  std::vector<CanopyNode> levelNodes;
+  std::vector<uint8_t> levelOf;
+  std::vector<uint32_t> lightBricks;
+  std::vector<uint32_t> modelFirstLevelNode;
   std::vector<InstanceView> instances;
   std::vector<Affine> worldToLatticeLinear;  // per instance: world vectors -> lattice index axes
   std::vector<uint32_t> gridStart, gridItems;

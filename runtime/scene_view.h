@@ -37,7 +37,19 @@ struct ModelView {
   uint32_t denseBricks;
   uint32_t firstSparsePage;
   const uint32_t* sparseIndex;
+  // The descent table (cone_segment.h descendByTable; ShadeParams::descentTable): for each level
+  // L < tableLevels, the node a descent asked for level L reaches in each of the 2^L x 2^L x 2^L
+  // cells of that level (x fastest; level L's cells from (8^L - 1) / 7 on); levelOf: that node's
+  // level (a leaf ends a descent early) | the level of lightBricks' brick << 4; lightBricks: the
+  // brick of the deepest node on that descent's path that has one and lies at most at lightDepth
+  // (the light the descent uses where its page is resident; kCanopyNone: none). tableLevels 0: none.
+  const CanopyNode* levelNodes;
+  const uint8_t* levelOf;
+  const uint32_t* lightBricks;
+  uint32_t tableLevels;
+  uint32_t rootLightPage;  // the light page of the root's brick (kCanopyNone: no root brick, or no light)
 };
+constexpr uint32_t kDescentTableLevels = 6;  // levels 0..5: (8^6 - 1) / 7 = 37449 nodes per model at most
 
 struct InstanceView {
   Affine worldToUnit;       // world -> this instance's model octree unit space
@@ -83,6 +95,7 @@ struct ShadeParams {
   float shadowMapBias;      // kShadowsMap: lookup offset towards the sun, in blur widths (planShadowMap)
   uint32_t shadowMapMaxVoxels;  // kShadowsMap: voxels grow until a grid has at most this many
   int descentCache;         // 1: reuse a ray's last descent per instance (DescentCache); 0: always descend
+  int descentTable;         // 1: a descent reads its node from the model's descent table where that gives the same descent
   int holdEmpty;            // 1: a primary ray keeps an instance's empty leaf segment to its end (EmptyHold)
   int skipEmptyBlocks;      // 1: a brick step in an empty cell goes to the end of the cell run (emptyRunEnd)
   int exactLight;           // 1 (--light exact): the finest level of Haar-lit models samples the Haar pages
@@ -136,7 +149,8 @@ struct WorkCounters {
   uint64_t cones, primarySteps, shadedSamples, segments, descents, brickSamples, shadowCones, shadowSteps, shadowMapLookups,
       shadowMapSteps, heldSegments, emptySteps, zeroBrickSamples, emptyBlockSkips,
       hitDrops,  // hits dropped from a full hit list (InstanceWalk)
-      farSteps;  // steps of primary cones through the far field (marchFarField)
+      farSteps,  // steps of primary cones through the far field (farFieldStep)
+      tableDescents;  // descents read from a descent table (descendByTable)
   // The level of detail rule at work (countVoxelFootprint): shading segments by the width of the
   // chosen level's voxel over the pixel's footprint there (in pixels): <= 1, <= 1.5, <= 4, above;
   // and the largest ratio (its float's bits).

@@ -442,6 +442,49 @@ TEST(Render, DescentCacheLeavesTheImageUnchanged) {
   }
 }
 
+// The descent table (cone_segment.h descendByTable) gives a descent's node in one read where the
+// result is the descent from the root's: the image must be the same bit for bit, on the 12-tree
+// forest with LB light (light pages on the descent path), from among the trees and from afar, with
+// the shadow map and shadow cones, with and without the descent cache, converged and on a cold
+// start (one pass: pages missing, the fallbacks to ancestors' bricks and light taken from the
+// root); the table served most descents where the pages were resident.
+TEST(Render, DescentTableLeavesTheImageUnchanged) {
+  const std::string file = pt::tmpDir("scenes") + "/forest-table.canopy";
+  std::vector<canopy::CanopyInstance> inst;
+  for (int i = 0; i < 12; ++i)
+    inst.push_back(pt::instanceAt(uint32_t(i % 2), float(i % 4) * 2.0f - 3.0f, 0, float(i / 4) * 2.0f - 2.0f, 1.0f, 0.9f * float(i)));
+  const float rgb[3] = {1.0f, 0.8f, 0.6f};
+  pt::writeLitScene(file, {canopy::octreepack::testing::syntheticPlant(40, 0, "a", 4), canopy::octreepack::testing::syntheticPlant(32, 0, "b", 3)},
+                    {pt::rampLight(rgb, 1.0f, 40, 0.03f), pt::rampLight(rgb, -0.5f, 32, 0.03f)}, inst);
+  for (const char* camera : {"orbit:azimuth=50,elevation=10,distance=4,turns=0", "orbit:azimuth=-20,elevation=30,distance=14,turns=0"})
+    for (const char* method : {"map", "cone"})
+      for (const bool cache : {true, false})
+        for (const bool converge : {true, false}) {
+          pl::PlayOptions o = pt::convergedView(file, 48, 32);
+          o.camera = camera;
+          o.shadowMethod = method;
+          o.descentCache = cache;
+          o.converge = converge;
+          o.warmStart = converge;
+          o.sun = "0.3,0.8,-0.52";
+          o.countWork = true;
+          nlohmann::json report;
+          const std::vector<float> root = render(o);
+          o.descentTable = true;
+          const std::vector<float> table = render(o, &report);
+          ASSERT_EQ(root.size(), table.size());
+          size_t differ = 0;
+          for (size_t i = 0; i < root.size(); ++i) differ += root[i] != table[i];
+          EXPECT_EQ(differ, 0u) << camera << " " << method << " cache " << cache << " converged " << converge;
+          EXPECT_EQ(int(report["lit_models"]), 2);
+          const double descents = double(report["work"]["descents"]), fromTable = double(report["work"]["table_descents"]);
+          if (converge && std::string(method) == "map") {
+            std::printf("%s cache %d: %.0f of %.0f descents from the table\n", camera, int(cache), fromTable, descents);
+            EXPECT_GT(fromTable, 0.5 * descents) << camera;
+          }
+        }
+}
+
 // Held empty segments (cone.h, EmptyHold): a primary ray keeps an instance's empty leaf segment
 // over the steps of its neighbours instead of evaluating it again; the image must be the one of
 // evaluating every active instance at every step, bit for bit. Same 12-tree forest (crowns
