@@ -463,6 +463,7 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
     } else {
       if (!(t < farEnd)) break;
       q = farFieldStep(s, o, d, t, farEnd);
+      if (!(q.next > t)) break;  // a step below float resolution at t (an absurd scale): stop rather than loop
     }
     const float alpha = shadeStep<kWithCones, kWithDepth>(s, o, d, t, pixelAngle, q, T, sun, r, window);
     T *= 1.0f - alpha;
