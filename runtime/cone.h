@@ -405,7 +405,7 @@ CANOPY_HD inline StepSums farFieldStep(const SceneView& s, V3 o, V3 d, float t, 
 // A ray that meets the ground (groundHit) before tMax is marched up to it (the parts of instances
 // below the plane are cut) and ends there: what is left of its transmittance shows the ground
 // (groundRadiance), and the result is opaque. With a far field the instances are marched up to
-// farFieldStart and the far field from there (marchFarField).
+// farFieldStart and the far field from there (farFieldSpan, farFieldStep), in the same loop.
 // The march starts at tStart with transmittance T0 (a stereo hole behind a reprojected layer: behind
 // it, with what that layer lets through, so that the march stops where the whole ray's would).
 // Each step: retire the hits that ended, bound the step and evaluate the hits that need it

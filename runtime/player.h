@@ -33,7 +33,7 @@ struct PlayOptions {
   float lodBias = 0.0f;
   float stepGrowthT = 0.0f;          // --step-growth: brick steps grow below this transmittance (0: never; ShadeParams)
   float stepGrowthMax = 4.0f;        // --step-growth-max: by at most this factor
-  // The far field (cone.h marchFarField): "auto" (from where a cone's footprint reaches the
+  // The far field (cone.h farFieldStep): "auto" (from where a cone's footprint reaches the
   // coarsest level's voxel of the coarsest instance), "off" (instances everywhere) or a distance D
   // (scene units, > 0): the prefiltered scene volume from D on.
   std::string farField = "auto";

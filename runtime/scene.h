@@ -81,7 +81,7 @@ HostScene buildScene(const CanopyFile& file);
 // cell, grown until the grid has at most shade.shadowMapMaxVoxels voxels. k is left null.
 ExtinctionGridView planExtinctionGrid(const HostScene& scene, const ShadeParams& shade);
 
-// The scene's far field (cone.h marchFarField): world axes over the scene's bounds with one empty
+// The scene's far field (cone.h farFieldStep): world axes over the scene's bounds with one empty
 // voxel of margin on every side; voxel edge the coarsest level's voxel (rootCells / 8 cells), or the
 // finest node where that is wider, of the instance whose such voxel is the widest, grown until the
 // grid has at most kFarFieldMaxVoxels voxels. values is left null.

@@ -131,7 +131,7 @@ struct ShadowMapView {
   float bias;               // lookups move this far towards the sun (world), see shadowMapLookup
 };
 
-// The far field (cone.h marchFarField): the scene prefiltered once per scene by the backend, a grid
+// The far field (cone.h farFieldStep): the scene prefiltered once per scene by the backend, a grid
 // in world axes whose voxel is the coarsest level's voxel of the coarsest instance (planFarField),
 // holding at each voxel centre the node-mean extinction of every instance there and that times its
 // albedo (buildFarFieldVoxel). A primary cone marches the instances up to the far field's start and

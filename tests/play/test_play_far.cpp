@@ -1,4 +1,4 @@
-// The far field (cone.h marchFarField): beyond where a cone's footprint exceeds every instance's
+// The far field (cone.h farFieldStep): beyond where a cone's footprint exceeds every instance's
 // coarsest voxel, a prefiltered scene volume stands in for the instances. Its image against the
 // per-instance render, its cost against the number of instances it stands for, and where it
 // changes nothing.
@@ -72,8 +72,8 @@ double relativeRms(const std::vector<float>& got, const std::vector<float>& ref)
 }  // namespace
 
 // The far field's grid: one voxel of margin around the scene's bounds, the voxel the coarsest
-// level's voxel of the coarsest instance (these plants: 32 cells at 0.1, so 4 cells: 0.4), every
-// border voxel empty, matter inside.
+// level's voxel of the widest instance (these plants: 64 cells of 0.025 at half size, so 8 cells:
+// 0.2), every border voxel empty, matter inside, extinction x albedo at most the extinction.
 TEST(FarField, GridCoversTheSceneWithTheCoarsestVoxelAndEmptyBorders) {
   const canopy::CanopyFile f = canopy::CanopyFile::open(standFile());
   const pl::HostScene scene = pl::buildScene(f);
