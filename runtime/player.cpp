@@ -786,6 +786,7 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
 
   const CanopyFile file = CanopyFile::open(o.input);
   HostScene scene = buildScene(file);
+  if (o.descentTable) addDescentTables(scene);
   const std::vector<FrameSetup> plan = framePlan(o, scene);
   const uint64_t cacheBytes = uint64_t(o.cacheMb * 1024.0 * 1024.0);
   const uint32_t slots = uint32_t(std::min<uint64_t>(std::max<uint64_t>(cacheBytes / file.header().pageBytes, 1), std::max<uint32_t>(file.pageCount(), 1)));

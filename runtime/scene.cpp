@@ -346,7 +346,9 @@ void addSceneLight(const CanopyFile& f, HostScene& s) {
 // Each model's descent table (ModelView::levelNodes): level by level, a cell's node is its parent
 // cell's child where the parent cell's node sits at the parent level and has children (the step a
 // descent takes), else the parent cell's node (a leaf ends the descent there).
-void addDescentTables(HostScene& s, uint32_t lightItemsPerPage) {
+void addDescentTables(HostScene& s) {
+  const uint32_t lightItemsPerPage = s.lightItemsPerPage;
+  s.levelNodes.clear(), s.levelOf.clear(), s.lightBricks.clear(), s.modelFirstLevelNode.clear();
   for (ModelView& m : s.models) {
     const uint32_t levels = std::min(m.depth + 1, kDescentTableLevels);
     const size_t first = s.levelNodes.size();
@@ -404,7 +406,6 @@ HostScene buildScene(const CanopyFile& f) {
   s.sparseIndex = &f.sparseIndex();
   std::vector<M34> latticeToModel, modelToUnit;
   addModels(f, s, latticeToModel, modelToUnit);
-  addDescentTables(s, h.lightItemsPerPage);
   double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
   addInstances(f, s, latticeToModel, modelToUnit, lo, hi);
   buildInstanceGrid(s, lo, hi);

@@ -114,10 +114,12 @@ CANOPY_HD inline float extinctionAt(const ExtinctionGridView& g, V3 p) {
   return k;
 }
 
-// The far field's voxel i (x fastest): the mean of 2x2x2 samples at +-voxel/4 about its centre of
-// the node-mean extinction and extinction x albedo of every instance there, nodes of edge at most a
-// voxel (so a voxel averages the nodes the size of its instance's coarsest voxels: what the
-// instance's own coarsest level holds there).
+// The far field's voxel i (x fastest): at its centre, the node-mean extinction and extinction x
+// albedo of every instance there, nodes of edge at most a voxel (the size of the instance's
+// coarsest voxels: what its own coarsest level holds there). One sample, not the extinction grid's
+// 2x2x2 box: on the far-field test stand the box's extra blur took the frame from 15 % to 23 % RMS
+// of the per-instance one (silhouettes a voxel taller); a sample may fall in a node that straddles
+// the voxel, so mass is kept only on average.
 CANOPY_HD inline void buildFarFieldVoxel(const SceneView& s, const FarFieldView& g, int64_t i) {
   const int x = int(i % g.dim[0]);
   const int y = int((i / g.dim[0]) % g.dim[1]);

@@ -444,9 +444,10 @@ TEST(Render, DescentCacheLeavesTheImageUnchanged) {
 
 // The descent table (cone_segment.h descendByTable) gives a descent's node in one read where the
 // result is the descent from the root's: the image must be the same bit for bit, on the 12-tree
-// forest with LB light (light pages on the descent path), from among the trees and from afar, with
-// the shadow map and shadow cones, with and without the descent cache, converged and on a cold
-// start (one pass: pages missing, the fallbacks to ancestors' bricks and light taken from the
+// forest with LB light (light pages on the descent path) and on its detail form (format 2.0: detail
+// levels lit from the light level, Haar light with --light exact), from among the trees and from
+// afar, with the shadow map and shadow cones, with and without the descent cache, converged and on
+// a cold start (one pass: pages missing, the fallbacks to ancestors' bricks and light taken from the
 // root); the table served most descents where the pages were resident.
 TEST(Render, DescentTableLeavesTheImageUnchanged) {
   const std::string file = pt::tmpDir("scenes") + "/forest-table.canopy";
@@ -454,13 +455,22 @@ TEST(Render, DescentTableLeavesTheImageUnchanged) {
   for (int i = 0; i < 12; ++i)
     inst.push_back(pt::instanceAt(uint32_t(i % 2), float(i % 4) * 2.0f - 3.0f, 0, float(i / 4) * 2.0f - 2.0f, 1.0f, 0.9f * float(i)));
   const float rgb[3] = {1.0f, 0.8f, 0.6f};
-  pt::writeLitScene(file, {canopy::octreepack::testing::syntheticPlant(40, 0, "a", 4), canopy::octreepack::testing::syntheticPlant(32, 0, "b", 3)},
-                    {pt::rampLight(rgb, 1.0f, 40, 0.03f), pt::rampLight(rgb, -0.5f, 32, 0.03f)}, inst);
+  const std::vector<canopy::octreepack::ModelSource> models = {canopy::octreepack::testing::syntheticPlant(40, 0, "a", 4),
+                                                               canopy::octreepack::testing::syntheticPlant(32, 0, "b", 3)};
+  const std::vector<canopy::octreepack::LightFn> lights = {pt::rampLight(rgb, 1.0f, 40, 0.03f), pt::rampLight(rgb, -0.5f, 32, 0.03f)};
+  pt::writeLitScene(file, models, lights, inst);
+  // the same forest with its geometry on detail lattices twice as fine and Haar light (format 2.0):
+  // detail levels take their light from the light level; --light exact samples the Haar pages
+  const std::string detail = pt::tmpDir("scenes") + "/forest-table-detail.canopy";
+  pt::writeHaarLitScene(detail, models, lights, inst, 0.01f, canopy::haar::Precision::Fp16, nullptr, 1);
+  for (const std::string& input : {file, detail})
   for (const char* camera : {"orbit:azimuth=50,elevation=10,distance=4,turns=0", "orbit:azimuth=-20,elevation=30,distance=14,turns=0"})
     for (const char* method : {"map", "cone"})
       for (const bool cache : {true, false})
         for (const bool converge : {true, false}) {
-          pl::PlayOptions o = pt::convergedView(file, 48, 32);
+          if (input == detail && !cache) continue;  // the cache's part is the same as on the first file
+          pl::PlayOptions o = pt::convergedView(input, 48, 32);
+          o.exactLight = input == detail;
           o.camera = camera;
           o.shadowMethod = method;
           o.descentCache = cache;
@@ -475,11 +485,11 @@ TEST(Render, DescentTableLeavesTheImageUnchanged) {
           ASSERT_EQ(root.size(), table.size());
           size_t differ = 0;
           for (size_t i = 0; i < root.size(); ++i) differ += root[i] != table[i];
-          EXPECT_EQ(differ, 0u) << camera << " " << method << " cache " << cache << " converged " << converge;
+          EXPECT_EQ(differ, 0u) << input << " " << camera << " " << method << " cache " << cache << " converged " << converge;
           EXPECT_EQ(int(report["lit_models"]), 2);
           const double descents = double(report["work"]["descents"]), fromTable = double(report["work"]["table_descents"]);
           if (converge && std::string(method) == "map") {
-            std::printf("%s cache %d: %.0f of %.0f descents from the table\n", camera, int(cache), fromTable, descents);
+            std::printf("%s %s cache %d: %.0f of %.0f descents from the table\n", input.c_str(), camera, int(cache), fromTable, descents);
             EXPECT_GT(fromTable, 0.5 * descents) << camera;
           }
         }

@@ -125,6 +125,7 @@ TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
     bool movingSun = false;  // three frames, the sun orbiting (the scene light's sun factor changes per frame)
     float stepGrowth = 0.0f;  // --step-growth (brick steps grow behind dense matter)
     const char* farField = "auto";  // --far-field (a distance: the far field from there on)
+    bool descentTable = false;      // --descent-table (the same image as descending from the root)
   };
   const std::string lit = litForestFile(), unlit = forestFile(), haar = haarForestFile(), sceneLit = sceneLitForestFile(),
                     detail = detailForestFile();
@@ -132,7 +133,8 @@ TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
                         Case{haar, true, 2, "map", true}, Case{haar, false, 2, "map", true}, Case{sceneLit, true, 2, "map", false, true},
                         Case{sceneLit, false, 2, "map", false, true}, Case{detail, true, 2, "map", false}, Case{detail, true, 2, "cone", true},
                         Case{lit, true, 2, "map", false, false, 0.2f}, Case{lit, true, 2, "map", false, false, 0.0f, "3"},
-                        Case{unlit, true, 0, "cone", false, false, 0.0f, "3"}}) {
+                        Case{unlit, true, 0, "cone", false, false, 0.0f, "3"}, Case{lit, true, 2, "map", false, false, 0.0f, "auto", true},
+                        Case{detail, true, 2, "map", true, false, 0.0f, "auto", true}}) {
     pl::PlayOptions o;
     o.input = k.file;
     o.shadowMethod = k.shadows;
@@ -143,6 +145,7 @@ TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
     o.exactLight = k.exact;
     o.stepGrowthT = k.stepGrowth;
     o.farField = k.farField;
+    o.descentTable = k.descentTable;
     if (k.litModels) o.sun = "0.3,0.8,-0.52";
     if (k.movingSun) o.sun = "orbit:azimuth=40,elevation=35,turns=0.3", o.frames = 3;
     // the whole forest (coarse levels), and a close view among the trees (finest bricks,
