@@ -119,13 +119,9 @@ CANOPY_HD CANOPY_FORCEINLINE CanopyNode loadNode(const CanopyNode* p) {
   return n;
 }
 
-CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m, V3 u, uint32_t maxLevel, bool wantLight) {
-  float x[3] = {u.x, u.y, u.z};
-  for (int a = 0; a < 3; ++a) x[a] = x[a] < 0.0f ? 0.0f : (x[a] >= 1.0f ? 0.99999994f : x[a]);
-  Descent d;
-  d.node = m.root;
-  d.lo[0] = d.lo[1] = d.lo[2] = 0.0f;
-  d.maxLevel = uint8_t(maxLevel);
+// A descent's brick and light fields before any brick of its path is seen: none resident, none
+// missing (descendResident and descendByTable start from it).
+CANOPY_HD CANOPY_FORCEINLINE void clearDescentPages(Descent& d) {
   d.brickLevel = d.lightLevel = 0;
   d.brickPoolSlot = -1;
   d.brickSlotInPage = 0;
@@ -134,6 +130,16 @@ CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m,
   d.lightSlotInPage = 0;
   d.missingLightPage = kCanopyNone;
   d.coarsestLightPage = kCanopyNone;
+}
+
+CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m, V3 u, uint32_t maxLevel, bool wantLight) {
+  float x[3] = {u.x, u.y, u.z};
+  for (int a = 0; a < 3; ++a) x[a] = x[a] < 0.0f ? 0.0f : (x[a] >= 1.0f ? 0.99999994f : x[a]);
+  Descent d;
+  d.node = m.root;
+  d.lo[0] = d.lo[1] = d.lo[2] = 0.0f;
+  d.maxLevel = uint8_t(maxLevel);
+  clearDescentPages(d);
   wantLight = wantLight && m.hasLight;
   const uint32_t firstFallback = maxLevel > kFallbackLevels ? maxLevel - kFallbackLevels : 0;
   float size = 1.0f;
@@ -206,14 +212,7 @@ CANOPY_HD inline bool descendByTable(const SceneView& s, const ModelView& m, V3 
   d.maxLevel = uint8_t(maxLevel);
   const float size = levelSize(level), up = pow2i(int(level));
   for (int a = 0; a < 3; ++a) d.lo[a] = floorf(x[a] * up) * size;  // the sum of the descent's halvings, exact
-  d.brickLevel = d.lightLevel = 0;
-  d.brickPoolSlot = -1;
-  d.brickSlotInPage = 0;
-  d.missingPage = kCanopyNone;
-  d.lightPoolSlot = -1;
-  d.lightSlotInPage = 0;
-  d.missingLightPage = kCanopyNone;
-  d.coarsestLightPage = kCanopyNone;
+  clearDescentPages(d);
   if (node.brick != kCanopyNone) {
     uint32_t page, inPage;
     const int32_t slot = residentSlot(s, m, node.brick, page, inPage);

@@ -641,7 +641,7 @@ nlohmann::json playReport(const PlayOptions& o, const CanopyFile& file, const Ho
   else
     r["ground"] = nullptr;
   if (shade.farStart >= 0.0f && !scene.empty) {
-    const FarFieldView f = planFarField(scene);
+    const FarFieldView& f = scene.far;
     r["far_field"] = {{"dim", {f.dim[0], f.dim[1], f.dim[2]}},
                       {"voxel", f.voxel},
                       {"from", shade.farStart > 0.0f ? nlohmann::json(shade.farStart) : nlohmann::json("auto")}};

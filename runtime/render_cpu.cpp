@@ -60,10 +60,10 @@ class CpuBackend final : public Backend {
       parallelFor(columns, [&](int64_t c) { buildShadowMapColumn(m, g, sub, c); }, 16);
       if (work_) work_->shadowMapSteps += uint64_t(columns) * uint64_t(m.dim[2]) * uint64_t(sub);
     }
-    if (shade.farStart >= 0.0f && farFieldReachable(scene, shade, camera, planFarField(scene).voxel)) {
+    if (shade.farStart >= 0.0f && farFieldReachable(scene, shade, camera)) {
       // the far field: once per scene (it depends on the instances and sigma only), once a cone can reach it
       if (farValues_.empty() || farSigma_ != shade.sigma) {
-        far_ = planFarField(scene);
+        far_ = scene.far;
         farValues_.assign(size_t(far_.dim[0]) * far_.dim[1] * far_.dim[2] * kFarFieldChannels, 0.0f);
         far_.values = farValues_.data();
         const FarFieldView f = far_;

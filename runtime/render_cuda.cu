@@ -300,10 +300,10 @@ class CudaBackend final : public Backend {
       v.shadowMap.T = shadowMap_.data();
       cuda::parallelFor(columns, ShadowMapKernel{v.shadowMap, grid_, sub}, compute_, 128);
     }
-    if (shade.farStart >= 0.0f && farFieldReachable(scene, shade, camera, planFarField(scene).voxel)) {
+    if (shade.farStart >= 0.0f && farFieldReachable(scene, shade, camera)) {
       // the far field: once per scene (it depends on the instances and sigma only), once a cone can reach it
       if (farValues_.size() == 0 || farSigma_ != shade.sigma) {
-        far_ = planFarField(scene);
+        far_ = scene.far;
         const int64_t n = int64_t(far_.dim[0]) * far_.dim[1] * far_.dim[2];
         CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
         farValues_.resize(size_t(n) * kFarFieldChannels);

@@ -410,6 +410,7 @@ HostScene buildScene(const CanopyFile& f) {
   addInstances(f, s, latticeToModel, modelToUnit, lo, hi);
   buildInstanceGrid(s, lo, hi);
   addSceneLight(f, s);
+  s.far = planFarField(s);
   return s;
 }
 
@@ -510,11 +511,11 @@ FarFieldView planFarField(const HostScene& s) {
   return g;
 }
 
-bool farFieldReachable(const HostScene& s, const ShadeParams& shade, const CameraView& camera, float voxel) {
+bool farFieldReachable(const HostScene& s, const ShadeParams& shade, const CameraView& camera) {
   if (s.empty || shade.farStart < 0.0f) return false;
   // the nearest start of any pixel's cone: the largest footprint per unit t is the pixel angle
   // (off-axis pixels subtend less, cameraRay)
-  const double start = shade.farStart > 0.0f ? double(shade.farStart) : double(voxel) / double(camera.pixelAngle);
+  const double start = shade.farStart > 0.0f ? double(shade.farStart) : double(s.far.voxel) / double(camera.pixelAngle);
   double far2 = 0.0;  // the farthest corner of the scene's bounds from the eye
   for (int c = 0; c < 8; ++c) {
     const double d[3] = {double((c & 1) ? s.boundsHi[0] : s.boundsLo[0]) - camera.position.x,

@@ -43,6 +43,7 @@ struct HostScene {
   float gridLo[3] = {0, 0, 0}, gridCell[3] = {1, 1, 1};
   float boundsLo[3] = {0, 0, 0}, boundsHi[3] = {0, 0, 0};  // world bounds of every instance
   bool empty = true;                      // no instance
+  FarFieldView far{};                     // the far field's grid (planFarField; values null: each backend builds its own)
   // The world height of the lowest instance base (--ground auto): min over instances of the world y
   // of their model's lowest matter (the bottom of its lowest occupied cell), taken below the centre
   // of the model's lattice (exact for upright instances); +inf without matter.
@@ -93,11 +94,11 @@ ExtinctionGridView planExtinctionGrid(const HostScene& scene, const ShadeParams&
 constexpr uint32_t kFarFieldMaxVoxels = 1u << 22;  // 64 MiB of 4 floats
 FarFieldView planFarField(const HostScene& scene);
 
-// Whether a primary cone of `camera` can reach the far field of `voxel` (shade.farStart, or where
-// the footprint reaches the voxel: farFieldStart) inside the scene's bounds; the backends build the
-// far field only once one can (the image is the same: a cone that reaches no far field marches the
-// instances to its end).
-bool farFieldReachable(const HostScene& scene, const ShadeParams& shade, const CameraView& camera, float voxel);
+// Whether a primary cone of `camera` can reach the scene's far field (scene.far; from shade.farStart,
+// or where the footprint reaches its voxel: farFieldStart) inside the scene's bounds; the backends
+// build the far field only once one can (the image is the same: a cone that reaches no far field
+// marches the instances to its end).
+bool farFieldReachable(const HostScene& scene, const ShadeParams& shade, const CameraView& camera);
 
 // The frame's sun transmittance map: its light-space frame (w = -toSun; u, v orthonormal,
 // continuous in the sun direction except where -toSun comes within 26 degrees of the x axis, where

@@ -61,14 +61,19 @@ CANOPY_HD inline float sceneMeanExtinctionAt(const SceneView& s, V3 x, float max
   return k;
 }
 
+// The world centre of voxel i (x fastest) of a grid whose voxel (0, 0, 0) is centred at lo.
+CANOPY_HD CANOPY_FORCEINLINE V3 gridVoxelCentre(const float lo[3], float voxel, const int32_t dim[3], int64_t i) {
+  const int x = int(i % dim[0]);
+  const int y = int((i / dim[0]) % dim[1]);
+  const int z = int(i / (int64_t(dim[0]) * dim[1]));
+  return v3(lo[0] + float(x) * voxel, lo[1] + float(y) * voxel, lo[2] + float(z) * voxel);
+}
+
 // The extinction grid's voxel i (x fastest): the mean of 2x2x2 samples at +-voxel/4 about its
 // centre (a box filter, so that a face of matter that falls on a voxel centre keeps its mass once
 // the grid is read trilinearly).
 CANOPY_HD inline void buildExtinctionVoxel(const SceneView& s, const ExtinctionGridView& g, int64_t i) {
-  const int x = int(i % g.dim[0]);
-  const int y = int((i / g.dim[0]) % g.dim[1]);
-  const int z = int(i / (int64_t(g.dim[0]) * g.dim[1]));
-  const V3 c = v3(g.lo[0] + float(x) * g.voxel, g.lo[1] + float(y) * g.voxel, g.lo[2] + float(z) * g.voxel);
+  const V3 c = gridVoxelCentre(g.lo, g.voxel, g.dim, i);
   const float q = 0.25f * g.voxel;
   float k = 0.0f;
   for (int j = 0; j < 8; ++j)
@@ -121,10 +126,7 @@ CANOPY_HD inline float extinctionAt(const ExtinctionGridView& g, V3 p) {
 // of the per-instance one (silhouettes a voxel taller); a sample may fall in a node that straddles
 // the voxel, so mass is kept only on average.
 CANOPY_HD inline void buildFarFieldVoxel(const SceneView& s, const FarFieldView& g, int64_t i) {
-  const int x = int(i % g.dim[0]);
-  const int y = int((i / g.dim[0]) % g.dim[1]);
-  const int z = int(i / (int64_t(g.dim[0]) * g.dim[1]));
-  const V3 c = v3(g.lo[0] + float(x) * g.voxel, g.lo[1] + float(y) * g.voxel, g.lo[2] + float(z) * g.voxel);
+  const V3 c = gridVoxelCentre(g.lo, g.voxel, g.dim, i);
   float ka[3] = {0.0f, 0.0f, 0.0f};
   const float k = sceneMeanExtinctionAt(s, c, g.voxel, ka);
   float* v = g.values + kFarFieldChannels * i;

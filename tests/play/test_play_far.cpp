@@ -78,12 +78,8 @@ TEST(FarField, GridCoversTheSceneWithTheCoarsestVoxelAndEmptyBorders) {
   const canopy::CanopyFile f = canopy::CanopyFile::open(standFile());
   const pl::HostScene scene = pl::buildScene(f);
   pl::FarFieldView g = pl::planFarField(scene);
-  float widest = 0.0f;
-  for (const pl::InstanceView& i : scene.instances) {
-    const pl::ModelView& m = scene.models[i.model];
-    widest = std::max(widest, float(std::max(m.rootCells / 8, m.rootCells >> m.depth)) * i.cellWorld);
-  }
-  EXPECT_FLOAT_EQ(g.voxel, widest);
+  EXPECT_FLOAT_EQ(g.voxel, 0.2f);  // 8 cells of 0.025
+  EXPECT_EQ(scene.far.voxel, g.voxel);  // buildScene's plan
   for (int a = 0; a < 3; ++a) {
     EXPECT_LE(g.lo[a], scene.boundsLo[a] - 0.99f * g.voxel) << a;
     EXPECT_GE(g.lo[a] + float(g.dim[a] - 1) * g.voxel, scene.boundsHi[a] + 0.99f * g.voxel) << a;
