@@ -241,7 +241,7 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t boundStep(const SceneView& s, const Instan
 }
 
 // The second pass: evaluates the hits of `evaluate` at t (instanceSegment) into the step's sums.
-template <bool kWithLight>
+template <bool kWithLight, uint32_t kPaths>
 CANOPY_HD CANOPY_FORCEINLINE void evaluateHits(const SceneView& s, InstanceWalk& w, V3 o, V3 d, float t, float pixelAngle,
                                                uint32_t evaluate, float grow, StepSums& q) {
   const float footprint = t * pixelAngle;
@@ -250,7 +250,7 @@ CANOPY_HD CANOPY_FORCEINLINE void evaluateHits(const SceneView& s, InstanceWalk&
     evaluate &= evaluate - 1u;
     Hit& hit = w.hits[h];
     const InstanceView& inst = s.instances[hit.instance];
-    const Segment g = instanceSegment(s, inst, o, d, t, hit.tout, footprint, true, w.caches[h],
+    const Segment g = instanceSegment<kPaths>(s, inst, o, d, t, hit.tout, footprint, true, w.caches[h],
                                       s.shade.holdEmpty ? &hit.hold : nullptr, grow);
     if (hit.hold.until > t) {  // a new hold: its level condition becomes a bound on t
       const float limit = levelHoldsUntil(s, inst, s.models[inst.model].depth, pixelAngle, hit.hold.level);
@@ -261,7 +261,7 @@ CANOPY_HD CANOPY_FORCEINLINE void evaluateHits(const SceneView& s, InstanceWalk&
     countVoxelFootprint(s, inst, footprint);
     q.k += g.k;
     float ind[3];
-    segmentIndirect<kWithLight>(s, inst, g, o, d, ind);
+    segmentIndirect<kWithLight, kPaths>(s, inst, g, o, d, ind);
     for (int c = 0; c < 3; ++c) {
       const float ka = g.k * g.albedo[c];
       q.kAlbedo[c] += ka;
@@ -410,7 +410,9 @@ CANOPY_HD inline StepSums farFieldStep(const SceneView& s, V3 o, V3 d, float t, 
 // it, with what that layer lets through, so that the march stops where the whole ray's would).
 // Each step: retire the hits that ended, bound the step and evaluate the hits that need it
 // (boundStep, evaluateHits), shade it (shadeStep), move the walk on.
-template <bool kWithCones, bool kWithLight = true, bool kWithDepth = false>
+// kPaths: the optional paths compiled in (scene_view.h scenePaths); without kPathFar the far field
+// is not marched (s.far is not read).
+template <bool kWithCones, bool kWithLight = true, bool kWithDepth = false, uint32_t kPaths = kAllPaths>
 CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixelAngle, float tMax, float window = 0.0f,
                                       float tStart = 0.0f, float T0 = 1.0f) {
   ConeResult r;
@@ -424,7 +426,8 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
   const float tGround = groundHit(s.shade, o, d);
   const bool ground = tGround < tMax;
   if (ground) tMax = tGround;
-  const float tFar = farFieldStart(s, pixelAngle);
+  constexpr bool kFar = (kPaths & kPathFar) != 0;
+  const float tFar = kFar ? farFieldStart(s, pixelAngle) : 3.0e38f;
   const float tNear = tFar < tMax ? tFar : tMax;  // the instances' part of the ray
   HitSlots slots;
   InstanceWalk w;
@@ -437,13 +440,13 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
   float farEnd = -1.0f;
   while (true) {
     StepSums q;
-    if (farEnd < 0.0f) {
+    if (!kFar || farEnd < 0.0f) {
       walkRetire(w, t);
       bool ended = w.live == 0 && w.done;
       if (!ended) {
         q = {w.done ? tNear : w.tCellExit, 0.0f, {0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}, false, 3.0e38f};
         const uint32_t evaluate = boundStep<kWithCones>(s, w, t, q);
-        evaluateHits<kWithLight>(s, w, o, d, t, pixelAngle, evaluate, stepGrowth(s.shade, T), q);
+        evaluateHits<kWithLight, kPaths>(s, w, o, d, t, pixelAngle, evaluate, stepGrowth(s.shade, T), q);
         if (!q.active && w.live == 0) {
           ended = w.done;
           if (!ended) {
@@ -454,7 +457,7 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
         }
       }
       if (ended) {  // no instance left before tNear: the far field from tNear on, if any
-        if (!(tNear < tMax) || !farFieldSpan(s.far, o, d, tNear > t ? tNear : t, tMax, t, farEnd)) break;
+        if (!kFar || !(tNear < tMax) || !farFieldSpan(s.far, o, d, tNear > t ? tNear : t, tMax, t, farEnd)) break;
         continue;
       }
       if (q.next > tNear) q.next = tNear;
@@ -469,9 +472,9 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
     T *= 1.0f - alpha;
     t = q.next;
     if (T < s.shade.stopT) break;
-    if (farEnd < 0.0f) {
+    if (!kFar || farEnd < 0.0f) {
       if (t >= tNear) {
-        if (!(tNear < tMax) || !farFieldSpan(s.far, o, d, t, tMax, t, farEnd)) break;
+        if (!kFar || !(tNear < tMax) || !farFieldSpan(s.far, o, d, t, tMax, t, farEnd)) break;
         continue;
       }
       while (!w.done && t >= w.tCellExit) walkAdvance(s, w, o, d, t);
@@ -546,7 +549,7 @@ CANOPY_HD inline void pixelLayers(const ConeResult& r, float cosAxis, float disp
 //   - kBehind (stereo's holes, stereoResolveHole): read, stereo[i] > 0: the ray is traced from
 //     disparity stereo[i] on (depth disparityScale / stereo[i]) and composited under the RGBA in
 //     rgba (a reprojected layer in front of it); else traced in full.
-template <bool kWithCones, bool kWithLight, bool kWithDepth = false, bool kBehind = false>
+template <bool kWithCones, bool kWithLight, bool kWithDepth = false, bool kBehind = false, uint32_t kPaths = kAllPaths>
 CANOPY_HD inline void renderPixelT(const SceneView& s, const CameraView& c, int64_t i, float* rgba, float* stereo = nullptr,
                                    float disparityScale = 0.0f) {
   const int x = int(i % c.width), y = int(i / c.width);
@@ -562,7 +565,7 @@ CANOPY_HD inline void renderPixelT(const SceneView& s, const CameraView& c, int6
   // behind a front: marched with what the front lets through, so the radiance is already weighted
   // and the transmittance is the whole ray's
   const float T0 = behind ? 1.0f - rgba[4 * i + 3] : 1.0f;
-  const ConeResult r = traceCone<kWithCones, kWithLight, kWithDepth>(s, c.position, d, fpPerT, 3.0e37f, window, tStart, T0);
+  const ConeResult r = traceCone<kWithCones, kWithLight, kWithDepth, kPaths>(s, c.position, d, fpPerT, 3.0e37f, window, tStart, T0);
   if (behind) {
     for (int ch = 0; ch < 3; ++ch) rgba[4 * i + ch] += r.rgb[ch];
     rgba[4 * i + 3] = 1.0f - r.transmittance;
@@ -575,8 +578,19 @@ CANOPY_HD inline void renderPixelT(const SceneView& s, const CameraView& c, int6
   if (kWithDepth) pixelLayers(r, cosAxis, disparityScale, stereo + kStereoPixelFloats * i);
 }
 
+// The map's (or no-shadow) renderPixelT of a frame without stereo, compiled with the optional paths
+// `paths` (scenePaths) and no others: kPaths runs from 0 up to the one asked for.
+template <bool kWithLight, uint32_t kPaths = 0>
+CANOPY_HD inline void renderPixelOfPaths(uint32_t paths, const SceneView& s, const CameraView& c, int64_t i, float* rgba) {
+  if constexpr (kPaths < kAllPaths) {
+    if (paths != kPaths) return renderPixelOfPaths<kWithLight, kPaths + 1>(paths, s, c, i, rgba);
+  }
+  renderPixelT<false, kWithLight, false, false, kPaths>(s, c, i, rgba);
+}
+
 // renderPixelT of the scene's shadow path and light (s.shade.shadows, s.litModels) in stereo mode
-// kWithDepth / kBehind.
+// kWithDepth / kBehind; the map's without stereo with the frame's paths only (scenePaths), as the
+// CUDA backend launches it. Shadow cones and stereo take every path.
 template <bool kWithDepth, bool kBehind>
 CANOPY_HD inline void renderPixelOfScene(const SceneView& s, const CameraView& c, int64_t i, float* rgba, float* stereo,
                                          float disparityScale) {
@@ -584,6 +598,8 @@ CANOPY_HD inline void renderPixelOfScene(const SceneView& s, const CameraView& c
   if (cones)
     light ? renderPixelT<true, true, kWithDepth, kBehind>(s, c, i, rgba, stereo, disparityScale)
           : renderPixelT<true, false, kWithDepth, kBehind>(s, c, i, rgba, stereo, disparityScale);
+  else if (!kWithDepth && !kBehind)
+    light ? renderPixelOfPaths<true>(scenePaths(s), s, c, i, rgba) : renderPixelOfPaths<false>(scenePaths(s), s, c, i, rgba);
   else
     light ? renderPixelT<false, true, kWithDepth, kBehind>(s, c, i, rgba, stereo, disparityScale)
           : renderPixelT<false, false, kWithDepth, kBehind>(s, c, i, rgba, stereo, disparityScale);

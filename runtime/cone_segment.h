@@ -98,9 +98,12 @@ CANOPY_HD CANOPY_FORCEINLINE const uint32_t* descentLightItem(const SceneView& s
   return d.lightPoolSlot >= 0 ? canopyLightInPage(s.pool + size_t(d.lightPoolSlot) * s.pageBytes, d.lightSlotInPage) : nullptr;
 }
 
-// The pool slot of brick `brick`'s page (-1: not resident); its page and slot in the page.
+// The pool slot of brick `brick`'s page (-1: not resident); its page and slot in the page. Here and
+// below, kPaths without kPathDetail (scenePaths: no model has detail levels or Haar light) compiles
+// out what only such models use.
+template <uint32_t kPaths = kAllPaths>
 CANOPY_HD inline int32_t residentSlot(const SceneView& s, const ModelView& m, uint32_t brick, uint32_t& page, uint32_t& inPage) {
-  if (brick < m.denseBricks) {
+  if (!(kPaths & kPathDetail) || brick < m.denseBricks) {
     page = m.firstBrickPage + divide(s.bricksPerPage, brick, inPage);
   } else {  // a detail level's sparse brick (the reader checked the id's level and location)
     const uint32_t loc = m.sparseIndex[brick - m.denseBricks];
@@ -132,6 +135,7 @@ CANOPY_HD CANOPY_FORCEINLINE void clearDescentPages(Descent& d) {
   d.coarsestLightPage = kCanopyNone;
 }
 
+template <uint32_t kPaths = kAllPaths>
 CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m, V3 u, uint32_t maxLevel, bool wantLight) {
   float x[3] = {u.x, u.y, u.z};
   for (int a = 0; a < 3; ++a) x[a] = x[a] < 0.0f ? 0.0f : (x[a] >= 1.0f ? 0.99999994f : x[a]);
@@ -162,7 +166,7 @@ CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m,
     }
     if (d.node.brick != kCanopyNone && (level >= firstFallback || last)) {
       uint32_t page, inPage;
-      const int32_t slot = residentSlot(s, m, d.node.brick, page, inPage);
+      const int32_t slot = residentSlot<kPaths>(s, m, d.node.brick, page, inPage);
       if (slot >= 0) {
         d.brickPoolSlot = slot;
         d.brickSlotInPage = uint16_t(inPage);
@@ -194,6 +198,7 @@ CANOPY_HD inline Descent descendResident(const SceneView& s, const ModelView& m,
 // light page resident (then missingLightPage is none and coarsestLightPage the root's, as the full
 // descent finds them). Else false (a missing brick or light page, a level beyond the table), and
 // the caller descends from the root.
+template <uint32_t kPaths = kAllPaths>
 CANOPY_HD inline bool descendByTable(const SceneView& s, const ModelView& m, V3 u, uint32_t maxLevel, bool wantLight, Descent& d) {
   if (maxLevel >= m.tableLevels) return false;
   float x[3] = {u.x, u.y, u.z};
@@ -215,7 +220,7 @@ CANOPY_HD inline bool descendByTable(const SceneView& s, const ModelView& m, V3 
   clearDescentPages(d);
   if (node.brick != kCanopyNone) {
     uint32_t page, inPage;
-    const int32_t slot = residentSlot(s, m, node.brick, page, inPage);
+    const int32_t slot = residentSlot<kPaths>(s, m, node.brick, page, inPage);
     if (slot < 0) return false;
     d.brickPoolSlot = slot;
     d.brickSlotInPage = uint16_t(inPage);
@@ -265,10 +270,11 @@ CANOPY_HD CANOPY_FORCEINLINE bool descentCovers(const DescentCache& c, V3 u, uin
 // A shading segment's light at unit point um (world ray parameter tm): the descent's light item and
 // the node-local coordinates of um in it. Light pages are used and asked for here, only by
 // segments with matter (not by empty space).
+template <uint32_t kPaths = kAllPaths>
 CANOPY_HD inline void segmentLight(const SceneView& s, const ModelView& m, const Descent& d, V3 um, float tm, Segment& g) {
   g.haarLocal = kHaarNone;
   g.haarItem = nullptr;
-  if (s.shade.exactLight && m.haarLight && d.level >= m.lightDepth) {
+  if ((kPaths & kPathDetail) && s.shade.exactLight && m.haarLight && d.level >= m.lightDepth) {
     // --light exact, the light lattice's level and the detail levels below it of a Haar-lit model:
     // the chaar brick at the sample's light lattice point, if its page is resident (else it is
     // asked for and the light items serve).
@@ -309,10 +315,10 @@ CANOPY_HD inline void segmentLight(const SceneView& s, const ModelView& m, const
 // its light item, else the density-only ambient term; each term times its scene factor at its sample.
 // kWithLight = false: compiled without the LB light code, for scenes without lit models (where no
 // segment has a light item, so the result is the same).
-template <bool kWithLight = true>
+template <bool kWithLight = true, uint32_t kPaths = kAllPaths>
 CANOPY_HD inline void segmentIndirect(const SceneView& s, const InstanceView& inst, const Segment& g, V3 o, V3 dir, float out[3]) {
   const SceneLightPair factor = sceneLightFactors(s.light, o + dir * g.tSample);
-  if (kWithLight && g.haarLocal != kHaarNone) {
+  if (kWithLight && (kPaths & kPathDetail) && g.haarLocal != kHaarNone) {
     haar::BrickLookup at;
     at.slot = 0;
     at.lx = int(g.haarLocal & 3u), at.ly = int((g.haarLocal >> 2) & 3u), at.lz = int((g.haarLocal >> 4) & 3u);
@@ -436,6 +442,7 @@ CANOPY_HD CANOPY_FORCEINLINE void holdEmpty(EmptyHold* hold, float tEnd, float c
 
 // The segment of a node without a usable brick (a constant node, or a missing brick without a close
 // resident ancestor): the node's mean up to the node's exit.
+template <uint32_t kPaths>
 CANOPY_HD CANOPY_FORCEINLINE Segment constantSegment(const SceneView& s, const ModelView& m, const Descent& d, const SegmentRay& r,
                                                      bool shading, EmptyHold* hold) {
   Segment g;
@@ -448,7 +455,7 @@ CANOPY_HD CANOPY_FORCEINLINE Segment constantSegment(const SceneView& s, const M
     tEnd = tEnd < r.t + maxLen ? tEnd : r.t + maxLen;
   }
   g.tEnd = tEnd < r.tout ? tEnd : r.tout;
-  if (shading && g.k > 0.0f) segmentLight(s, m, d, r.uo + r.ud * (0.5f * (r.t + g.tEnd)), 0.5f * (r.t + g.tEnd), g);
+  if (shading && g.k > 0.0f) segmentLight<kPaths>(s, m, d, r.uo + r.ud * (0.5f * (r.t + g.tEnd)), 0.5f * (r.t + g.tEnd), g);
   if (hold && c.density == 0.0f && d.node.brick == kCanopyNone && !(d.node.child != kCanopyNone && d.node.child < m.tileCount))
     holdEmpty(hold, g.tEnd, r.cellsPerWorld, d.level);
   return g;
@@ -482,6 +489,7 @@ CANOPY_HD CANOPY_FORCEINLINE bool emptyCellSegment(const SceneView& s, const uns
 
 // The segment of a brick: one trilinear sample at the middle of a step of stepFactor voxels of the
 // descent's level (cut at the node's exit and the instance's end).
+template <uint32_t kPaths>
 CANOPY_HD CANOPY_FORCEINLINE Segment brickSegment(const SceneView& s, const ModelView& m, const Descent& d, const unsigned char* brickPage,
                                                   bool sparse, const SegmentRay& r, const float brickLo[3], float inv, bool shading) {
   Segment g;
@@ -497,13 +505,14 @@ CANOPY_HD CANOPY_FORCEINLINE Segment brickSegment(const SceneView& s, const Mode
   if (c.density == 0.0f) CANOPY_PLAY_COUNT(s, zeroBrickSamples, 1);
   g.albedo[0] = c.albedo[0], g.albedo[1] = c.albedo[1], g.albedo[2] = c.albedo[2];
   g.tEnd = tEnd;
-  if (shading && g.k > 0.0f) segmentLight(s, m, d, um, 0.5f * (r.t + tEnd), g);
+  if (shading && g.k > 0.0f) segmentLight<kPaths>(s, m, d, um, 0.5f * (r.t + tEnd), g);
   return g;
 }
 
 // The segment of instance `inst` at ray position t (world), the cone footprint there being
 // `footprint` (world units). tout is the end of the instance's box interval. `hold` (optional): set
 // for an empty leaf's segment, else cleared (see EmptyHold).
+template <uint32_t kPaths = kAllPaths>
 CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView& inst, V3 o, V3 dir, float t,
                                          float tout, float footprint, bool shading, DescentCache& cache,
                                          EmptyHold* hold = nullptr, float grow = 1.0f) {
@@ -521,10 +530,10 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
   if (hold) hold->until = -3.0e38f;
   CANOPY_PLAY_COUNT(s, segments, 1);
   if (!s.shade.descentCache || !descentCovers(cache, up, level)) {
-    if (s.shade.descentTable && descendByTable(s, m, up, level, shading, cache.d))
+    if ((kPaths & kPathTable) && s.shade.descentTable && descendByTable<kPaths>(s, m, up, level, shading, cache.d))
       CANOPY_PLAY_COUNT(s, tableDescents, 1);
     else
-      cache.d = descendResident(s, m, up, level, shading);
+      cache.d = descendResident<kPaths>(s, m, up, level, shading);
     CANOPY_PLAY_COUNT(s, descents, 1);
   }
   const Descent& d = cache.d;
@@ -532,17 +541,17 @@ CANOPY_HD inline Segment instanceSegment(const SceneView& s, const InstanceView&
   if (r.tExit < t + r.eps) r.tExit = t + r.eps;
   if (d.missingPage != kCanopyNone) writeStamp(s.pageWanted + d.missingPage, s.stamp);
   const unsigned char* brickPage = descentBrickPage(s, d);
-  if (d.node.brick == kCanopyNone || brickPage == nullptr) return constantSegment(s, m, d, r, shading, hold);
+  if (d.node.brick == kCanopyNone || brickPage == nullptr) return constantSegment<kPaths>(s, m, d, r, shading, hold);
   writeStamp(s.slotUsed + d.brickPoolSlot, s.stamp);
   float brickLo[3];
   const float brickSize = levelBox(d, d.brickLevel, brickLo);
   const float inv = 1.0f / brickSize;
-  const bool sparse = d.brickLevel > m.lightDepth;  // a detail level's brick (format 2.0)
+  const bool sparse = (kPaths & kPathDetail) && d.brickLevel > m.lightDepth;  // a detail level's brick (format 2.0)
   Segment g;
   if (s.shade.skipEmptyBlocks && (sparse || s.brickMaskOffset != 0) &&
       emptyCellSegment(s, brickPage, d, sparse, r, up, brickLo, brickSize, inv, hold, g))
     return g;
-  return brickSegment(s, m, d, brickPage, sparse, r, brickLo, inv, shading);
+  return brickSegment<kPaths>(s, m, d, brickPage, sparse, r, brickLo, inv, shading);
 }
 
 }  // namespace canopy::play

@@ -21,8 +21,9 @@ namespace {
 // One thread per pixel, a warp on a tileW x tileH tile of pixels (default 8x4 rather than 32
 // pixels of one row: the rays of a warp stay closer together, so they walk the same instances and
 // nodes longer). Thread j -> tile j / (tileW tileH), lane j % (tileW tileH). One kernel per shadow
-// path (renderPixelT): the map's and no-shadow kernel has no shadow-cone code.
-template <bool kWithCones, bool kWithLight, bool kWithDepth = false, bool kBehind = false>
+// path (renderPixelT): the map's and no-shadow kernel has no shadow-cone code; without stereo, it has
+// only the optional paths the frame uses (kPaths, scenePaths).
+template <bool kWithCones, bool kWithLight, bool kWithDepth = false, bool kBehind = false, uint32_t kPaths = kAllPaths>
 struct PixelKernel {
   SceneView scene;
   CameraView camera;
@@ -36,7 +37,7 @@ struct PixelKernel {
   __device__ void operator()(int64_t k) const {
     int x, y;
     if (!bandTilePixel(list ? int64_t(list[k]) : k, tilesX, tileW, tileH, camera.width, y0, y1, x, y)) return;
-    renderPixelT<kWithCones, kWithLight, kWithDepth, kBehind>(scene, camera, int64_t(y) * camera.width + x, out, stereo, disparityScale);
+    renderPixelT<kWithCones, kWithLight, kWithDepth, kBehind, kPaths>(scene, camera, int64_t(y) * camera.width + x, out, stereo, disparityScale);
   }
 };
 
@@ -50,17 +51,17 @@ struct PixelKernel {
 // the grove (lit) 14.44 -> 14.90 ms; 8 blocks was slower on all three. setPixelOccupancy overrides
 // it (6, 8, or -1 for unconstrained). Shadow-cone kernel: 5 (96 registers, as before the light change).
 constexpr int kPixelBlock = 128;
-template <bool kWithCones, bool kWithLight, bool kWithDepth, bool kBehind, int kMinBlocks>
+template <bool kWithCones, bool kWithLight, bool kWithDepth, bool kBehind, uint32_t kPaths, int kMinBlocks>
 __global__ void __launch_bounds__(kPixelBlock, kMinBlocks > 0 ? kMinBlocks : 1)
-    pixelKernel(PixelKernel<kWithCones, kWithLight, kWithDepth, kBehind> k, int64_t n) {
+    pixelKernel(PixelKernel<kWithCones, kWithLight, kWithDepth, kBehind, kPaths> k, int64_t n) {
   const int64_t i = blockIdx.x * int64_t(kPixelBlock) + threadIdx.x;
   if (i < n) k(i);
 }
 
-template <int kMinBlocks, bool kWithCones, bool kWithLight, bool kWithDepth, bool kBehind>
-void launchPixels(const PixelKernel<kWithCones, kWithLight, kWithDepth, kBehind>& k, int64_t n, cudaStream_t stream) {
+template <int kMinBlocks, bool kWithCones, bool kWithLight, bool kWithDepth, bool kBehind, uint32_t kPaths>
+void launchPixels(const PixelKernel<kWithCones, kWithLight, kWithDepth, kBehind, kPaths>& k, int64_t n, cudaStream_t stream) {
   if (n <= 0) return;
-  pixelKernel<kWithCones, kWithLight, kWithDepth, kBehind, kMinBlocks><<<unsigned((n + kPixelBlock - 1) / kPixelBlock), kPixelBlock, 0, stream>>>(k, n);
+  pixelKernel<kWithCones, kWithLight, kWithDepth, kBehind, kPaths, kMinBlocks><<<unsigned((n + kPixelBlock - 1) / kPixelBlock), kPixelBlock, 0, stream>>>(k, n);
   CANOPY_CUDA_CHECK(cudaGetLastError());
 }
 
@@ -356,13 +357,25 @@ class CudaBackend final : public Backend {
       launchPixels<kWithLight ? 0 : 6>(k, threads, compute_);
     } else {
       const int blocks = minBlocks_ != 0 ? minBlocks_ : (kWithLight ? -1 : 6);
-      if (blocks >= 8)
+      if (minBlocks_ == 0)
+        launchOfPaths<kWithLight ? 0 : 6>(scenePaths(k.scene), k, threads);
+      else if (blocks >= 8)
         launchPixels<8>(k, threads, compute_);
       else if (blocks >= 6)
         launchPixels<6>(k, threads, compute_);
       else
         launchPixels<0>(k, threads, compute_);
     }
+  }
+  // The kernel of k's mode compiled with the optional paths `paths` only (kPaths counts up to it).
+  template <int kMinBlocks, uint32_t kPaths = 0, bool kWithLight>
+  void launchOfPaths(uint32_t paths, const PixelKernel<false, kWithLight>& k, int64_t threads) {
+    if constexpr (kPaths < kAllPaths) {
+      if (paths != kPaths) return launchOfPaths<kMinBlocks, kPaths + 1>(paths, k, threads);
+    }
+    launchPixels<kMinBlocks>(PixelKernel<false, kWithLight, false, false, kPaths>{k.scene, k.camera, k.out, k.tilesX, k.tileW, k.tileH, k.y0,
+                                                                                  k.y1, k.list, k.stereo, k.disparityScale},
+                             threads, compute_);
   }
   StereoCounts reprojectRows(const HostScene& scene, const CameraView& right, uint32_t stamp, Band band, const StereoParams& p) override {
     (void)stamp;  // view_'s, the last render of this pass

@@ -159,6 +159,7 @@ void addModels(const CanopyFile& f, HostScene& s, std::vector<M34>& latticeToMod
       logWarn(f.path() + ": model '" + std::string(M.name, strnlen(M.name, sizeof(M.name))) +
               "' is flagged lit but has no light item per brick; it is lit as density-only (direct sun + ambient)");
     s.litModels += v.hasLight;
+    s.detailModels += M.detailLevels > 0 || M.sparseBricks > 0 || v.haarLight ? 1u : 0u;
     if (v.hasLight && !(M.flags & kCanopyModelScatteredSun)) {
       ++s.totalSunModels;
       logWarn(f.path() + ": model '" + std::string(M.name, strnlen(M.name, sizeof(M.name))) +
@@ -576,6 +577,7 @@ SceneView hostSceneView(const HostScene& s) {
   v.brickMaskOffset = canopyBrickMaskOffset(s.pageBytes, s.bricksPerPage);
   v.lightItemsPerPage = indexDivisor(s.lightItemsPerPage > 0 ? s.lightItemsPerPage : 1);
   v.litModels = s.litModels;
+  v.detailModels = s.detailModels;
   v.light = s.light;
   v.light.values = s.hasSceneLight ? s.lightPairs.data() : nullptr;
   return v;

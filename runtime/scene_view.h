@@ -182,12 +182,25 @@ struct SceneView {
   uint32_t brickMaskOffset;      // where a brick page image keeps its empty-cell masks (0: no masks, no skip)
   IndexDivisor lightItemsPerPage;
   uint32_t litModels;            // models with LB light (0: renderPixel takes the path without light code)
+  uint32_t detailModels;         // models with detail levels or Haar light (0: the pixel kernels without their code, scenePaths)
   SceneLightView light;
   ShadeParams shade;
   ShadowMapView shadowMap;       // kShadowsMap: this pass's sun transmittance map
   FarFieldView far;              // the far field (values nullptr: none, instances everywhere)
   WorkCounters* work;            // CPU only, optional (nullptr: not counted)
 };
+
+// The optional paths of a primary cone's march (renderPixelT's kPaths): a pixel kernel is compiled
+// with those a frame uses and no others, since code that a frame never runs still costs: on one
+// H100 the far field's and the descent table's code, unused, made the real forest's frames 19-25 %
+// slower, and the detail levels' code cost 11-14 % (docs/performance.md, "Kernel code size").
+//   kPathFar: the far field (a frame whose cones can reach it: s.far.values set);
+//   kPathDetail: detail levels' sparse bricks and Haar light (s.detailModels > 0);
+//   kPathTable: descents read from the models' descent tables (s.shade.descentTable).
+constexpr uint32_t kPathFar = 1, kPathDetail = 2, kPathTable = 4, kAllPaths = 7;
+CANOPY_HD inline uint32_t scenePaths(const SceneView& s) {
+  return (s.far.values ? kPathFar : 0u) | (s.detailModels > 0 ? kPathDetail : 0u) | (s.shade.descentTable ? kPathTable : 0u);
+}
 
 // Adds n to a work counter (host code only; compiled out of the CUDA kernels).
 #if defined(__CUDA_ARCH__)
@@ -200,7 +213,7 @@ struct SceneView {
 // Stamp stores are benign races (every writer writes the same value); relaxed atomics on the host.
 CANOPY_HD CANOPY_FORCEINLINE void writeStamp(uint32_t* p, uint32_t v) {
 #if defined(__CUDA_ARCH__)
-  if (*p != v) *p = v;
+  *p = v;  // a plain store: testing the old value first (a load the warp waits on) was 2 % slower on the real forest
 #else
   if (__atomic_load_n(p, __ATOMIC_RELAXED) != v) __atomic_store_n(p, v, __ATOMIC_RELAXED);
 #endif

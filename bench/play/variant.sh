@@ -6,6 +6,8 @@
 # DROP: a flag of the build's command line to leave out (e.g. --use_fast_math, for the IEEE build).
 # PREINC=DIR (environment): DIR is searched for includes before the project's own directories, e.g.
 # an earlier commit's runtime/cone.h for an A/B of the kernel (`git show REV:runtime/cone.h`).
+# SRC=FILE (environment): FILE is compiled instead of runtime/render_cuda.cu (an edited copy, e.g. another
+# launch bound), with the project's include paths.
 set -euo pipefail
 name=$1 flags=$2 drop=${3:-}
 cd "$(dirname "$0")/../../build"
@@ -17,6 +19,7 @@ compile=${compile/-o $obj/-o $w/render_cuda.cu.o $flags}
 compile=$(sed 's| -MD -MT [^ ]* -MF [^ ]*||' <<< "$compile")
 [[ -z $drop ]] || compile=${compile// $drop / }
 [[ -z ${PREINC:-} ]] || compile=$(sed "s|^\([^ ]*nvcc\) |\1 -I$PREINC |" <<< "$compile")
+[[ -z ${SRC:-} ]] || compile=$(sed "s| [^ ]*/runtime/render_cuda.cu | $(realpath "$SRC") |" <<< "$compile")
 eval "$compile"
 cp runtime/libcanopy_runtime.a "$w/"
 (cd "$w" && ar r libcanopy_runtime.a render_cuda.cu.o)
