@@ -15,6 +15,7 @@ struct CliValues {
   bool noShadows = false;
   bool noDirect = false;
   bool noDescentCache = false;
+  bool noDescentTable = false;
   bool noEmptySkip = false;
   std::string lightMode = "fast";
   std::string groundAlbedo = "0.2,0.17,0.13";
@@ -68,8 +69,8 @@ void addShadowOptions(CLI::App& app, canopy::play::PlayOptions& o, CliValues& x)
       ->capture_default_str()
       ->group("");
   app.add_flag("--no-descent-cache", x.noDescentCache, "Descend the octree from the root for every segment (same image; for timing)")->group("");
-  app.add_flag("--descent-table", o.descentTable,
-               "Read a descent's node from the model's table of nodes per level where that gives the same descent (same image; for timing)")
+  app.add_flag("--no-descent-table", x.noDescentTable,
+               "Descend from the root instead of reading a descent's node from the model's descent table (same image; for timing)")
       ->group("");
   app.add_flag("--no-empty-skip", x.noEmptySkip,
                "March the empty cells of bricks in half-voxel steps instead of skipping them (the sample phase changes by 0.1-0.4 % RMS; for comparison)")
@@ -133,6 +134,7 @@ void applyValues(const CLI::App& app, const CliValues& x, canopy::play::PlayOpti
   o.directSun = !x.noDirect;
   if (app.count("--stop-opacity")) o.stopTransmittance = float(1.0 - x.stopOpacity);  // else exactly kStopT
   o.descentCache = !x.noDescentCache;
+  o.descentTable = !x.noDescentTable;
   o.skipEmptyBlocks = !x.noEmptySkip;
   o.warmStart = !x.coldStart;
   o.exactLight = x.lightMode == "exact";

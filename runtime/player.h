@@ -48,7 +48,7 @@ struct PlayOptions {
                                      // and a finest node) towards the sun
   uint32_t shadowMapMaxVoxels = 1u << 23;  // ...grown until the grid (and the map) has at most this many voxels
   bool descentCache = true;          // reuse a ray's last octree descent per instance (same image, fewer descents)
-  bool descentTable = false;         // build the models' descent tables and read a descent's node from them where that is the same descent (same image)
+  bool descentTable = true;          // build the models' descent tables and read a descent's node from them where that is the same descent (same image)
   bool holdEmpty = true;             // keep an instance's empty leaf segment over later steps (same image, cone.h EmptyHold)
   bool skipEmptyBlocks = true;       // a brick step in an empty one-voxel cell goes to the end of the cell run (cone.h emptyRunEnd)
   bool exactLight = false;           // --light exact: the finest level of Haar-lit models from their Haar pages (the .chaar's values)

@@ -66,7 +66,7 @@ int main(int argc, char** argv) {
   app.add_option("--cache-mb", cacheMb, "Cache budget (MiB)")->capture_default_str();
   app.add_option("--instances", instances, "Forest instances")->capture_default_str();
   app.add_option("--extra", extra, "NAME=FILE.canopy[@CAMERA]: more packed scenes (default camera orbit:elevation=20; CAMERA as canopy-play --camera)");
-  app.add_option("--shadows", shadowMethods, "Shadow methods to run, each scene with each (map, cone, off; a -nocache suffix turns off the descent cache, -table reads descents from the models' descent tables (same image), -nohold the held empty segments, -noskip the empty-cell skip, -occ6/-occ8/-occfree the CUDA pixel kernel for 6/8 blocks per SM or unconstrained (default: 6 without LB light, unconstrained with it), -rows puts a warp on 32 pixels of a row, -tile4/-tile16 on 4x8/16x2 pixels, -exact the finest level's light from Haar pages (--light exact); quality dials: -stop99 stops cones at opacity 0.99 (--stop-opacity), -step1 marches bricks in steps of one voxel (--step 1), -lod1 one level coarser (--lod-bias -1), -grow longer steps below transmittance 0.1 (--step-growth 0.1); each scene's last frame is compared with the first method's (RMS)")->capture_default_str();
+  app.add_option("--shadows", shadowMethods, "Shadow methods to run, each scene with each (map, cone, off; a -nocache suffix turns off the descent cache, -notable descends from the root instead of reading the models' descent tables (same image), -nohold the held empty segments, -noskip the empty-cell skip, -occ6/-occ8/-occfree the CUDA pixel kernel for 6/8 blocks per SM or unconstrained (default: 6 without LB light, unconstrained with it), -rows puts a warp on 32 pixels of a row, -tile4/-tile16 on 4x8/16x2 pixels, -exact the finest level's light from Haar pages (--light exact); quality dials: -stop99 stops cones at opacity 0.99 (--stop-opacity), -step1 marches bricks in steps of one voxel (--step 1), -lod1 one level coarser (--lod-bias -1), -grow longer steps below transmittance 0.1 (--step-growth 0.1); each scene's last frame is compared with the first method's (RMS)")->capture_default_str();
   app.add_flag("--count-work", countWork, "CPU only: count cones, steps, samples and shadow work per frame (results.json \"work\")");
   app.add_flag("--only-extra", skipSynthetic, "Play only the --extra scenes (the synthetic ones are still written)");
   return tool.run(argc, argv, [&] {
@@ -116,7 +116,7 @@ int main(int argc, char** argv) {
       o.cacheMb = cacheMb;
       // "map-nocache": the map without the per-instance descent cache (timing comparison)
       o.descentCache = method.find("nocache") == std::string::npos;
-      o.descentTable = method.find("table") != std::string::npos;  // -table: descents from the models' descent tables
+      o.descentTable = method.find("notable") == std::string::npos;  // "map-notable": every descent from the root, no descent tables
       o.holdEmpty = method.find("nohold") == std::string::npos;  // "map-nohold": no EmptyHold
       o.skipEmptyBlocks = method.find("noskip") == std::string::npos;  // "map-noskip": no empty-cell skip
       o.exactLight = method.find("exact") != std::string::npos;        // "map-exact": --light exact (Haar pages)

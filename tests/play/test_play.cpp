@@ -479,6 +479,7 @@ TEST(Render, DescentTableLeavesTheImageUnchanged) {
           o.sun = "0.3,0.8,-0.52";
           o.countWork = true;
           nlohmann::json report;
+          o.descentTable = false;
           const std::vector<float> root = render(o);
           o.descentTable = true;
           const std::vector<float> table = render(o, &report);
