@@ -176,7 +176,7 @@ class CudaBackend final : public Backend {
     uploadVector(levelNodes_, scene.levelNodes);
     uploadVector(levelOf_, scene.levelOf);
     uploadVector(lightBricks_, scene.lightBricks);
-    for (size_t m = 0; m < models.size() && m < scene.modelFirstLevelNode.size(); ++m) {  // none without --descent-table
+    for (size_t m = 0; m < models.size() && m < scene.modelFirstLevelNode.size(); ++m) {  // none with --no-descent-table
       models[m].levelNodes = levelNodes_.data() + scene.modelFirstLevelNode[m];
       models[m].levelOf = levelOf_.data() + scene.modelFirstLevelNode[m];
       models[m].lightBricks = lightBricks_.data() + scene.modelFirstLevelNode[m];

@@ -78,9 +78,9 @@ void buildSceneLightPairs(const std::vector<float>& values, uint32_t bases, size
 // Builds the scene; throws canopy::Error(InvalidInput) for a degenerate transform.
 HostScene buildScene(const CanopyFile& file);
 
-// Builds every model's descent table (ModelView::levelNodes; --descent-table) before the backends
-// are made (at most 37449 nodes, 21 bytes each, per model of depth 5 or more); without it a model's
-// tableLevels is 0 and every descent runs from the root.
+// Builds every model's descent table (ModelView::levelNodes; the player does unless
+// --no-descent-table) before the backends are made (at most 37449 nodes, 21 bytes each, per model
+// of depth 5 or more); without it a model's tableLevels is 0 and every descent runs from the root.
 void addDescentTables(HostScene& scene);
 
 // The scene's extinction grid (kShadowsMap, cone.h): world axes over the scene's bounds with one
