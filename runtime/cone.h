@@ -578,31 +578,33 @@ CANOPY_HD inline void renderPixelT(const SceneView& s, const CameraView& c, int6
   if (kWithDepth) pixelLayers(r, cosAxis, disparityScale, stereo + kStereoPixelFloats * i);
 }
 
-// The map's (or no-shadow) renderPixelT of a frame without stereo, compiled with the optional paths
-// `paths` (scenePaths) and no others: kPaths runs from 0 up to the one asked for.
-template <bool kWithLight, uint32_t kPaths = 0>
-CANOPY_HD inline void renderPixelOfPaths(uint32_t paths, const SceneView& s, const CameraView& c, int64_t i, float* rgba) {
+// The map's (or no-shadow) renderPixelT compiled with the optional paths `paths` (scenePaths; for
+// stereo's kWithDepth and kBehind, stereoPaths) and no others: kPaths runs from 0 up to the one
+// asked for, over the sets compiled for the mode.
+template <bool kWithLight, bool kWithDepth, bool kBehind, uint32_t kPaths = 0>
+CANOPY_HD inline void renderPixelOfPaths(uint32_t paths, const SceneView& s, const CameraView& c, int64_t i, float* rgba, float* stereo,
+                                         float disparityScale) {
   if constexpr (kPaths < kAllPaths) {
-    if (paths != kPaths) return renderPixelOfPaths<kWithLight, kPaths + 1>(paths, s, c, i, rgba);
+    constexpr uint32_t kNext = nextPathSet(kPaths, kWithDepth || kBehind);
+    if (paths != kPaths) return renderPixelOfPaths<kWithLight, kWithDepth, kBehind, kNext>(paths, s, c, i, rgba, stereo, disparityScale);
   }
-  renderPixelT<false, kWithLight, false, false, kPaths>(s, c, i, rgba);
+  renderPixelT<false, kWithLight, kWithDepth, kBehind, kPaths>(s, c, i, rgba, stereo, disparityScale);
 }
 
 // renderPixelT of the scene's shadow path and light (s.shade.shadows, s.litModels) in stereo mode
-// kWithDepth / kBehind; the map's without stereo with the frame's paths only (scenePaths), as the
-// CUDA backend launches it. Shadow cones and stereo take every path.
+// kWithDepth / kBehind; the map's with the frame's paths only (scenePaths, stereoPaths), as the
+// CUDA backend launches it. Shadow cones take every path.
 template <bool kWithDepth, bool kBehind>
 CANOPY_HD inline void renderPixelOfScene(const SceneView& s, const CameraView& c, int64_t i, float* rgba, float* stereo,
                                          float disparityScale) {
   const bool cones = s.shade.shadows == kShadowsCone, light = s.litModels > 0;
+  const uint32_t paths = kWithDepth || kBehind ? stereoPaths(scenePaths(s)) : scenePaths(s);
   if (cones)
     light ? renderPixelT<true, true, kWithDepth, kBehind>(s, c, i, rgba, stereo, disparityScale)
           : renderPixelT<true, false, kWithDepth, kBehind>(s, c, i, rgba, stereo, disparityScale);
-  else if (!kWithDepth && !kBehind)
-    light ? renderPixelOfPaths<true>(scenePaths(s), s, c, i, rgba) : renderPixelOfPaths<false>(scenePaths(s), s, c, i, rgba);
   else
-    light ? renderPixelT<false, true, kWithDepth, kBehind>(s, c, i, rgba, stereo, disparityScale)
-          : renderPixelT<false, false, kWithDepth, kBehind>(s, c, i, rgba, stereo, disparityScale);
+    light ? renderPixelOfPaths<true, kWithDepth, kBehind>(paths, s, c, i, rgba, stereo, disparityScale)
+          : renderPixelOfPaths<false, kWithDepth, kBehind>(paths, s, c, i, rgba, stereo, disparityScale);
 }
 
 // renderPixelT of the mode and scene: with depth (stereo's traced eye) when `depth` is set, as

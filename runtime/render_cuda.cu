@@ -346,19 +346,22 @@ class CudaBackend final : public Backend {
   }
   // The map's (or no-shadow) kernel at the occupancy asked for (setPixelOccupancy); the traced
   // eye's with depth at the default one, the holes' at setStereoHoles's.
+  // Each with the frame's paths only (scenePaths; stereo's kernels stereoPaths), but those of an
+  // occupancy asked for with setPixelOccupancy, which have every path.
   template <bool kWithLight, bool kWithDepth, bool kBehind>
   void launchMap(const PixelKernel<false, kWithLight, kWithDepth, kBehind>& k, int64_t threads) {
+    const uint32_t paths = scenePaths(k.scene);
     if constexpr (kBehind) {
       if (holeMinBlocks_ >= 6)
-        launchPixels<6>(k, threads, compute_);
+        launchOfPaths<6>(stereoPaths(paths), k, threads);
       else
-        launchPixels<0>(k, threads, compute_);
+        launchOfPaths<0>(stereoPaths(paths), k, threads);
     } else if constexpr (kWithDepth) {
-      launchPixels<kWithLight ? 0 : 6>(k, threads, compute_);
+      launchOfPaths<kWithLight ? 0 : 6>(stereoPaths(paths), k, threads);
     } else {
       const int blocks = minBlocks_ != 0 ? minBlocks_ : (kWithLight ? -1 : 6);
       if (minBlocks_ == 0)
-        launchOfPaths<kWithLight ? 0 : 6>(scenePaths(k.scene), k, threads);
+        launchOfPaths<kWithLight ? 0 : 6>(paths, k, threads);
       else if (blocks >= 8)
         launchPixels<8>(k, threads, compute_);
       else if (blocks >= 6)
@@ -367,14 +370,15 @@ class CudaBackend final : public Backend {
         launchPixels<0>(k, threads, compute_);
     }
   }
-  // The kernel of k's mode compiled with the optional paths `paths` only (kPaths counts up to it).
-  template <int kMinBlocks, uint32_t kPaths = 0, bool kWithLight>
-  void launchOfPaths(uint32_t paths, const PixelKernel<false, kWithLight>& k, int64_t threads) {
+  // The kernel of k's mode compiled with the optional paths `paths` only (kPaths runs over the mode's
+  // path sets up to it: nextPathSet).
+  template <int kMinBlocks, uint32_t kPaths = 0, bool kWithLight, bool kWithDepth, bool kBehind>
+  void launchOfPaths(uint32_t paths, const PixelKernel<false, kWithLight, kWithDepth, kBehind>& k, int64_t threads) {
     if constexpr (kPaths < kAllPaths) {
-      if (paths != kPaths) return launchOfPaths<kMinBlocks, kPaths + 1>(paths, k, threads);
+      if (paths != kPaths) return launchOfPaths<kMinBlocks, nextPathSet(kPaths, kWithDepth || kBehind)>(paths, k, threads);
     }
-    launchPixels<kMinBlocks>(PixelKernel<false, kWithLight, false, false, kPaths>{k.scene, k.camera, k.out, k.tilesX, k.tileW, k.tileH, k.y0,
-                                                                                  k.y1, k.list, k.stereo, k.disparityScale},
+    launchPixels<kMinBlocks>(PixelKernel<false, kWithLight, kWithDepth, kBehind, kPaths>{k.scene, k.camera, k.out, k.tilesX, k.tileW, k.tileH,
+                                                                                          k.y0, k.y1, k.list, k.stereo, k.disparityScale},
                              threads, compute_);
   }
   StereoCounts reprojectRows(const HostScene& scene, const CameraView& right, uint32_t stamp, Band band, const StereoParams& p) override {

@@ -201,6 +201,14 @@ constexpr uint32_t kPathFar = 1, kPathDetail = 2, kPathTable = 4, kAllPaths = 7;
 CANOPY_HD inline uint32_t scenePaths(const SceneView& s) {
   return (s.far.values ? kPathFar : 0u) | (s.detailModels > 0 ? kPathDetail : 0u) | (s.shade.descentTable ? kPathTable : 0u);
 }
+// Stereo's kernels (the traced eye's, the holes') come in three path sets only, to bound the
+// kernels compiled: none, the descent table alone (the default frame of a scene without detail
+// levels and far field), and every path for the rest.
+CANOPY_HD inline uint32_t stereoPaths(uint32_t paths) { return paths == 0 || paths == kPathTable ? paths : kAllPaths; }
+// The path set compiled after `paths` (< kAllPaths) for a mode: every set in turn, or stereo's three.
+constexpr uint32_t nextPathSet(uint32_t paths, bool stereo) {
+  return stereo ? (paths == 0 ? kPathTable : kAllPaths) : paths + 1;
+}
 
 // Adds n to a work counter (host code only; compiled out of the CUDA kernels).
 #if defined(__CUDA_ARCH__)
