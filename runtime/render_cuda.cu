@@ -21,8 +21,8 @@ namespace {
 // One thread per pixel, a warp on a tileW x tileH tile of pixels (default 8x4 rather than 32
 // pixels of one row: the rays of a warp stay closer together, so they walk the same instances and
 // nodes longer). Thread j -> tile j / (tileW tileH), lane j % (tileW tileH). One kernel per shadow
-// path (renderPixelT): the map's and no-shadow kernel has no shadow-cone code; without stereo, it has
-// only the optional paths the frame uses (kPaths, scenePaths).
+// path (renderPixelT): the map's and no-shadow kernel has no shadow-cone code, and only the optional
+// paths the frame uses (kPaths: scenePaths, or stereo's three sets, stereoPaths).
 template <bool kWithCones, bool kWithLight, bool kWithDepth = false, bool kBehind = false, uint32_t kPaths = kAllPaths>
 struct PixelKernel {
   SceneView scene;
