@@ -596,6 +596,27 @@ TEST(Render, ReprojectedEyeMatchesTheTracedEyeAndTracesOnlyItsHoles) {
   EXPECT_DOUBLE_EQ(double(rt["stereo"]["reproject_ms_median"]), 0.0);
 }
 
+// Stereo's kernels are compiled per path set (cone.h renderPixelOfPaths, stereoPaths): the traced
+// eye's and the holes' with the descent tables (the default) and without them give both eyes bit
+// for bit alike, and the reprojection traces the same holes.
+TEST(Render, StereoPairIsTheSameWithAndWithoutTheDescentTables) {
+  pl::PlayOptions o = groveView(160, 90);
+  o.stereoIpd = 0.5f;
+  o.countWork = true;
+  std::vector<float> left, right, leftRoot, rightRoot;
+  const nlohmann::json r = pl::play(o, Device{}, &left, &right);
+  EXPECT_GT(double(r["work"]["table_descents"]), 0.0);  // the tables served descents
+  o.descentTable = false;
+  const nlohmann::json rr = pl::play(o, Device{}, &leftRoot, &rightRoot);
+  ASSERT_EQ(left.size(), leftRoot.size());
+  ASSERT_EQ(right.size(), rightRoot.size());
+  EXPECT_EQ(std::memcmp(left.data(), leftRoot.data(), left.size() * sizeof(float)), 0);
+  EXPECT_EQ(std::memcmp(right.data(), rightRoot.data(), right.size() * sizeof(float)), 0);
+  EXPECT_GT(double(r["stereo"]["traced_fraction_mean"]), 0.0);  // holes were traced (the holes' kernel ran)
+  EXPECT_DOUBLE_EQ(double(r["stereo"]["traced_fraction_mean"]), double(rr["stereo"]["traced_fraction_mean"]));
+  EXPECT_EQ(double(rr["work"]["table_descents"]), 0.0);
+}
+
 TEST(Render, StereoSideBySideAndSeparateOutputs) {
   pl::PlayOptions o = groveView(32, 18);
   o.stereoIpd = 0.1f;
