@@ -44,6 +44,9 @@ struct WarpLanes {
 #ifndef CANOPY_PLAY_QUEUE_SLOTS
 #define CANOPY_PLAY_QUEUE_SLOTS 8
 #endif
+#ifndef CANOPY_PLAY_QUEUE_LIT_BLOCKS
+#define CANOPY_PLAY_QUEUE_LIT_BLOCKS 0
+#endif
 using WarpQueue = IndirectQueue<WarpLanes, CANOPY_PLAY_QUEUE_SLOTS>;
 
 // One thread per pixel, a warp on a tileW x tileH tile of pixels (default 8x4 rather than 32
@@ -402,9 +405,11 @@ class CudaBackend final : public Backend {
     } else if constexpr (kWithDepth) {
       launchOfPaths<kWithLight ? 0 : 6>(stereoPaths(paths), k, threads);
     } else {
+      // with the queue: 5 blocks without LB light, as many as its shared memory allows
+      constexpr bool kQueues = PixelKernel<false, kWithLight>::kQueues;
       const int blocks = minBlocks_ != 0 ? minBlocks_ : (kWithLight ? -1 : 6);
       if (minBlocks_ == 0)
-        launchOfPaths<kWithLight ? 0 : 6>(paths, k, threads);
+        launchOfPaths<kWithLight ? (kQueues ? CANOPY_PLAY_QUEUE_LIT_BLOCKS : 0) : (kQueues ? 5 : 6)>(paths, k, threads);
       else if (blocks >= 8)
         launchPixels<8>(k, threads, compute_);
       else if (blocks >= 6)
