@@ -56,10 +56,9 @@
 //   cone_segment.h  one instance's segment: the footprint's level, the descent, held segments (3.)
 //   cone_walk.h     the walk of the instance grid and the hit list of the lock-step march (1., 2.)
 //   shadow_map.h    the scene's extinction grid and the frame's sun transmittance map (5.)
-//   indirect_queue.h  shading segments queued for their indirect light, evaluated a warp's round at a time
 //   cone.h          shadow cones, the ground, the primary cone (4.-5.), the camera, a pixel
 #pragma once
-#include "runtime/indirect_queue.h"
+#include "runtime/shadow_map.h"
 
 namespace canopy::play {
 
@@ -241,12 +240,10 @@ CANOPY_HD CANOPY_FORCEINLINE uint32_t boundStep(const SceneView& s, const Instan
   return evaluate;
 }
 
-// The second pass: evaluates the hits of `evaluate` at t (instanceSegment) into the step's sums. A
-// shading segment's indirect light is evaluated here, or queued (Queue::kQueues, IndirectQueue:
-// then it is not in q.kIndirect), except a Haar light sample (--light exact), always evaluated here.
-template <bool kWithLight, uint32_t kPaths, class Queue>
+// The second pass: evaluates the hits of `evaluate` at t (instanceSegment) into the step's sums.
+template <bool kWithLight, uint32_t kPaths>
 CANOPY_HD CANOPY_FORCEINLINE void evaluateHits(const SceneView& s, InstanceWalk& w, V3 o, V3 d, float t, float pixelAngle,
-                                               uint32_t evaluate, float grow, StepSums& q, Queue* queue) {
+                                               uint32_t evaluate, float grow, StepSums& q) {
   const float footprint = t * pixelAngle;
   while (evaluate != 0) {
     const uint32_t h = lowestSetBit(evaluate);
@@ -263,14 +260,6 @@ CANOPY_HD CANOPY_FORCEINLINE void evaluateHits(const SceneView& s, InstanceWalk&
     if (g.k <= 0.0f) continue;
     countVoxelFootprint(s, inst, footprint);
     q.k += g.k;
-    if constexpr (Queue::kQueues) {
-      const float ka[3] = {g.k * g.albedo[0], g.k * g.albedo[1], g.k * g.albedo[2]};
-      if (!((kPaths & kPathDetail) && g.haarLocal != kHaarNone) && queue->push(g, hit.instance, ka)) {
-        CANOPY_PLAY_COUNT(s, queuedSegments, 1);
-        for (int c = 0; c < 3; ++c) q.kAlbedo[c] += ka[c];
-        continue;
-      }
-    }
     float ind[3];
     segmentIndirect<kWithLight, kPaths>(s, inst, g, o, d, ind);
     for (int c = 0; c < 3; ++c) {
@@ -302,14 +291,12 @@ struct SunAtSample {
 
 // Shades the step [t, next) of extinction q.k: its radiance into r (and the inverse-depth moments,
 // kWithDepth, and the layers: window, addDepthSample), weighted by the transmittance T before it;
-// returns the step's alpha. scale: the weight of the step's k x albedo terms in the pixel (T alpha /
-// k; 0 where the step adds nothing).
+// returns the step's alpha.
 template <bool kWithCones, bool kWithDepth>
 CANOPY_HD CANOPY_FORCEINLINE float shadeStep(const SceneView& s, V3 o, V3 d, float t, float pixelAngle, const StepSums& q, float T,
-                                             SunAtSample& sun, ConeResult& r, float window, float& scale) {
+                                             SunAtSample& sun, ConeResult& r, float window) {
   const float dt = q.next - t;
   const float alpha = 1.0f - expf(-q.k * dt);
-  scale = 0.0f;
   if (!(alpha > 0.0f && T * alpha > kMinContribution)) return alpha;
   const float tm = t + 0.5f * dt;
   const V3 p = o + d * tm;
@@ -330,7 +317,7 @@ CANOPY_HD CANOPY_FORCEINLINE float shadeStep(const SceneView& s, V3 o, V3 d, flo
     sun.refT = T;
     sun.spacing = 2.0f * footprint > 1.5f * q.minCell ? 2.0f * footprint : 1.5f * q.minCell;
   }
-  scale = T * alpha / q.k;
+  const float scale = T * alpha / q.k;
   // Two branches on purpose: with one loop through add[3] for both, nvcc kept add[] in local memory
   // in the mono shadow-cone kernel and summed with a multiply and an add instead of one fma, so its
   // CUDA frames moved by rounding (the CPU's did not).
@@ -425,13 +412,9 @@ CANOPY_HD inline StepSums farFieldStep(const SceneView& s, V3 o, V3 d, float t, 
 // (boundStep, evaluateHits), shade it (shadeStep), move the walk on.
 // kPaths: the optional paths compiled in (scene_view.h scenePaths); without kPathFar the far field
 // is not marched (s.far is not read).
-// queue (Queue::kQueues): the shading segments' indirect light goes through the lanes' queue
-// (IndirectQueue); all lanes that share it call traceCone together, `valid` false for a lane
-// without a pixel (it only serves the queue). Without one (InlineIndirect) each segment's is
-// evaluated where it is found.
-template <bool kWithCones, bool kWithLight = true, bool kWithDepth = false, uint32_t kPaths = kAllPaths, class Queue = InlineIndirect>
+template <bool kWithCones, bool kWithLight = true, bool kWithDepth = false, uint32_t kPaths = kAllPaths>
 CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixelAngle, float tMax, float window = 0.0f,
-                                      float tStart = 0.0f, float T0 = 1.0f, Queue* queue = nullptr, bool valid = true) {
+                                      float tStart = 0.0f, float T0 = 1.0f) {
   ConeResult r;
   r.rgb[0] = r.rgb[1] = r.rgb[2] = 0.0f;
   r.transmittance = 1.0f;
@@ -439,8 +422,7 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
   r.frontSums[0] = r.frontSums[1] = r.frontSums[2] = 0.0f;
   r.frontRgb[0] = r.frontRgb[1] = r.frontRgb[2] = 0.0f;
   r.frontLimit = -1.0f;
-  static_assert(!(Queue::kQueues && kWithDepth), "a queued segment's light does not join the front layer's");
-  if (valid) CANOPY_PLAY_COUNT(s, cones, 1);
+  CANOPY_PLAY_COUNT(s, cones, 1);
   const float tGround = groundHit(s.shade, o, d);
   const bool ground = tGround < tMax;
   if (ground) tMax = tGround;
@@ -449,15 +431,14 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
   const float tNear = tFar < tMax ? tFar : tMax;  // the instances' part of the ray
   HitSlots slots;
   InstanceWalk w;
-  walkBegin(s, w, slots, o, d, tStart, valid ? tNear : tStart);
+  walkBegin(s, w, slots, o, d, tStart, tNear);
   float t = tStart;
   float T = T0;
   SunAtSample sun;
   // The far field's part, once the instances' has ended (one loop and one shadeStep for both, so
   // that the far field adds little to the kernel): farEnd > 0 while it is marched.
   float farEnd = -1.0f;
-  // One step; false once the ray has ended.
-  const auto step = [&]() -> bool {
+  while (true) {
     StepSums q;
     if (!kFar || farEnd < 0.0f) {
       walkRetire(w, t);
@@ -465,55 +446,44 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
       if (!ended) {
         q = {w.done ? tNear : w.tCellExit, 0.0f, {0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}, false, 3.0e38f};
         const uint32_t evaluate = boundStep<kWithCones>(s, w, t, q);
-        evaluateHits<kWithLight, kPaths>(s, w, o, d, t, pixelAngle, evaluate, stepGrowth(s.shade, T), q, queue);
+        evaluateHits<kWithLight, kPaths>(s, w, o, d, t, pixelAngle, evaluate, stepGrowth(s.shade, T), q);
         if (!q.active && w.live == 0) {
           ended = w.done;
           if (!ended) {
             t = w.tCellExit;
             walkAdvance(s, w, o, d, t);
-            return true;
+            continue;
           }
         }
       }
-      if (ended)  // no instance left before tNear: the far field from tNear on, if any
-        return kFar && tNear < tMax && farFieldSpan(s.far, o, d, tNear > t ? tNear : t, tMax, t, farEnd);
+      if (ended) {  // no instance left before tNear: the far field from tNear on, if any
+        if (!kFar || !(tNear < tMax) || !farFieldSpan(s.far, o, d, tNear > t ? tNear : t, tMax, t, farEnd)) break;
+        continue;
+      }
       if (q.next > tNear) q.next = tNear;
       CANOPY_PLAY_COUNT(s, primarySteps, 1);
       if (q.k == 0.0f) CANOPY_PLAY_COUNT(s, emptySteps, 1);
     } else {
-      if (!(t < farEnd)) return false;
+      if (!(t < farEnd)) break;
       q = farFieldStep(s, o, d, t, farEnd);
-      if (!(q.next > t)) return false;  // a step below float resolution at t (an absurd scale): stop rather than loop
+      if (!(q.next > t)) break;  // a step below float resolution at t (an absurd scale): stop rather than loop
     }
-    float scale;
-    const float alpha = shadeStep<kWithCones, kWithDepth>(s, o, d, t, pixelAngle, q, T, sun, r, window, scale);
-    if constexpr (Queue::kQueues) queue->endStep(scale);
+    const float alpha = shadeStep<kWithCones, kWithDepth>(s, o, d, t, pixelAngle, q, T, sun, r, window);
     T *= 1.0f - alpha;
     t = q.next;
-    if (T < s.shade.stopT) return false;
+    if (T < s.shade.stopT) break;
     if (!kFar || farEnd < 0.0f) {
-      if (t >= tNear) return kFar && tNear < tMax && farFieldSpan(s.far, o, d, t, tMax, t, farEnd);
+      if (t >= tNear) {
+        if (!kFar || !(tNear < tMax) || !farFieldSpan(s.far, o, d, t, tMax, t, farEnd)) break;
+        continue;
+      }
       while (!w.done && t >= w.tCellExit) walkAdvance(s, w, o, d, t);
-    }
-    return true;
-  };
-  if constexpr (Queue::kQueues) {
-    bool alive = valid;
-    while (queue->any(alive)) {
-      if (alive) alive = step();
-      queue->template serve<kWithLight>(s, o, d, false);
-    }
-    queue->template serve<kWithLight>(s, o, d, true);
-  } else {
-    while (step()) {
     }
   }
   if (ground) {
     addGround<kWithCones, kWithDepth>(s, o, d, tGround, pixelAngle, T, r, window);
     T = 0.0f;
   }
-  if constexpr (Queue::kQueues)
-    for (int c = 0; c < 3; ++c) r.rgb[c] += queue->rgb[c];
   r.transmittance = T;
   return r;
 }
@@ -579,12 +549,9 @@ CANOPY_HD inline void pixelLayers(const ConeResult& r, float cosAxis, float disp
 //   - kBehind (stereo's holes, stereoResolveHole): read, stereo[i] > 0: the ray is traced from
 //     disparity stereo[i] on (depth disparityScale / stereo[i]) and composited under the RGBA in
 //     rgba (a reprojected layer in front of it); else traced in full.
-// queue, valid: traceCone's (the lanes' queue of shading segments; valid false: no pixel, i is
-// not read and nothing is written).
-template <bool kWithCones, bool kWithLight, bool kWithDepth = false, bool kBehind = false, uint32_t kPaths = kAllPaths,
-          class Queue = InlineIndirect>
+template <bool kWithCones, bool kWithLight, bool kWithDepth = false, bool kBehind = false, uint32_t kPaths = kAllPaths>
 CANOPY_HD inline void renderPixelT(const SceneView& s, const CameraView& c, int64_t i, float* rgba, float* stereo = nullptr,
-                                   float disparityScale = 0.0f, Queue* queue = nullptr, bool valid = true) {
+                                   float disparityScale = 0.0f) {
   const int x = int(i % c.width), y = int(i / c.width);
   float fpPerT;
   const V3 d = cameraRay(c, x, y, fpPerT);
@@ -598,9 +565,7 @@ CANOPY_HD inline void renderPixelT(const SceneView& s, const CameraView& c, int6
   // behind a front: marched with what the front lets through, so the radiance is already weighted
   // and the transmittance is the whole ray's
   const float T0 = behind ? 1.0f - rgba[4 * i + 3] : 1.0f;
-  const ConeResult r =
-      traceCone<kWithCones, kWithLight, kWithDepth, kPaths>(s, c.position, d, fpPerT, 3.0e37f, window, tStart, T0, queue, valid);
-  if (!valid) return;
+  const ConeResult r = traceCone<kWithCones, kWithLight, kWithDepth, kPaths>(s, c.position, d, fpPerT, 3.0e37f, window, tStart, T0);
   if (behind) {
     for (int ch = 0; ch < 3; ++ch) rgba[4 * i + ch] += r.rgb[ch];
     rgba[4 * i + 3] = 1.0f - r.transmittance;
@@ -634,18 +599,6 @@ CANOPY_HD inline void renderPixelOfScene(const SceneView& s, const CameraView& c
                                          float disparityScale) {
   const bool cones = s.shade.shadows == kShadowsCone, light = s.litModels > 0;
   const uint32_t paths = kWithDepth || kBehind ? stereoPaths(scenePaths(s)) : scenePaths(s);
-#if !defined(__CUDA_ARCH__)
-  if (!kWithDepth && !kBehind && !cones && s.shade.queueIndirect) {
-    // the GPU's queue in one lane, with rounds of 5 entries in a ring of 8 (so that rounds leave
-    // entries behind, and full rings send segments down the inline path)
-    using Queue = IndirectQueue<OneLane, 8, 5>;
-    Queue::Storage storage;
-    Queue queue{&storage};
-    light ? renderPixelT<false, true, false, false, kAllPaths>(s, c, i, rgba, stereo, disparityScale, &queue)
-          : renderPixelT<false, false, false, false, kAllPaths>(s, c, i, rgba, stereo, disparityScale, &queue);
-    return;
-  }
-#endif
   if (cones)
     light ? renderPixelT<true, true, kWithDepth, kBehind>(s, c, i, rgba, stereo, disparityScale)
           : renderPixelT<true, false, kWithDepth, kBehind>(s, c, i, rgba, stereo, disparityScale);

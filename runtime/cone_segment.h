@@ -311,38 +311,27 @@ CANOPY_HD inline void segmentLight(const SceneView& s, const ModelView& m, const
   }
 }
 
-// The indirect light at world point p of a sample whose light item is `item` (nullptr: the
-// density-only ambient term) at node-local coordinates l, lit with the instance's sun weights:
-// each term times its scene factor at p. kWithLight = false: compiled without the LB light code,
-// for scenes without lit models (where no segment has a light item, so the result is the same).
-// segmentIndirect's, and a queued segment's (IndirectQueue, cone.h).
-template <bool kWithLight>
-CANOPY_HD CANOPY_FORCEINLINE void itemIndirect(const SceneView& s, const sun::Weights& sunWeights, const uint32_t* item, const float l[3], V3 p,
-                                               float out[3]) {
-  const SceneLightPair factor = sceneLightFactors(s.light, p);
-  if (!kWithLight || !item) {
-    ambientOnly(s, factor, out);
-    return;
-  }
-  sampleLbLight(item, sunWeights, l[0], l[1], l[2], s.shade.sun, s.shade.ambient, factor, out);
-}
-
 // The indirect light of a shading segment of instance `inst` on the ray o + t dir: the LB light of
-// its light item (or Haar item), else the density-only ambient term (itemIndirect).
+// its light item, else the density-only ambient term; each term times its scene factor at its sample.
+// kWithLight = false: compiled without the LB light code, for scenes without lit models (where no
+// segment has a light item, so the result is the same).
 template <bool kWithLight = true, uint32_t kPaths = kAllPaths>
 CANOPY_HD inline void segmentIndirect(const SceneView& s, const InstanceView& inst, const Segment& g, V3 o, V3 dir, float out[3]) {
-  const V3 p = o + dir * g.tSample;
-  if (!(kWithLight && (kPaths & kPathDetail) && g.haarLocal != kHaarNone)) {
-    itemIndirect<kWithLight>(s, inst.sunWeights, g.lightItem, g.light, p, out);
-  } else {
-    const SceneLightPair factor = sceneLightFactors(s.light, p);
+  const SceneLightPair factor = sceneLightFactors(s.light, o + dir * g.tSample);
+  if (kWithLight && (kPaths & kPathDetail) && g.haarLocal != kHaarNone) {
     haar::BrickLookup at;
     at.slot = 0;
     at.lx = int(g.haarLocal & 3u), at.ly = int((g.haarLocal >> 2) & 3u), at.lz = int((g.haarLocal >> 4) & 3u);
     at.fx = g.light[0], at.fy = g.light[1], at.fz = g.light[2];
     const haar::Rgb sun = {s.shade.sun[0], s.shade.sun[1], s.shade.sun[2]};
     sampleHaarLbLight(g.haarItem, (g.haarLocal >> 6) & 1u, at, inst.sunWeights, sun, s.shade.ambient, factor.sun, factor.ambient, out);
+    return;
   }
+  if (!kWithLight || !g.lightItem) {
+    ambientOnly(s, factor, out);
+    return;
+  }
+  sampleLbLight(g.lightItem, inst.sunWeights, g.light[0], g.light[1], g.light[2], s.shade.sun, s.shade.ambient, factor, out);
 }
 
 // An instance's segment that stays what it is (k = 0, the same end) over later steps: the primary

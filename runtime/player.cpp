@@ -338,7 +338,6 @@ ShadeParams shadeParams(const PlayOptions& o) {
   shade.holdEmpty = o.holdEmpty ? 1 : 0;
   shade.skipEmptyBlocks = o.skipEmptyBlocks ? 1 : 0;
   shade.exactLight = o.exactLight ? 1 : 0;
-  shade.queueIndirect = o.cpuQueueIndirect ? 1 : 0;
   shade.shadowMapMaxVoxels = o.shadowMapMaxVoxels;
   shade.stereoLayer = o.stereoIpd > 0.0f ? 2.0f * o.stereo.maxSpread : 0.0f;  // a front layer is coherent (stereo.h)
   shade.farStart = parseFarField(o.farField);
@@ -583,7 +582,6 @@ nlohmann::json workReport(const WorkCounters& work, uint64_t passes) {
           {"hit_drops", work.hitDrops},
           {"far_steps", work.farSteps},
           {"table_descents", work.tableDescents},
-          {"queued_segments", work.queuedSegments},
           {"voxel_px", voxelPixelsReport(work)}};
 }
 

@@ -18,46 +18,13 @@
 namespace canopy::play {
 namespace {
 
-// A warp's lanes, for the queue of shading segments (IndirectQueue, indirect_queue.h): every lane
-// of the warp takes part in each call (traceCone keeps the warp's lanes in its loop until all of
-// their rays have ended).
-struct WarpLanes {
-  static constexpr int kLanes = 32;
-  __device__ static uint32_t lane() { return threadIdx.x & 31u; }
-  __device__ static uint32_t lanesBelow() {
-    uint32_t m;
-    asm("mov.u32 %0, %%lanemask_lt;" : "=r"(m));
-    return m;
-  }
-  __device__ static bool any(bool b) { return __any_sync(0xFFFFFFFFu, b); }
-  __device__ static uint32_t ballot(bool b) { return __ballot_sync(0xFFFFFFFFu, b); }
-  __device__ static uint32_t sum(uint32_t v) { return __reduce_add_sync(0xFFFFFFFFu, v); }
-  __device__ static float shuffle(float v, uint32_t lane) { return __shfl_sync(0xFFFFFFFFu, v, int(lane)); }
-  __device__ static void sync() { __syncwarp(); }
-};
-// A lane's ring of 8 entries: 10.5 KB of shared memory per warp, 42 KB per block of 128 threads.
-// Build flags for A/Bs (bench/play/variant.sh): CANOPY_PLAY_QUEUE=0 evaluates every segment's
-// indirect light inline in the mono map kernels too; CANOPY_PLAY_QUEUE_SLOTS another ring.
-#ifndef CANOPY_PLAY_QUEUE
-#define CANOPY_PLAY_QUEUE 1
-#endif
-#ifndef CANOPY_PLAY_QUEUE_SLOTS
-#define CANOPY_PLAY_QUEUE_SLOTS 8
-#endif
-#ifndef CANOPY_PLAY_QUEUE_LIT_BLOCKS
-#define CANOPY_PLAY_QUEUE_LIT_BLOCKS 0
-#endif
-using WarpQueue = IndirectQueue<WarpLanes, CANOPY_PLAY_QUEUE_SLOTS>;
-
 // One thread per pixel, a warp on a tileW x tileH tile of pixels (default 8x4 rather than 32
 // pixels of one row: the rays of a warp stay closer together, so they walk the same instances and
 // nodes longer). Thread j -> tile j / (tileW tileH), lane j % (tileW tileH). One kernel per shadow
 // path (renderPixelT): the map's and no-shadow kernel has no shadow-cone code, and only the optional
-// paths the frame uses (kPaths: scenePaths, or stereo's three sets, stereoPaths). The mono map
-// kernel (kQueues) queues its shading segments' indirect light per warp (WarpQueue).
+// paths the frame uses (kPaths: scenePaths, or stereo's three sets, stereoPaths).
 template <bool kWithCones, bool kWithLight, bool kWithDepth = false, bool kBehind = false, uint32_t kPaths = kAllPaths>
 struct PixelKernel {
-  static constexpr bool kQueues = CANOPY_PLAY_QUEUE && !kWithCones && !kWithDepth && !kBehind;
   SceneView scene;
   CameraView camera;
   float* out;
@@ -71,14 +38,6 @@ struct PixelKernel {
     int x, y;
     if (!bandTilePixel(list ? int64_t(list[k]) : k, tilesX, tileW, tileH, camera.width, y0, y1, x, y)) return;
     renderPixelT<kWithCones, kWithLight, kWithDepth, kBehind, kPaths>(scene, camera, int64_t(y) * camera.width + x, out, stereo, disparityScale);
-  }
-  // kQueues: every thread of the warp, `valid` where k is a thread of the launch.
-  __device__ void operator()(int64_t k, bool valid, WarpQueue::Storage* queue) const {
-    int x = 0, y = 0;
-    valid = valid && bandTilePixel(list ? int64_t(list[k]) : k, tilesX, tileW, tileH, camera.width, y0, y1, x, y);
-    WarpQueue q{queue};
-    renderPixelT<kWithCones, kWithLight, kWithDepth, kBehind, kPaths>(scene, camera, valid ? int64_t(y) * camera.width + x : 0, out, stereo,
-                                                                     disparityScale, &q, valid);
   }
 };
 
@@ -96,12 +55,7 @@ template <bool kWithCones, bool kWithLight, bool kWithDepth, bool kBehind, uint3
 __global__ void __launch_bounds__(kPixelBlock, kMinBlocks > 0 ? kMinBlocks : 1)
     pixelKernel(PixelKernel<kWithCones, kWithLight, kWithDepth, kBehind, kPaths> k, int64_t n) {
   const int64_t i = blockIdx.x * int64_t(kPixelBlock) + threadIdx.x;
-  if constexpr (PixelKernel<kWithCones, kWithLight, kWithDepth, kBehind, kPaths>::kQueues) {
-    __shared__ WarpQueue::Storage queues[kPixelBlock / 32];
-    k(i, i < n, &queues[threadIdx.x / 32]);
-  } else if (i < n) {
-    k(i);
-  }
+  if (i < n) k(i);
 }
 
 template <int kMinBlocks, bool kWithCones, bool kWithLight, bool kWithDepth, bool kBehind, uint32_t kPaths>
@@ -405,11 +359,9 @@ class CudaBackend final : public Backend {
     } else if constexpr (kWithDepth) {
       launchOfPaths<kWithLight ? 0 : 6>(stereoPaths(paths), k, threads);
     } else {
-      // with the queue: 5 blocks without LB light, as many as its shared memory allows
-      constexpr bool kQueues = PixelKernel<false, kWithLight>::kQueues;
       const int blocks = minBlocks_ != 0 ? minBlocks_ : (kWithLight ? -1 : 6);
       if (minBlocks_ == 0)
-        launchOfPaths<kWithLight ? (kQueues ? CANOPY_PLAY_QUEUE_LIT_BLOCKS : 0) : (kQueues ? 5 : 6)>(paths, k, threads);
+        launchOfPaths<kWithLight ? 0 : 6>(paths, k, threads);
       else if (blocks >= 8)
         launchPixels<8>(k, threads, compute_);
       else if (blocks >= 6)

@@ -99,10 +99,6 @@ struct ShadeParams {
   int holdEmpty;            // 1: a primary ray keeps an instance's empty leaf segment to its end (EmptyHold)
   int skipEmptyBlocks;      // 1: a brick step in an empty cell goes to the end of the cell run (emptyRunEnd)
   int exactLight;           // 1 (--light exact): the finest level of Haar-lit models samples the Haar pages
-  // 1: the CPU's mono map path queues its shading segments' indirect light (IndirectQueue of one
-  // lane, cone.h renderPixelOfScene), as the GPU's mono map kernels always do; 0: evaluated inline.
-  // For the tests of the queue's bookkeeping; the CUDA backend ignores it.
-  int queueIndirect;
   // The ground (groundRadiance): a horizontal plane y = groundY (world, +Y up) that ends every ray
   // from above it that reaches it; 0 (ShadeParams{}): none, rays leave the scene to the sky.
   int ground;
@@ -154,8 +150,7 @@ struct WorkCounters {
       shadowMapSteps, heldSegments, emptySteps, zeroBrickSamples, emptyBlockSkips,
       hitDrops,  // hits dropped from a full hit list (InstanceWalk)
       farSteps,  // steps of primary cones through the far field (farFieldStep)
-      tableDescents,  // descents read from a descent table (descendByTable)
-      queuedSegments;  // shading segments whose indirect light was queued (IndirectQueue; ShadeParams::queueIndirect)
+      tableDescents;  // descents read from a descent table (descendByTable)
   // The level of detail rule at work (countVoxelFootprint): shading segments by the width of the
   // chosen level's voxel over the pixel's footprint there (in pixels): <= 1, <= 1.5, <= 4, above;
   // and the largest ratio (its float's bits).

@@ -496,53 +496,6 @@ TEST(Render, DescentTableLeavesTheImageUnchanged) {
         }
 }
 
-// The GPU's mono map kernels queue their shading segments' indirect light (indirect_queue.h) and
-// add it to the pixel in another order; the CPU runs the same queue in one lane (rounds of 5 entries
-// in a ring of 8, so that rounds leave entries behind and full rings send segments down the inline
-// path). The image must be the inline one up to float rounding: on the 12-tree forest with LB light,
-// its detail form with Haar light and --light exact (Haar samples stay inline, the light items'
-// samples of the coarser levels are queued), and the unlit close forest (the density-only term
-// queued); from among the trees and from afar, converged and on a cold start (segments without a
-// resident light page). The counters show that most shading segments went through the queue.
-TEST(Render, QueuedIndirectLightIsTheInlineSumUpToRounding) {
-  const std::string lit = pt::tmpDir("scenes") + "/forest-queue.canopy";
-  std::vector<canopy::CanopyInstance> inst;
-  for (int i = 0; i < 12; ++i)
-    inst.push_back(pt::instanceAt(uint32_t(i % 2), float(i % 4) * 2.0f - 3.0f, 0, float(i / 4) * 2.0f - 2.0f, 1.0f, 0.9f * float(i)));
-  const float rgb[3] = {1.0f, 0.8f, 0.6f};
-  const std::vector<canopy::octreepack::ModelSource> models = {canopy::octreepack::testing::syntheticPlant(40, 0, "a", 4),
-                                                               canopy::octreepack::testing::syntheticPlant(32, 0, "b", 3)};
-  const std::vector<canopy::octreepack::LightFn> lights = {pt::rampLight(rgb, 1.0f, 40, 0.03f), pt::rampLight(rgb, -0.5f, 32, 0.03f)};
-  pt::writeLitScene(lit, models, lights, inst);
-  const std::string detail = pt::tmpDir("scenes") + "/forest-queue-detail.canopy";
-  pt::writeHaarLitScene(detail, models, lights, inst, 0.01f, canopy::haar::Precision::Fp16, nullptr, 1);
-  for (const std::string& input : {lit, detail, closeForestFile()})
-    for (const char* camera : {"orbit:azimuth=50,elevation=10,distance=4,turns=0", "orbit:azimuth=-20,elevation=30,distance=14,turns=0"})
-      for (const bool converge : {true, false}) {
-        pl::PlayOptions o = pt::convergedView(input, 48, 32);
-        o.exactLight = input == detail;
-        o.camera = camera;
-        o.converge = converge;
-        o.warmStart = converge;
-        o.sun = "0.3,0.8,-0.52";
-        o.countWork = true;
-        nlohmann::json report;
-        const std::vector<float> inline_ = render(o);
-        o.cpuQueueIndirect = true;
-        const std::vector<float> queued = render(o, &report);
-        ASSERT_EQ(inline_.size(), queued.size());
-        double worst = 0.0;
-        for (size_t i = 0; i < inline_.size(); ++i)
-          worst = std::max(worst, double(std::fabs(inline_[i] - queued[i])) / std::max(1.0, double(std::fabs(inline_[i]))));
-        EXPECT_LT(worst, 2e-6) << input << " " << camera << " converged " << converge;
-        const double queuedSegments = double(report["work"]["queued_segments"]), shaded = double(report["work"]["voxel_px"]["segments"]);
-        std::printf("%s %s converged %d: %.0f of %.0f shading segments queued, worst difference %.2e\n", input.c_str(), camera, int(converge),
-                    queuedSegments, shaded, worst);
-        EXPECT_GT(queuedSegments, (input == detail ? 0.2 : 0.9) * shaded) << input << " " << camera;
-        EXPECT_LE(queuedSegments, shaded) << input << " " << camera;
-      }
-}
-
 // Held empty segments (cone.h, EmptyHold): a primary ray keeps an instance's empty leaf segment
 // over the steps of its neighbours instead of evaluating it again; the image must be the one of
 // evaluating every active instance at every step, bit for bit. Same 12-tree forest (crowns
