@@ -31,7 +31,7 @@ struct PlayOptions {
   bool directSun = true;             // false (--no-direct-sun): only the indirect (LB and ambient) light
   float stepFactor = 0.5f;           // brick step, in voxels of the chosen level
   float lodBias = 0.0f;
-  float stepGrowthT = 0.0f;          // --step-growth: brick steps grow below this transmittance (0: never; ShadeParams)
+  float stepGrowthT = 0.1f;          // --step-growth: brick steps grow below this transmittance (0: never; ShadeParams)
   float stepGrowthMax = 4.0f;        // --step-growth-max: by at most this factor
   // The far field (cone.h farFieldStep): "auto" (from where a cone's footprint reaches the
   // coarsest level's voxel of the coarsest instance), "off" (instances everywhere) or a distance D

@@ -569,6 +569,7 @@ TEST(Render, StepGrowthChangesOnlyWhatLiesBehindDenseMatter) {
   pl::PlayOptions o = pt::convergedView(file, 48, 32);
   o.camera = "orbit:azimuth=50,elevation=10,distance=4,turns=0";
   o.countWork = true;
+  o.stepGrowthT = 0.0f;  // the fixed march (the default grows steps below 0.1)
   nlohmann::json fixedReport, grownReport;
   const std::vector<float> fixed = render(o, &fixedReport);
   o.stepGrowthT = o.stopTransmittance;
