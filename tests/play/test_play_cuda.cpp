@@ -123,7 +123,7 @@ TEST(PlayCuda, cuda_FrameMatchesTheCpuReference) {
     const char* shadows;  // the sun transmittance map (default) or the per-sample shadow cones
     bool exact = false;   // --light exact (the Haar-lit file's Haar pages)
     bool movingSun = false;  // three frames, the sun orbiting (the scene light's sun factor changes per frame)
-    float stepGrowth = 0.0f;  // --step-growth (brick steps grow behind dense matter)
+    float stepGrowth = pl::PlayOptions{}.stepGrowthT;  // --step-growth (brick steps grow behind dense matter; the default 0.1, 0 in four cases)
     const char* farField = "auto";  // --far-field (a distance: the far field from there on)
     bool descentTable = true;       // off: --no-descent-table (the same image as with the descent tables)
   };
