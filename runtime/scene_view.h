@@ -204,10 +204,13 @@ CANOPY_HD inline uint32_t scenePaths(const SceneView& s) {
 // Stereo's kernels (the traced eye's, the holes') come in three path sets only, to bound the
 // kernels compiled: none, the descent table alone (the default frame of a scene without detail
 // levels and far field), and every path for the rest.
-CANOPY_HD inline uint32_t stereoPaths(uint32_t paths) { return paths == 0 || paths == kPathTable ? paths : kAllPaths; }
-// The path set compiled after `paths` (< kAllPaths) for a mode: every set in turn, or stereo's three.
-constexpr uint32_t nextPathSet(uint32_t paths, bool stereo) {
-  return stereo ? (paths == 0 ? kPathTable : kAllPaths) : paths + 1;
+CANOPY_HD constexpr uint32_t stereoPaths(uint32_t paths) { return paths == 0 || paths == kPathTable ? paths : kAllPaths; }
+// The path set compiled after `paths` (< kAllPaths) for a mode: every set in turn, or the next of
+// stereo's (a set that stereoPaths keeps as it is).
+CANOPY_HD constexpr uint32_t nextPathSet(uint32_t paths, bool stereo) {
+  uint32_t next = paths + 1;
+  while (stereo && stereoPaths(next) != next) ++next;
+  return next;
 }
 
 // Adds n to a work counter (host code only; compiled out of the CUDA kernels).

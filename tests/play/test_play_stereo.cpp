@@ -538,6 +538,40 @@ TEST(Stereo, AHoleTracedBehindItsFrontAddsWhatTheRayMeetsFromThereOn) {
   EXPECT_LT(underGround, int(n));
 }
 
+// Stereo's kernels come in three path sets (stereoPaths): "every path" (the far field, the detail
+// levels, the descent table) must march a frame that uses none of them as the others do. The grove's
+// pair with a far field present but never reached (its start off), against the same view without
+// one: the traced eye's RGBA and layers and the holes' RGBA (traced in full, and behind a front at
+// 0.5 m) bit for bit.
+TEST(Stereo, TheEveryPathSetOfTheStereoKernelsMarchesAFrameWithoutThosePathsAlike) {
+  const GroveStereo g(64, 36);
+  pl::SceneView all = g.v;
+  std::vector<float> unread(pl::kFarFieldChannels, 0.0f);
+  all.far.values = unread.data();  // present, so scenePaths has kPathFar; never read with the start off
+  all.shade.farStart = -1.0f;
+  ASSERT_EQ(pl::stereoPaths(pl::scenePaths(all)), pl::kAllPaths);
+  ASSERT_NE(pl::stereoPaths(pl::scenePaths(g.v)), pl::kAllPaths);
+  const int64_t n = int64_t(g.left.width) * g.left.height;
+  std::vector<float> rgba(size_t(n) * 4), rgbaAll(size_t(n) * 4), layers(size_t(n) * pl::kStereoPixelFloats),
+      layersAll(size_t(n) * pl::kStereoPixelFloats);
+  const float front[4] = {0.05f, 0.1f, 0.02f, 0.4f};
+  std::vector<float> holes(size_t(n) * 4), holesAll(size_t(n) * 4), from(static_cast<size_t>(n), 0.0f);
+  int covered = 0;
+  for (int64_t i = 0; i < n; ++i) {
+    pl::renderPixel(g.v, g.left, i, rgba.data(), layers.data(), g.scale);
+    pl::renderPixel(all, g.left, i, rgbaAll.data(), layersAll.data(), g.scale);
+    covered += rgba[size_t(4 * i + 3)] > 0.02f ? 1 : 0;
+    from[size_t(i)] = i % 2 ? g.scale / 0.5f : 0.0f;  // behind a front at 0.5 m, or traced in full
+    for (int c = 0; c < 4; ++c) holes[size_t(4 * i + c)] = holesAll[size_t(4 * i + c)] = i % 2 ? front[c] : 0.0f;
+    pl::renderPixel(g.v, g.right, i, holes.data(), nullptr, g.scale, from.data());
+    pl::renderPixel(all, g.right, i, holesAll.data(), nullptr, g.scale, from.data());
+  }
+  EXPECT_GT(covered, int(n / 2));
+  EXPECT_EQ(std::memcmp(rgba.data(), rgbaAll.data(), rgba.size() * sizeof(float)), 0);
+  EXPECT_EQ(std::memcmp(layers.data(), layersAll.data(), layers.size() * sizeof(float)), 0);
+  EXPECT_EQ(std::memcmp(holes.data(), holesAll.data(), holes.size() * sizeof(float)), 0);
+}
+
 TEST(Stereo, PixelDisparityIsTheWeightedMeanAndSpreadOfInverseDepth) {
   // two samples of equal weight at t = 2 and t = 4 on the axis: 1/z = 0.5 and 0.25
   const float sums[3] = {1.0f, 0.5f * 0.5f + 0.5f * 0.25f, 0.5f * 0.25f + 0.5f * 0.0625f};
