@@ -34,9 +34,17 @@ CANOPY_HD CANOPY_FORCEINLINE void hitHead(const Hit& h, float& tin, float& until
 // interval along the ray, tested there, was added then or rejected for good (a rejection at an
 // earlier, smaller tNow holds at a later one). An instance's cells form a box of cells and the
 // walk's cells move monotonically along each axis, so an instance met in any earlier cell is
-// listed by the cell just behind. So no membership scan is needed, except after a hit was dropped
-// from a full list (`dropped`): from then on each cell's whole list is scanned against the hits,
-// as a dropped instance is found again from a later cell it overlaps.
+// listed by the cell just behind. So no membership scan is needed, except where a full list put a
+// hit off or dropped one (below).
+// A full list loses nothing: the farthest of its pending hits and the new one waits (the one that
+// starts later), the march stops where it starts or at the cell's exit (tCellExit, the nearer),
+// and walkAdvance adds the cell there (`rewind`: the current one again, or the next) with its
+// whole list scanned against the live hits. Every waiting instance is met again from there: the
+// ray enters its box at or after that point, in that cell or a later one, and every instance that
+// a later cell lists was listed by the cell added whole or added through a face on the way. Only
+// when every live hit and the new one are active at once (more than kHitCapacity boxes overlap
+// where the march is) is a hit dropped for good (`dropped`): from then on each cell's whole list
+// is scanned against the hits, as a dropped instance is found again from a later cell it overlaps.
 // The slots themselves live apart from the walk's other state (HitSlots), reached through two
 // pointers: indexed by a run-time slot they must be in local memory on the GPU, and in one
 // aggregate with them nvcc kept the walk's scalars (live, the DDA, the exits) there too, loaded at
@@ -55,6 +63,7 @@ struct InstanceWalk {
   float tCellExit;  // the march may advance up to here with the current list
   float tGridExit;
   bool done;
+  bool rewind;   // a full list put a hit off: at tCellExit the current cell is added again
   bool dropped;  // a hit was dropped from a full list: cells add their whole lists with a membership scan
 };
 constexpr uint32_t kAllHitSlots = kHitCapacity >= 32 ? 0xFFFFFFFFu : (1u << kHitCapacity) - 1u;
@@ -93,14 +102,21 @@ CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 
     if (t0 < tNow) t0 = tNow;
     if (!(t1 > t0)) continue;
     uint32_t slot;
-    if (w.live == kAllHitSlots) {  // full: replace the farthest pending hit if this one is nearer
+    if (w.live == kAllHitSlots) {  // full: the farthest pending hit or this one waits (or is dropped)
       slot = 0;
       for (uint32_t m = w.live & (w.live - 1u); m != 0; m &= m - 1u) {
         const uint32_t h = lowestSetBit(m);
         slot = w.hits[h].tin > w.hits[slot].tin ? h : slot;
       }
-      w.dropped = true;  // this one or the farthest: found again from a later cell it overlaps
-      CANOPY_PLAY_COUNT(s, hitDrops, 1);
+      const float tLater = w.hits[slot].tin > t0 ? w.hits[slot].tin : t0;
+      if (tLater > tNow) {  // it starts ahead of the march: the walk adds this cell again there
+        w.rewind = true;
+        w.tCellExit = tLater < w.tCellExit ? tLater : w.tCellExit;
+        CANOPY_PLAY_COUNT(s, hitRewinds, 1);
+      } else {  // all active at once: this one or the farthest is found again from a later cell only
+        w.dropped = true;
+        CANOPY_PLAY_COUNT(s, hitDrops, 1);
+      }
       if (w.hits[slot].tin <= t0) continue;
     } else {
       slot = lowestSetBit(~w.live & kAllHitSlots);
@@ -112,6 +128,14 @@ CANOPY_HD inline void walkAddCell(const SceneView& s, InstanceWalk& w, V3 o, V3 
   }
 }
 
+// Bounds the march by the current cell's exit and adds the cell's instances (walkAddCell, which
+// may bound it further).
+CANOPY_HD CANOPY_FORCEINLINE void walkEnterCell(const SceneView& s, InstanceWalk& w, V3 o, V3 d, float tNow, int face) {
+  const float tx = gridExit(w.dda);
+  w.tCellExit = tx < w.tGridExit ? tx : w.tGridExit;
+  walkAddCell(s, w, o, d, tNow, face);
+}
+
 // Starts the walk for the ray o + t d, t in [tStart, tEnd], its hits in `slots`.
 CANOPY_HD inline void walkBegin(const SceneView& s, InstanceWalk& w, HitSlots& slots, V3 o, V3 d, float tStart, float tEnd) {
   w.hits = slots.hits;
@@ -121,6 +145,7 @@ CANOPY_HD inline void walkBegin(const SceneView& s, InstanceWalk& w, HitSlots& s
   w.done = true;
   w.dropped = false;
   w.tCellExit = tEnd;
+  w.rewind = false;
   if (s.instanceCount == 0) return;
   const V3 lo = v3(s.gridLo[0], s.gridLo[1], s.gridLo[2]);
   const V3 hi = v3(s.gridLo[0] + s.gridCell[0] * float(s.gridDim[0]), s.gridLo[1] + s.gridCell[1] * float(s.gridDim[1]),
@@ -132,6 +157,10 @@ CANOPY_HD inline void walkBegin(const SceneView& s, InstanceWalk& w, HitSlots& s
   if (!(t1 > t0)) return;
   w.done = false;
   w.tGridExit = t1;
+  for (int a = 0; a < 3; ++a) {  // (no step on an axis gridStart leaves with step 0)
+    const float da = fabsf(comp(d, a));
+    w.tDelta[a] = da < 1e-30f ? 3.0e38f : s.gridCell[a] / da;
+  }
   const V3 p = o + d * t0;
   int cell[3];
   for (int a = 0; a < 3; ++a) {
@@ -139,37 +168,39 @@ CANOPY_HD inline void walkBegin(const SceneView& s, InstanceWalk& w, HitSlots& s
     cell[a] = c < 0 ? 0 : (c >= s.gridDim[a] ? s.gridDim[a] - 1 : c);
   }
   gridStart(w.dda, cell, s.gridLo, s.gridCell, o, d);
-  for (int a = 0; a < 3; ++a) {
-    const int st = w.dda.step[a];
-    w.tDelta[a] = st == 0 ? 3.0e38f : (st > 0 ? s.gridCell[a] / comp(d, a) : -s.gridCell[a] / comp(d, a));
-  }
-  walkAddCell(s, w, o, d, t0, -1);
-  const float tx = gridExit(w.dda);
-  w.tCellExit = tx < t1 ? tx : t1;
+  walkEnterCell(s, w, o, d, t0, -1);
 }
 
-// Advances the DDA one cell (when the march reached tCellExit).
+// Advances the DDA one cell (when the march reached tCellExit). After a full list put a hit off
+// (`rewind`), the cell the march is in is added with its whole list: the current one again if the
+// march stopped inside it (where the hit put off starts), else the next one. One call of
+// walkEnterCell for all: the kernels' code is the smaller (code size costs these kernels time,
+// docs/performance.md).
 CANOPY_HD inline void walkAdvance(const SceneView& s, InstanceWalk& w, V3 o, V3 d, float tNow) {
   if (w.done) return;
-  if (w.tCellExit >= w.tGridExit) {
-    w.done = true;
-    return;
+  const bool whole = w.rewind;
+  w.rewind = false;
+  int face = -1;
+  if (!whole || !(tNow < gridExit(w.dda))) {
+    if (w.tCellExit >= w.tGridExit) {
+      w.done = true;
+      return;
+    }
+    face = onAxis(gridAxis(w.dda), [&](auto axis) {  // constant indices (grid_dda.h onAxis)
+      constexpr int a = decltype(axis)::value;
+      w.dda.cell[a] += w.dda.step[a];
+      w.dda.tNext[a] += w.tDelta[a];
+      if (w.dda.cell[a] < 0 || w.dda.cell[a] >= s.gridDim[a]) return -1;
+      return 2 * a + (w.dda.step[a] > 0 ? 0 : 1);
+    });
+    if (face < 0) {
+      w.done = true;
+      w.tCellExit = w.tGridExit;
+      return;
+    }
+    face = whole ? -1 : face;
   }
-  const int face = onAxis(gridAxis(w.dda), [&](auto axis) {  // constant indices (grid_dda.h onAxis)
-    constexpr int a = decltype(axis)::value;
-    w.dda.cell[a] += w.dda.step[a];
-    w.dda.tNext[a] += w.tDelta[a];
-    if (w.dda.cell[a] < 0 || w.dda.cell[a] >= s.gridDim[a]) return -1;
-    return 2 * a + (w.dda.step[a] > 0 ? 0 : 1);
-  });
-  if (face < 0) {
-    w.done = true;
-    w.tCellExit = w.tGridExit;
-    return;
-  }
-  walkAddCell(s, w, o, d, tNow, face);
-  const float tx = gridExit(w.dda);
-  w.tCellExit = tx < w.tGridExit ? tx : w.tGridExit;
+  walkEnterCell(s, w, o, d, tNow, face);
 }
 
 // Drops hits that ended before t (tout <= t); nothing to do before the nearest exit.

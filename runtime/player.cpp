@@ -580,6 +580,7 @@ nlohmann::json workReport(const WorkCounters& work, uint64_t passes) {
           {"zero_brick_samples", work.zeroBrickSamples},
           {"empty_block_skips", work.emptyBlockSkips},
           {"hit_drops", work.hitDrops},
+          {"hit_rewinds", work.hitRewinds},
           {"far_steps", work.farSteps},
           {"table_descents", work.tableDescents},
           {"voxel_px", voxelPixelsReport(work)}};

@@ -8,7 +8,10 @@ namespace canopy::play {
 // ------------------------------------------------------------------------------------------------
 // The scene as the kernel sees it (plain pointers: host memory on the CPU, device memory on the GPU)
 // ------------------------------------------------------------------------------------------------
-constexpr int kHitCapacity = 16;        // instances pending or active along one ray at once
+#ifndef CANOPY_HIT_CAPACITY
+#define CANOPY_HIT_CAPACITY 16
+#endif
+constexpr int kHitCapacity = CANOPY_HIT_CAPACITY;  // instances pending or active along one ray at once (InstanceWalk)
 static_assert(kHitCapacity <= 32, "hit bit masks (InstanceWalk::live, traceCone's evaluation mask) are 32 bits");
 constexpr uint32_t kFallbackLevels = 3;  // a missing brick may use a resident ancestor this much coarser
 constexpr float kMaxConstantCells = 4.0f;  // a uniform non-empty node is shaded at least every 4 cells
@@ -148,7 +151,8 @@ struct FarFieldView {
 struct WorkCounters {
   uint64_t cones, primarySteps, shadedSamples, segments, descents, brickSamples, shadowCones, shadowSteps, shadowMapLookups,
       shadowMapSteps, heldSegments, emptySteps, zeroBrickSamples, emptyBlockSkips,
-      hitDrops,  // hits dropped from a full hit list (InstanceWalk)
+      hitDrops,    // hits dropped for good from a full hit list: more than kHitCapacity active at once (InstanceWalk)
+      hitRewinds,  // hits put off by a full hit list, found again where the walk adds their cell whole (InstanceWalk)
       farSteps,  // steps of primary cones through the far field (farFieldStep)
       tableDescents;  // descents read from a descent table (descendByTable)
   // The level of detail rule at work (countVoxelFootprint): shading segments by the width of the

@@ -886,16 +886,36 @@ TEST(PlayBench, ScatterIsDeterministicAndPlacesEveryInstanceOnTheDisk) {
 // the hit list (what `dropped` switches to), over many rays through a 400-instance forest whose
 // boxes overlap, with hits retired as the march would: the same hits, added in the same order to the
 // same slots, cell after cell. Rays where the hit list overflows (more than kHitCapacity pending)
-// must occur too, so that the switch itself is exercised.
-TEST(InstanceWalk, FaceListsAddTheSameHitsAsWholeListsWithAMembershipScan) {
+// must occur too (the walk restarts where the first hit put off starts), so that the switch itself
+// is exercised.
+// A 400-instance forest whose boxes overlap (rays meet several at once), and rays through it.
+// row: also kWalkRow small instances 0.15 m apart in a row along +x at height 12 m (boxes 0.4 m
+// wide), more than kHitCapacity of them in one cell of the instance grid.
+constexpr int kWalkRow = 60;
+pl::HostScene walkForest(bool row = false) {
   pl::bench::ScatterOptions so;
   so.count = 400;
   so.models = 2;
   so.radius = 25;  // crowns overlap, so rays meet several boxes at once
-  const std::string p = pt::tmpDir("scenes") + "/forest400-walk.canopy";
-  pt::writeScene(p, {pt::sphereModel(16, 6, 0.5f, 0.25f), pt::sphereModel(12, 4, 0.8f, 0.25f)}, pl::bench::scatterInstances(so));
-  const canopy::CanopyFile f = canopy::CanopyFile::open(p);
-  const pl::HostScene scene = pl::buildScene(f);
+  std::vector<canopy::CanopyInstance> instances = pl::bench::scatterInstances(so);
+  for (int i = 0; row && i < kWalkRow; ++i) {
+    canopy::CanopyInstance in{};
+    const float m[12] = {0.1f, 0, 0, -4.5f + 0.15f * float(i), 0, 0.1f, 0, 12.0f, 0, 0, 0.1f, 0};
+    std::copy(m, m + 12, in.modelToWorld);
+    instances.push_back(in);
+  }
+  const std::string p = pt::tmpDir("scenes") + (row ? "/forest400-row-walk.canopy" : "/forest400-walk.canopy");
+  pt::writeScene(p, {pt::sphereModel(16, 6, 0.5f, 0.25f), pt::sphereModel(12, 4, 0.8f, 0.25f)}, instances);
+  return pl::buildScene(canopy::CanopyFile::open(p));
+}
+void walkForestRay(std::mt19937& rng, pl::V3& o, pl::V3& d) {
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  o = pl::v3(40.0f * u(rng), 2.0f + 8.0f * (u(rng) + 1.0f), 40.0f * u(rng));
+  d = pl::normalize(pl::v3(-o.x + 10.0f * u(rng), -o.y + 2.0f * u(rng), -o.z + 10.0f * u(rng)));
+}
+
+TEST(InstanceWalk, FaceListsAddTheSameHitsAsWholeListsWithAMembershipScan) {
+  const pl::HostScene scene = walkForest();
   // The lists themselves: face list (c, 2a + side) = the instances of cell c that the cell behind
   // that face (c - e_a for side 0, c + e_a for side 1; none outside the grid) does not list, in
   // the same (ascending) order.
@@ -931,12 +951,12 @@ TEST(InstanceWalk, FaceListsAddTheSameHitsAsWholeListsWithAMembershipScan) {
   pl::SceneView counted = s;  // walk a counts its drops (WorkCounters::hitDrops)
   counted.work = &work;
   std::mt19937 rng(11);
-  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
   int rays = 0, overflowed = 0;
   size_t added = 0;
   for (int r = 0; r < 3000; ++r) {
-    const pl::V3 o = pl::v3(40.0f * u(rng), 2.0f + 8.0f * (u(rng) + 1.0f), 40.0f * u(rng));
-    const pl::V3 d = pl::normalize(pl::v3(-o.x + 10.0f * u(rng), -o.y + 2.0f * u(rng), -o.z + 10.0f * u(rng)));
+    pl::V3 o, d;
+    walkForestRay(rng, o, d);
+    const uint64_t rewindsBefore = work.hitRewinds;
     pl::HitSlots slotsA, slotsB;
     pl::InstanceWalk a, b;
     pl::walkBegin(counted, a, slotsA, o, d, 0.0f, 3.0e38f);
@@ -962,17 +982,82 @@ TEST(InstanceWalk, FaceListsAddTheSameHitsAsWholeListsWithAMembershipScan) {
     }
     std::sort(seen.begin(), seen.end());
     added += size_t(std::unique(seen.begin(), seen.end()) - seen.begin());
-    overflowed += a.dropped ? 1 : 0;
+    overflowed += work.hitRewinds > rewindsBefore ? 1 : 0;
     ++rays;
   }
   EXPECT_EQ(rays, 3000);
   EXPECT_GT(added, size_t(3000));   // instances met: several per ray on average
-  EXPECT_GT(overflowed, 0);         // some rays overflowed the hit list (the switch ran)
+  EXPECT_GT(overflowed, 0);         // some rays overflowed the hit list (the restart ran)
   EXPECT_LT(overflowed, rays / 2);  // and most did not (the face lists ran)
-  EXPECT_GE(work.hitDrops, uint64_t(overflowed));  // every overflowed ray dropped at least one hit
-  EXPECT_LE(work.hitDrops, uint64_t(overflowed) * 64);
-  std::printf("walk: %zu instances met over %d rays, %d rays overflowed the hit list, %llu hits dropped\n", added, rays, overflowed,
-              (unsigned long long)work.hitDrops);
+  std::printf("walk: %zu instances met over %d rays, %d rays overflowed the hit list (%llu hits put off, %llu dropped)\n", added, rays,
+              overflowed, (unsigned long long)work.hitRewinds, (unsigned long long)work.hitDrops);
+}
+
+// A full hit list loses no instance (InstanceWalk: the walk restarts where the first hit it put
+// off starts): walked as the march walks it (up to each cell exit, retiring what ended), a ray
+// meets exactly the instances whose boxes it crosses, each with its interval, against every box
+// tested on its own. Half the rays run along a row of more instances than the list holds, within
+// one or two grid cells (a walk that dropped the farthest hit lost some of them for good).
+TEST(InstanceWalk, AFullHitListLosesNoInstance) {
+  const pl::HostScene scene = walkForest(true);
+  ASSERT_GT(kWalkRow, 2 * pl::kHitCapacity);
+  const pl::SceneView s0 = pl::hostSceneView(scene);
+  pl::WorkCounters work{};
+  pl::SceneView s = s0;
+  s.work = &work;
+  std::mt19937 rng(12);
+  int overflowed = 0;
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  int rowRays = 0;
+  for (int r = 0; r < 3000; ++r) {
+    pl::V3 o, d;
+    if (r % 2 == 0) {
+      walkForestRay(rng, o, d);
+    } else {  // along the row, from either end
+      const float side = r % 4 == 1 ? 1.0f : -1.0f;
+      o = pl::v3(-8.0f * side, 12.0f + 0.05f * u(rng), 0.05f * u(rng));
+      d = pl::normalize(pl::v3(side, 0.002f * u(rng), 0.002f * u(rng)));
+    }
+    std::vector<std::pair<uint32_t, float>> expected;  // instance, tout
+    for (uint32_t i = 0; i < s.instanceCount; ++i) {
+      const pl::InstanceView& inst = s.instances[i];
+      float t0, t1;
+      pl::rayBox(pl::applyPoint(inst.worldToUnit, o), pl::applyVector(inst.worldToUnit, d), pl::v3(inst.unitLo[0], inst.unitLo[1], inst.unitLo[2]),
+                 pl::v3(inst.unitHi[0], inst.unitHi[1], inst.unitHi[2]), t0, t1);
+      if (t1 > std::max(t0, 0.0f)) expected.emplace_back(i, t1);
+    }
+    const uint64_t rewindsBefore = work.hitRewinds;
+    pl::HitSlots slots;
+    pl::InstanceWalk w;
+    pl::walkBegin(s, w, slots, o, d, 0.0f, 3.0e38f);
+    std::vector<std::pair<uint32_t, float>> met;
+    const auto record = [&] {
+      for (uint32_t m = w.live; m != 0; m &= m - 1u) {
+        const pl::Hit& h = w.hits[pl::lowestSetBit(m)];
+        if (std::find_if(met.begin(), met.end(), [&](const auto& e) { return e.first == h.instance; }) == met.end()) met.emplace_back(h.instance, h.tout);
+      }
+    };
+    record();
+    float t = 0.0f;
+    for (int step = 0; step < 10000 && !w.done; ++step) {
+      ASSERT_GE(w.tCellExit, t) << "ray " << r;
+      t = w.tCellExit;
+      pl::walkRetire(w, t);
+      int advances = 0;
+      for (; advances < 100 && !w.done && t >= w.tCellExit; ++advances) pl::walkAdvance(s, w, o, d, t);
+      ASSERT_LT(advances, 100) << "ray " << r << ": the walk does not move on from " << t;
+      record();
+    }
+    ASSERT_TRUE(w.done) << "ray " << r;
+    std::sort(met.begin(), met.end());
+    ASSERT_EQ(met, expected) << "ray " << r;
+    overflowed += work.hitRewinds > rewindsBefore ? 1 : 0;
+    rowRays += r % 2 == 1 && expected.size() >= size_t(kWalkRow) ? 1 : 0;
+  }
+  EXPECT_EQ(rowRays, 1500);   // every ray along the row met all of it
+  EXPECT_GT(overflowed, 1500);  // the restart ran on those and on some of the others
+  EXPECT_EQ(work.hitDrops, 0u);  // no more than kHitCapacity boxes overlap anywhere in this forest
+  std::printf("%d of 3000 rays overflowed the hit list (%llu hits put off)\n", overflowed, (unsigned long long)work.hitRewinds);
 }
 
 TEST(PlayBench, A400InstanceForestRendersWithEveryInstanceInTheGrid) {
