@@ -99,8 +99,8 @@ CANOPY_HD CANOPY_FORCEINLINE const uint32_t* descentLightItem(const SceneView& s
 }
 
 // The pool slot of brick `brick`'s page (-1: not resident); its page and slot in the page. Here and
-// below, kPaths without kPathDetail (scenePaths: no model has detail levels or Haar light) compiles
-// out what only such models use.
+// below, kPaths without kPathDetail (scenePaths: no model has detail levels) compiles out what only
+// such models use, and without kPathExact the Haar light of --light exact.
 template <uint32_t kPaths = kAllPaths>
 CANOPY_HD inline int32_t residentSlot(const SceneView& s, const ModelView& m, uint32_t brick, uint32_t& page, uint32_t& inPage) {
   if (!(kPaths & kPathDetail) || brick < m.denseBricks) {
@@ -274,7 +274,7 @@ template <uint32_t kPaths = kAllPaths>
 CANOPY_HD inline void segmentLight(const SceneView& s, const ModelView& m, const Descent& d, V3 um, float tm, Segment& g) {
   g.haarLocal = kHaarNone;
   g.haarItem = nullptr;
-  if ((kPaths & kPathDetail) && s.shade.exactLight && m.haarLight && d.level >= m.lightDepth) {
+  if ((kPaths & kPathExact) && s.shade.exactLight && m.haarLight && d.level >= m.lightDepth) {
     // --light exact, the light lattice's level and the detail levels below it of a Haar-lit model:
     // the chaar brick at the sample's light lattice point, if its page is resident (else it is
     // asked for and the light items serve).
@@ -318,7 +318,7 @@ CANOPY_HD inline void segmentLight(const SceneView& s, const ModelView& m, const
 template <bool kWithLight = true, uint32_t kPaths = kAllPaths>
 CANOPY_HD inline void segmentIndirect(const SceneView& s, const InstanceView& inst, const Segment& g, V3 o, V3 dir, float out[3]) {
   const SceneLightPair factor = sceneLightFactors(s.light, o + dir * g.tSample);
-  if (kWithLight && (kPaths & kPathDetail) && g.haarLocal != kHaarNone) {
+  if (kWithLight && (kPaths & kPathExact) && g.haarLocal != kHaarNone) {
     haar::BrickLookup at;
     at.slot = 0;
     at.lx = int(g.haarLocal & 3u), at.ly = int((g.haarLocal >> 2) & 3u), at.lz = int((g.haarLocal >> 4) & 3u);

@@ -159,7 +159,8 @@ void addModels(const CanopyFile& f, HostScene& s, std::vector<M34>& latticeToMod
       logWarn(f.path() + ": model '" + std::string(M.name, strnlen(M.name, sizeof(M.name))) +
               "' is flagged lit but has no light item per brick; it is lit as density-only (direct sun + ambient)");
     s.litModels += v.hasLight;
-    s.detailModels += M.detailLevels > 0 || M.sparseBricks > 0 || v.haarLight ? 1u : 0u;
+    s.detailModels += M.detailLevels > 0 || M.sparseBricks > 0 ? 1u : 0u;
+    s.haarModels += v.haarLight ? 1u : 0u;
     if (v.hasLight && !(M.flags & kCanopyModelScatteredSun)) {
       ++s.totalSunModels;
       logWarn(f.path() + ": model '" + std::string(M.name, strnlen(M.name, sizeof(M.name))) +
@@ -578,6 +579,7 @@ SceneView hostSceneView(const HostScene& s) {
   v.lightItemsPerPage = indexDivisor(s.lightItemsPerPage > 0 ? s.lightItemsPerPage : 1);
   v.litModels = s.litModels;
   v.detailModels = s.detailModels;
+  v.haarModels = s.haarModels;
   v.light = s.light;
   v.light.values = s.hasSceneLight ? s.lightPairs.data() : nullptr;
   return v;

@@ -61,7 +61,8 @@ struct HostScene {
   uint64_t lightPageBytes = 0;            // bytes of the lit models' light pages (streamed, same cache)
   uint64_t haarPageBytes = 0;             // bytes of the Haar-lit models' Haar pages (streamed with --light exact)
   uint32_t litModels = 0;                 // models sampled with LB light
-  uint32_t detailModels = 0;              // models with detail levels (sparse bricks) or Haar light
+  uint32_t detailModels = 0;              // models with detail levels (sparse bricks)
+  uint32_t haarModels = 0;                // models with Haar light (--light exact)
   uint32_t totalSunModels = 0;            // of them, with sun bases that include the direct beam (counted twice)
 
   // Sets every instance's sun weights for the direction towards the sun (world), and with a

@@ -186,7 +186,8 @@ struct SceneView {
   uint32_t brickMaskOffset;      // where a brick page image keeps its empty-cell masks (0: no masks, no skip)
   IndexDivisor lightItemsPerPage;
   uint32_t litModels;            // models with LB light (0: renderPixel takes the path without light code)
-  uint32_t detailModels;         // models with detail levels or Haar light (0: the pixel kernels without their code, scenePaths)
+  uint32_t detailModels;         // models with detail levels (0: the pixel kernels without their code, scenePaths)
+  uint32_t haarModels;           // models with Haar light (with --light exact, the pixel kernels with its code)
   SceneLightView light;
   ShadeParams shade;
   ShadowMapView shadowMap;       // kShadowsMap: this pass's sun transmittance map
@@ -199,20 +200,25 @@ struct SceneView {
 // H100 the far field's and the descent table's code, unused, made the real forest's frames 19-25 %
 // slower, and the detail levels' code cost 11-14 % (docs/performance.md, "Kernel code size").
 //   kPathFar: the far field (a frame whose cones can reach it: s.far.values set);
-//   kPathDetail: detail levels' sparse bricks and Haar light (s.detailModels > 0);
-//   kPathTable: descents read from the models' descent tables (s.shade.descentTable).
-constexpr uint32_t kPathFar = 1, kPathDetail = 2, kPathTable = 4, kAllPaths = 7;
+//   kPathDetail: detail levels' sparse bricks (s.detailModels > 0);
+//   kPathTable: descents read from the models' descent tables (s.shade.descentTable);
+//   kPathExact: --light exact's Haar light (s.shade.exactLight with a model that has Haar light).
+//     A reference mode: compiled only with every other path (kAllPaths), to bound the kernels
+//     compiled; apart, the default frames of Haar-lit models leave its code out (docs/performance.md).
+constexpr uint32_t kPathFar = 1, kPathDetail = 2, kPathTable = 4, kPathExact = 8, kAllPaths = 15;
 CANOPY_HD inline uint32_t scenePaths(const SceneView& s) {
+  if (s.shade.exactLight && s.haarModels > 0) return kAllPaths;
   return (s.far.values ? kPathFar : 0u) | (s.detailModels > 0 ? kPathDetail : 0u) | (s.shade.descentTable ? kPathTable : 0u);
 }
 // Stereo's kernels (the traced eye's, the holes') come in three path sets only, to bound the
 // kernels compiled: none, the descent table alone (the default frame of a scene without detail
 // levels and far field), and every path for the rest.
 CANOPY_HD constexpr uint32_t stereoPaths(uint32_t paths) { return paths == 0 || paths == kPathTable ? paths : kAllPaths; }
-// The path set compiled after `paths` (< kAllPaths) for a mode: every set in turn, or the next of
-// stereo's (a set that stereoPaths keeps as it is).
+// The path set compiled after `paths` (< kAllPaths) for a mode: every set without kPathExact in
+// turn, then kAllPaths; or the next of stereo's (a set that stereoPaths keeps as it is).
 CANOPY_HD constexpr uint32_t nextPathSet(uint32_t paths, bool stereo) {
   uint32_t next = paths + 1;
+  if (next & kPathExact) next = kAllPaths;
   while (stereo && stereoPaths(next) != next) ++next;
   return next;
 }

@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <map>
 #include <string>
@@ -21,6 +22,7 @@
 #include "runtime/cone.h"
 #include "runtime/player.h"
 #include "tests/octreepack/synthetic.h"
+#include "tests/play/resident.h"
 #include "tests/play/scenes.h"
 #include "tests/play/views.h"
 
@@ -396,6 +398,42 @@ TEST(Light, ExactHaarLightIsSampledAtTheSamplesLatticePoint) {
   EXPECT_EQ(rf["light"], "fast");
   EXPECT_EQ(int(rf["pages_streamed"]), int(ri["pages_streamed"]));  // no Haar page was wanted
   for (size_t i = 0; i < fast.size(); ++i) ASSERT_NEAR(fast[i], ref[i], 2e-5f * std::fabs(ref[i]) + 1e-6f) << "value " << i;
+}
+
+// A Haar-lit model's default frame (--light fast) is rendered by the kernel without the exact
+// light's code (scenePaths: no kPathExact, and no kPathDetail without detail levels), and gives the
+// every-path kernel's pixels bit for bit; with --light exact the frame takes the every-path kernel.
+TEST(Light, AHaarLitFramesDefaultPathsLeaveTheExactLightOutAndChangeNoPixel) {
+  pl::PlayOptions o = pt::convergedView(haarSphere(1.0f), 40, 30);
+  o.sun = "0.3,0.8,-0.52";
+  o.camera = "orbit:azimuth=30,elevation=20,turns=0";
+  const canopy::CanopyFile f = canopy::CanopyFile::open(o.input);
+  pl::HostScene scene = pl::buildScene(f);
+  const std::vector<pl::FrameSetup> plan = pl::framePlan(o, scene);
+  pl::ShadeParams shade = pl::shadeParams(o);
+  shade.shadows = pl::kShadowsOff;
+  shade.toSun = plan[0].toSun;
+  scene.setSun(shade.toSun);
+  pt::ResidentPages pages(f);
+  pl::SceneView v = pages.view(scene);
+  v.shade = shade;
+  ASSERT_EQ(v.haarModels, 1u);
+  ASSERT_EQ(v.detailModels, 0u);
+  ASSERT_EQ(pl::scenePaths(v), pl::kPathTable);
+  pl::SceneView exact = v;
+  exact.shade.exactLight = 1;
+  EXPECT_EQ(pl::scenePaths(exact), pl::kAllPaths);
+  const pl::CameraView& c = plan[0].camera;
+  const int64_t n = int64_t(c.width) * c.height;
+  std::vector<float> rgba(size_t(n) * 4), rgbaAll(size_t(n) * 4);
+  int covered = 0;
+  for (int64_t i = 0; i < n; ++i) {
+    pl::renderPixelT<false, true, false, false, pl::kPathTable>(v, c, i, rgba.data(), nullptr, 0.0f);
+    pl::renderPixelT<false, true, false, false, pl::kAllPaths>(v, c, i, rgbaAll.data(), nullptr, 0.0f);
+    covered += rgba[size_t(4 * i + 3)] > 0.02f ? 1 : 0;
+  }
+  EXPECT_GT(covered, int(n / 20));  // the ball is in view
+  EXPECT_EQ(std::memcmp(rgba.data(), rgbaAll.data(), rgba.size() * sizeof(float)), 0);
 }
 
 // A 19-base scene light (format 1.2), uniform over the ball: B00 = 0.6 and sun base j = 0.1 + 0.05 j.
