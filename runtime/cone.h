@@ -447,14 +447,9 @@ CANOPY_HD inline ConeResult traceCone(const SceneView& s, V3 o, V3 d, float pixe
         q = {w.done ? tNear : w.tCellExit, 0.0f, {0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}, false, 3.0e38f};
         const uint32_t evaluate = boundStep<kWithCones>(s, w, t, q);
         evaluateHits<kWithLight, kPaths>(s, w, o, d, t, pixelAngle, evaluate, stepGrowth(s.shade, T), q);
-        if (!q.active && w.live == 0) {
-          ended = w.done;
-          if (!ended) {
-            t = w.tCellExit;
-            walkAdvance(s, w, o, d, t);
-            continue;
-          }
-        }
+        // No hit in this cell: an empty step to its exit (q.next), where the walk moves on below
+        // (one call site of walkAdvance in this loop, not two: these kernels wait on their code)
+        if (!q.active && w.live == 0) ended = w.done;
       }
       if (ended) {  // no instance left before tNear: the far field from tNear on, if any
         if (!kFar || !(tNear < tMax) || !farFieldSpan(s.far, o, d, tNear > t ? tNear : t, tMax, t, farEnd)) break;

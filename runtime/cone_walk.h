@@ -168,7 +168,10 @@ CANOPY_HD inline void walkBegin(const SceneView& s, InstanceWalk& w, HitSlots& s
     cell[a] = c < 0 ? 0 : (c >= s.gridDim[a] ? s.gridDim[a] - 1 : c);
   }
   gridStart(w.dda, cell, s.gridLo, s.gridCell, o, d);
-  walkEnterCell(s, w, o, d, t0, -1);
+  // The first cell's instances are added by the march's first walkAdvance, at t0 (its whole list,
+  // as after a full list): one inlined copy of walkAddCell fewer in each march.
+  w.rewind = true;
+  w.tCellExit = t0;
 }
 
 // Advances the DDA one cell (when the march reached tCellExit). After a full list put a hit off
