@@ -63,7 +63,7 @@ struct InstanceWalk {
   float tCellExit;  // the march may advance up to here with the current list
   float tGridExit;
   bool done;
-  bool rewind;   // a full list put a hit off: at tCellExit the current cell is added again
+  bool rewind;   // at tCellExit the current cell is added whole: the first cell (walkBegin), or after a full list put a hit off
   bool dropped;  // a hit was dropped from a full list: cells add their whole lists with a membership scan
 };
 constexpr uint32_t kAllHitSlots = kHitCapacity >= 32 ? 0xFFFFFFFFu : (1u << kHitCapacity) - 1u;

@@ -8,7 +8,7 @@ namespace canopy::play {
 // ------------------------------------------------------------------------------------------------
 // The scene as the kernel sees it (plain pointers: host memory on the CPU, device memory on the GPU)
 // ------------------------------------------------------------------------------------------------
-#ifndef CANOPY_HIT_CAPACITY
+#ifndef CANOPY_HIT_CAPACITY  // (a compile-time dial for measurements, e.g. bench/play/variant.sh NAME -DCANOPY_HIT_CAPACITY=8)
 #define CANOPY_HIT_CAPACITY 16
 #endif
 constexpr int kHitCapacity = CANOPY_HIT_CAPACITY;  // instances pending or active along one ray at once (InstanceWalk)
