@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "formats/canopy_file.h"
+#include "runtime/player.h"
 #include "runtime/scene.h"
 
 namespace canopy::play::testing {
@@ -36,6 +37,31 @@ struct ResidentPages {
     v.stamp = 1;
     return v;
   }
+};
+
+// The scene view of the first frame of o (its camera, sun and ground; shadows off) with every page
+// resident, for tests that call renderPixel* directly.
+struct FrameView {
+  CanopyFile f;
+  HostScene scene;
+  ShadeParams shade;
+  ResidentPages pages;
+  SceneView v{};
+  CameraView camera{};
+
+  explicit FrameView(const PlayOptions& o) : f(CanopyFile::open(o.input)), scene(buildScene(f)), pages(f) {
+    const std::vector<FrameSetup> plan = framePlan(o, scene);
+    shade = shadeParams(o);
+    shade.shadows = kShadowsOff;
+    shade.toSun = plan[0].toSun;
+    setGround(o, scene, shade);
+    scene.setSun(shade.toSun);
+    v = pages.view(scene);
+    v.shade = shade;
+    camera = plan[0].camera;
+  }
+  FrameView(const FrameView&) = delete;
+  FrameView& operator=(const FrameView&) = delete;
 };
 
 }  // namespace canopy::play::testing

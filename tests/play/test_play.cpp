@@ -890,8 +890,9 @@ TEST(PlayBench, ScatterIsDeterministicAndPlacesEveryInstanceOnTheDisk) {
 // is exercised.
 // A 400-instance forest whose boxes overlap (rays meet several at once), and rays through it.
 // row: also kWalkRow small instances 0.15 m apart in a row along +x at height 12 m (boxes 0.4 m
-// wide), more than kHitCapacity of them in one cell of the instance grid.
-constexpr int kWalkRow = 60;
+// wide), more than kHitCapacity of them in one cell of the instance grid, and kWalkStack of the same
+// instances at one place (20, 12, 20): more boxes than the list holds overlap there.
+constexpr int kWalkRow = 60, kWalkStack = pl::kHitCapacity + 4;
 pl::HostScene walkForest(bool row = false) {
   pl::bench::ScatterOptions so;
   so.count = 400;
@@ -901,6 +902,12 @@ pl::HostScene walkForest(bool row = false) {
   for (int i = 0; row && i < kWalkRow; ++i) {
     canopy::CanopyInstance in{};
     const float m[12] = {0.1f, 0, 0, -4.5f + 0.15f * float(i), 0, 0.1f, 0, 12.0f, 0, 0, 0.1f, 0};
+    std::copy(m, m + 12, in.modelToWorld);
+    instances.push_back(in);
+  }
+  for (int i = 0; row && i < kWalkStack; ++i) {
+    canopy::CanopyInstance in{};
+    const float m[12] = {0.1f, 0, 0, 20.0f, 0, 0.1f, 0, 12.0f, 0, 0, 0.1f, 20.0f};
     std::copy(m, m + 12, in.modelToWorld);
     instances.push_back(in);
   }
@@ -996,8 +1003,10 @@ TEST(InstanceWalk, FaceListsAddTheSameHitsAsWholeListsWithAMembershipScan) {
 // A full hit list loses no instance (InstanceWalk: the walk restarts where the first hit it put
 // off starts): walked as the march walks it (up to each cell exit, retiring what ended), a ray
 // meets exactly the instances whose boxes it crosses, each with its interval, against every box
-// tested on its own. Half the rays run along a row of more instances than the list holds, within
-// one or two grid cells (a walk that dropped the farthest hit lost some of them for good).
+// tested on its own. A third of the rays run along a row of more instances than the list holds,
+// within one or two grid cells (a walk that dropped the farthest hit lost some of them for good). A
+// third cross a stack of more boxes than the list holds at one place: there, and only there, hits
+// are dropped (the rest of the stack is met, each with its interval).
 TEST(InstanceWalk, AFullHitListLosesNoInstance) {
   const pl::HostScene scene = walkForest(true);
   ASSERT_GT(kWalkRow, 2 * pl::kHitCapacity);
@@ -1008,15 +1017,19 @@ TEST(InstanceWalk, AFullHitListLosesNoInstance) {
   std::mt19937 rng(12);
   int overflowed = 0;
   std::uniform_real_distribution<float> u(-1.0f, 1.0f);
-  int rowRays = 0;
+  int rowRays = 0, stackRays = 0;
   for (int r = 0; r < 3000; ++r) {
     pl::V3 o, d;
-    if (r % 2 == 0) {
+    const bool stack = r % 3 == 2;
+    if (r % 3 == 0) {
       walkForestRay(rng, o, d);
-    } else {  // along the row, from either end
-      const float side = r % 4 == 1 ? 1.0f : -1.0f;
+    } else if (!stack) {  // along the row, from either end
+      const float side = r % 2 == 1 ? 1.0f : -1.0f;
       o = pl::v3(-8.0f * side, 12.0f + 0.05f * u(rng), 0.05f * u(rng));
       d = pl::normalize(pl::v3(side, 0.002f * u(rng), 0.002f * u(rng)));
+    } else {  // through the stack
+      o = pl::v3(20.0f + 0.05f * u(rng), 12.0f + 0.05f * u(rng), 15.0f);
+      d = pl::normalize(pl::v3(0.002f * u(rng), 0.002f * u(rng), 1.0f));
     }
     std::vector<std::pair<uint32_t, float>> expected;  // instance, tout
     for (uint32_t i = 0; i < s.instanceCount; ++i) {
@@ -1026,7 +1039,7 @@ TEST(InstanceWalk, AFullHitListLosesNoInstance) {
                  pl::v3(inst.unitHi[0], inst.unitHi[1], inst.unitHi[2]), t0, t1);
       if (t1 > std::max(t0, 0.0f)) expected.emplace_back(i, t1);
     }
-    const uint64_t rewindsBefore = work.hitRewinds;
+    const uint64_t rewindsBefore = work.hitRewinds, dropsBefore = work.hitDrops;
     pl::HitSlots slots;
     pl::InstanceWalk w;
     pl::walkBegin(s, w, slots, o, d, 0.0f, 3.0e38f);
@@ -1050,14 +1063,25 @@ TEST(InstanceWalk, AFullHitListLosesNoInstance) {
     }
     ASSERT_TRUE(w.done) << "ray " << r;
     std::sort(met.begin(), met.end());
-    ASSERT_EQ(met, expected) << "ray " << r;
     overflowed += work.hitRewinds > rewindsBefore ? 1 : 0;
-    rowRays += r % 2 == 1 && expected.size() >= size_t(kWalkRow) ? 1 : 0;
+    if (!stack) {
+      ASSERT_EQ(met, expected) << "ray " << r;
+      ASSERT_EQ(work.hitDrops, dropsBefore) << "ray " << r;  // nowhere else do more than kHitCapacity boxes overlap
+      rowRays += r % 3 == 1 && expected.size() >= size_t(kWalkRow) ? 1 : 0;
+      continue;
+    }
+    // the stack: a full list of it at once, the rest dropped; what was met, met with its interval
+    ASSERT_EQ(expected.size(), size_t(kWalkStack)) << "ray " << r;
+    ASSERT_GT(work.hitDrops, dropsBefore) << "ray " << r;
+    ASSERT_GE(met.size(), size_t(pl::kHitCapacity)) << "ray " << r;
+    for (const auto& e : met) ASSERT_NE(std::find(expected.begin(), expected.end(), e), expected.end()) << "ray " << r;
+    ++stackRays;
   }
-  EXPECT_EQ(rowRays, 1500);   // every ray along the row met all of it
-  EXPECT_GT(overflowed, 1500);  // the restart ran on those and on some of the others
-  EXPECT_EQ(work.hitDrops, 0u);  // no more than kHitCapacity boxes overlap anywhere in this forest
-  std::printf("%d of 3000 rays overflowed the hit list (%llu hits put off)\n", overflowed, (unsigned long long)work.hitRewinds);
+  EXPECT_EQ(rowRays, 1000);   // every ray along the row met all of it
+  EXPECT_EQ(stackRays, 1000);
+  EXPECT_GT(overflowed, 1000);  // the restart ran on those and on some of the others
+  std::printf("%d of 3000 rays overflowed the hit list (%llu hits put off, %llu dropped in the stack)\n", overflowed,
+              (unsigned long long)work.hitRewinds, (unsigned long long)work.hitDrops);
 }
 
 TEST(PlayBench, A400InstanceForestRendersWithEveryInstanceInTheGrid) {

@@ -110,24 +110,14 @@ pl::PlayOptions groveView(int w, int h) {
 // (the map is a backend's pass; nothing here depends on it): the scene's view and the two eyes.
 struct GroveStereo {
   pl::PlayOptions o;
-  canopy::CanopyFile f;
-  pl::HostScene scene;
-  pl::ShadeParams shade;
-  pt::ResidentPages pages;
-  pl::SceneView v{};
+  pt::FrameView frame;
+  const pl::ShadeParams& shade = frame.shade;
+  const pl::SceneView& v = frame.v;
   pl::CameraView left{}, right{};
   float scale = 0.0f;  // the eyes' disparity scale
 
-  GroveStereo(int w, int h) : o(withIpd(groveView(w, h))), f(canopy::CanopyFile::open(o.input)), scene(pl::buildScene(f)), pages(f) {
-    const std::vector<pl::FrameSetup> plan = pl::framePlan(o, scene);
-    shade = pl::shadeParams(o);
-    shade.shadows = pl::kShadowsOff;
-    shade.toSun = plan[0].toSun;
-    pl::setGround(o, scene, shade);
-    scene.setSun(shade.toSun);
-    v = pages.view(scene);
-    v.shade = shade;
-    pl::stereoEyes(plan[0].camera, o.stereoIpd, left, right);
+  GroveStereo(int w, int h) : o(withIpd(groveView(w, h))), frame(o) {
+    pl::stereoEyes(frame.camera, o.stereoIpd, left, right);
     scale = pl::stereoDisparityScale(left, o.stereoIpd);
   }
   GroveStereo(const GroveStereo&) = delete;
