@@ -75,6 +75,35 @@ CANOPY_HD inline void ambientOnly(const SceneView& s, SceneLightPair scene, floa
   lbIndirect(none, zero, b0, s.shade.sun, s.shade.ambient, scene, out);
 }
 
+// lbIndirect()'s sum (the same terms in the same order) over bases that `sample(base, rgb)` gives at
+// the sample point: the sun bases of w, each times its weight, scaled by the sun radiance and the
+// scene's sun factor, then B_0's term, ambient B_0 / 18 * ambientFactor. A zero weight's base is not
+// sampled (it would add +0: a base's value is finite). On the device the four bases run in a rolled
+// loop, one copy of the sampler: unrolled, the light items' sampler was a sixth of the forest's lit
+// kernel, whose warps then waited for instruction fetch half of the time; rolled, the real forest's
+// frames took 0.86-0.90x the time on one H100 (docs/performance.md, "Kernel code size").
+template <class SampleBase>
+CANOPY_HD CANOPY_FORCEINLINE void lbBaseSum(const sun::Weights& w, const float sun[3], float ambient, float sunFactor,
+                                            float ambientFactor, const SampleBase& sample, float out[3]) {
+  float acc[3] = {0.0f, 0.0f, 0.0f};
+#if defined(__CUDA_ARCH__)
+#pragma unroll 1
+#endif
+  for (int v = 0; v < 4; ++v) {
+    if (v == 3) {  // the three sun bases are summed: scale them by the sun radiance and the scene's sun factor before B_0 joins
+      for (int c = 0; c < 3; ++c) acc[c] = acc[c] * sun[c] * sunFactor;
+    }
+    const float weight = v == 0 ? w.weight[0] : v == 1 ? w.weight[1] : v == 2 ? w.weight[2] : ambient * kAmbientB0Scale;
+    if (!(weight != 0.0f)) continue;
+    const uint32_t base = v == 0 ? uint32_t(w.base[0]) : v == 1 ? uint32_t(w.base[1]) : v == 2 ? uint32_t(w.base[2]) : 0u;
+    float b[3];
+    sample(base, b);
+    const float f = v == 3 ? ambientFactor : 1.0f;  // B_0's term: ambient B_0 / 18 * ambientFactor (x 1 is exact)
+    for (int c = 0; c < 3; ++c) acc[c] += weight * b[c] * f;
+  }
+  for (int c = 0; c < 3; ++c) out[c] = acc[c];
+}
+
 // The LB indirect light from a Haar item (--light exact at the finest level of a Haar-lit model) at
 // the brick-local footprint `at`: (sum_v w_v B_v) * sun * sunFactor + ambient B_0 / 18 * ambientFactor,
 // as lbIndirect() computes it (the same terms in the same order), each base haar::sampleBrick of the item (bit for
@@ -93,44 +122,24 @@ CANOPY_HD inline void ambientOnly(const SceneView& s, SceneLightPair scene, floa
 CANOPY_HD CANOPY_PLAY_NOINLINE void sampleHaarLbLight(const unsigned char* item, uint32_t fp16, const haar::BrickLookup& at,
                                                       const sun::Weights& w, haar::Rgb sun, float ambient,
                                                       float sunFactor, float ambientFactor, float out[3]) {
-  float acc[3] = {0.0f, 0.0f, 0.0f};
-  if (item) {
-    const uint32_t base[4] = {uint32_t(w.base[0]), uint32_t(w.base[1]), uint32_t(w.base[2]), 0u};
-    const float weight[4] = {w.weight[0], w.weight[1], w.weight[2], ambient * kAmbientB0Scale};
-#if defined(__CUDA_ARCH__)
-#pragma unroll 1
-#endif
-    for (int v = 0; v < 4; ++v) {
-      if (v == 3) {  // the three sun bases are summed: scale them by the sun radiance and the scene's sun factor before B_0 joins
-        acc[0] = acc[0] * sun.r * sunFactor;
-        acc[1] = acc[1] * sun.g * sunFactor;
-        acc[2] = acc[2] * sun.b * sunFactor;
-      }
-      if (!(weight[v] != 0.0f)) continue;  // a zero weight adds +0 (lbIndirect would add 0 * B)
-      const haar::Rgb c = canopyHaarSampleAt(item, fp16, base[v], at);
-      const float f = v == 3 ? ambientFactor : 1.0f;  // B_0's term: ambient B_0 / 18 * ambientFactor (x 1 is exact)
-      acc[0] += weight[v] * c.r * f;
-      acc[1] += weight[v] * c.g * f;
-      acc[2] += weight[v] * c.b * f;
-    }
+  if (!item) {
+    out[0] = out[1] = out[2] = 0.0f;
+    return;
   }
-  for (int c = 0; c < 3; ++c) out[c] = acc[c];
+  const float sunRgb[3] = {sun.r, sun.g, sun.b};
+  lbBaseSum(w, sunRgb, ambient, sunFactor, ambientFactor, [&](uint32_t base, float rgb[3]) {
+    const haar::Rgb c = canopyHaarSampleAt(item, fp16, base, at);
+    rgb[0] = c.r, rgb[1] = c.g, rgb[2] = c.b;
+  }, out);
 }
 
 // The LB indirect light from a light item at node-local l in [0,1]^3: the (up to) three sun bases
 // of the instance's lookup and B_0, each trilinear (canopySampleLight's interpolation, the corners
-// found once), then lbIndirect().
+// found once), summed as lbIndirect() sums them (lbBaseSum).
 CANOPY_HD inline void sampleLbLight(const uint32_t* item, const sun::Weights& w, float lx, float ly, float lz,
                                     const float sun[3], float ambient, SceneLightPair scene, float out[3]) {
   const CanopyLightCorners k = canopyLightCorners(lx, ly, lz);
-  float bases[3][3];
-  for (int v = 0; v < 3; ++v) {
-    bases[v][0] = bases[v][1] = bases[v][2] = 0.0f;
-    if (w.weight[v] > 0.0f) canopySampleLightAt(item, uint32_t(w.base[v]), k, bases[v]);
-  }
-  float b0[3];
-  canopySampleLightAt(item, 0, k, b0);
-  lbIndirect(w, bases, b0, sun, ambient, scene, out);
+  lbBaseSum(w, sun, ambient, scene.sun, scene.ambient, [&](uint32_t base, float rgb[3]) { canopySampleLightAt(item, base, k, rgb); }, out);
 }
 
 }  // namespace canopy::play
