@@ -62,8 +62,8 @@ class Backend {
   virtual void setStereoHoles(int order, int minBlocks) { (void)order, (void)minBlocks; }
   // The pixels one GPU warp renders: a w x h tile, w h = 32 (CUDA only; 8x4 by default).
   virtual void setPixelTile(int w, int h) { (void)w, (void)h; }
-  // CUDA: the pixel kernel compiled for at least this many blocks of 128 threads per SM (6 or 8;
-  // 0, the default: unconstrained; map and no-shadow modes; a timing knob)
+  // CUDA: the pixel kernel compiled for at least this many blocks of 128 threads per SM (6 or 8; -1:
+  // unconstrained; 0, the default: 6 without LB light, 5 with it; map and no-shadow modes; a timing knob)
   virtual void setPixelOccupancy(int minBlocks) { (void)minBlocks; }
   // Counts the work of the following renders into `work` (CPU reference only; others ignore it).
   virtual void countWork(WorkCounters* work) { (void)work; }

@@ -43,12 +43,15 @@ struct PixelKernel {
 
 // The pixel kernel: 128 threads per block; kMinBlocks > 0 asks ptxas for at least that many
 // resident blocks per SM (__launch_bounds__: fewer registers, maybe spills), 0 leaves it free.
-// Map kernels by default: 6 blocks for scenes without LB light, unconstrained with it (ptxas -v,
-// sm_90, with the empty-cell skip: 91 registers and a 2608-byte stack free, 56 bytes of spill
-// stores at 6 blocks; 134 registers with light). Measured on an H200 before the skip, when a step
-// stopped keeping a per-hit segment array (docs/performance.md, 'Occupancy'; 87 registers then,
-// 12 bytes of spills at 6): 6 blocks took the forest orbit 43.19 -> 42.49 ms and the walk 15.41 -> 14.84 ms,
-// the grove (lit) 14.44 -> 14.90 ms; 8 blocks was slower on all three. setPixelOccupancy overrides
+// Map kernels by default: 6 blocks for scenes without LB light, 5 with it (ptxas -v, sm_90, with
+// the empty-cell skip: 91 registers and a 2608-byte stack free, 56 bytes of spill stores at 6
+// blocks). Measured on an H200 before the skip, when a step stopped keeping a per-hit segment array
+// (docs/performance.md, 'Occupancy'; 87 registers then, 12 bytes of spills at 6): 6 blocks took the
+// forest orbit 43.19 -> 42.49 ms and the walk 15.41 -> 14.84 ms, the grove (lit) 14.44 -> 14.90 ms;
+// 8 blocks was slower on all three. The lit kernel since its light bases are rolled (cone_light.h
+// lbBaseSum): 113 registers free (4 blocks), 96 and 56 bytes of spill stores at 5; on the real
+// forest (one H100, 2026-12-06) 5 blocks took 0.98-0.99x the frame time at 4K, 0.99-1.01x at 1080p;
+// 6 blocks (80 registers) 1.07-1.11x. setPixelOccupancy overrides
 // it (6, 8, or -1 for unconstrained). Shadow-cone kernel: 5 (96 registers, as before the light change).
 constexpr int kPixelBlock = 128;
 template <bool kWithCones, bool kWithLight, bool kWithDepth, bool kBehind, uint32_t kPaths, int kMinBlocks>
@@ -359,12 +362,11 @@ class CudaBackend final : public Backend {
     } else if constexpr (kWithDepth) {
       launchOfPaths<kWithLight ? 0 : 6>(stereoPaths(paths), k, threads);
     } else {
-      const int blocks = minBlocks_ != 0 ? minBlocks_ : (kWithLight ? -1 : 6);
       if (minBlocks_ == 0)
-        launchOfPaths<kWithLight ? 0 : 6>(paths, k, threads);
-      else if (blocks >= 8)
+        launchOfPaths<kWithLight ? 5 : 6>(paths, k, threads);
+      else if (minBlocks_ >= 8)
         launchPixels<8>(k, threads, compute_);
-      else if (blocks >= 6)
+      else if (minBlocks_ >= 6)
         launchPixels<6>(k, threads, compute_);
       else
         launchPixels<0>(k, threads, compute_);
