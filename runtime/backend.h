@@ -60,7 +60,7 @@ class Backend {
   // stereoHoleHalf; kHoleOrderKind by default) and its kernel's occupancy (6: built for at least 6
   // blocks of 128 per SM, the default; 0: unconstrained). Neither changes the image.
   virtual void setStereoHoles(int order, int minBlocks) { (void)order, (void)minBlocks; }
-  // The pixels one GPU warp renders: a w x h tile, w h = 32 (CUDA only; 8x4 by default).
+  // The pixels one GPU warp renders: a w x h tile, w h = 32 (CUDA only; 4x8 by default).
   virtual void setPixelTile(int w, int h) { (void)w, (void)h; }
   // CUDA: the pixel kernel compiled for at least this many blocks of 128 threads per SM (6 or 8; -1:
   // unconstrained; 0, the default: 6 without LB light, 5 with it; map and no-shadow modes; a timing knob)

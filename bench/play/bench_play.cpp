@@ -66,7 +66,7 @@ int main(int argc, char** argv) {
   app.add_option("--cache-mb", cacheMb, "Cache budget (MiB)")->capture_default_str();
   app.add_option("--instances", instances, "Forest instances")->capture_default_str();
   app.add_option("--extra", extra, "NAME=FILE.canopy[@CAMERA]: more packed scenes (default camera orbit:elevation=20; CAMERA as canopy-play --camera)");
-  app.add_option("--shadows", shadowMethods, "Shadow methods to run, each scene with each (map, cone, off; a -nocache suffix turns off the descent cache, -notable descends from the root instead of reading the models' descent tables (same image), -nohold the held empty segments, -noskip the empty-cell skip, -occ6/-occ8/-occfree the CUDA pixel kernel for 6/8 blocks per SM or unconstrained (default: 6 without LB light, 5 with it), -rows puts a warp on 32 pixels of a row, -tile4/-tile16 on 4x8/16x2 pixels, -exact the finest level's light from Haar pages (--light exact); quality dials: -stop99 stops cones at opacity 0.99 (--stop-opacity), -step1 marches bricks in steps of one voxel (--step 1), -lod1 one level coarser (--lod-bias -1), -nogrow brick steps that never grow (--step-growth 0; the default grows them below transmittance 0.1); each scene's last frame is compared with the first method's (RMS)")->capture_default_str();
+  app.add_option("--shadows", shadowMethods, "Shadow methods to run, each scene with each (map, cone, off; a -nocache suffix turns off the descent cache, -notable descends from the root instead of reading the models' descent tables (same image), -nohold the held empty segments, -noskip the empty-cell skip, -occ6/-occ8/-occfree the CUDA pixel kernel for 6/8 blocks per SM or unconstrained (default: 6 without LB light, 5 with it), -rows puts a warp on 32 pixels of a row, -tile2/-tile4/-tile8/-tile16 on 2x16/4x8 (the default)/8x4/16x2 pixels, -exact the finest level's light from Haar pages (--light exact); quality dials: -stop99 stops cones at opacity 0.99 (--stop-opacity), -step1 marches bricks in steps of one voxel (--step 1), -lod1 one level coarser (--lod-bias -1), -nogrow brick steps that never grow (--step-growth 0; the default grows them below transmittance 0.1); each scene's last frame is compared with the first method's (RMS)")->capture_default_str();
   app.add_flag("--count-work", countWork, "CPU only: count cones, steps, samples and shadow work per frame (results.json \"work\")");
   app.add_flag("--only-extra", skipSynthetic, "Play only the --extra scenes (the synthetic ones are still written)");
   return tool.run(argc, argv, [&] {
@@ -125,6 +125,8 @@ int main(int argc, char** argv) {
       if (method.find("occfree") != std::string::npos) o.pixelMinBlocks = -1;  // "map-occfree": unconstrained
       if (method.find("rows") != std::string::npos) o.warpTileWidth = 32;  // "map-rows": a warp on 32 pixels of a row
       if (method.find("tile4") != std::string::npos) o.warpTileWidth = 4;    // "map-tile4": 4x8 pixel tiles
+      if (method.find("tile2") != std::string::npos) o.warpTileWidth = 2;    // "map-tile2": 2x16 pixel tiles
+      if (method.find("tile8") != std::string::npos) o.warpTileWidth = 8;    // "map-tile8": 8x4 pixel tiles
       if (method.find("tile16") != std::string::npos) o.warpTileWidth = 16;  // "map-tile16": 16x2 pixel tiles
       if (method.find("stop99") != std::string::npos) o.stopTransmittance = 0.01f;  // quality dials (image changes)
       if (method.find("step1") != std::string::npos) o.stepFactor = 1.0f;
