@@ -79,8 +79,8 @@ CANOPY_HD inline void ambientOnly(const SceneView& s, SceneLightPair scene, floa
 // the sample point: the sun bases of w, each times its weight, scaled by the sun radiance and the
 // scene's sun factor, then B_0's term, ambient B_0 / 18 * ambientFactor. A zero weight's base is not
 // sampled (it would add +0: a base's value is finite). On the device the four bases run in a rolled
-// loop, one copy of the sampler: unrolled, the light items' four copies were 6.9 KB of the forest's
-// 54.8 KB lit kernel, all in the march's loop; rolled, the real forest's frames took 0.86-0.90x the
+// loop, one copy of the sampler: unrolled, the light items' four copies were 6.8 KB of the forest's
+// 56.8 KB lit map kernel, all in the march's loop; rolled, the real forest's frames took 0.86-0.90x the
 // time on one H100 (docs/performance.md, "Kernel code size").
 template <class SampleBase>
 CANOPY_HD CANOPY_FORCEINLINE void lbBaseSum(const sun::Weights& w, const float sun[3], float ambient, float sunFactor,
