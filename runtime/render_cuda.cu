@@ -50,9 +50,9 @@ struct PixelKernel {
 // (docs/performance.md, 'Occupancy'; 87 registers then, 12 bytes of spills at 6): 6 blocks took the
 // forest orbit 43.19 -> 42.49 ms and the walk 15.41 -> 14.84 ms, the grove (lit) 14.44 -> 14.90 ms;
 // 8 blocks was slower on all three. The lit kernel since its light bases are rolled (cone_light.h
-// lbBaseSum): 113 registers free (4 blocks), 96 and 56 bytes of spill stores at 5; on the real
+// lbBaseSum): 117 registers free (4 blocks), 96 and 64 bytes of spill stores at 5; on the real
 // forest (one H100, 2026-12-06) 5 blocks took 0.98-0.99x the frame time at 4K, 0.99-1.01x at 1080p;
-// 6 blocks (80 registers) 1.07-1.11x. setPixelOccupancy overrides
+// 6 blocks (80 registers, 190 bytes of spill stores) 1.07-1.11x. setPixelOccupancy overrides
 // it (6, 8, or -1 for unconstrained). Shadow-cone kernel: 5 (96 registers, as before the light change).
 constexpr int kPixelBlock = 128;
 template <bool kWithCones, bool kWithLight, bool kWithDepth, bool kBehind, uint32_t kPaths, int kMinBlocks>
@@ -349,7 +349,8 @@ class CudaBackend final : public Backend {
     }
   }
   // The map's (or no-shadow) kernel at the occupancy asked for (setPixelOccupancy); the traced
-  // eye's with depth at the default one, the holes' at setStereoHoles's.
+  // eye's with depth at 6 blocks without LB light and unconstrained with it (the mono lit kernel's 5
+  // blocks are not measured there), the holes' at setStereoHoles's.
   // Each with the frame's paths only (scenePaths; stereo's kernels stereoPaths), but those of an
   // occupancy asked for with setPixelOccupancy, which have every path.
   template <bool kWithLight, bool kWithDepth, bool kBehind>
