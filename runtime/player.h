@@ -14,6 +14,7 @@
 #include "runtime/cone.h"
 #include "runtime/scene.h"
 #include "runtime/stereo.h"
+#include "runtime/tiles.h"
 
 namespace canopy::play {
 
@@ -53,7 +54,7 @@ struct PlayOptions {
   bool skipEmptyBlocks = true;       // a brick step in an empty one-voxel cell goes to the end of the cell run (cone.h emptyRunEnd)
   bool exactLight = false;           // --light exact: the finest level of Haar-lit models from their Haar pages (the .chaar's values)
   int pixelMinBlocks = 0;            // CUDA, map/no shadows: pixel kernel built for >= 6 or 8 blocks of 128 per SM, -1 unconstrained (0: the default, 6 without LB light, 5 with it)
-  int warpTileWidth = 4;             // CUDA: a warp renders a warpTileWidth x (32 / warpTileWidth) tile
+  int warpTileWidth = kDefaultWarpTileWidth;  // CUDA: a warp renders a warpTileWidth x (32 / warpTileWidth) tile
   std::string stereoHoleOrder = "kind";  // CUDA: the order stereo's holes are traced in: tile or kind (Backend::setStereoHoles)
   int stereoHoleBlocks = 6;              // CUDA: the holes' kernel built for >= 6 blocks of 128 per SM, or 0: unconstrained
   bool countWork = false;            // CPU only: count cones, steps, samples, shadow work (report "work")

@@ -44,9 +44,9 @@ struct PixelKernel {
 
 // The pixel kernel: 128 threads per block; kMinBlocks > 0 asks ptxas for at least that many
 // resident blocks per SM (__launch_bounds__: fewer registers, maybe spills), 0 leaves it free.
-// Map kernels by default: 6 blocks for scenes without LB light, 5 with it (ptxas -v, sm_90, with
-// the empty-cell skip: 91 registers and a 2608-byte stack free, 56 bytes of spill stores at 6
-// blocks). Measured on an H200 before the skip, when a step stopped keeping a per-hit segment array
+// Map kernels by default: 6 blocks for scenes without LB light, 5 with it (the unlit kernel, ptxas
+// -v, sm_90, with the empty-cell skip: 91 registers and a 2608-byte stack free, 56 bytes of spill
+// stores at 6 blocks). Measured on an H200 before the skip, when a step stopped keeping a per-hit segment array
 // (docs/performance.md, 'Occupancy'; 87 registers then, 12 bytes of spills at 6): 6 blocks took the
 // forest orbit 43.19 -> 42.49 ms and the walk 15.41 -> 14.84 ms, the grove (lit) 14.44 -> 14.90 ms;
 // 8 blocks was slower on all three. The lit kernel since its light bases are rolled (cone_light.h
@@ -442,7 +442,7 @@ class CudaBackend final : public Backend {
 
  private:
   uint32_t pageBytes_, pageCount_, slots_ = 0;
-  int tileW_ = 4, tileH_ = 8;
+  int tileW_ = kDefaultWarpTileWidth, tileH_ = 32 / kDefaultWarpTileWidth;
   int minBlocks_ = 0;
   int holeOrder_ = kHoleOrderKind, holeMinBlocks_ = 6;  // setStereoHoles
   cudaStream_t compute_ = nullptr, copy_ = nullptr;

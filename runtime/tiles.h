@@ -29,6 +29,10 @@ std::vector<Band> equalBands(int height, int n, int align);
 // height allows). Bands with no measured cost (all zero) are left as they are.
 std::vector<Band> balanceBands(const std::vector<Band>& bands, const std::vector<double>& cost, int height, int align);
 
+// A warp's tile by default: kDefaultWarpTileWidth x (32 / it) pixels, 4 wide and 8 tall
+// (PlayOptions::warpTileWidth, Backend::setPixelTile; docs/performance.md, "Warp tiles").
+constexpr int kDefaultWarpTileWidth = 4;
+
 // Warp tiles (the CUDA kernels of render_cuda.cu): launch position j over a band -> its pixel
 // (x, y). The band's rows [y0, y1) are cut into tiles of tileW x tileH pixels, tilesX of them per
 // tile row; position j is lane j % (tileW tileH), row-major, of tile j / (tileW tileH). False for

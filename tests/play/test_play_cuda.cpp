@@ -245,6 +245,29 @@ TEST(PlayCuda, cuda_StereoPairMatchesTheCpuReference) {
   EXPECT_EQ(std::memcmp(tr.data(), gr.data(), gr.size() * sizeof(float)), 0);
 }
 
+// The warp tile's shape (--warp-tile, 4x8 by default) moves no pixel: each thread computes its own
+// pixel with the same code, so converged frames are equal bit for bit with every shape (and the
+// tiles cross the frame's last row and column where 96 x 60 is not a multiple of the tile).
+TEST(PlayCuda, cuda_WarpTileShapeChangesNoPixel) {
+  if (canopy::cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA device";
+  pl::PlayOptions o;
+  o.input = litForestFile();
+  o.width = 96;
+  o.height = 60;
+  o.converge = true;
+  o.sun = "0.3,0.8,-0.52";
+  o.camera = "orbit:azimuth=60,elevation=8,distance=5,turns=0";
+  std::vector<float> ref;
+  pl::play(o, cuda(), &ref);
+  for (int w : {1, 2, 8, 16, 32}) {
+    o.warpTileWidth = w;
+    std::vector<float> img;
+    pl::play(o, cuda(), &img);
+    ASSERT_EQ(img.size(), ref.size());
+    EXPECT_EQ(std::memcmp(img.data(), ref.data(), ref.size() * sizeof(float)), 0) << w << "x" << 32 / w << " rms " << pt::imageRms(img, ref);
+  }
+}
+
 // Bands on one GPU (--tiles 3 on cuda:0: three backends, three caches, three threads; what several
 // GPUs do, on one): converged frames equal the one-band frame bit for bit, with stereo on.
 TEST(PlayCuda, cuda_BandsOnOneGpuGiveTheSameImageAsOneBand) {
