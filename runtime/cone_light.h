@@ -15,7 +15,8 @@ namespace canopy::play {
 // that node, with weight 0 unless the lattice is one node thick there), so the eight loads issue
 // together; the sum is taken in corner order as w_c x value_c (a zero weight adds +0, as the
 // skipped term did: the same bits as the loop that skipped it, measured 18-21 % of the real
-// forest's frame on an H200 before the change).
+// forest's frame on an H200 before the change). Node indices in 32 bits (addSceneLight refuses a
+// lattice of 2^32 nodes or more); with this and shadowMapLookup's in 64, 1.5-2 % slower frames.
 CANOPY_HD inline SceneLightPair sceneLightFactors(const SceneLightView& L, V3 p) {
   if (!L.values) return SceneLightPair{1.0f, 1.0f};
   const V3 q = applyPoint(L.worldToIndex, p);
@@ -30,9 +31,9 @@ CANOPY_HD inline SceneLightPair sceneLightFactors(const SceneLightView& L, V3 p)
     f[a] = x - fl;
     if (i0[a] >= L.dim[a] - 1) i0[a] = L.dim[a] > 1 ? L.dim[a] - 2 : 0, f[a] = L.dim[a] > 1 ? 1.0f : 0.0f;
   }
-  const size_t sy = size_t(L.dim[0]), sz = size_t(L.dim[0]) * size_t(L.dim[1]);
-  const size_t ox = L.dim[0] > 1 ? 1 : 0, oy = L.dim[1] > 1 ? sy : 0, oz = L.dim[2] > 1 ? sz : 0;
-  const SceneLightPair* b = L.values + size_t(i0[0]) + sy * size_t(i0[1]) + sz * size_t(i0[2]);
+  const uint32_t sy = uint32_t(L.dim[0]), sz = uint32_t(L.dim[0]) * uint32_t(L.dim[1]);
+  const uint32_t ox = L.dim[0] > 1 ? 1u : 0u, oy = L.dim[1] > 1 ? sy : 0u, oz = L.dim[2] > 1 ? sz : 0u;
+  const SceneLightPair* b = L.values + (uint32_t(i0[0]) + sy * uint32_t(i0[1]) + sz * uint32_t(i0[2]));
   SceneLightPair n[8];
   for (int c = 0; c < 8; ++c) n[c] = b[((c & 1) ? ox : 0) + ((c & 2) ? oy : 0) + ((c & 4) ? oz : 0)];
   SceneLightPair v{0.0f, 0.0f};

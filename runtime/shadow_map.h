@@ -161,7 +161,7 @@ CANOPY_HD inline void buildShadowMapColumn(const ShadowMapView& m, const Extinct
 // near a crown's sunlit surface would be shadowed by matter that lies behind it (away from the
 // sun), by an amount that depends on where the sample falls between the map's voxel centres:
 // banding ("shadow acne"). The price is that matter within `bias` of the sample towards the sun
-// does not shadow it.
+// does not shadow it. Voxel indices in 32 bits: the map has at most 2^28 voxels (--shadow-map-voxels).
 CANOPY_HD inline float shadowMapLookup(const ShadowMapView& m, V3 p) {
   const V3 q = p - m.axis[2] * m.bias - m.origin;
   const float inv = 1.0f / m.voxel;
@@ -180,9 +180,9 @@ CANOPY_HD inline float shadowMapLookup(const ShadowMapView& m, V3 p) {
       f[a] = m.dim[a] > 1 ? 1.0f : 0.0f;
     }
   }
-  const int64_t sx = 1, sy = m.dim[0], sz = int64_t(m.dim[0]) * m.dim[1];
-  const float* b = m.T + i0[0] + sy * i0[1] + sz * i0[2];
-  const int64_t dx = m.dim[0] > 1 ? sx : 0, dy = m.dim[1] > 1 ? sy : 0, dz = m.dim[2] > 1 ? sz : 0;
+  const uint32_t sx = 1, sy = uint32_t(m.dim[0]), sz = uint32_t(m.dim[0]) * uint32_t(m.dim[1]);
+  const float* b = m.T + (uint32_t(i0[0]) + sy * uint32_t(i0[1]) + sz * uint32_t(i0[2]));
+  const uint32_t dx = m.dim[0] > 1 ? sx : 0u, dy = m.dim[1] > 1 ? sy : 0u, dz = m.dim[2] > 1 ? sz : 0u;
   const float c00 = b[0] + (b[dx] - b[0]) * f[0];
   const float c10 = b[dy] + (b[dy + dx] - b[dy]) * f[0];
   const float c01 = b[dz] + (b[dz + dx] - b[dz]) * f[0];
