@@ -209,7 +209,9 @@ CANOPY_HD inline bool descendByTable(const SceneView& s, const ModelView& m, V3 
     x[a] = x[a] < 0.0f ? 0.0f : (x[a] >= 1.0f ? 0.99999994f : x[a]);
     c[a] = uint32_t(x[a] * scale);  // exact: a power-of-two scale, truncated (the descent's child bits)
   }
-  const size_t e = ((size_t(1) << (3 * maxLevel)) - 1) / 7 + c[0] + n * (c[1] + size_t(n) * c[2]);
+  // 32 bits: at most (8^kDescentTableLevels - 1) / 7 entries (in 64, the level's first entry was a
+  // 64-bit division)
+  const uint32_t e = ((1u << (3 * maxLevel)) - 1u) / 7u + c[0] + n * (c[1] + n * c[2]);
   const CanopyNode node = loadNode(m.levelNodes + e);
   const uint32_t levels = m.levelOf[e], level = levels & 15u;
   d.node = node;

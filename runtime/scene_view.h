@@ -53,6 +53,7 @@ struct ModelView {
   uint32_t rootLightPage;  // the light page of the root's brick (kCanopyNone: no root brick, or no light)
 };
 constexpr uint32_t kDescentTableLevels = 6;  // levels 0..5: (8^6 - 1) / 7 = 37449 nodes per model at most
+static_assert(kDescentTableLevels <= 10, "descendByTable indexes a model's table in 32 bits");
 
 struct InstanceView {
   Affine worldToUnit;       // world -> this instance's model octree unit space
