@@ -324,8 +324,8 @@ void buildInstanceGrid(HostScene& s, const double lo[3], const double hi[3]) {
 void addSceneLight(const CanopyFile& f, HostScene& s) {
   if (!f.hasSceneLight()) return;
   const CanopySceneLight& L = f.sceneLight();
-  // sceneLightFactors indexes the lattice's nodes in 32 bits (measured 1.5-2 % of the real forest's
-  // frame on one H100 against 64): the file's check allows 65536 nodes a side
+  // sceneLightFactors indexes the lattice's nodes in 32 bits (cone_light.h); the file's reader allows
+  // up to 65536 nodes a side (such a lattice's section alone would be 16 GiB or more)
   if (uint64_t(L.dim[0]) * uint64_t(L.dim[1]) * uint64_t(L.dim[2]) > uint64_t(UINT32_MAX))
     throw invalidInput(f.path() + ": scene light lattice of " + std::to_string(L.dim[0]) + "x" + std::to_string(L.dim[1]) + "x" +
                        std::to_string(L.dim[2]) + " nodes: more than the player's 2^32 - 1");
