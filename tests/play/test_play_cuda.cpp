@@ -66,6 +66,18 @@ std::string litForestFile() {
   return p;
 }
 
+// A converged w x h frame of the lit forest from `camera`, the sun fixed (the stereo and warp-tile tests).
+pl::PlayOptions litForestOptions(int w, int h, const char* camera) {
+  pl::PlayOptions o;
+  o.input = litForestFile();
+  o.width = w;
+  o.height = h;
+  o.converge = true;
+  o.sun = "0.3,0.8,-0.52";
+  o.camera = camera;
+  return o;
+}
+
 // The lit forest with its lighting Haar-compressed (fp16, threshold 0.01): with --light exact the
 // finest level's light comes from Haar pages in the same device pool (canopyHaarSampleAt).
 std::string haarForestFile() {
@@ -209,13 +221,7 @@ TEST(PlayCuda, cuda_QuarterCacheCameraPathMatchesFullCacheAfterWarmUp) {
 // threshold (nvcc's fast-math division): the traced fractions within 1 % of the pixels.
 TEST(PlayCuda, cuda_StereoPairMatchesTheCpuReference) {
   if (canopy::cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA device";
-  pl::PlayOptions o;
-  o.input = litForestFile();
-  o.width = 160;
-  o.height = 96;
-  o.converge = true;
-  o.sun = "0.3,0.8,-0.52";
-  o.camera = "orbit:azimuth=60,elevation=8,distance=9,turns=0";
+  pl::PlayOptions o = litForestOptions(160, 96, "orbit:azimuth=60,elevation=8,distance=9,turns=0");
   o.stereoIpd = 0.3f;
   std::vector<float> cl, cr, gl, gr;
   const nlohmann::json rc = pl::play(o, canopy::Device{}, &cl, &cr);
@@ -250,13 +256,7 @@ TEST(PlayCuda, cuda_StereoPairMatchesTheCpuReference) {
 // tiles cross the frame's last row and column where 96 x 60 is not a multiple of the tile).
 TEST(PlayCuda, cuda_WarpTileShapeChangesNoPixel) {
   if (canopy::cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA device";
-  pl::PlayOptions o;
-  o.input = litForestFile();
-  o.width = 96;
-  o.height = 60;
-  o.converge = true;
-  o.sun = "0.3,0.8,-0.52";
-  o.camera = "orbit:azimuth=60,elevation=8,distance=5,turns=0";
+  pl::PlayOptions o = litForestOptions(96, 60, "orbit:azimuth=60,elevation=8,distance=5,turns=0");
   std::vector<float> ref;
   pl::play(o, cuda(), &ref);
   for (int w : {1, 2, 8, 16, 32}) {
