@@ -60,8 +60,15 @@ class Backend {
   // stereoHoleHalf; kHoleOrderKind by default) and its kernel's occupancy (6: built for at least 6
   // blocks of 128 per SM, the default; 0: unconstrained). Neither changes the image.
   virtual void setStereoHoles(int order, int minBlocks) { (void)order, (void)minBlocks; }
-  // The pixels one GPU warp renders: a w x h tile, w h = 32 (CUDA only; 4x8 by default).
-  virtual void setPixelTile(int w, int h) { (void)w, (void)h; }
+  // The pixels one GPU warp renders: a w x h tile, w h = 32 (4x8 by default). The CUDA kernels'
+  // warp tiles, and adaptive sampling's blocks on both backends (adaptive.h).
+  void setPixelTile(int w, int h) { tileW_ = w, tileH_ = h; }
+  // Adaptive sampling (adaptive.h) of the renders of eye 0 without depth: tol > 0 traces the
+  // lattice, fills each block whose cells' corners agree within tol and traces the other blocks
+  // whole; 0 (the default) traces every pixel.
+  void setAdaptive(float tol) { adaptive_ = tol; }
+  // The pixels of the last renderRows' band that were filled, not traced (adaptive sampling).
+  uint64_t lastFilled() const { return lastFilled_; }
   // CUDA: the pixel kernel compiled for at least this many blocks of 128 threads per SM (6 or 8; -1:
   // unconstrained; 0, the default: 6 without LB light, 5 with it; map and no-shadow modes; a timing knob)
   virtual void setPixelOccupancy(int minBlocks) { (void)minBlocks; }
@@ -81,6 +88,9 @@ class Backend {
 
  protected:
   ShadowMapView lastShadowMap_{};
+  int tileW_ = kDefaultWarpTileWidth, tileH_ = 32 / kDefaultWarpTileWidth;
+  float adaptive_ = 0.0f;
+  uint64_t lastFilled_ = 0;
 };
 
 std::unique_ptr<Backend> makeCpuBackend(const HostScene& scene, uint32_t slots);

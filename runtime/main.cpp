@@ -48,6 +48,11 @@ void addFrameOptions(CLI::App& app, canopy::play::PlayOptions& o, CliValues& x) 
       ->capture_default_str();
   app.add_option("--stop-opacity", x.stopOpacity, "A cone stops at this opacity; at most 1 - this of a pixel's light is dropped")
       ->default_str("0.999")->check(CLI::Range(0.5, 1.0));
+  app.add_option("--adaptive", o.adaptive,
+                 "Adaptive sampling: trace every second pixel of every second row, then fill each 4x8 block whose 2x2 cells' traced "
+                 "corners differ by at most this in every channel (linear premultiplied RGBA) and trace the other blocks whole; "
+                 "0: trace every pixel (docs/play.md)")
+      ->capture_default_str();
 }
 
 // The shadow options, and the benchmarks' timing knobs (hidden from --help).

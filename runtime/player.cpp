@@ -399,6 +399,8 @@ void validateOptions(const PlayOptions& o) {
   if (!(o.stereo.maxSpread >= 0.0f && o.stereo.maxSpread <= 1.0e3f)) throw usageError("--stereo-spread must be in [0, 1000] pixels");
   if (!(o.stereo.solidAlpha >= 0.0f && o.stereo.solidAlpha <= 1.0f)) throw usageError("--stereo-solid must be in [0, 1]");
   if (o.tiles < 0 || o.tiles > 64) throw usageError("--tiles must be 0..64");
+  if (!(o.adaptive >= 0.0f && o.adaptive <= 1.0e3f)) throw usageError("--adaptive must be a tolerance in [0, 1000] (0: off)");
+  if (o.adaptive > 0.0f && o.stereoIpd > 0.0f) throw usageError("--adaptive is for one eye: not with --stereo");
   if (o.loaderThreads < 0 || o.loaderThreads > 64) throw usageError("--loader-threads must be 0..64 (0: the host's threads)");
   float groundY;
   parseGround(o.ground, groundY);
@@ -430,6 +432,7 @@ struct Tile {
   double reprojectS = 0.0;        // of it, the reprojection (before the holes' trace)
   uint64_t traced = 0;            // second-eye pixels traced this frame (last pass)
   uint64_t tracedBehind = 0;      // of them, traced only behind a reprojected front
+  uint64_t filled = 0;            // --adaptive: the traced eye's pixels filled, not traced, this frame (last pass)
   std::vector<double> costMs;     // per frame, for the report
 };
 
@@ -464,6 +467,7 @@ void renderTileFrame(Tile& t, const PlayOptions& o, const HostScene& scene, cons
     auto t0 = std::chrono::steady_clock::now();
     t.backend->renderRows(scene, shade, eyes.traced, t.stamp, t.band, 0, stereo && o.stereoFill == "reproject" ? eyes.disparityScale : 0.0f);
     t.firstEyeS += secondsSince(t0);
+    t.filled = t.backend->lastFilled();
     if (stereo) {
       t0 = std::chrono::steady_clock::now();
       if (o.stereoFill == "trace") {
@@ -673,6 +677,11 @@ void logSummary(const PlayOptions& o, const nlohmann::json& r, const StreamStats
                 double(r["stream_mb_per_s"]),
                 st.corruptPages ? (", " + std::to_string(st.corruptPages) + " corrupt page(s) skipped").c_str() : "");
   logInfo(line);
+  if (r.contains("adaptive")) {
+    std::snprintf(line, sizeof(line), "canopy-play: adaptive sampling (tolerance %g): %.1f%% of the pixels traced", double(r["adaptive"]["tolerance"]),
+                  100.0 * double(r["adaptive"]["traced_fraction_mean"]));
+    logInfo(line);
+  }
   if (r.contains("stereo")) {
     const auto& s = r["stereo"];
     std::snprintf(line, sizeof(line),
@@ -689,6 +698,7 @@ void logSummary(const PlayOptions& o, const nlohmann::json& r, const StreamStats
 // complete frame.
 struct FrameLog {
   std::vector<double> frameMs, firstEyeMs, secondEyeMs, reprojectMs, tracedFraction, behindFraction;
+  std::vector<double> adaptiveFraction;  // --adaptive: the fraction of the frame's pixels traced
   double firstCompleteS = -1.0;
   uint64_t coldStartBytes = 0;  // streamed by the first complete frame
 };
@@ -715,10 +725,11 @@ std::vector<Tile> makeTiles(const PlayOptions& o, const Device& device, const Ca
 std::vector<double> recordFrame(const PlayOptions& o, const std::vector<Tile>& tiles, std::chrono::steady_clock::time_point t0, FrameLog& log) {
   uint32_t missing = 0;
   double first = 0.0, second = 0.0, reproject = 0.0;
-  uint64_t traced = 0, behind = 0;
+  uint64_t traced = 0, behind = 0, filled = 0;
   std::vector<double> cost;
   for (const Tile& t : tiles) {
     missing += t.missing;
+    filled += t.filled;
     first = std::max(first, t.firstEyeS), second = std::max(second, t.secondEyeS), reproject = std::max(reproject, t.reprojectS);
     traced += t.traced;
     behind += t.tracedBehind;
@@ -731,6 +742,7 @@ std::vector<double> recordFrame(const PlayOptions& o, const std::vector<Tile>& t
     log.tracedFraction.push_back(double(traced) / (double(o.width) * o.height));
     log.behindFraction.push_back(double(behind) / (double(o.width) * o.height));
   }
+  if (o.adaptive > 0.0f) log.adaptiveFraction.push_back(1.0 - double(filled) / (double(o.width) * o.height));
   if (missing == 0 && log.firstCompleteS < 0.0) {
     log.firstCompleteS = secondsSince(t0);
     log.coldStartBytes = sumStats(tiles).bytesLoaded;
@@ -807,6 +819,7 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
     t.backend->setPixelTile(o.warpTileWidth, tileH);
     t.backend->setPixelOccupancy(o.pixelMinBlocks);
     t.backend->setStereoHoles(o.stereoHoleOrder == "tile" ? kHoleOrderTile : kHoleOrderKind, o.stereoHoleBlocks);
+    t.backend->setAdaptive(o.adaptive);
   }
 
   FrameLog log;
@@ -838,6 +851,8 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
 
   nlohmann::json r = playReport(o, file, scene, tiles, shade, log.frameMs, t0, log.firstCompleteS, log.coldStartBytes, slots);
   if (stereo) r["stereo"] = stereoReport(o, log);
+  if (o.adaptive > 0.0f)
+    r["adaptive"] = {{"tolerance", o.adaptive}, {"traced_fraction_mean", mean(log.adaptiveFraction)}, {"traced_fraction", log.adaptiveFraction}};
   if (o.countWork && backendName == "cpu" && tiles.size() == 1)
     r["work"] = workReport(work, tiles[0].passes);
   logSummary(o, r, sumStats(tiles), backendName);

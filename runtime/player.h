@@ -39,6 +39,7 @@ struct PlayOptions {
   // (scene units, > 0): the prefiltered scene volume from D on.
   std::string farField = "auto";
   float stopTransmittance = kStopT;   // a cone stops below this transmittance (--stop-opacity 1 - this); the rest is dropped
+  float adaptive = 0.0f;             // > 0: adaptive sampling at this tolerance (adaptive.h; one eye only); 0: every pixel traced
   float shadowAperture = 0.03f;      // shadow cone growth per unit length (soft shadows, coarser
                                      // levels and longer steps far from the receiver)
   bool shadows = true;

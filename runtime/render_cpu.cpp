@@ -5,6 +5,7 @@
 #include <cstring>
 
 #include "canopy/parallel.h"
+#include "runtime/adaptive.h"
 #include "runtime/backend.h"
 
 namespace canopy::play {
@@ -84,8 +85,41 @@ class CpuBackend final : public Backend {
       depth = disparity_.data();
       disparityScale_ = disparityScale;
     }
+    lastFilled_ = 0;
+    if (adaptive_ > 0.0f && !depth) return renderAdaptive(v, camera, band, out);
     const int64_t first = int64_t(band.y0) * camera.width;
     parallelFor(int64_t(band.rows()) * camera.width, [&](int64_t i) { renderPixel(v, camera, first + i, out, depth, disparityScale); }, 64);
+  }
+  // adaptive.h: the lattice; each block of the band tested; the passing blocks' off-lattice pixels
+  // filled, the failing blocks' traced.
+  void renderAdaptive(const SceneView& v, const CameraView& camera, Band band, float* out) {
+    const int w = camera.width, h = camera.height, lw = adaptiveLatticeWidth(w), ly0 = adaptiveLatticeFirst(band.y0);
+    const int64_t lattice = int64_t(lw) * (adaptiveLatticeEnd(band.y1, h) - ly0);
+    parallelFor(lattice, [&](int64_t i) {
+      const int x = 2 * int(i % lw), y = 2 * (ly0 + int(i / lw));
+      renderPixel(v, camera, int64_t(y) * w + x, out, nullptr, 0.0f);
+    }, 64);
+    const int blocksX = (w + tileW_ - 1) / tileW_, by0 = adaptiveBlockRowFirst(band.y0, tileH_);
+    const int64_t blocks = int64_t(blocksX) * (adaptiveBlockRowEnd(band.y1, tileH_) - by0);
+    blockPass_.assign(size_t(blocks), 0);
+    parallelFor(blocks, [&](int64_t b) {
+      blockPass_[size_t(b)] = adaptiveBlockAgrees(out, w, h, int(b % blocksX), by0 + int(b / blocksX), tileW_, tileH_, adaptive_) ? 1 : 0;
+    }, 64);
+    trace_.clear();
+    uint64_t filled = 0;
+    for (int y = band.y0; y < band.y1; ++y)
+      for (int x = 0; x < w; ++x) {
+        if (adaptiveOnLattice(x, y)) continue;
+        const size_t b = size_t(y / tileH_ - by0) * blocksX + size_t(x / tileW_);
+        if (blockPass_[b]) {
+          adaptiveFillPixel(out, w, x, y);
+          ++filled;
+        } else {
+          trace_.push_back(int64_t(y) * w + x);
+        }
+      }
+    parallelFor(int64_t(trace_.size()), [&](int64_t k) { renderPixel(v, camera, trace_[size_t(k)], out, nullptr, 0.0f); }, 64);
+    lastFilled_ = filled;
   }
   StereoCounts reprojectRows(const HostScene& scene, const CameraView& right, uint32_t stamp, Band band, const StereoParams& p) override {
     (void)scene, (void)stamp;  // the stamp and scene of view_, the last render of this pass
@@ -143,6 +177,8 @@ class CpuBackend final : public Backend {
   std::vector<uint32_t> slotUsed_, pageWanted_;
   std::vector<float> image_[2], disparity_, shadowMap_, extinction_, farValues_;
   std::vector<float> holeFrom_;  // stereo: per right-eye hole, where its trace starts (stereoResolveHole)
+  std::vector<uint8_t> blockPass_;  // adaptive sampling: the band's blocks, 1 where filled
+  std::vector<int64_t> trace_;      // and the off-lattice pixels of the others, to trace
   float disparityScale_ = 0.0f;  // the traced eye's (renderRows)
   std::vector<unsigned long long> keys_, behind_;
   std::vector<uint32_t> cover_;

@@ -13,6 +13,7 @@
 #include <cub/device/device_select.cuh>
 
 #include "canopy/parallel_cuda.cuh"
+#include "runtime/adaptive.h"
 #include "runtime/backend.h"
 
 namespace canopy::play {
@@ -35,9 +36,12 @@ struct PixelKernel {
   float* stereo;             // renderPixelT's: kWithDepth, the layers per pixel (stereo's traced eye); kBehind, where
                              // each hole's trace starts (stereo's holes)
   float disparityScale;
+  bool lattice;              // adaptive sampling's first pass: position k of the band's lattice (adaptive.h; tilesX its)
   __device__ void operator()(int64_t k) const {
     int x, y;
-    if (!bandTilePixel(list ? int64_t(list[k]) : k, tilesX, tileW, tileH, camera.width, y0, y1, x, y)) return;
+    if (lattice ? !adaptiveLatticePixel(k, tilesX, tileW, tileH, camera.width, y0, y1, camera.height, x, y)
+                : !bandTilePixel(list ? int64_t(list[k]) : k, tilesX, tileW, tileH, camera.width, y0, y1, x, y))
+      return;
     renderPixelT<kWithCones, kWithLight, kWithDepth, kBehind, kPaths>(scene, camera, int64_t(y) * camera.width + x, out, stereo, disparityScale);
   }
 };
@@ -123,6 +127,42 @@ struct StereoResolveKernel {
   }
 };
 
+// Adaptive sampling (adaptive.h), after the lattice's trace: each block of the band tested (pass[b]
+// = 1: filled), then per tile position j of the band its pixel filled where its block passed, or
+// marked (mark[j] = j; -1 elsewhere) where it failed, every position of a failing block (its
+// lattice pixels are traced again, to the same bits, so that a warp traces a whole block), the
+// marks then compacted as stereo's holes are. *filled counts the filled pixels (one atomic per warp).
+struct AdaptiveBlockKernel {
+  const float* rgba;
+  int width, height, tileW, tileH, blocksX, blockRow0;
+  float tol;
+  uint8_t* pass;
+  __device__ void operator()(int64_t b) const {
+    pass[b] = adaptiveBlockAgrees(rgba, width, height, int(b % blocksX), blockRow0 + int(b / blocksX), tileW, tileH, tol) ? 1 : 0;
+  }
+};
+
+struct AdaptiveFillKernel {
+  float* rgba;
+  int width, tilesX, tileW, tileH, y0, y1, blocksX, blockRow0, blockRows;
+  const uint8_t* pass;
+  int32_t* mark;
+  unsigned long long* filled;
+  __device__ void operator()(int64_t j) const {
+    int x, y;
+    const bool in = bandTilePixel(j, tilesX, tileW, tileH, width, y0, y1, x, y);
+    // a position past the band's rows (its last tile row may reach beyond them): the band's last block row, for the mark only
+    const int row = y / tileH - blockRow0 < blockRows ? y / tileH - blockRow0 : blockRows - 1;
+    const bool blockPass = pass[int64_t(row) * blocksX + x / tileW] != 0;
+    const bool fill = in && blockPass && !adaptiveOnLattice(x, y);
+    if (fill) adaptiveFillPixel(rgba, width, x, y);
+    mark[j] = blockPass ? -1 : int32_t(j);
+    const unsigned active = __activemask();
+    const unsigned ballot = __ballot_sync(active, fill);
+    if (ballot != 0u && int(threadIdx.x & 31u) == __ffs(int(active)) - 1) atomicAdd(filled, static_cast<unsigned long long>(__popc(ballot)));
+  }
+};
+
 struct IsHole {
   __host__ __device__ bool operator()(int32_t j) const { return j >= 0; }
 };
@@ -159,6 +199,7 @@ class CudaBackend final : public Backend {
     CANOPY_CUDA_CHECK(cudaSetDevice(device));
     holeCount_.resize(1);
     behindCount_.resize(1);
+    filledCount_.resize(1);
     CANOPY_CUDA_CHECK(cudaStreamCreateWithFlags(&compute_, cudaStreamNonBlocking));
     CANOPY_CUDA_CHECK(cudaStreamCreateWithFlags(&copy_, cudaStreamNonBlocking));
     for (int i = 0; i < 2; ++i) CANOPY_CUDA_CHECK(cudaEventCreateWithFlags(&tableCopied_[i], cudaEventDisableTiming));
@@ -325,26 +366,67 @@ class CudaBackend final : public Backend {
     // one kernel per shadow path and per light (renderPixelT): the map's kernel for a scene
     // without lit models has neither shadow-cone nor LB light code
     float* out = image_[eye].data();
+    lastFilled_ = 0;
     if (depth)
       launchMode<true>(scene, shade, camera, out, band, nullptr, threads, depth, disparityScale);
+    else if (adaptive_ > 0.0f)
+      renderAdaptive(scene, shade, camera, out, band, tilesX, threads);
     else
       launchMode<false>(scene, shade, camera, out, band, nullptr, threads, nullptr, 0.0f);
     CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
+  }
+  // adaptive.h: the lattice; each block of the band tested; the passing blocks' off-lattice pixels
+  // filled, the failing blocks traced whole (a warp to a block where the band starts on a block row).
+  void renderAdaptive(const HostScene& scene, const ShadeParams& shade, const CameraView& camera, float* out, Band band, int tilesX,
+                      int64_t threads) {
+    const int latticeTilesX = (adaptiveLatticeWidth(camera.width) + tileW_ - 1) / tileW_;
+    const int latticeRows = adaptiveLatticeEnd(band.y1, camera.height) - adaptiveLatticeFirst(band.y0);
+    const int latticeTilesY = (latticeRows + tileH_ - 1) / tileH_;
+    launchMode<false>(scene, shade, camera, out, band, nullptr, int64_t(latticeTilesX) * latticeTilesY * tileW_ * tileH_, nullptr, 0.0f, true);
+    const int blockRow0 = adaptiveBlockRowFirst(band.y0, tileH_), blockRows = adaptiveBlockRowEnd(band.y1, tileH_) - blockRow0;
+    const int64_t blocks = int64_t(tilesX) * blockRows;
+    if (blockPass_.size() < size_t(blocks)) blockPass_.resize(size_t(blocks));
+    cuda::parallelFor(blocks, AdaptiveBlockKernel{out, camera.width, camera.height, tileW_, tileH_, tilesX, blockRow0, adaptive_, blockPass_.data()},
+                      compute_, 128);
+    if (hole_.size() < size_t(threads)) hole_.resize(size_t(threads)), holeList_.resize(size_t(threads));
+    CANOPY_CUDA_CHECK(cudaMemsetAsync(filledCount_.data(), 0, sizeof(unsigned long long), compute_));
+    cuda::parallelFor(threads,
+                      AdaptiveFillKernel{out, camera.width, tilesX, tileW_, tileH_, band.y0, band.y1, tilesX, blockRow0, blockRows,
+                                         blockPass_.data(), hole_.data(), filledCount_.data()},
+                      compute_, 256);
+    unsigned long long filled = 0;
+    CANOPY_CUDA_CHECK(cudaMemcpyAsync(&filled, filledCount_.data(), sizeof filled, cudaMemcpyDeviceToHost, compute_));
+    const int64_t traced = compactHoles(threads);
+    launchMode<false>(scene, shade, camera, out, band, holeList_.data(), traced, nullptr, 0.0f);
+    lastFilled_ = filled;  // written by the copy before compactHoles' wait
+  }
+  // The marks hole_[0, marks) that are >= 0, in order, into holeList_; returns their count (waits
+  // for the compute stream).
+  int64_t compactHoles(int64_t marks) {
+    size_t tempBytes = 0;
+    CANOPY_CUDA_CHECK(cub::DeviceSelect::If(nullptr, tempBytes, hole_.data(), holeList_.data(), holeCount_.data(), marks, IsHole{}, compute_));
+    if (selectTemp_.size() < tempBytes) selectTemp_.resize(tempBytes);
+    CANOPY_CUDA_CHECK(cub::DeviceSelect::If(selectTemp_.data(), tempBytes, hole_.data(), holeList_.data(), holeCount_.data(), marks, IsHole{},
+                                            compute_));
+    int64_t holes = 0;
+    CANOPY_CUDA_CHECK(cudaMemcpyAsync(&holes, holeCount_.data(), sizeof holes, cudaMemcpyDeviceToHost, compute_));
+    CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
+    return holes;
   }
   // The pixel kernel of the mode (shadow path, LB light, stereo's depth or holes) over `threads`
   // tile positions of the band (or list[0, threads) of them), with view_.
   template <bool kWithDepth, bool kBehind = false>
   void launchMode(const HostScene& scene, const ShadeParams& shade, const CameraView& camera, float* out, Band band, const int32_t* list,
-                  int64_t threads, float* stereo, float disparityScale) {
-    const int tilesX = (camera.width + tileW_ - 1) / tileW_;
+                  int64_t threads, float* stereo, float disparityScale, bool lattice = false) {
+    const int tilesX = ((lattice ? adaptiveLatticeWidth(camera.width) : camera.width) + tileW_ - 1) / tileW_;
     if (shade.shadows == kShadowsCone) {
-      launchPixels<5>(PixelKernel<true, true, kWithDepth, kBehind>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, stereo, disparityScale},
+      launchPixels<5>(PixelKernel<true, true, kWithDepth, kBehind>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, stereo, disparityScale, lattice},
                       threads, compute_);
     } else if (scene.litModels > 0) {
-      launchMap(PixelKernel<false, true, kWithDepth, kBehind>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, stereo, disparityScale},
+      launchMap(PixelKernel<false, true, kWithDepth, kBehind>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, stereo, disparityScale, lattice},
                 threads);
     } else {
-      launchMap(PixelKernel<false, false, kWithDepth, kBehind>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, stereo, disparityScale},
+      launchMap(PixelKernel<false, false, kWithDepth, kBehind>{view_, camera, out, tilesX, tileW_, tileH_, band.y0, band.y1, list, stereo, disparityScale, lattice},
                 threads);
     }
   }
@@ -382,7 +464,7 @@ class CudaBackend final : public Backend {
       if (paths != kPaths) return launchOfPaths<kMinBlocks, nextPathSet(kPaths, kWithDepth || kBehind)>(paths, k, threads);
     }
     launchPixels<kMinBlocks>(PixelKernel<false, kWithLight, kWithDepth, kBehind, kPaths>{k.scene, k.camera, k.out, k.tilesX, k.tileW, k.tileH,
-                                                                                          k.y0, k.y1, k.list, k.stereo, k.disparityScale},
+                                                                                          k.y0, k.y1, k.list, k.stereo, k.disparityScale, k.lattice},
                              threads, compute_);
   }
   StereoCounts reprojectRows(const HostScene& scene, const CameraView& right, uint32_t stamp, Band band, const StereoParams& p) override {
@@ -409,16 +491,9 @@ class CudaBackend final : public Backend {
                       StereoResolveKernel{sv, tilesX, tileW_, tileH_, band.y0, band.y1, hole_.data(), threads, holeOrder_, holeFrom_.data(),
                                           behindCount_.data()},
                       compute_, 256);
-    size_t tempBytes = 0;
-    CANOPY_CUDA_CHECK(cub::DeviceSelect::If(nullptr, tempBytes, hole_.data(), holeList_.data(), holeCount_.data(), marks, IsHole{}, compute_));
-    if (selectTemp_.size() < tempBytes) selectTemp_.resize(tempBytes);
-    CANOPY_CUDA_CHECK(cub::DeviceSelect::If(selectTemp_.data(), tempBytes, hole_.data(), holeList_.data(), holeCount_.data(), marks, IsHole{},
-                                            compute_));
-    int64_t holes = 0;
     unsigned long long behind = 0;
-    CANOPY_CUDA_CHECK(cudaMemcpyAsync(&holes, holeCount_.data(), sizeof holes, cudaMemcpyDeviceToHost, compute_));
     CANOPY_CUDA_CHECK(cudaMemcpyAsync(&behind, behindCount_.data(), sizeof behind, cudaMemcpyDeviceToHost, compute_));
-    CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
+    const int64_t holes = compactHoles(marks);
     const double reprojectS = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     launchMode<false, true>(scene, view_.shade, right, image_[1].data(), band, holeList_.data(), holes, holeFrom_.data(), disparityScale_);
     CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
@@ -431,7 +506,6 @@ class CudaBackend final : public Backend {
     if (slots_) slotUsed_.download(slotUsed.data(), slots_);
     if (pageCount_) pageWanted_.download(pageWanted.data(), pageCount_);
   }
-  void setPixelTile(int w, int h) override { tileW_ = w, tileH_ = h; }
   void setPixelOccupancy(int minBlocks) override { minBlocks_ = minBlocks; }
   void setStereoHoles(int order, int minBlocks) override { holeOrder_ = order, holeMinBlocks_ = minBlocks; }
   void readRows(std::vector<float>& rgba, int eye, Band band, int width) override {
@@ -442,7 +516,6 @@ class CudaBackend final : public Backend {
 
  private:
   uint32_t pageBytes_, pageCount_, slots_ = 0;
-  int tileW_ = kDefaultWarpTileWidth, tileH_ = 32 / kDefaultWarpTileWidth;
   int minBlocks_ = 0;
   int holeOrder_ = kHoleOrderKind, holeMinBlocks_ = 6;  // setStereoHoles
   cudaStream_t compute_ = nullptr, copy_ = nullptr;
@@ -465,7 +538,10 @@ class CudaBackend final : public Backend {
   cuda::DeviceBuffer<float> image_[2], disparity_, shadowMap_, extinction_, farValues_;
   cuda::DeviceBuffer<unsigned long long> keys_, behind_;  // stereo: per right-eye pixel, the nearest front span and the nearest span behind it (stereo.h)
   cuda::DeviceBuffer<uint32_t> cover_;
-  cuda::DeviceBuffer<int32_t> hole_, holeList_;   // stereo: the holes' marks by half and tile position, and compacted
+  cuda::DeviceBuffer<int32_t> hole_, holeList_;   // stereo's holes' marks by half and tile position (adaptive sampling's by tile
+                                                  // position), and compacted
+  cuda::DeviceBuffer<uint8_t> blockPass_;         // adaptive sampling: the band's blocks, 1 where filled
+  cuda::DeviceBuffer<unsigned long long> filledCount_;  // adaptive sampling: the pixels filled
   cuda::DeviceBuffer<int64_t> holeCount_;
   cuda::DeviceBuffer<unsigned long long> behindCount_;  // stereo: the holes traced behind a reprojected front
   cuda::DeviceBuffer<float> holeFrom_;                  // stereo: per right-eye hole, where its trace starts

@@ -1,12 +1,15 @@
-// test_play_stereo.cpp: stereo pairs by reprojection (runtime/stereo.h) and frames cut into bands
-// over several renderers (runtime/tiles.h), on the CPU reference.
+// test_play_stereo.cpp: stereo pairs by reprojection (runtime/stereo.h), adaptive sampling
+// (runtime/adaptive.h) and frames cut into bands over several renderers (runtime/tiles.h), on the
+// CPU reference.
 //
 // The per-element reprojection is tested on hand-made rows whose answer is known (a wall moves by
 // its disparity, an edge leaves a hole as wide as the disparity step, a spread or a translucent
 // overlap is traced); the whole second eye against the same eye traced in full (its traced pixels
-// bit for bit, the reprojected ones within a stated RMS); bands against one band, bit for bit.
+// bit for bit, the reprojected ones within a stated RMS); adaptive sampling's tests and fill per
+// element and its frame against the full trace; bands against one band, bit for bit.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -15,6 +18,7 @@
 
 #include "canopy/errors.h"
 #include "formats/canopy_file.h"
+#include "runtime/adaptive.h"
 #include "runtime/image_io.h"
 #include "runtime/player.h"
 #include "runtime/stereo.h"
@@ -677,4 +681,162 @@ TEST(Render, StereoSideBySideAndSeparateOutputs) {
   } catch (const canopy::Error& e) {
     EXPECT_EQ(e.code(), canopy::ExitCode::Usage) << e.what();
   }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Adaptive sampling (adaptive.h)
+// ---------------------------------------------------------------------------------------------
+
+TEST(Adaptive, ACellAgreesWithinTheToleranceInEveryChannelAndFillsWithTheBilinearMean) {
+  const int w = 5, h = 5;
+  std::vector<float> img(size_t(w) * h * 4, -1.0f);  // -1: not written
+  auto px = [&](int x, int y) { return img.data() + (size_t(y) * w + x) * 4; };
+  auto set = [&](int x, int y, float v, float a) { float* p = px(x, y); p[0] = p[1] = p[2] = v, p[3] = a; };
+  // the cell (0, 0)-(2, 2): corners 0.2, 0.3, 0.4, 0.5 (alpha 1)
+  set(0, 0, 0.2f, 1.0f), set(2, 0, 0.3f, 1.0f), set(0, 2, 0.4f, 1.0f), set(2, 2, 0.5f, 1.0f);
+  EXPECT_FALSE(pl::adaptiveCellAgrees(img.data(), w, h, 0, 0, 0.29f));  // 0.3 apart
+  EXPECT_TRUE(pl::adaptiveCellAgrees(img.data(), w, h, 0, 0, 0.3f));
+  pl::adaptiveFillPixel(img.data(), w, 1, 1);
+  EXPECT_FLOAT_EQ(px(1, 1)[0], 0.35f);  // the four corners' mean
+  EXPECT_FLOAT_EQ(px(1, 1)[3], 1.0f);
+  pl::adaptiveFillPixel(img.data(), w, 1, 0);
+  EXPECT_FLOAT_EQ(px(1, 0)[0], 0.25f);  // on a lattice row: between its two neighbours
+  pl::adaptiveFillPixel(img.data(), w, 0, 1);
+  EXPECT_FLOAT_EQ(px(0, 1)[0], 0.3f);
+  // the opacity counts as a channel: a crown's edge against the sky is traced
+  set(2, 2, 0.5f, 0.5f);
+  EXPECT_FALSE(pl::adaptiveCellAgrees(img.data(), w, h, 0, 0, 0.3f));
+  EXPECT_TRUE(pl::adaptiveCellAgrees(img.data(), w, h, 0, 0, 0.5f));
+  // a NaN corner fails its cell
+  px(2, 2)[1] = std::nanf("");
+  EXPECT_FALSE(pl::adaptiveCellAgrees(img.data(), w, h, 0, 0, 1e30f));
+  // a cell not whole in the frame (the last column and row of a 4 x 4 frame) fails
+  std::vector<float> flat(size_t(4) * 4 * 4, 0.25f);
+  EXPECT_TRUE(pl::adaptiveCellAgrees(flat.data(), 4, 4, 0, 0, 0.0f));
+  EXPECT_FALSE(pl::adaptiveCellAgrees(flat.data(), 4, 4, 2, 0, 1.0f));
+  EXPECT_FALSE(pl::adaptiveCellAgrees(flat.data(), 4, 4, 0, 2, 1.0f));
+}
+
+TEST(Adaptive, ABlockPassesOnlyWhereEveryCellOfItsOffLatticePixelsAgrees) {
+  // A 17 x 13 frame of lattice values that agree everywhere but at one corner, moved around: a
+  // block fails exactly where one of its off-lattice pixels has that corner in its cell (checked
+  // against the per-pixel rule), and blocks at the last column or row, whose cells are not whole.
+  const int w = 17, h = 13;
+  for (const int tileW : {1, 2, 4, 8, 16, 32}) {
+    const int tileH = 32 / tileW;
+    for (const int bad : {0, 2 * w + 4, 4 * w + 8, 6 * w + 14, 12 * w + 16}) {
+      std::vector<float> img(size_t(w) * h * 4, 0.5f);
+      for (int k = 0; k < 4; ++k) img[size_t(bad) * 4 + k] = 0.9f;
+      const int bx0 = bad % w, by0 = bad / w;
+      ASSERT_TRUE(pl::adaptiveOnLattice(bx0, by0));
+      for (int by = 0; by * tileH < h; ++by)
+        for (int bx = 0; bx * tileW < w; ++bx) {
+          bool expect = true;
+          for (int y = by * tileH; y < std::min(h, (by + 1) * tileH); ++y)
+            for (int x = bx * tileW; x < std::min(w, (bx + 1) * tileW); ++x) {
+              if (pl::adaptiveOnLattice(x, y)) continue;
+              const int cx = x & ~1, cy = y & ~1;
+              const bool whole = cx + 2 < w && cy + 2 < h;
+              const bool hasBad = (bx0 == cx || bx0 == cx + 2) && (by0 == cy || by0 == cy + 2);
+              expect = expect && whole && !hasBad;
+            }
+          EXPECT_EQ(pl::adaptiveBlockAgrees(img.data(), w, h, bx, by, tileW, tileH, 0.1f), expect)
+              << "tile " << tileW << "x" << tileH << " bad " << bx0 << "," << by0 << " block " << bx << "," << by;
+        }
+    }
+  }
+}
+
+TEST(Adaptive, EachBandTracesTheLatticeRowsOfItsCells) {
+  // Every off-lattice pixel of a band whose cell is whole in the frame has its four corners among
+  // the lattice pixels that band traces; no lattice pixel is traced twice by one band.
+  for (const int height : {10, 11, 45}) {
+    const int width = 13, tileW = 8, tileH = 4;
+    for (const std::vector<pl::Band>& bands : {pl::equalBands(height, 1, tileH), pl::equalBands(height, 3, tileH), pl::equalBands(height, 4, 1)}) {
+      for (const pl::Band& b : bands) {
+        const int tilesX = (pl::adaptiveLatticeWidth(width) + tileW - 1) / tileW;
+        const int rows = pl::adaptiveLatticeEnd(b.y1, height) - pl::adaptiveLatticeFirst(b.y0);
+        const int64_t positions = int64_t(tilesX) * ((rows + tileH - 1) / tileH) * tileW * tileH;
+        std::vector<int> traced(size_t(width) * height, 0);
+        for (int64_t j = 0; j < positions; ++j) {
+          int x = -1, y = -1;
+          if (!pl::adaptiveLatticePixel(j, tilesX, tileW, tileH, width, b.y0, b.y1, height, x, y)) continue;
+          ASSERT_TRUE(x >= 0 && x < width && y >= 0 && y < height && pl::adaptiveOnLattice(x, y)) << x << "," << y;
+          ++traced[size_t(y) * width + x];
+        }
+        for (int y = b.y0; y < b.y1; ++y)
+          for (int x = 0; x < width; ++x) {
+            if (pl::adaptiveOnLattice(x, y)) {
+              EXPECT_EQ(traced[size_t(y) * width + x], 1) << height << ": " << x << "," << y;
+              continue;
+            }
+            const int cx = x & ~1, cy = y & ~1;
+            if (cx + 2 >= width || cy + 2 >= height) continue;
+            for (int c = 0; c < 4; ++c)
+              EXPECT_EQ(traced[size_t(cy + 2 * (c / 2)) * width + cx + 2 * (c % 2)], 1) << height << " band " << b.y0 << ": " << x << "," << y;
+          }
+      }
+    }
+  }
+}
+
+TEST(Render, AdaptiveSamplingFillsWholeBlocksNearTheFullTrace) {
+  // The grove at 160x90: the lattice (a quarter) plus the blocks whose cells' corners differ,
+  // against every pixel traced; every pixel of a block is either the full trace's own (traced) or
+  // its cell's bilinear mean of the full trace's lattice (filled), and blocks are whole.
+  pl::PlayOptions o = groveView(160, 90);
+  std::vector<float> full, loose, tight, bands;
+  pl::play(o, Device{}, &full);
+  o.adaptive = 0.02f;
+  const nlohmann::json r = pl::play(o, Device{}, &loose);
+  o.adaptive = 1e-4f;
+  const nlohmann::json rt = pl::play(o, Device{}, &tight);
+  const double f = r["adaptive"]["traced_fraction_mean"], ft = rt["adaptive"]["traced_fraction_mean"];
+  const double e = pt::imageRms(loose, full), et = pt::imageRms(tight, full);
+  std::printf("adaptive 0.02: traced %.3f, RMS %.3g; 1e-4: traced %.3f, RMS %.3g\n", f, e, ft, et);
+  EXPECT_DOUBLE_EQ(double(r["adaptive"]["tolerance"]), double(0.02f));
+  EXPECT_GE(f, 0.25);  // the lattice at least
+  EXPECT_LT(f, 0.9);
+  EXPECT_GT(ft, f);
+  EXPECT_LT(et, e);
+  EXPECT_GT(e, 0.0);
+  EXPECT_LT(e, 1e-3);
+  // per block: traced (every pixel the full trace's, bit for bit) or filled (every off-lattice
+  // pixel its cell's mean of the full trace's corners, the lattice the full trace's)
+  const int w = o.width, h = o.height, tileW = pl::kDefaultWarpTileWidth, tileH = 32 / tileW;
+  std::vector<float> mean = full;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      if (!pl::adaptiveOnLattice(x, y) && (x & ~1) + 2 < w && (y & ~1) + 2 < h) pl::adaptiveFillPixel(mean.data(), w, x, y);
+  int filledBlocks = 0, tracedBlocks = 0;
+  for (int by = 0; by * tileH < h; ++by)
+    for (int bx = 0; bx * tileW < w; ++bx) {
+      bool same = true, asMean = true;
+      for (int y = by * tileH; y < std::min(h, (by + 1) * tileH); ++y)
+        for (int x = bx * tileW; x < std::min(w, (bx + 1) * tileW); ++x) {
+          const size_t i = (size_t(y) * w + x) * 4;
+          same = same && std::memcmp(&loose[i], &full[i], 4 * sizeof(float)) == 0;
+          asMean = asMean && std::memcmp(&loose[i], &mean[i], 4 * sizeof(float)) == 0;
+        }
+      EXPECT_TRUE(same || asMean) << "block " << bx << "," << by;
+      const bool passes = pl::adaptiveBlockAgrees(full.data(), w, h, bx, by, tileW, tileH, 0.02f);
+      EXPECT_TRUE(passes ? asMean : same) << "block " << bx << "," << by;
+      (passes ? filledBlocks : tracedBlocks)++;
+    }
+  EXPECT_GT(filledBlocks, 0);
+  EXPECT_GT(tracedBlocks, 0);
+  // bands give the same image (each band traces the lattice rows of its cells)
+  o.adaptive = 0.02f;
+  o.tiles = 3;
+  const nlohmann::json rb = pl::play(o, Device{}, &bands);
+  ASSERT_EQ(rb["bands"].size(), 3u);
+  ASSERT_EQ(bands.size(), loose.size());
+  EXPECT_EQ(std::memcmp(bands.data(), loose.data(), loose.size() * sizeof(float)), 0) << "rms " << pt::imageRms(bands, loose);
+  // one eye only, and a tolerance >= 0
+  o.tiles = 0;
+  o.stereoIpd = 0.1f;
+  EXPECT_THROW(pl::play(o, Device{}), canopy::Error);
+  o.stereoIpd = 0.0f;
+  o.adaptive = -0.1f;
+  EXPECT_THROW(pl::play(o, Device{}), canopy::Error);
 }
