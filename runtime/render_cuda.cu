@@ -128,10 +128,10 @@ struct StereoResolveKernel {
 };
 
 // Adaptive sampling (adaptive.h), after the lattice's trace: each block of the band tested (pass[b]
-// = 1: filled), then per tile position j of the band its pixel filled where its block passed, or
-// marked (mark[j] = j; -1 elsewhere) where it failed, every position of a failing block (its
-// lattice pixels are traced again, to the same bits, so that a warp traces a whole block), the
-// marks then compacted as stereo's holes are. *filled counts the filled pixels (one atomic per warp).
+// = 1: filled), then per tile position j of the band its off-lattice pixel filled where its block
+// passed, or marked (mark[j] = j; -1 elsewhere) where it failed; the marks are compacted in order
+// as stereo's holes are, so that a warp traces the 24 off-lattice pixels of a failing block and 8 of
+// the next failing one. *filled counts the filled pixels (one atomic per warp).
 struct AdaptiveBlockKernel {
   const float* rgba;
   int width, height, tileW, tileH, blocksX, blockRow0;
@@ -144,19 +144,17 @@ struct AdaptiveBlockKernel {
 
 struct AdaptiveFillKernel {
   float* rgba;
-  int width, tilesX, tileW, tileH, y0, y1, blocksX, blockRow0, blockRows;
+  int width, tilesX, tileW, tileH, y0, y1, blocksX, blockRow0;
   const uint8_t* pass;
   int32_t* mark;
   unsigned long long* filled;
   __device__ void operator()(int64_t j) const {
     int x, y;
     const bool in = bandTilePixel(j, tilesX, tileW, tileH, width, y0, y1, x, y);
-    // a position past the band's rows (its last tile row may reach beyond them): the band's last block row, for the mark only
-    const int row = y / tileH - blockRow0 < blockRows ? y / tileH - blockRow0 : blockRows - 1;
-    const bool blockPass = pass[int64_t(row) * blocksX + x / tileW] != 0;
-    const bool fill = in && blockPass && !adaptiveOnLattice(x, y);
+    const bool off = in && !adaptiveOnLattice(x, y);
+    const bool fill = off && pass[int64_t(y / tileH - blockRow0) * blocksX + x / tileW] != 0;
     if (fill) adaptiveFillPixel(rgba, width, x, y);
-    mark[j] = blockPass ? -1 : int32_t(j);
+    mark[j] = off && !fill ? int32_t(j) : -1;
     const unsigned active = __activemask();
     const unsigned ballot = __ballot_sync(active, fill);
     if (ballot != 0u && int(threadIdx.x & 31u) == __ffs(int(active)) - 1) atomicAdd(filled, static_cast<unsigned long long>(__popc(ballot)));
@@ -376,7 +374,7 @@ class CudaBackend final : public Backend {
     CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
   }
   // adaptive.h: the lattice; each block of the band tested; the passing blocks' off-lattice pixels
-  // filled, the failing blocks traced whole (a warp to a block where the band starts on a block row).
+  // filled, the failing blocks' traced (in tile order: a warp's rays stay within two blocks).
   void renderAdaptive(const HostScene& scene, const ShadeParams& shade, const CameraView& camera, float* out, Band band, int tilesX,
                       int64_t threads) {
     const int latticeTilesX = (adaptiveLatticeWidth(camera.width) + tileW_ - 1) / tileW_;
@@ -391,8 +389,8 @@ class CudaBackend final : public Backend {
     if (hole_.size() < size_t(threads)) hole_.resize(size_t(threads)), holeList_.resize(size_t(threads));
     CANOPY_CUDA_CHECK(cudaMemsetAsync(filledCount_.data(), 0, sizeof(unsigned long long), compute_));
     cuda::parallelFor(threads,
-                      AdaptiveFillKernel{out, camera.width, tilesX, tileW_, tileH_, band.y0, band.y1, tilesX, blockRow0, blockRows,
-                                         blockPass_.data(), hole_.data(), filledCount_.data()},
+                      AdaptiveFillKernel{out, camera.width, tilesX, tileW_, tileH_, band.y0, band.y1, tilesX, blockRow0, blockPass_.data(),
+                                         hole_.data(), filledCount_.data()},
                       compute_, 256);
     unsigned long long filled = 0;
     CANOPY_CUDA_CHECK(cudaMemcpyAsync(&filled, filledCount_.data(), sizeof filled, cudaMemcpyDeviceToHost, compute_));
