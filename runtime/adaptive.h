@@ -1,4 +1,4 @@
-// adaptive.h: adaptive sampling of a frame in whole warp tiles (canopy-play --adaptive TOL), per
+// adaptive.h: adaptive sampling of a frame in warp-tile blocks (canopy-play --adaptive TOL), per
 // element, for the CPU reference and the CUDA kernels alike.
 //
 // The pixels with an even x and an even y (the lattice: a quarter of the frame) are traced first,
@@ -10,11 +10,12 @@
 // that holds one of a block's off-lattice pixels differ by at most TOL in every channel
 // (premultiplied linear RGBA: the colour, and the opacity, so that an edge of a crown against the
 // sky is never smoothed over), the block's off-lattice pixels are their cells' bilinear means;
-// every other block is traced whole, a warp to a block. A cell that is not whole in the frame (the
+// the other blocks' off-lattice pixels are traced (on the GPU compacted in tile order, so that a
+// warp's rays lie in one block and the next failing one). A cell that is not whole in the frame (the
 // last column or row) fails its block.
 //
-// Why whole blocks: a warp costs about the union of its rays' work, so the pixels left to trace
-// pay only where they come 32 neighbours to a warp. The form that traced each failing pixel on
+// Why blocks: a warp costs about the union of its rays' work, so the pixels left to trace pay only
+// where they come 32 neighbours to a warp. The form that traced each failing pixel on
 // its own (the marks compacted, 32 scattered edge pixels to a warp) cost 2.6x a pixel's time and was
 // slower than the full trace on five of six real-forest views (docs/performance.md, "adaptive
 // sampling"). Within a block that passes, what a filled pixel misses is a feature narrower than

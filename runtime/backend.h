@@ -64,8 +64,8 @@ class Backend {
   // warp tiles, and adaptive sampling's blocks on both backends (adaptive.h).
   void setPixelTile(int w, int h) { tileW_ = w, tileH_ = h; }
   // Adaptive sampling (adaptive.h) of the renders of eye 0 without depth: tol > 0 traces the
-  // lattice, fills each block whose cells' corners agree within tol and traces the other blocks
-  // whole; 0 (the default) traces every pixel.
+  // lattice, fills each block whose cells' corners agree within tol and traces the other blocks'
+  // pixels; 0 (the default) traces every pixel.
   void setAdaptive(float tol) { adaptive_ = tol; }
   // The pixels of the last renderRows' band that were filled, not traced (adaptive sampling).
   uint64_t lastFilled() const { return lastFilled_; }

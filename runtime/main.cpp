@@ -50,7 +50,7 @@ void addFrameOptions(CLI::App& app, canopy::play::PlayOptions& o, CliValues& x) 
       ->default_str("0.999")->check(CLI::Range(0.5, 1.0));
   app.add_option("--adaptive", o.adaptive,
                  "Adaptive sampling: trace every second pixel of every second row, then fill each 4x8 block whose 2x2 cells' traced "
-                 "corners differ by at most this in every channel (linear premultiplied RGBA) and trace the other blocks whole; "
+                 "corners differ by at most this in every channel (linear premultiplied RGBA) and trace the other blocks; "
                  "0: trace every pixel (docs/play.md)")
       ->capture_default_str();
 }

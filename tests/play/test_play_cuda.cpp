@@ -269,7 +269,7 @@ TEST(PlayCuda, cuda_WarpTileShapeChangesNoPixel) {
 }
 
 // Adaptive sampling on the GPU (adaptive.h: the lattice in warp tiles of the half-size grid, the
-// blocks' tests, the fill, the failing blocks' positions compacted and traced a warp to a block)
+// blocks' tests, the fill, the failing blocks' off-lattice pixels compacted in tile order and traced)
 // against the CPU reference, on the lit forest from among the trees: the two fill the same blocks
 // but where a corner's few-1e-4 difference between the backends moves a cell across the tolerance
 // (traced fractions within 2 % of the pixels), so the frames agree as every GPU frame does
