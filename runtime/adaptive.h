@@ -26,9 +26,9 @@
 // within a cell except at its edges and where the march's sample phase differs between
 // neighbouring rays: the test finds those, and the blocks between them are what it saves.
 //
-// A band of rows (tiles.h) traces the lattice rows its cells need, one or two beyond its own rows
-// where its edge cuts a cell, and a block's test reads only lattice pixels, so the image does not
-// depend on where the bands are. The passes (lattice; the blocks' tests; the fills and the failing
+// A band of rows (tiles.h) traces the lattice rows that its blocks' cells need, beyond its own rows
+// where its edges cut a block or a cell, and a block's test reads only lattice pixels, so the image
+// does not depend on where the bands are. The passes (lattice; the blocks' tests; the fills and the failing
 // blocks' trace) need no synchronisation inside a pass: a fill reads lattice pixels and writes its
 // own off-lattice pixel, which no trace of the same pass writes.
 #pragma once
@@ -42,9 +42,10 @@ namespace canopy::play {
 
 CANOPY_HD inline bool adaptiveOnLattice(int x, int y) { return ((x | y) & 1) == 0; }
 
-// The lattice's pixels that a band [y0, y1) of a frame `height` rows high traces, as warp tiles of
-// the half-size grid (lattice column lx = x / 2, row ly = y / 2): columns [0, (width + 1) / 2),
-// rows [y0 / 2, the row below the cell of the band's last row], within the frame.
+// The lattice's pixels that rows [y0, y1) of a frame `height` rows high need, as warp tiles of the
+// half-size grid (lattice column lx = x / 2, row ly = y / 2): columns [0, (width + 1) / 2), rows
+// [y0 / 2, the row below the cell of row y1 - 1], within the frame. A band traces those of its
+// blocks' rows (adaptiveBlockRows), not only of its own.
 CANOPY_HD inline int adaptiveLatticeWidth(int width) { return (width + 1) / 2; }
 CANOPY_HD inline int adaptiveLatticeFirst(int y0) { return y0 / 2; }
 CANOPY_HD inline int adaptiveLatticeEnd(int y1, int height) {
@@ -111,9 +112,24 @@ CANOPY_HD inline void adaptiveFillPixel(float* rgba, int width, int x, int y) {
 }
 
 // The blocks of a band [y0, y1): block rows [y0 / tileH, (y1 - 1) / tileH], (width + tileW - 1) /
-// tileW per row; a block that a band edge cuts is tested by both bands (the same lattice pixels,
-// the same answer), each filling or tracing its own rows of it.
+// tileW per row; a block that a band edge cuts (bands lie on multiples of tileH rows only where the
+// frame's height allows, tiles.h) is tested by both bands, each filling or tracing its own rows of
+// it. Each band traces the lattice of its blocks' whole rows (adaptiveBlockRows), so both test it
+// on the same lattice pixels, traced by each, and give the same answer.
 CANOPY_HD inline int adaptiveBlockRowFirst(int y0, int tileH) { return y0 / tileH; }
 CANOPY_HD inline int adaptiveBlockRowEnd(int y1, int tileH) { return (y1 - 1) / tileH + 1; }
+// The off-lattice pixels of rows [y0, y1) of a frame `width` pixels wide: an odd row is all off the
+// lattice, an even row has its odd columns off it. The filled ones are these less those traced.
+CANOPY_HD inline uint64_t adaptiveOffLattice(int width, int y0, int y1) {
+  const uint64_t odd = uint64_t(y1 / 2 - y0 / 2), rows = uint64_t(y1 - y0);  // odd rows in [y0, y1): y1 / 2 - y0 / 2
+  return odd * uint64_t(width) + (rows - odd) * uint64_t(width / 2);
+}
+
+// The pixel rows [r0, r1) of the band [y0, y1)'s blocks, within the frame.
+CANOPY_HD inline void adaptiveBlockRows(int y0, int y1, int tileH, int height, int& r0, int& r1) {
+  r0 = adaptiveBlockRowFirst(y0, tileH) * tileH;
+  r1 = adaptiveBlockRowEnd(y1, tileH) * tileH;
+  r1 = r1 < height ? r1 : height;
+}
 
 }  // namespace canopy::play

@@ -86,15 +86,17 @@ class CpuBackend final : public Backend {
       disparityScale_ = disparityScale;
     }
     lastFilled_ = 0;
-    if (adaptive_ > 0.0f && !depth) return renderAdaptive(v, camera, band, out);
+    if (adaptive_ > 0.0f && !depth && eye == 0) return renderAdaptive(v, camera, band, out);
     const int64_t first = int64_t(band.y0) * camera.width;
     parallelFor(int64_t(band.rows()) * camera.width, [&](int64_t i) { renderPixel(v, camera, first + i, out, depth, disparityScale); }, 64);
   }
   // adaptive.h: the lattice; each block of the band tested; the passing blocks' off-lattice pixels
   // filled, the failing blocks' traced.
   void renderAdaptive(const SceneView& v, const CameraView& camera, Band band, float* out) {
-    const int w = camera.width, h = camera.height, lw = adaptiveLatticeWidth(w), ly0 = adaptiveLatticeFirst(band.y0);
-    const int64_t lattice = int64_t(lw) * (adaptiveLatticeEnd(band.y1, h) - ly0);
+    int r0, r1;  // the rows of the band's blocks, whose lattice the blocks' tests read
+    adaptiveBlockRows(band.y0, band.y1, tileH_, camera.height, r0, r1);
+    const int w = camera.width, h = camera.height, lw = adaptiveLatticeWidth(w), ly0 = adaptiveLatticeFirst(r0);
+    const int64_t lattice = int64_t(lw) * (adaptiveLatticeEnd(r1, h) - ly0);
     parallelFor(lattice, [&](int64_t i) {
       const int x = 2 * int(i % lw), y = 2 * (ly0 + int(i / lw));
       renderPixel(v, camera, int64_t(y) * w + x, out, nullptr, 0.0f);
@@ -106,20 +108,16 @@ class CpuBackend final : public Backend {
       blockPass_[size_t(b)] = adaptiveBlockAgrees(out, w, h, int(b % blocksX), by0 + int(b / blocksX), tileW_, tileH_, adaptive_) ? 1 : 0;
     }, 64);
     trace_.clear();
-    uint64_t filled = 0;
     for (int y = band.y0; y < band.y1; ++y)
       for (int x = 0; x < w; ++x) {
         if (adaptiveOnLattice(x, y)) continue;
-        const size_t b = size_t(y / tileH_ - by0) * blocksX + size_t(x / tileW_);
-        if (blockPass_[b]) {
+        if (blockPass_[size_t(y / tileH_ - by0) * blocksX + size_t(x / tileW_)])
           adaptiveFillPixel(out, w, x, y);
-          ++filled;
-        } else {
+        else
           trace_.push_back(int64_t(y) * w + x);
-        }
       }
     parallelFor(int64_t(trace_.size()), [&](int64_t k) { renderPixel(v, camera, trace_[size_t(k)], out, nullptr, 0.0f); }, 64);
-    lastFilled_ = filled;
+    lastFilled_ = adaptiveOffLattice(w, band.y0, band.y1) - trace_.size();
   }
   StereoCounts reprojectRows(const HostScene& scene, const CameraView& right, uint32_t stamp, Band band, const StereoParams& p) override {
     (void)scene, (void)stamp;  // the stamp and scene of view_, the last render of this pass

@@ -130,8 +130,8 @@ struct StereoResolveKernel {
 // Adaptive sampling (adaptive.h), after the lattice's trace: each block of the band tested (pass[b]
 // = 1: filled), then per tile position j of the band its off-lattice pixel filled where its block
 // passed, or marked (mark[j] = j; -1 elsewhere) where it failed; the marks are compacted in order
-// as stereo's holes are, so that a warp traces the 24 off-lattice pixels of a failing block and 8 of
-// the next failing one. *filled counts the filled pixels (one atomic per warp).
+// as stereo's holes are, so that a warp traces the 24 off-lattice pixels of a failing 4x8 block and 8
+// of the next failing one (where the band starts on a block row).
 struct AdaptiveBlockKernel {
   const float* rgba;
   int width, height, tileW, tileH, blocksX, blockRow0;
@@ -147,7 +147,6 @@ struct AdaptiveFillKernel {
   int width, tilesX, tileW, tileH, y0, y1, blocksX, blockRow0;
   const uint8_t* pass;
   int32_t* mark;
-  unsigned long long* filled;
   __device__ void operator()(int64_t j) const {
     int x, y;
     const bool in = bandTilePixel(j, tilesX, tileW, tileH, width, y0, y1, x, y);
@@ -155,9 +154,6 @@ struct AdaptiveFillKernel {
     const bool fill = off && pass[int64_t(y / tileH - blockRow0) * blocksX + x / tileW] != 0;
     if (fill) adaptiveFillPixel(rgba, width, x, y);
     mark[j] = off && !fill ? int32_t(j) : -1;
-    const unsigned active = __activemask();
-    const unsigned ballot = __ballot_sync(active, fill);
-    if (ballot != 0u && int(threadIdx.x & 31u) == __ffs(int(active)) - 1) atomicAdd(filled, static_cast<unsigned long long>(__popc(ballot)));
   }
 };
 
@@ -197,7 +193,6 @@ class CudaBackend final : public Backend {
     CANOPY_CUDA_CHECK(cudaSetDevice(device));
     holeCount_.resize(1);
     behindCount_.resize(1);
-    filledCount_.resize(1);
     CANOPY_CUDA_CHECK(cudaStreamCreateWithFlags(&compute_, cudaStreamNonBlocking));
     CANOPY_CUDA_CHECK(cudaStreamCreateWithFlags(&copy_, cudaStreamNonBlocking));
     for (int i = 0; i < 2; ++i) CANOPY_CUDA_CHECK(cudaEventCreateWithFlags(&tableCopied_[i], cudaEventDisableTiming));
@@ -367,7 +362,7 @@ class CudaBackend final : public Backend {
     lastFilled_ = 0;
     if (depth)
       launchMode<true>(scene, shade, camera, out, band, nullptr, threads, depth, disparityScale);
-    else if (adaptive_ > 0.0f)
+    else if (adaptive_ > 0.0f && eye == 0)
       renderAdaptive(scene, shade, camera, out, band, tilesX, threads);
     else
       launchMode<false>(scene, shade, camera, out, band, nullptr, threads, nullptr, 0.0f);
@@ -377,26 +372,25 @@ class CudaBackend final : public Backend {
   // filled, the failing blocks' traced (in tile order: a warp's rays stay within two blocks).
   void renderAdaptive(const HostScene& scene, const ShadeParams& shade, const CameraView& camera, float* out, Band band, int tilesX,
                       int64_t threads) {
+    Band rows;  // the rows of the band's blocks, whose lattice the blocks' tests read
+    adaptiveBlockRows(band.y0, band.y1, tileH_, camera.height, rows.y0, rows.y1);
     const int latticeTilesX = (adaptiveLatticeWidth(camera.width) + tileW_ - 1) / tileW_;
-    const int latticeRows = adaptiveLatticeEnd(band.y1, camera.height) - adaptiveLatticeFirst(band.y0);
+    const int latticeRows = adaptiveLatticeEnd(rows.y1, camera.height) - adaptiveLatticeFirst(rows.y0);
     const int latticeTilesY = (latticeRows + tileH_ - 1) / tileH_;
-    launchMode<false>(scene, shade, camera, out, band, nullptr, int64_t(latticeTilesX) * latticeTilesY * tileW_ * tileH_, nullptr, 0.0f, true);
+    launchMode<false>(scene, shade, camera, out, rows, nullptr, int64_t(latticeTilesX) * latticeTilesY * tileW_ * tileH_, nullptr, 0.0f, true);
     const int blockRow0 = adaptiveBlockRowFirst(band.y0, tileH_), blockRows = adaptiveBlockRowEnd(band.y1, tileH_) - blockRow0;
     const int64_t blocks = int64_t(tilesX) * blockRows;
     if (blockPass_.size() < size_t(blocks)) blockPass_.resize(size_t(blocks));
     cuda::parallelFor(blocks, AdaptiveBlockKernel{out, camera.width, camera.height, tileW_, tileH_, tilesX, blockRow0, adaptive_, blockPass_.data()},
                       compute_, 128);
     if (hole_.size() < size_t(threads)) hole_.resize(size_t(threads)), holeList_.resize(size_t(threads));
-    CANOPY_CUDA_CHECK(cudaMemsetAsync(filledCount_.data(), 0, sizeof(unsigned long long), compute_));
     cuda::parallelFor(threads,
                       AdaptiveFillKernel{out, camera.width, tilesX, tileW_, tileH_, band.y0, band.y1, tilesX, blockRow0, blockPass_.data(),
-                                         hole_.data(), filledCount_.data()},
+                                         hole_.data()},
                       compute_, 256);
-    unsigned long long filled = 0;
-    CANOPY_CUDA_CHECK(cudaMemcpyAsync(&filled, filledCount_.data(), sizeof filled, cudaMemcpyDeviceToHost, compute_));
     const int64_t traced = compactHoles(threads);
     launchMode<false>(scene, shade, camera, out, band, holeList_.data(), traced, nullptr, 0.0f);
-    lastFilled_ = filled;  // written by the copy before compactHoles' wait
+    lastFilled_ = adaptiveOffLattice(camera.width, band.y0, band.y1) - uint64_t(traced);
   }
   // The marks hole_[0, marks) that are >= 0, in order, into holeList_; returns their count (waits
   // for the compute stream).
@@ -539,7 +533,6 @@ class CudaBackend final : public Backend {
   cuda::DeviceBuffer<int32_t> hole_, holeList_;   // stereo's holes' marks by half and tile position (adaptive sampling's by tile
                                                   // position), and compacted
   cuda::DeviceBuffer<uint8_t> blockPass_;         // adaptive sampling: the band's blocks, 1 where filled
-  cuda::DeviceBuffer<unsigned long long> filledCount_;  // adaptive sampling: the pixels filled
   cuda::DeviceBuffer<int64_t> holeCount_;
   cuda::DeviceBuffer<unsigned long long> behindCount_;  // stereo: the holes traced behind a reprojected front
   cuda::DeviceBuffer<float> holeFrom_;                  // stereo: per right-eye hole, where its trace starts

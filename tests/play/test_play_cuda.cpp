@@ -17,6 +17,7 @@
 #include "formats/canopy_file.h"
 #include "runtime/player.h"
 #include "tests/octreepack/synthetic.h"
+#include "tests/play/adaptive_check.h"
 #include "tests/play/scenes.h"
 
 namespace pl = canopy::play;
@@ -269,30 +270,43 @@ TEST(PlayCuda, cuda_WarpTileShapeChangesNoPixel) {
 }
 
 // Adaptive sampling on the GPU (adaptive.h: the lattice in warp tiles of the half-size grid, the
-// blocks' tests, the fill, the failing blocks' off-lattice pixels compacted in tile order and traced)
-// against the CPU reference, on the lit forest from among the trees: the two fill the same blocks
-// but where a corner's few-1e-4 difference between the backends moves a cell across the tolerance
-// (traced fractions within 2 % of the pixels), so the frames agree as every GPU frame does
-// (RMS < 4e-3, 98 % of the values within 1e-2); three bands on the GPU give its one-band frame
-// bit for bit.
-TEST(PlayCuda, cuda_AdaptiveFrameMatchesTheCpuReference) {
+// blocks' tests, the fill, the failing blocks' off-lattice pixels compacted in tile order and
+// traced), on the lit forest from among the trees: block by block against the GPU's own full trace
+// (expectAdaptiveBlocks: each block filled from the full trace's corners or traced to its bits, as
+// the test on the full trace says; the report's count of filled pixels), at 160x96 with 4x8 blocks
+// and at 161x97 with 8x4 ones; against the CPU reference as every GPU frame is (the two fill the
+// same blocks but where a corner's few-1e-4 difference between the backends moves a cell across
+// the tolerance; measured 2026-12-06: the same traced fraction, RMS 6e-7); and bands (3 on block
+// rows, 40 on single rows that cut blocks) give the one-band frame bit for bit.
+TEST(PlayCuda, cuda_AdaptiveFrameMatchesTheFullTraceBlockByBlock) {
   if (canopy::cudaDeviceCount() == 0) GTEST_SKIP() << "no CUDA device";
-  pl::PlayOptions o = litForestOptions(160, 96, "orbit:azimuth=60,elevation=8,distance=9,turns=0");
-  o.adaptive = 0.02f;
-  std::vector<float> c, g, g3;
-  const nlohmann::json rc = pl::play(o, canopy::Device{}, &c);
-  const nlohmann::json rg = pl::play(o, cuda(), &g);
-  const double fc = rc["adaptive"]["traced_fraction_mean"], fg = rg["adaptive"]["traced_fraction_mean"];
-  std::printf("adaptive: traced fraction cpu %.4f cuda %.4f; RMS %.2e (within 1e-2: %.4f)\n", fc, fg, pt::imageRms(c, g), fractionWithin(c, g, 1e-2f));
-  EXPECT_GT(fc, 0.25);
-  EXPECT_LT(fc, 0.95);
-  EXPECT_NEAR(fc, fg, 0.02);
-  EXPECT_LT(pt::imageRms(c, g), 4e-3);
-  EXPECT_GT(fractionWithin(c, g, 1e-2f), 0.98);
-  o.tiles = 3;
-  pl::play(o, cuda(), &g3);
-  ASSERT_EQ(g3.size(), g.size());
-  EXPECT_EQ(std::memcmp(g3.data(), g.data(), g.size() * sizeof(float)), 0) << "rms " << pt::imageRms(g3, g);
+  for (const int tileW : {4, 8}) {
+    const int w = tileW == 4 ? 160 : 161, h = tileW == 4 ? 96 : 97, tileH = 32 / tileW;
+    pl::PlayOptions o = litForestOptions(w, h, "orbit:azimuth=60,elevation=8,distance=9,turns=0");
+    o.warpTileWidth = tileW;
+    std::vector<float> full, c, g, gb;
+    pl::play(o, cuda(), &full);
+    o.adaptive = 0.02f;
+    const nlohmann::json rc = pl::play(o, canopy::Device{}, &c);
+    const nlohmann::json rg = pl::play(o, cuda(), &g);
+    const double fc = rc["adaptive"]["traced_fraction_mean"], fg = rg["adaptive"]["traced_fraction_mean"];
+    std::printf("adaptive %dx%d: traced fraction cpu %.4f cuda %.4f; RMS %.2e (within 1e-2: %.4f)\n", w, h, fc, fg, pt::imageRms(c, g),
+                fractionWithin(c, g, 1e-2f));
+    int passing = 0, failing = 0;
+    const uint64_t filled = pt::expectAdaptiveBlocks(g, full, w, h, tileW, tileH, 0.02f, passing, failing);
+    EXPECT_GT(passing, 0);
+    EXPECT_GT(failing, 0);
+    EXPECT_DOUBLE_EQ(fg, 1.0 - double(filled) / (double(w) * h));
+    EXPECT_NEAR(fc, fg, 0.02);
+    EXPECT_LT(pt::imageRms(c, g), 4e-3);
+    EXPECT_GT(fractionWithin(c, g, 1e-2f), 0.98);
+    for (const int tiles : {3, 40}) {
+      o.tiles = tiles;
+      pl::play(o, cuda(), &gb);
+      ASSERT_EQ(gb.size(), g.size());
+      EXPECT_EQ(std::memcmp(gb.data(), g.data(), g.size() * sizeof(float)), 0) << tiles << " bands: rms " << pt::imageRms(gb, g);
+    }
+  }
 }
 
 // Bands on one GPU (--tiles 3 on cuda:0: three backends, three caches, three threads; what several
