@@ -118,6 +118,18 @@ CANOPY_HD inline void adaptiveFillPixel(float* rgba, int width, int x, int y) {
 // on the same lattice pixels, traced by each, and give the same answer.
 CANOPY_HD inline int adaptiveBlockRowFirst(int y0, int tileH) { return y0 / tileH; }
 CANOPY_HD inline int adaptiveBlockRowEnd(int y1, int tileH) { return (y1 - 1) / tileH + 1; }
+// What tile position j of the band [y0, y1) (bandTilePixel's order; tilesX tiles a row, which are
+// also the blocks a row) does once the band's blocks are tested (pass: 1 where the block passed,
+// from block row blockRow0 on): kAdaptiveFill its off-lattice pixel (x, y) from its cell,
+// kAdaptiveTrace it, or kAdaptiveSkip (a lattice pixel, or a position past the frame or the band).
+// The CUDA fill kernel's element and the CPU's loop alike.
+enum : int { kAdaptiveSkip = 0, kAdaptiveFill = 1, kAdaptiveTrace = 2 };
+CANOPY_HD inline int adaptiveAction(int64_t j, int tilesX, int tileW, int tileH, int width, int y0, int y1, int blockRow0, const uint8_t* pass,
+                                    int& x, int& y) {
+  if (!bandTilePixel(j, tilesX, tileW, tileH, width, y0, y1, x, y) || adaptiveOnLattice(x, y)) return kAdaptiveSkip;
+  return pass[int64_t(y / tileH - blockRow0) * tilesX + x / tileW] != 0 ? kAdaptiveFill : kAdaptiveTrace;
+}
+
 // The off-lattice pixels of rows [y0, y1) of a frame `width` pixels wide: an odd row is all off the
 // lattice, an even row has its odd columns off it. The filled ones are these less those traced.
 CANOPY_HD inline uint64_t adaptiveOffLattice(int width, int y0, int y1) {

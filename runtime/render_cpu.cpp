@@ -108,14 +108,13 @@ class CpuBackend final : public Backend {
       blockPass_[size_t(b)] = adaptiveBlockAgrees(out, w, h, int(b % blocksX), by0 + int(b / blocksX), tileW_, tileH_, adaptive_) ? 1 : 0;
     }, 64);
     trace_.clear();
-    for (int y = band.y0; y < band.y1; ++y)
-      for (int x = 0; x < w; ++x) {
-        if (adaptiveOnLattice(x, y)) continue;
-        if (blockPass_[size_t(y / tileH_ - by0) * blocksX + size_t(x / tileW_)])
-          adaptiveFillPixel(out, w, x, y);
-        else
-          trace_.push_back(int64_t(y) * w + x);
-      }
+    const int64_t positions = int64_t(blocksX) * ((band.rows() + tileH_ - 1) / tileH_) * tileW_ * tileH_;  // the band's warp tiles
+    for (int64_t j = 0; j < positions; ++j) {
+      int x, y;
+      const int a = adaptiveAction(j, blocksX, tileW_, tileH_, w, band.y0, band.y1, by0, blockPass_.data(), x, y);
+      if (a == kAdaptiveFill) adaptiveFillPixel(out, w, x, y);
+      if (a == kAdaptiveTrace) trace_.push_back(int64_t(y) * w + x);
+    }
     parallelFor(int64_t(trace_.size()), [&](int64_t k) { renderPixel(v, camera, trace_[size_t(k)], out, nullptr, 0.0f); }, 64);
     lastFilled_ = adaptiveOffLattice(w, band.y0, band.y1) - trace_.size();
   }

@@ -144,16 +144,14 @@ struct AdaptiveBlockKernel {
 
 struct AdaptiveFillKernel {
   float* rgba;
-  int width, tilesX, tileW, tileH, y0, y1, blocksX, blockRow0;
+  int width, tilesX, tileW, tileH, y0, y1, blockRow0;
   const uint8_t* pass;
   int32_t* mark;
   __device__ void operator()(int64_t j) const {
     int x, y;
-    const bool in = bandTilePixel(j, tilesX, tileW, tileH, width, y0, y1, x, y);
-    const bool off = in && !adaptiveOnLattice(x, y);
-    const bool fill = off && pass[int64_t(y / tileH - blockRow0) * blocksX + x / tileW] != 0;
-    if (fill) adaptiveFillPixel(rgba, width, x, y);
-    mark[j] = off && !fill ? int32_t(j) : -1;
+    const int a = adaptiveAction(j, tilesX, tileW, tileH, width, y0, y1, blockRow0, pass, x, y);
+    if (a == kAdaptiveFill) adaptiveFillPixel(rgba, width, x, y);
+    mark[j] = a == kAdaptiveTrace ? int32_t(j) : -1;
   }
 };
 
@@ -385,8 +383,7 @@ class CudaBackend final : public Backend {
                       compute_, 128);
     if (hole_.size() < size_t(threads)) hole_.resize(size_t(threads)), holeList_.resize(size_t(threads));
     cuda::parallelFor(threads,
-                      AdaptiveFillKernel{out, camera.width, tilesX, tileW_, tileH_, band.y0, band.y1, tilesX, blockRow0, blockPass_.data(),
-                                         hole_.data()},
+                      AdaptiveFillKernel{out, camera.width, tilesX, tileW_, tileH_, band.y0, band.y1, blockRow0, blockPass_.data(), hole_.data()},
                       compute_, 256);
     const int64_t traced = compactHoles(threads);
     launchMode<false>(scene, shade, camera, out, band, holeList_.data(), traced, nullptr, 0.0f);

@@ -19,6 +19,7 @@
 #include "tests/octreepack/synthetic.h"
 #include "tests/play/adaptive_check.h"
 #include "tests/play/scenes.h"
+#include "tests/play/views.h"
 
 namespace pl = canopy::play;
 namespace pt = canopy::play::testing;
@@ -69,13 +70,8 @@ std::string litForestFile() {
 
 // A converged w x h frame of the lit forest from `camera`, the sun fixed (the stereo and warp-tile tests).
 pl::PlayOptions litForestOptions(int w, int h, const char* camera) {
-  pl::PlayOptions o;
-  o.input = litForestFile();
-  o.width = w;
-  o.height = h;
-  o.converge = true;
+  pl::PlayOptions o = pt::convergedView(litForestFile(), w, h, camera);
   o.sun = "0.3,0.8,-0.52";
-  o.camera = camera;
   return o;
 }
 

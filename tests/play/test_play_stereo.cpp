@@ -27,6 +27,7 @@
 #include "tests/play/adaptive_check.h"
 #include "tests/play/resident.h"
 #include "tests/play/scenes.h"
+#include "tests/play/views.h"
 
 namespace pl = canopy::play;
 namespace pt = canopy::play::testing;
@@ -101,15 +102,7 @@ const std::string& groveFile() {
   return path;
 }
 
-pl::PlayOptions groveView(int w, int h) {
-  pl::PlayOptions o;
-  o.input = groveFile();
-  o.width = w;
-  o.height = h;
-  o.converge = true;
-  o.camera = "orbit:elevation=8,distance=9,fov=60";
-  return o;
-}
+pl::PlayOptions groveView(int w, int h) { return pt::convergedView(groveFile(), w, h, "orbit:elevation=8,distance=9,fov=60"); }
 
 // The grove's stereo pair (IPD 0.5) with every page resident, the ground under it and shadows off
 // (the map is a backend's pass; nothing here depends on it): the scene's view and the two eyes.
