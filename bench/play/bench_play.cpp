@@ -10,6 +10,7 @@
 // scenes from the pipeline (e.g. the grove, or pipelines/scatter.py's forest packed by
 // canopy-octreepack --scene).
 #include <algorithm>
+#include <cctype>
 #include <cstdio>
 #include <cstdlib>
 #include <cmath>
@@ -66,7 +67,7 @@ int main(int argc, char** argv) {
   app.add_option("--cache-mb", cacheMb, "Cache budget (MiB)")->capture_default_str();
   app.add_option("--instances", instances, "Forest instances")->capture_default_str();
   app.add_option("--extra", extra, "NAME=FILE.canopy[@CAMERA]: more packed scenes (default camera orbit:elevation=20; CAMERA as canopy-play --camera)");
-  app.add_option("--shadows", shadowMethods, "Shadow methods to run, each scene with each (map, cone, off; a -nocache suffix turns off the descent cache, -notable descends from the root instead of reading the models' descent tables (same image), -nohold the held empty segments, -noskip the empty-cell skip, -occ6/-occ8/-occfree the CUDA pixel kernel for 6/8 blocks per SM or unconstrained (default: 6 without LB light, 5 with it), -rows puts a warp on 32 pixels of a row, -tile2/-tile4/-tile8/-tile16 on 2x16/4x8 (the default)/8x4/16x2 pixels, -exact the finest level's light from Haar pages (--light exact); quality dials: -stop99 stops cones at opacity 0.99 (--stop-opacity), -step1 marches bricks in steps of one voxel (--step 1), -lod1 one level coarser (--lod-bias -1), -nogrow brick steps that never grow (--step-growth 0; the default grows them below transmittance 0.1), -adaptTOL adaptive sampling in whole blocks (--adaptive TOL, e.g. -adapt0.04); each scene's last frame is compared with the first method's (RMS)")->capture_default_str();
+  app.add_option("--shadows", shadowMethods, "Shadow methods to run, each scene with each (map, cone, off; a -nocache suffix turns off the descent cache, -notable descends from the root instead of reading the models' descent tables (same image), -nohold the held empty segments, -noskip the empty-cell skip, -occ6/-occ8/-occfree the CUDA pixel kernel for 6/8 blocks per SM or unconstrained (default: 6 without LB light, 5 with it), -rows puts a warp on 32 pixels of a row, -tile2/-tile4/-tile8/-tile16 on 2x16/4x8 (the default)/8x4/16x2 pixels, -exact the finest level's light from Haar pages (--light exact); quality dials: -stop99 stops cones at opacity 0.99 (--stop-opacity), -step1 marches bricks in steps of one voxel (--step 1), -lod1 one level coarser (--lod-bias -1), -nogrow brick steps that never grow (--step-growth 0; the default grows them below transmittance 0.1), -growT steps that grow below transmittance T (--step-growth T, e.g. -grow0.2), -adaptTOL adaptive sampling in whole blocks (--adaptive TOL, e.g. -adapt0.04); each scene's last frame is compared with the first method's (RMS)")->capture_default_str();
   app.add_flag("--count-work", countWork, "CPU only: count cones, steps, samples and shadow work per frame (results.json \"work\")");
   app.add_flag("--only-extra", skipSynthetic, "Play only the --extra scenes (the synthetic ones are still written)");
   return tool.run(argc, argv, [&] {
@@ -131,7 +132,8 @@ int main(int argc, char** argv) {
       if (method.find("stop99") != std::string::npos) o.stopTransmittance = 0.01f;  // quality dials (image changes)
       if (method.find("step1") != std::string::npos) o.stepFactor = 1.0f;
       if (method.find("nogrow") != std::string::npos) o.stepGrowthT = 0.0f;     // -nogrow: brick steps never grow (--step-growth 0)
-      else if (method.find("grow") != std::string::npos) o.stepGrowthT = 0.1f;  // -grow: steps grow below T 0.1, up to 4x (the default)
+      else if (const size_t at = method.find("grow"); at != std::string::npos)  // -grow: steps grow below T 0.1, up to 4x (the default);
+        o.stepGrowthT = std::isdigit(static_cast<unsigned char>(method[std::min(at + 4, method.size() - 1)])) ? std::stof(method.substr(at + 4)) : 0.1f;  // -growT: below T
       if (method.find("lod1") != std::string::npos) o.lodBias = -1.0f;
       if (const size_t at = method.find("adapt"); at != std::string::npos) o.adaptive = std::stof(method.substr(at + 5));  // -adaptTOL: --adaptive TOL
       const std::string shadowMethod = method.substr(0, method.find('-'));
