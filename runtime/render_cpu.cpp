@@ -58,8 +58,7 @@ class CpuBackend final : public Backend {
       v.shadowMap.T = shadowMap_.data();
       const ShadowMapView m = v.shadowMap;
       const ExtinctionGridView g = grid_;
-      parallelFor(int64_t(shadowMap_.size()), [&](int64_t i) { shadowMapVoxelDepth(m, g, sub, i); }, 1024);
-      parallelFor(columns, [&](int64_t c) { shadowMapColumnTransmittance(m, c); }, 64);
+      parallelFor(columns, [&](int64_t c) { buildShadowMapColumn(m, g, sub, c); }, 16);
       if (work_) work_->shadowMapSteps += uint64_t(columns) * uint64_t(m.dim[2]) * uint64_t(sub);
     }
     if (shade.farStart >= 0.0f && farFieldReachable(scene, shade, camera)) {

@@ -171,16 +171,11 @@ struct FarFieldKernel {
   __device__ void operator()(int64_t i) const { buildFarFieldVoxel(scene, far, i); }
 };
 
-// The shadow map's two passes (shadow_map.h): every voxel's optical depth, then each column's T.
-struct ShadowMapDepthKernel {
+struct ShadowMapKernel {
   ShadowMapView map;
   ExtinctionGridView grid;
   int sub;
-  __device__ void operator()(int64_t i) const { shadowMapVoxelDepth(map, grid, sub, i); }
-};
-struct ShadowMapColumnKernel {
-  ShadowMapView map;
-  __device__ void operator()(int64_t c) const { shadowMapColumnTransmittance(map, c); }
+  __device__ void operator()(int64_t c) const { buildShadowMapColumn(map, grid, sub, c); }
 };
 
 template <class T>
@@ -340,8 +335,7 @@ class CudaBackend final : public Backend {
         shadowMap_.resize(n + n / 4);  // room for the next frames' slightly larger boxes
       }
       v.shadowMap.T = shadowMap_.data();
-      cuda::parallelFor(int64_t(n), ShadowMapDepthKernel{v.shadowMap, grid_, sub}, compute_, 256);
-      cuda::parallelFor(columns, ShadowMapColumnKernel{v.shadowMap}, compute_, 128);
+      cuda::parallelFor(columns, ShadowMapKernel{v.shadowMap, grid_, sub}, compute_, 128);
     }
     if (shade.farStart >= 0.0f && farFieldReachable(scene, shade, camera)) {
       // the far field: once per scene (it depends on the instances and sigma only), once a cone can reach it

@@ -139,37 +139,31 @@ CANOPY_HD CANOPY_FORCEINLINE V3 shadowMapPoint(const ShadowMapView& m, float u, 
   return m.origin + m.axis[0] * (u * m.voxel) + m.axis[1] * (v * m.voxel) + m.axis[2] * (w * m.voxel);
 }
 
-// The map is built in two passes, each a GPU kernel (and a CPU loop) over independent elements:
-// 1. shadowMapVoxelDepth, every voxel at once: T[i] = the optical depth from voxel i's centre to
-//    the next one away from the sun (`sub` midpoint steps through the extinction grid);
-// 2. shadowMapColumnTransmittance, each column c = u + dim0 v front to back from the sun, in place:
-//    T[c + stride w] = exp(-(the depths of voxels 0 .. w - 1)), read eight at a time (voxel 0 lies
-//    outside the scene's box, so its T is 1).
-// A column marched by one thread, reading each step's extinction after storing the previous
-// voxel's T, waited out a read's latency per step: 0.14-0.16 ms of each frame on one H100 or H200
-// for 42 K columns of about 200 voxels, 1 % of the 1080p low orbit's frame.
-// Voxel indices in 32 bits: the map has at most 2^28 voxels (--shadow-map-voxels).
-CANOPY_HD inline void shadowMapVoxelDepth(const ShadowMapView& m, const ExtinctionGridView& g, int sub, int64_t i) {
-  const uint32_t columns = uint32_t(m.dim[0]) * uint32_t(m.dim[1]), c = uint32_t(i) % columns;
-  const int u = int(c % uint32_t(m.dim[0])), v = int(c / uint32_t(m.dim[0])), w = int(uint32_t(i) / columns);
+// Map column c = u + dim0 v: marched front to back from the sun through the extinction grid, T
+// stored at each voxel centre; between two centres `sub` midpoint steps (voxel 0 lies outside the
+// scene's box, so its T is 1). The steps go kShadowMapBatch at a time: their extinctions are read
+// before any is added (the reads depend on the positions only), then added in order. A step's read
+// following the previous step's store of T made one GPU thread wait out a read's latency per step:
+// 0.16 ms of a frame on one H200, a column per thread. Same operations in the same order as one
+// step at a time, so the same bits.
+constexpr int kShadowMapBatch = 8;
+CANOPY_HD inline void buildShadowMapColumn(const ShadowMapView& m, const ExtinctionGridView& g, int sub, int64_t c) {
+  const int u = int(c % m.dim[0]), v = int(c / m.dim[0]);
+  const int64_t stride = int64_t(m.dim[0]) * m.dim[1];
   const float ds = m.voxel / float(sub);
   const V3 step = m.axis[2] * ds;
-  V3 p = shadowMapPoint(m, float(u), float(v), float(w)) + step * 0.5f;
-  float k = 0.0f;
-  for (int j = 0; j < sub; ++j, p = p + step) k += extinctionAt(g, p);
-  m.T[i] = k * ds;
-}
-
-constexpr int kShadowMapBatch = 8;
-CANOPY_HD inline void shadowMapColumnTransmittance(const ShadowMapView& m, int64_t c) {
-  const uint32_t stride = uint32_t(m.dim[0]) * uint32_t(m.dim[1]);
+  V3 p = shadowMapPoint(m, float(u), float(v), 0.0f) + step * 0.5f;
   float tau = 0.0f;  // optical depth from the sun to the current voxel centre
-  for (int w0 = 0; w0 < m.dim[2]; w0 += kShadowMapBatch) {
-    float d[kShadowMapBatch];
-    for (int b = 0; b < kShadowMapBatch; ++b) d[b] = w0 + b < m.dim[2] ? m.T[uint32_t(c) + stride * uint32_t(w0 + b)] : 0.0f;
-    for (int b = 0; b < kShadowMapBatch && w0 + b < m.dim[2]; ++b) {
-      m.T[uint32_t(c) + stride * uint32_t(w0 + b)] = expf(-tau);
-      tau += d[b];
+  const int64_t steps = int64_t(m.dim[2]) * sub;
+  int64_t at = c;  // voxel w's index, c + stride w
+  int j = 0;       // the step within voxel w
+  for (int64_t s0 = 0; s0 < steps; s0 += kShadowMapBatch) {
+    float k[kShadowMapBatch];
+    for (int b = 0; b < kShadowMapBatch; ++b, p = p + step) k[b] = s0 + b < steps ? extinctionAt(g, p) : 0.0f;
+    for (int b = 0; b < kShadowMapBatch && s0 + b < steps; ++b) {
+      if (j == 0) m.T[at] = expf(-tau);
+      tau += k[b] * ds;
+      if (++j == sub) j = 0, at += stride;
     }
   }
 }
