@@ -142,10 +142,10 @@ CANOPY_HD CANOPY_FORCEINLINE V3 shadowMapPoint(const ShadowMapView& m, float u, 
 // Map column c = u + dim0 v: marched front to back from the sun through the extinction grid, T
 // stored at each voxel centre; between two centres `sub` midpoint steps (voxel 0 lies outside the
 // scene's box, so its T is 1). The steps go kShadowMapBatch at a time: their extinctions are read
-// before any is added (the reads depend on the positions only), then added in order. A step's read
-// following the previous step's store of T made one GPU thread wait out a read's latency per step:
-// 0.16 ms of a frame on one H200, a column per thread. Same operations in the same order as one
-// step at a time, so the same bits.
+// before any is added (the reads depend on the positions only), then added in order, so that a GPU
+// thread (a column) need not wait out one read's latency per step behind the store of T. Same
+// operations in the same order as one step at a time, so the same bits. The kernel is 0.14-0.16 ms
+// of a real-forest frame either way (docs/performance.md, "Shadows: the sun transmittance map").
 constexpr int kShadowMapBatch = 8;
 CANOPY_HD inline void buildShadowMapColumn(const ShadowMapView& m, const ExtinctionGridView& g, int sub, int64_t c) {
   const int u = int(c % m.dim[0]), v = int(c / m.dim[0]);
