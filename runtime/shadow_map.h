@@ -141,12 +141,7 @@ CANOPY_HD CANOPY_FORCEINLINE V3 shadowMapPoint(const ShadowMapView& m, float u, 
 
 // Map column c = u + dim0 v: marched front to back from the sun through the extinction grid, T
 // stored at each voxel centre; between two centres `sub` midpoint steps (voxel 0 lies outside the
-// scene's box, so its T is 1). The steps go kShadowMapBatch at a time: their extinctions are read
-// before any is added (the reads depend on the positions only), then added in order, so that a GPU
-// thread (a column) need not wait out one read's latency per step behind the store of T. Same
-// operations in the same order as one step at a time, so the same bits. The kernel is 0.14-0.16 ms
-// of a real-forest frame either way (docs/performance.md, "Shadows: the sun transmittance map").
-constexpr int kShadowMapBatch = 8;
+// scene's box, so its T is 1).
 CANOPY_HD inline void buildShadowMapColumn(const ShadowMapView& m, const ExtinctionGridView& g, int sub, int64_t c) {
   const int u = int(c % m.dim[0]), v = int(c / m.dim[0]);
   const int64_t stride = int64_t(m.dim[0]) * m.dim[1];
@@ -154,17 +149,9 @@ CANOPY_HD inline void buildShadowMapColumn(const ShadowMapView& m, const Extinct
   const V3 step = m.axis[2] * ds;
   V3 p = shadowMapPoint(m, float(u), float(v), 0.0f) + step * 0.5f;
   float tau = 0.0f;  // optical depth from the sun to the current voxel centre
-  const int64_t steps = int64_t(m.dim[2]) * sub;
-  int64_t at = c;  // voxel w's index, c + stride w
-  int j = 0;       // the step within voxel w
-  for (int64_t s0 = 0; s0 < steps; s0 += kShadowMapBatch) {
-    float k[kShadowMapBatch];
-    for (int b = 0; b < kShadowMapBatch; ++b, p = p + step) k[b] = s0 + b < steps ? extinctionAt(g, p) : 0.0f;
-    for (int b = 0; b < kShadowMapBatch && s0 + b < steps; ++b) {
-      if (j == 0) m.T[at] = expf(-tau);
-      tau += k[b] * ds;
-      if (++j == sub) j = 0, at += stride;
-    }
+  for (int w = 0; w < m.dim[2]; ++w) {
+    m.T[c + stride * w] = expf(-tau);
+    for (int j = 0; j < sub; ++j, p = p + step) tau += extinctionAt(g, p) * ds;
   }
 }
 

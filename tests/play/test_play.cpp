@@ -377,48 +377,6 @@ TEST(Render, ShadowMapIsBeerLambertThroughAUniformCube) {
   EXPECT_NEAR(pl::shadowMapLookup(biased, pl::v3(0.1f, -1.2f, -0.2f)), pl::shadowMapLookup(m, pl::v3(0.1f, 0.0f, -0.2f)), 1e-6f);
 }
 
-// buildShadowMapColumn reads its steps' extinctions kShadowMapBatch at a time (GPU latency) and
-// adds them in order: the same bits as the march one step at a time (written out here), for
-// columns whose step count is and is not a multiple of the batch, 1 to 3 steps per voxel, on a
-// random extinction grid in an oblique map.
-TEST(Render, ShadowMapColumnsInBatchesAreTheOneStepMarchBitForBit) {
-  pl::ExtinctionGridView g{};
-  g.dim[0] = 9, g.dim[1] = 7, g.dim[2] = 11;
-  g.voxel = 0.5f;
-  g.lo[0] = -2.0f, g.lo[1] = -1.5f, g.lo[2] = -2.5f;
-  std::vector<float> k(size_t(g.dim[0]) * g.dim[1] * g.dim[2]);
-  std::mt19937 rng(7);
-  std::uniform_real_distribution<float> uni(0.0f, 3.0f);
-  for (float& x : k) x = uni(rng);
-  g.k = k.data();
-  for (int sub = 1; sub <= 3; ++sub)
-    for (int depth : {1, 5, 8, 13}) {
-      pl::ShadowMapView m{};
-      m.dim[0] = 4, m.dim[1] = 3, m.dim[2] = depth;
-      m.voxel = 0.7f;
-      m.axis[2] = pl::normalize(pl::v3(-0.3f, -1.0f, 0.2f));
-      m.axis[0] = pl::normalize(pl::cross(pl::v3(1, 0, 0), m.axis[2]));
-      m.axis[1] = pl::cross(m.axis[2], m.axis[0]);
-      m.origin = pl::v3(-1.1f, 2.3f, -0.4f);
-      const int64_t columns = int64_t(m.dim[0]) * m.dim[1], stride = columns;
-      std::vector<float> batched(size_t(columns) * depth), oneStep(batched.size());
-      m.T = batched.data();
-      for (int64_t c = 0; c < columns; ++c) pl::buildShadowMapColumn(m, g, sub, c);
-      for (int64_t c = 0; c < columns; ++c) {
-        const float ds = m.voxel / float(sub);
-        const pl::V3 step = m.axis[2] * ds;
-        pl::V3 p = pl::shadowMapPoint(m, float(c % m.dim[0]), float(c / m.dim[0]), 0.0f) + step * 0.5f;
-        float tau = 0.0f;
-        for (int w = 0; w < depth; ++w) {
-          oneStep[size_t(c + stride * w)] = expf(-tau);
-          for (int j = 0; j < sub; ++j, p = p + step) tau += pl::extinctionAt(g, p) * ds;
-        }
-      }
-      EXPECT_EQ(std::memcmp(batched.data(), oneStep.data(), batched.size() * sizeof(float)), 0) << "sub " << sub << ", depth " << depth;
-      if (depth > 2) EXPECT_LT(batched.back(), 0.9f) << "sub " << sub << ", depth " << depth;  // the march crossed matter
-    }
-}
-
 // The map against the shadow cones (the brick-resolution reference; within 1-4 % of the path
 // tracer's direct sun on the oak, docs/validation.md) on the synthetic plant lit from the side: the
 // same alpha exactly (shadows never change opacity), and close radiance. The map holds each node's
