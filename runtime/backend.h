@@ -11,6 +11,7 @@
 // whole frame's size, of which only the band's rows are written and read back.
 #pragma once
 #include <cstdint>
+#include <cstring>
 #include <memory>
 #include <string>
 #include <vector>
@@ -76,6 +77,8 @@ class Backend {
   virtual void countWork(WorkCounters* work) { (void)work; }
   // The last render's sun transmittance map (kShadowsMap; dim all 1 otherwise).
   const ShadowMapView& lastShadowMap() const { return lastShadowMap_; }
+  // Shadow-map builds since the backend was made (kShadowsMap: one per sun direction and scene).
+  uint64_t shadowMapBuilds() const { return shadowMapBuilds_; }
 
   // The whole frame, one eye (tests, single-band use).
   void render(const HostScene& scene, const ShadeParams& shade, const CameraView& camera, uint32_t stamp) {
@@ -87,7 +90,24 @@ class Backend {
   }
 
  protected:
+  // Whether the pass's shadow map m (planShadowMap, `sub` steps per voxel, its storage in m.T) must
+  // be built: its columns depend only on the plan (the sun's direction, the scene's box, the voxel,
+  // the steps), the storage and the extinction grid (gridBuilt: built again for this pass), so a
+  // map built for the same plan into the same storage is kept, the same bits. A sun that does not
+  // move costs one build, not one per frame. Records m as the map built.
+  bool shadowMapNeedsBuild(const ShadowMapView& m, int sub, bool gridBuilt) {
+    const ShadowMapView& b = builtShadowMap_;
+    const auto same = [](const void* x, const void* y, size_t n) { return std::memcmp(x, y, n) == 0; };
+    const bool kept = !gridBuilt && builtShadowMapSub_ == sub && b.T == m.T && same(&b.origin, &m.origin, sizeof(V3)) &&
+                      same(b.axis, m.axis, sizeof(b.axis)) && same(&b.voxel, &m.voxel, sizeof(float)) && same(b.dim, m.dim, sizeof(b.dim));
+    builtShadowMap_ = m, builtShadowMapSub_ = sub;
+    shadowMapBuilds_ += kept ? 0 : 1;
+    return !kept;
+  }
   ShadowMapView lastShadowMap_{};
+  ShadowMapView builtShadowMap_{};
+  int builtShadowMapSub_ = 0;  // 0: none built
+  uint64_t shadowMapBuilds_ = 0;
   int tileW_ = kDefaultWarpTileWidth, tileH_ = 32 / kDefaultWarpTileWidth;
   float adaptive_ = 0.0f;
   uint64_t lastFilled_ = 0;

@@ -43,7 +43,9 @@ class CpuBackend final : public Backend {
     v.work = work_;
     if (shade.shadows == kShadowsMap) {
       // the extinction grid: once per scene (it depends on the instances and sigma only)
-      if (extinction_.empty() || gridSigma_ != shade.sigma || gridCells_ != shade.shadowMapCells || gridCap_ != shade.shadowMapMaxVoxels) {
+      const bool gridBuilt =
+          extinction_.empty() || gridSigma_ != shade.sigma || gridCells_ != shade.shadowMapCells || gridCap_ != shade.shadowMapMaxVoxels;
+      if (gridBuilt) {
         grid_ = planExtinctionGrid(scene, shade);
         extinction_.resize(size_t(grid_.dim[0]) * grid_.dim[1] * grid_.dim[2]);
         grid_.k = extinction_.data();
@@ -56,10 +58,12 @@ class CpuBackend final : public Backend {
       const int64_t columns = int64_t(v.shadowMap.dim[0]) * v.shadowMap.dim[1];
       shadowMap_.resize(size_t(columns) * v.shadowMap.dim[2]);
       v.shadowMap.T = shadowMap_.data();
-      const ShadowMapView m = v.shadowMap;
-      const ExtinctionGridView g = grid_;
-      parallelFor(columns, [&](int64_t c) { buildShadowMapColumn(m, g, sub, c); }, 16);
-      if (work_) work_->shadowMapSteps += uint64_t(columns) * uint64_t(m.dim[2]) * uint64_t(sub);
+      if (shadowMapNeedsBuild(v.shadowMap, sub, gridBuilt)) {
+        const ShadowMapView m = v.shadowMap;
+        const ExtinctionGridView g = grid_;
+        parallelFor(columns, [&](int64_t c) { buildShadowMapColumn(m, g, sub, c); }, 16);
+        if (work_) work_->shadowMapSteps += uint64_t(columns) * uint64_t(m.dim[2]) * uint64_t(sub);
+      }
     }
     if (shade.farStart >= 0.0f && farFieldReachable(scene, shade, camera)) {
       // the far field: once per scene (it depends on the instances and sigma only), once a cone can reach it

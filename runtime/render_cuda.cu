@@ -317,7 +317,9 @@ class CudaBackend final : public Backend {
     v.shade = shade;
     if (shade.shadows == kShadowsMap) {
       // the extinction grid: once per scene (it depends on the instances and sigma only)
-      if (extinction_.size() == 0 || gridSigma_ != shade.sigma || gridCells_ != shade.shadowMapCells || gridCap_ != shade.shadowMapMaxVoxels) {
+      const bool gridBuilt =
+          extinction_.size() == 0 || gridSigma_ != shade.sigma || gridCells_ != shade.shadowMapCells || gridCap_ != shade.shadowMapMaxVoxels;
+      if (gridBuilt) {
         grid_ = planExtinctionGrid(scene, shade);
         const size_t n = size_t(grid_.dim[0]) * grid_.dim[1] * grid_.dim[2];
         CANOPY_CUDA_CHECK(cudaStreamSynchronize(compute_));
@@ -335,7 +337,7 @@ class CudaBackend final : public Backend {
         shadowMap_.resize(n + n / 4);  // room for the next frames' slightly larger boxes
       }
       v.shadowMap.T = shadowMap_.data();
-      cuda::parallelFor(columns, ShadowMapKernel{v.shadowMap, grid_, sub}, compute_, 128);
+      if (shadowMapNeedsBuild(v.shadowMap, sub, gridBuilt)) cuda::parallelFor(columns, ShadowMapKernel{v.shadowMap, grid_, sub}, compute_, 128);
     }
     if (shade.farStart >= 0.0f && farFieldReachable(scene, shade, camera)) {
       // the far field: once per scene (it depends on the instances and sigma only), once a cone can reach it

@@ -30,6 +30,7 @@
 #include "runtime/scene.h"
 #include "tests/octreepack/synthetic.h"
 #include "bench/play/forest.h"
+#include "tests/play/resident.h"
 #include "tests/play/scenes.h"
 #include "tests/play/views.h"
 
@@ -327,12 +328,9 @@ TEST(Render, SphereHasTheAnalyticSilhouetteAndBeerLambertOpacity) {
 // with the mass kept) and float rounding remain: optical depth within 3% + 0.03 (measured: see
 // the printout). Beside the lattice box and above the cube T = 1; T falls monotonically with depth.
 // With the default bias the lookup reads T 1.5 blur widths (1.5 x 0.8 m here) nearer the sun.
-TEST(Render, ShadowMapIsBeerLambertThroughAUniformCube) {
-  const std::string file = pt::tmpDir("scenes") + "/cube.canopy";
-  pt::writeScene(file, {pt::sphereModel(kEdge, 1000.0f, kDensity, kCell)}, {pt::instanceAt(0, 0, 0, 0)});
-  const canopy::CanopyFile f = canopy::CanopyFile::open(file);
-  pl::HostScene scene = pl::buildScene(f);
-  std::unique_ptr<pl::Backend> backend = pl::makeCpuBackend(scene, f.pageCount());
+namespace {
+// Map-mode shading with the sun overhead, no lookup bias, 4-cell extinction voxels.
+pl::ShadeParams mapShade() {
   pl::ShadeParams shade{};
   shade.toSun = pl::v3(0, 1, 0);
   shade.sun[0] = shade.sun[1] = shade.sun[2] = 1.0f;
@@ -344,14 +342,33 @@ TEST(Render, ShadowMapIsBeerLambertThroughAUniformCube) {
   shade.shadowMapBias = 0.0f;
   shade.stopT = pl::kStopT;
   shade.shadowMapMaxVoxels = 1u << 23;
-  scene.setSun(shade.toSun);
+  return shade;
+}
+// A w x h camera at z = 10 looking down -z, `spread` world units per pixel at the origin.
+pl::CameraView frontCamera(int w, int h, float spread) {
   pl::CameraView cam{};
   cam.position = pl::v3(0, 0, 10);
   cam.forward = pl::v3(0, 0, -1);
-  cam.right = pl::v3(0.1f, 0, 0);
-  cam.up = pl::v3(0, 0.1f, 0);
-  cam.pixelAngle = 0.2f;
-  cam.width = cam.height = 1;
+  cam.right = pl::v3(spread, 0, 0);
+  cam.up = pl::v3(0, spread, 0);
+  cam.pixelAngle = 2.0f * spread;
+  cam.width = w, cam.height = h;
+  return cam;
+}
+std::vector<float> mapValues(const pl::ShadowMapView& m) {
+  return std::vector<float>(m.T, m.T + size_t(m.dim[0]) * m.dim[1] * m.dim[2]);
+}
+}  // namespace
+
+TEST(Render, ShadowMapIsBeerLambertThroughAUniformCube) {
+  const std::string file = pt::tmpDir("scenes") + "/cube.canopy";
+  pt::writeScene(file, {pt::sphereModel(kEdge, 1000.0f, kDensity, kCell)}, {pt::instanceAt(0, 0, 0, 0)});
+  const canopy::CanopyFile f = canopy::CanopyFile::open(file);
+  pl::HostScene scene = pl::buildScene(f);
+  std::unique_ptr<pl::Backend> backend = pl::makeCpuBackend(scene, f.pageCount());
+  const pl::ShadeParams shade = mapShade();
+  scene.setSun(shade.toSun);
+  const pl::CameraView cam = frontCamera(1, 1, 0.1f);
   backend->render(scene, shade, cam, 1);
   const pl::ShadowMapView m = backend->lastShadowMap();
   ASSERT_NE(m.T, nullptr);
@@ -375,6 +392,46 @@ TEST(Render, ShadowMapIsBeerLambertThroughAUniformCube) {
   pl::ShadowMapView biased = m;
   biased.bias = 1.5f * 0.8f;
   EXPECT_NEAR(pl::shadowMapLookup(biased, pl::v3(0.1f, -1.2f, -0.2f)), pl::shadowMapLookup(m, pl::v3(0.1f, 0.0f, -0.2f)), 1e-6f);
+}
+
+// The map is built once per sun direction (backend.h, shadowMapNeedsBuild): frames under the same
+// sun keep the first build's values and images, a sun that moves rebuilds it, and every kept or
+// rebuilt map is bit for bit the one a fresh backend builds for that sun.
+TEST(Render, ShadowMapIsBuiltOncePerSunDirection) {
+  const std::string file = pt::tmpDir("scenes") + "/plant48-map.canopy";
+  pt::writeScene(file, {canopy::octreepack::testing::syntheticPlant(48, 0, "plant", 8)}, {pt::instanceAt(0, 0, 0, 0)});
+  pt::FrameView fv(pt::convergedView(file, 24, 24, "orbit:azimuth=30,elevation=15,fov=40,turns=0"));
+  pl::ShadeParams overhead = fv.shade, side = fv.shade;
+  overhead.shadows = side.shadows = pl::kShadowsMap;
+  overhead.toSun = pl::v3(0, 1, 0);
+  side.toSun = pl::normalize(pl::v3(0.8f, 0.5f, 0.3f));
+  const auto makeBackend = [&] {  // every page resident
+    std::unique_ptr<pl::Backend> b = pl::makeCpuBackend(fv.scene, fv.f.pageCount());
+    for (uint32_t p = 0; p < fv.f.pageCount(); ++p) b->upload(p, fv.pages.pool.data() + size_t(p) * fv.f.header().pageBytes);
+    b->setPageTable(fv.pages.pageSlot);
+    b->waitUploads();
+    return b;
+  };
+  const auto renderWith = [&](pl::Backend& b, const pl::ShadeParams& shade, std::vector<float>& image) {
+    fv.scene.setSun(shade.toSun);
+    b.render(fv.scene, shade, fv.camera, 1);
+    b.readImage(image, fv.camera);
+    return mapValues(b.lastShadowMap());
+  };
+  std::vector<float> imageOverhead, imageSide, image;
+  const std::vector<float> mapOverhead = renderWith(*makeBackend(), overhead, imageOverhead);
+  const std::vector<float> mapSide = renderWith(*makeBackend(), side, imageSide);
+  ASSERT_NE(mapOverhead, mapSide);
+  ASSERT_NE(imageOverhead, imageSide);
+  std::unique_ptr<pl::Backend> b = makeBackend();
+  const pl::ShadeParams* const frames[] = {&overhead, &overhead, &overhead, &side, &side, &overhead};
+  const uint64_t expectedBuilds[] = {1, 1, 1, 2, 2, 3};
+  for (int i = 0; i < 6; ++i) {
+    const bool isSide = frames[i] == &side;
+    EXPECT_EQ(renderWith(*b, *frames[i], image), isSide ? mapSide : mapOverhead) << "frame " << i;
+    EXPECT_EQ(image, isSide ? imageSide : imageOverhead) << "frame " << i;
+    EXPECT_EQ(b->shadowMapBuilds(), expectedBuilds[i]) << "frame " << i;
+  }
 }
 
 // The map against the shadow cones (the brick-resolution reference; within 1-4 % of the path
