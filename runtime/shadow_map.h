@@ -13,10 +13,11 @@ namespace canopy::play {
 // through the instance grid), of sigma x the node mean density / the instance's cell, the node
 // being the one of edge <= 2 voxels on the descent (node tiles are always resident, so the grid
 // needs no page, is the same for every cache state and is ready at the first frame). (2) The
-// frame's TRANSMITTANCE MAP (light space, per render pass): each column is a ray from the sun,
+// frame's TRANSMITTANCE MAP (light space, built again only when the sun's direction has changed,
+// Backend::shadowMapNeedsBuild): each column is a ray from the sun,
 // marched front to back through the extinction grid (trilinear, steps of at most one extinction
 // voxel); T at a voxel centre = exp(-optical depth from the sun). A sample reads T trilinearly.
-// The cost per frame is one march per map column (independent of the image and of the number of
+// The cost is one march per map column per build (independent of the image and of the number of
 // samples) and 8 reads per shaded sample, instead of a shadow cone through every instance per
 // shadow interval. Shadows are resolved to about one finest node (8 lattice cells) and the map
 // voxel; the cone mode (kShadowsCone) keeps the brick-resolution reference.
