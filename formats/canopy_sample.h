@@ -28,6 +28,18 @@ struct CanopySample {
   float albedo[3];
 };
 
+// *p, for data that no thread writes while a kernel runs (a page of the cache, the scene's tiles):
+// on the GPU a non-coherent load (ld.global.nc), which the compiler may issue ahead of the kernel's
+// stores (the pages' use stamps), as it may not for a plain load.
+template <class T>
+CANOPY_HD CANOPY_FORCEINLINE T canopyLoadRO(const T* p) {
+#if defined(__CUDA_ARCH__)
+  return __ldg(p);
+#else
+  return *p;
+#endif
+}
+
 // The float with bits b (host and device alike: the same code runs in CPU tests and kernels).
 CANOPY_HD CANOPY_FORCEINLINE float canopyFloatFromBits(uint32_t b) {
   float f;
@@ -222,7 +234,7 @@ CANOPY_HD CANOPY_FORCEINLINE CanopySparseBrickView canopySparseBrickInPage(const
 
 // A dense brick's voxel loads, for canopySampleVoxels.
 CANOPY_HD CANOPY_FORCEINLINE void canopyLoadVoxel(const CanopyBrickView& b, uint32_t idx, float& d, uint32_t& m) {
-  d = b.density[idx], m = b.material[idx];
+  d = canopyLoadRO(b.density + idx), m = canopyLoadRO(b.material + idx);
 }
 CANOPY_HD CANOPY_FORCEINLINE void canopyLoadVoxel(const CanopySparseBrickView& b, uint32_t idx, float& d, uint32_t& m) { b.load(idx, d, m); }
 
@@ -328,7 +340,7 @@ CANOPY_HD CANOPY_FORCEINLINE void canopySampleLightAt(const uint32_t* item, uint
                                                       float rgb[3]) {
   const uint32_t* plane = item + size_t(base) * kCanopyLightVoxelCount;
   uint32_t w[8];
-  for (int c = 0; c < 8; ++c) w[c] = plane[k.offset[c]];
+  for (int c = 0; c < 8; ++c) w[c] = canopyLoadRO(plane + k.offset[c]);
   rgb[0] = rgb[1] = rgb[2] = 0.0f;
   for (int c = 0; c < 8; ++c) {
     float v[3];

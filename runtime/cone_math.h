@@ -59,6 +59,16 @@ CANOPY_HD CANOPY_FORCEINLINE Words4 load16(const void* p) {
   return r;
 }
 
+// load16 of data that no thread writes while a kernel runs (canopyLoadRO): non-coherent on the GPU.
+CANOPY_HD CANOPY_FORCEINLINE Words4 load16ro(const void* p) {
+#if defined(__CUDA_ARCH__)
+  const uint4 v = canopyLoadRO(static_cast<const uint4*>(p));
+  return Words4{{v.x, v.y, v.z, v.w}};
+#else
+  return load16(p);
+#endif
+}
+
 // A 3x4 row-major affine map. Rows 16-byte aligned: one 16-byte load each on the GPU.
 struct alignas(16) Affine {
   float m[12];

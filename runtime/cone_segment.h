@@ -116,7 +116,7 @@ CANOPY_HD inline int32_t residentSlot(const SceneView& s, const ModelView& m, ui
 // A node of a tile array, by load16 (on the device every node is 16-byte aligned: the backend's
 // tile arrays are device allocations of 16-byte nodes; the host's copy needs no alignment).
 CANOPY_HD CANOPY_FORCEINLINE CanopyNode loadNode(const CanopyNode* p) {
-  const Words4 v = load16(p);
+  const Words4 v = load16ro(p);
   CanopyNode n;
   n.child = v.w[0], n.brick = v.w[1], n.density = canopyFloatFromBits(v.w[2]), n.material = v.w[3];
   return n;
@@ -398,7 +398,7 @@ struct EmptyCellBits {
   const uint32_t* words;
   CANOPY_HD CANOPY_FORCEINLINE bool operator()(int x, int y, int z) const {
     const uint32_t i = uint32_t(x + int(kCanopyEmptyCells) * (y + int(kCanopyEmptyCells) * z));
-    return ((words[i >> 5] >> (i & 31u)) & 1u) != 0;
+    return ((canopyLoadRO(words + (i >> 5)) >> (i & 31u)) & 1u) != 0;
   }
 };
 
