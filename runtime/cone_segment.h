@@ -113,7 +113,7 @@ CANOPY_HD inline int32_t residentSlot(const SceneView& s, const ModelView& m, ui
   return s.pageSlot[page];
 }
 
-// A node of a tile array, by load16 (on the device every node is 16-byte aligned: the backend's
+// A node of a tile array, by load16ro (on the device every node is 16-byte aligned: the backend's
 // tile arrays are device allocations of 16-byte nodes; the host's copy needs no alignment).
 CANOPY_HD CANOPY_FORCEINLINE CanopyNode loadNode(const CanopyNode* p) {
   const Words4 v = load16ro(p);
