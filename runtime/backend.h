@@ -90,19 +90,21 @@ class Backend {
   }
 
  protected:
-  // Whether the pass's shadow map m (planShadowMap, `sub` steps per voxel, its storage in m.T) must
-  // be built: its columns depend only on the plan (the sun's direction, the scene's box, the voxel,
-  // the steps), the storage and the extinction grid (gridBuilt: built again for this pass), so a
-  // map built for the same plan into the same storage is kept, the same bits. A sun that does not
-  // move costs one build, not one per frame. Records m as the map built.
-  bool shadowMapNeedsBuild(const ShadowMapView& m, int sub, bool gridBuilt) {
+  // Calls build() to build the pass's shadow map m (planShadowMap, `sub` steps per voxel, its
+  // storage in m.T) unless the last build made the same map: its columns depend only on the plan
+  // (the sun's direction, the scene's box, the voxel, the steps), the storage and the extinction
+  // grid (gridBuilt: built again for this pass), so a map built for the same plan into the same
+  // storage is kept, the same bits. A sun that does not move costs one build, not one per frame.
+  template <class Build>
+  void buildShadowMap(const ShadowMapView& m, int sub, bool gridBuilt, Build&& build) {
     const ShadowMapView& b = builtShadowMap_;
     const auto same = [](const void* x, const void* y, size_t n) { return std::memcmp(x, y, n) == 0; };
     const bool kept = !gridBuilt && builtShadowMapSub_ == sub && b.T == m.T && same(&b.origin, &m.origin, sizeof(V3)) &&
                       same(b.axis, m.axis, sizeof(b.axis)) && same(&b.voxel, &m.voxel, sizeof(float)) && same(b.dim, m.dim, sizeof(b.dim));
+    if (kept) return;
+    build();
     builtShadowMap_ = m, builtShadowMapSub_ = sub;
-    shadowMapBuilds_ += kept ? 0 : 1;
-    return !kept;
+    ++shadowMapBuilds_;
   }
   ShadowMapView lastShadowMap_{};
   ShadowMapView builtShadowMap_{};

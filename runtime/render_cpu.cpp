@@ -58,12 +58,12 @@ class CpuBackend final : public Backend {
       const int64_t columns = int64_t(v.shadowMap.dim[0]) * v.shadowMap.dim[1];
       shadowMap_.resize(size_t(columns) * v.shadowMap.dim[2]);
       v.shadowMap.T = shadowMap_.data();
-      if (shadowMapNeedsBuild(v.shadowMap, sub, gridBuilt)) {
-        const ShadowMapView m = v.shadowMap;
-        const ExtinctionGridView g = grid_;
+      const ShadowMapView m = v.shadowMap;
+      const ExtinctionGridView g = grid_;
+      buildShadowMap(m, sub, gridBuilt, [&] {
         parallelFor(columns, [&](int64_t c) { buildShadowMapColumn(m, g, sub, c); }, 16);
         if (work_) work_->shadowMapSteps += uint64_t(columns) * uint64_t(m.dim[2]) * uint64_t(sub);
-      }
+      });
     }
     if (shade.farStart >= 0.0f && farFieldReachable(scene, shade, camera)) {
       // the far field: once per scene (it depends on the instances and sigma only), once a cone can reach it

@@ -337,7 +337,7 @@ class CudaBackend final : public Backend {
         shadowMap_.resize(n + n / 4);  // room for the next frames' slightly larger boxes
       }
       v.shadowMap.T = shadowMap_.data();
-      if (shadowMapNeedsBuild(v.shadowMap, sub, gridBuilt)) cuda::parallelFor(columns, ShadowMapKernel{v.shadowMap, grid_, sub}, compute_, 128);
+      buildShadowMap(v.shadowMap, sub, gridBuilt, [&] { cuda::parallelFor(columns, ShadowMapKernel{v.shadowMap, grid_, sub}, compute_, 128); });
     }
     if (shade.farStart >= 0.0f && farFieldReachable(scene, shade, camera)) {
       // the far field: once per scene (it depends on the instances and sigma only), once a cone can reach it

@@ -124,8 +124,9 @@ constexpr int kShadowsCone = 2;  // a shadow cone marched per shadow interval (s
 // The sun transmittance map of one frame (kShadowsMap): a grid in light space whose third axis
 // points along the light's travel (-toSun), so that a column of voxels is a ray from the sun.
 // T[u + dim0 (v + dim1 w)] is the transmittance from the sun to the centre of voxel (u, v, w).
-// It is built per render pass from the scene's extinction grid (buildShadowMapColumn) and looked
-// up per sample (shadowMapLookup): view-independent, so the sun may move every frame.
+// It is built from the scene's extinction grid (buildShadowMapColumn) when the sun's direction has
+// changed (Backend::buildShadowMap) and looked up per sample (shadowMapLookup): view-independent,
+// so the sun may move every frame.
 struct ShadowMapView {
   float* T;                 // dim[0] * dim[1] * dim[2] values, u fastest
   V3 origin;                // world position of voxel (0, 0, 0)'s centre

@@ -14,7 +14,7 @@ namespace canopy::play {
 // being the one of edge <= 2 voxels on the descent (node tiles are always resident, so the grid
 // needs no page, is the same for every cache state and is ready at the first frame). (2) The
 // frame's TRANSMITTANCE MAP (light space, built again only when the sun's direction has changed,
-// Backend::shadowMapNeedsBuild): each column is a ray from the sun,
+// Backend::buildShadowMap): each column is a ray from the sun,
 // marched front to back through the extinction grid (trilinear, steps of at most one extinction
 // voxel); T at a voxel centre = exp(-optical depth from the sun). A sample reads T trilinearly.
 // The cost is one march per map column per build (independent of the image and of the number of

@@ -328,9 +328,12 @@ TEST(Render, SphereHasTheAnalyticSilhouetteAndBeerLambertOpacity) {
 // with the mass kept) and float rounding remain: optical depth within 3% + 0.03 (measured: see
 // the printout). Beside the lattice box and above the cube T = 1; T falls monotonically with depth.
 // With the default bias the lookup reads T 1.5 blur widths (1.5 x 0.8 m here) nearer the sun.
-namespace {
-// Map-mode shading with the sun overhead, no lookup bias, 4-cell extinction voxels.
-pl::ShadeParams mapShade() {
+TEST(Render, ShadowMapIsBeerLambertThroughAUniformCube) {
+  const std::string file = pt::tmpDir("scenes") + "/cube.canopy";
+  pt::writeScene(file, {pt::sphereModel(kEdge, 1000.0f, kDensity, kCell)}, {pt::instanceAt(0, 0, 0, 0)});
+  const canopy::CanopyFile f = canopy::CanopyFile::open(file);
+  pl::HostScene scene = pl::buildScene(f);
+  std::unique_ptr<pl::Backend> backend = pl::makeCpuBackend(scene, f.pageCount());
   pl::ShadeParams shade{};
   shade.toSun = pl::v3(0, 1, 0);
   shade.sun[0] = shade.sun[1] = shade.sun[2] = 1.0f;
@@ -342,33 +345,14 @@ pl::ShadeParams mapShade() {
   shade.shadowMapBias = 0.0f;
   shade.stopT = pl::kStopT;
   shade.shadowMapMaxVoxels = 1u << 23;
-  return shade;
-}
-// A w x h camera at z = 10 looking down -z, `spread` world units per pixel at the origin.
-pl::CameraView frontCamera(int w, int h, float spread) {
+  scene.setSun(shade.toSun);
   pl::CameraView cam{};
   cam.position = pl::v3(0, 0, 10);
   cam.forward = pl::v3(0, 0, -1);
-  cam.right = pl::v3(spread, 0, 0);
-  cam.up = pl::v3(0, spread, 0);
-  cam.pixelAngle = 2.0f * spread;
-  cam.width = w, cam.height = h;
-  return cam;
-}
-std::vector<float> mapValues(const pl::ShadowMapView& m) {
-  return std::vector<float>(m.T, m.T + size_t(m.dim[0]) * m.dim[1] * m.dim[2]);
-}
-}  // namespace
-
-TEST(Render, ShadowMapIsBeerLambertThroughAUniformCube) {
-  const std::string file = pt::tmpDir("scenes") + "/cube.canopy";
-  pt::writeScene(file, {pt::sphereModel(kEdge, 1000.0f, kDensity, kCell)}, {pt::instanceAt(0, 0, 0, 0)});
-  const canopy::CanopyFile f = canopy::CanopyFile::open(file);
-  pl::HostScene scene = pl::buildScene(f);
-  std::unique_ptr<pl::Backend> backend = pl::makeCpuBackend(scene, f.pageCount());
-  const pl::ShadeParams shade = mapShade();
-  scene.setSun(shade.toSun);
-  const pl::CameraView cam = frontCamera(1, 1, 0.1f);
+  cam.right = pl::v3(0.1f, 0, 0);
+  cam.up = pl::v3(0, 0.1f, 0);
+  cam.pixelAngle = 0.2f;
+  cam.width = cam.height = 1;
   backend->render(scene, shade, cam, 1);
   const pl::ShadowMapView m = backend->lastShadowMap();
   ASSERT_NE(m.T, nullptr);
@@ -394,7 +378,7 @@ TEST(Render, ShadowMapIsBeerLambertThroughAUniformCube) {
   EXPECT_NEAR(pl::shadowMapLookup(biased, pl::v3(0.1f, -1.2f, -0.2f)), pl::shadowMapLookup(m, pl::v3(0.1f, 0.0f, -0.2f)), 1e-6f);
 }
 
-// The map is built once per sun direction (backend.h, shadowMapNeedsBuild): frames under the same
+// The map is built once per sun direction (backend.h, buildShadowMap): frames under the same
 // sun keep the first build's values and images, a sun that moves rebuilds it, and every kept or
 // rebuilt map is bit for bit the one a fresh backend builds for that sun.
 TEST(Render, ShadowMapIsBuiltOncePerSunDirection) {
@@ -412,11 +396,12 @@ TEST(Render, ShadowMapIsBuiltOncePerSunDirection) {
     b->waitUploads();
     return b;
   };
-  const auto renderWith = [&](pl::Backend& b, const pl::ShadeParams& shade, std::vector<float>& image) {
+  const auto renderWith = [&](pl::Backend& b, const pl::ShadeParams& shade, std::vector<float>& image) {  // the map's values
     fv.scene.setSun(shade.toSun);
     b.render(fv.scene, shade, fv.camera, 1);
     b.readImage(image, fv.camera);
-    return mapValues(b.lastShadowMap());
+    const pl::ShadowMapView& m = b.lastShadowMap();
+    return std::vector<float>(m.T, m.T + size_t(m.dim[0]) * m.dim[1] * m.dim[2]);
   };
   std::vector<float> imageOverhead, imageSide, image;
   const std::vector<float> mapOverhead = renderWith(*makeBackend(), overhead, imageOverhead);
