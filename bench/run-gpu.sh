@@ -42,7 +42,8 @@
 #                    reprojected against traced in full, its time and image error) at --stereo-spread
 #                    0.5, 0.65 (default), 0.75 and 1, and on a high orbit.
 #   forest           canopy-play on real-plant forests built by the Make rules (the stereo phase's build
-#                    and walk), each run 120 frames, 1 GiB cache, --json: one table in $OUT/forest.md,
+#                    and walk), each run 120 frames, 1 GiB cache, --json, canopy-play's defaults (at
+#                    3840x2160 --adaptive auto samples adaptively: the size cell says so): one table in $OUT/forest.md,
 #                    the reports forest_*.json, each camera's last frame as forest-*.png (480x270):
 #                    - the 400-instance forest, high orbit (elevation 25 deg, 300 m: the whole forest
 #                      in view; a quarter turn), 1920x1080 and 3840x2160
@@ -338,6 +339,9 @@ try:
     r = json.load(open(path))
     first = r["first_complete_frame_s"]  # -1: no frame was complete
     cells = [f"{r['frame_ms_median']:.2f}", f"{r['frame_ms_p95']:.2f}", f"{first:.2f}" if first >= 0 else "none"]
+    if "adaptive" in r:  # --adaptive auto at 3840x2160 and larger
+        a = r["adaptive"]
+        size += f" (adaptive {a['tolerance']:g}, {100 * a['traced_fraction_mean']:.0f} % traced)"
 except (OSError, ValueError, KeyError, TypeError):
     cells = ["failed"] * 3
 print(f"| {scene} | {camera} | {size} | " + " | ".join(cells) + f" | {png} |")

@@ -49,9 +49,10 @@ void addFrameOptions(CLI::App& app, canopy::play::PlayOptions& o, CliValues& x) 
   app.add_option("--stop-opacity", x.stopOpacity, "A cone stops at this opacity; at most 1 - this of a pixel's light is dropped")
       ->default_str("0.999")->check(CLI::Range(0.5, 1.0));
   app.add_option("--adaptive", o.adaptive,
-                 "Adaptive sampling: trace every second pixel of every second row, then fill each 4x8 block whose 2x2 cells' traced "
-                 "corners differ by at most this in every channel (linear premultiplied RGBA) and trace the other blocks; "
-                 "0: trace every pixel (docs/play.md)")
+                 "auto | off | TOL. Adaptive sampling: trace every second pixel of every second row, then fill each 4x8 block whose "
+                 "2x2 cells' traced corners differ by at most TOL in every channel (linear premultiplied RGBA) and trace the other "
+                 "blocks. auto: TOL 0.08 on frames of 3840x2160 pixels or more (one eye, without --converge), else off; "
+                 "off or 0: trace every pixel (docs/play.md)")
       ->capture_default_str();
 }
 

@@ -317,6 +317,18 @@ static float parseFarField(const std::string& spec) {
   return float(v);
 }
 
+float adaptiveTolerance(const PlayOptions& o) {
+  if (o.adaptive == "auto")
+    return o.stereoIpd == 0.0f && !o.converge && uint64_t(o.width) * uint64_t(o.height) >= kAdaptiveAutoPixels ? kAdaptiveAutoTolerance : 0.0f;
+  if (o.adaptive == "off") return 0.0f;
+  double v = 0;
+  char tail;
+  if (std::sscanf(o.adaptive.c_str(), "%lf%c", &v, &tail) != 1 || !(v >= 0.0 && v <= 1.0e3))
+    throw usageError("--adaptive '" + o.adaptive + "': expected auto, off or a tolerance in [0, 1000] (0: off)");
+  if (v > 0.0 && o.stereoIpd > 0.0f) throw usageError("--adaptive is for one eye: not with --stereo");
+  return float(v);
+}
+
 ShadeParams shadeParams(const PlayOptions& o) {
   ShadeParams shade{};
   shade.sun[0] = shade.sun[1] = shade.sun[2] = o.sunIntensity;
@@ -399,8 +411,7 @@ void validateOptions(const PlayOptions& o) {
   if (!(o.stereo.maxSpread >= 0.0f && o.stereo.maxSpread <= 1.0e3f)) throw usageError("--stereo-spread must be in [0, 1000] pixels");
   if (!(o.stereo.solidAlpha >= 0.0f && o.stereo.solidAlpha <= 1.0f)) throw usageError("--stereo-solid must be in [0, 1]");
   if (o.tiles < 0 || o.tiles > 64) throw usageError("--tiles must be 0..64");
-  if (!(o.adaptive >= 0.0f && o.adaptive <= 1.0e3f)) throw usageError("--adaptive must be a tolerance in [0, 1000] (0: off)");
-  if (o.adaptive > 0.0f && o.stereoIpd > 0.0f) throw usageError("--adaptive is for one eye: not with --stereo");
+  adaptiveTolerance(o);
   if (o.loaderThreads < 0 || o.loaderThreads > 64) throw usageError("--loader-threads must be 0..64 (0: the host's threads)");
   float groundY;
   parseGround(o.ground, groundY);
@@ -678,8 +689,9 @@ void logSummary(const PlayOptions& o, const nlohmann::json& r, const StreamStats
                 st.corruptPages ? (", " + std::to_string(st.corruptPages) + " corrupt page(s) skipped").c_str() : "");
   logInfo(line);
   if (r.contains("adaptive")) {
-    std::snprintf(line, sizeof(line), "canopy-play: adaptive sampling (tolerance %g): %.1f%% of the pixels traced", double(r["adaptive"]["tolerance"]),
-                  100.0 * double(r["adaptive"]["traced_fraction_mean"]));
+    const bool autoOn = r["adaptive"]["option"] == "auto";
+    std::snprintf(line, sizeof(line), "canopy-play: adaptive sampling (tolerance %g%s): %.1f%% of the pixels traced", double(r["adaptive"]["tolerance"]),
+                  autoOn ? ", auto at this frame size; --adaptive off traces every pixel" : "", 100.0 * double(r["adaptive"]["traced_fraction_mean"]));
     logInfo(line);
   }
   if (r.contains("stereo")) {
@@ -699,6 +711,7 @@ void logSummary(const PlayOptions& o, const nlohmann::json& r, const StreamStats
 struct FrameLog {
   std::vector<double> frameMs, firstEyeMs, secondEyeMs, reprojectMs, tracedFraction, behindFraction;
   std::vector<double> adaptiveFraction;  // --adaptive: the fraction of the frame's pixels traced
+  float adaptive = 0.0f;                 // the run's adaptive sampling tolerance (adaptiveTolerance; 0: off)
   double firstCompleteS = -1.0;
   uint64_t coldStartBytes = 0;  // streamed by the first complete frame
 };
@@ -742,7 +755,7 @@ std::vector<double> recordFrame(const PlayOptions& o, const std::vector<Tile>& t
     log.tracedFraction.push_back(double(traced) / (double(o.width) * o.height));
     log.behindFraction.push_back(double(behind) / (double(o.width) * o.height));
   }
-  if (o.adaptive > 0.0f) log.adaptiveFraction.push_back(1.0 - double(filled) / (double(o.width) * o.height));
+  if (log.adaptive > 0.0f) log.adaptiveFraction.push_back(1.0 - double(filled) / (double(o.width) * o.height));
   if (missing == 0 && log.firstCompleteS < 0.0) {
     log.firstCompleteS = secondsSince(t0);
     log.coldStartBytes = sumStats(tiles).bytesLoaded;
@@ -814,15 +827,17 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
   ShadeParams shade = shadeParams(o);
   setGround(o, scene, shade);
   WorkCounters work{};
+  const float adaptive = adaptiveTolerance(o);
   for (Tile& t : tiles) {
     if (o.countWork && tiles.size() == 1) t.backend->countWork(&work);
     t.backend->setPixelTile(o.warpTileWidth, tileH);
     t.backend->setPixelOccupancy(o.pixelMinBlocks);
     t.backend->setStereoHoles(o.stereoHoleOrder == "tile" ? kHoleOrderTile : kHoleOrderKind, o.stereoHoleBlocks);
-    t.backend->setAdaptive(o.adaptive);
+    t.backend->setAdaptive(adaptive);
   }
 
   FrameLog log;
+  log.adaptive = adaptive;
   std::vector<float> image, right;
   Progress progress("canopy-play", o.frames);
   WrittenFrames written;
@@ -851,8 +866,8 @@ nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<floa
 
   nlohmann::json r = playReport(o, file, scene, tiles, shade, log.frameMs, t0, log.firstCompleteS, log.coldStartBytes, slots);
   if (stereo) r["stereo"] = stereoReport(o, log);
-  if (o.adaptive > 0.0f)
-    r["adaptive"] = {{"tolerance", o.adaptive}, {"traced_fraction_mean", mean(log.adaptiveFraction)}, {"traced_fraction", log.adaptiveFraction}};
+  if (adaptive > 0.0f)
+    r["adaptive"] = {{"tolerance", adaptive}, {"option", o.adaptive}, {"traced_fraction_mean", mean(log.adaptiveFraction)}, {"traced_fraction", log.adaptiveFraction}};
   if (o.countWork && backendName == "cpu" && tiles.size() == 1)
     r["work"] = workReport(work, tiles[0].passes);
   logSummary(o, r, sumStats(tiles), backendName);

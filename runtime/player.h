@@ -39,7 +39,10 @@ struct PlayOptions {
   // (scene units, > 0): the prefiltered scene volume from D on.
   std::string farField = "auto";
   float stopTransmittance = kStopT;   // a cone stops below this transmittance (--stop-opacity 1 - this); the rest is dropped
-  float adaptive = 0.0f;             // > 0: adaptive sampling at this tolerance (adaptive.h; one eye only); 0: every pixel traced
+  // Adaptive sampling (adaptive.h; one eye only): "auto" (kAdaptiveAutoTolerance on frames of at least
+  // kAdaptiveAutoPixels pixels without --stereo or --converge, else every pixel traced), "off" or 0
+  // (every pixel traced), or a tolerance TOL > 0. adaptiveTolerance() resolves it.
+  std::string adaptive = "auto";
   float shadowAperture = 0.03f;      // shadow cone growth per unit length (soft shadows, coarser
                                      // levels and longer steps far from the receiver)
   bool shadows = true;
@@ -109,6 +112,16 @@ int loaderThreadsFor(int requested, int bands);
 // every GPU, a band each (tiles.h).
 nlohmann::json play(const PlayOptions& o, const Device& device, std::vector<float>* lastImage = nullptr,
                     std::vector<float>* lastRight = nullptr);
+
+// --adaptive "auto": adaptive sampling at this tolerance on frames of at least this many pixels
+// (3840x2160), where the footprint rule samples voxels that span several pixels and the lattice's
+// rays see what a 1920x1080 frame's do (docs/play.md, "Adaptive sampling").
+constexpr float kAdaptiveAutoTolerance = 0.08f;
+constexpr uint64_t kAdaptiveAutoPixels = uint64_t(3840) * 2160;
+
+// The adaptive sampling tolerance of the options (0: every pixel traced). Throws Usage for a bad
+// spelling, a tolerance outside [0, 1000], and a tolerance > 0 given with --stereo.
+float adaptiveTolerance(const PlayOptions& o);
 
 // The per-sample parameters of the options (everything but the frame's sun direction, toSun, and
 // the ground, setGround).

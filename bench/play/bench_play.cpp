@@ -1,7 +1,10 @@
 // bench_play.cpp: canopy-play's benchmark (issue 6): 1920x1080, one cone per pixel, a plant and a
 // forest of >= 400 instances, each played along a camera path with a 1 GiB cache from a cold start.
-// Prints median / p95 frame time against the 16.7 ms (60 fps) target, the first complete frame
-// against the 2 s target, and the streaming rate; saves the last frame of each scene as PNG.
+// Prints median / p95 frame time against the target (16.7 ms, 60 fps; 33 ms from 3840x2160's pixel
+// count on, issue 26), the first complete frame against the 1 s target, and the streaming rate; saves
+// the last frame of each scene as PNG. Where canopy-play's --adaptive auto samples adaptively (from
+// 3840x2160 on) a line gives the tolerance and the fraction of the pixels traced; the suffix -adapt0
+// traces every pixel.
 //
 //   bench-play OUTDIR [--device cuda] [--size 1920x1080] [--frames 120] [--cache-mb 1024]
 //                     [--instances 400] [--extra NAME=FILE.canopy[@CAMERA] ...]
@@ -67,7 +70,7 @@ int main(int argc, char** argv) {
   app.add_option("--cache-mb", cacheMb, "Cache budget (MiB)")->capture_default_str();
   app.add_option("--instances", instances, "Forest instances")->capture_default_str();
   app.add_option("--extra", extra, "NAME=FILE.canopy[@CAMERA]: more packed scenes (default camera orbit:elevation=20; CAMERA as canopy-play --camera)");
-  app.add_option("--shadows", shadowMethods, "Shadow methods to run, each scene with each (map, cone, off; a -nocache suffix turns off the descent cache, -notable descends from the root instead of reading the models' descent tables (same image), -nohold the held empty segments, -noskip the empty-cell skip, -occ6/-occ8/-occfree the CUDA pixel kernel for 6/8 blocks per SM or unconstrained (default: 6 without LB light, 5 with it), -rows puts a warp on 32 pixels of a row, -tile2/-tile4/-tile8/-tile16 on 2x16/4x8 (the default)/8x4/16x2 pixels, -exact the finest level's light from Haar pages (--light exact); quality dials: -stop99 stops cones at opacity 0.99 (--stop-opacity), -step1 marches bricks in steps of one voxel (--step 1), -lod1 one level coarser (--lod-bias -1), -nogrow brick steps that never grow (--step-growth 0; the default grows them below transmittance 0.1), -growT steps that grow below transmittance T (--step-growth T, e.g. -grow0.2), -adaptTOL adaptive sampling in whole blocks (--adaptive TOL, e.g. -adapt0.04); each scene's last frame is compared with the first method's (RMS)")->capture_default_str();
+  app.add_option("--shadows", shadowMethods, "Shadow methods to run, each scene with each (map, cone, off; a -nocache suffix turns off the descent cache, -notable descends from the root instead of reading the models' descent tables (same image), -nohold the held empty segments, -noskip the empty-cell skip, -occ6/-occ8/-occfree the CUDA pixel kernel for 6/8 blocks per SM or unconstrained (default: 6 without LB light, 5 with it), -rows puts a warp on 32 pixels of a row, -tile2/-tile4/-tile8/-tile16 on 2x16/4x8 (the default)/8x4/16x2 pixels, -exact the finest level's light from Haar pages (--light exact); quality dials: -stop99 stops cones at opacity 0.99 (--stop-opacity), -step1 marches bricks in steps of one voxel (--step 1), -lod1 one level coarser (--lod-bias -1), -nogrow brick steps that never grow (--step-growth 0; the default grows them below transmittance 0.1), -growT steps that grow below transmittance T (--step-growth T, e.g. -grow0.2), -adaptTOL adaptive sampling in whole blocks (--adaptive TOL, e.g. -adapt0.04; -adapt0 every pixel traced where --adaptive auto, the default, would sample adaptively: 3840x2160 and larger); each scene's last frame is compared with the first method's (RMS)")->capture_default_str();
   app.add_flag("--count-work", countWork, "CPU only: count cones, steps, samples and shadow work per frame (results.json \"work\")");
   app.add_flag("--only-extra", skipSynthetic, "Play only the --extra scenes (the synthetic ones are still written)");
   return tool.run(argc, argv, [&] {
@@ -103,7 +106,7 @@ int main(int argc, char** argv) {
     }
     nlohmann::json results = nlohmann::json::array();
     std::map<std::string, std::vector<float>> firstFrames;  // per scene: the first method's last frame
-    std::printf("| scene | shadows | device | size | frames | median ms | p95 ms | target 16.7 ms | first complete frame s | target 2 s | "
+    std::printf("| scene | shadows | device | size | frames | median ms | p95 ms | target 16.7 ms (33 at 4K) | first complete frame s | target 1 s | "
                 "hit rate | MB streamed | stream MB/s | cold start MB (MB/s) | disk read MB/s |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (const std::string& method : shadowMethods)
     for (const Scene& s : scenes) {
@@ -135,7 +138,7 @@ int main(int argc, char** argv) {
       else if (const size_t at = method.find("grow"); at != std::string::npos)  // -grow: steps grow below T 0.1, up to 4x (the default);
         o.stepGrowthT = std::isdigit(static_cast<unsigned char>(method[std::min(at + 4, method.size() - 1)])) ? std::stof(method.substr(at + 4)) : 0.1f;  // -growT: below T
       if (method.find("lod1") != std::string::npos) o.lodBias = -1.0f;
-      if (const size_t at = method.find("adapt"); at != std::string::npos) o.adaptive = std::stof(method.substr(at + 5));  // -adaptTOL: --adaptive TOL
+      if (const size_t at = method.find("adapt"); at != std::string::npos) o.adaptive = method.substr(at + 5);  // -adaptTOL: --adaptive TOL (-adapt0: every pixel traced)
       const std::string shadowMethod = method.substr(0, method.find('-'));
       o.shadows = shadowMethod != "off";
       if (o.shadows) o.shadowMethod = shadowMethod;
@@ -156,10 +159,15 @@ int main(int argc, char** argv) {
       }
       results.push_back(r);
       const double med = r["frame_ms_median"], fc = r["first_complete_frame_s"];
+      const double target = uint64_t(w) * uint64_t(h) >= uint64_t(3840) * 2160 ? 33.0 : 16.7;
       std::printf("| %s | %s | %s | %dx%d | %d | %.2f | %.2f | %s | %.3f | %s | %.1f%% | %.1f | %.1f | %.1f (%.0f) | %.1f |\n", s.name.c_str(),
-                  method.c_str(), std::string(r["device"]).c_str(), w, h, frames, med, double(r["frame_ms_p95"]), med <= 16.7 ? "met" : "missed", fc,
-                  fc >= 0 && fc <= 2.0 ? "met" : "missed", 100.0 * double(r["cache_hit_rate"]), double(r["mb_streamed"]),
+                  method.c_str(), std::string(r["device"]).c_str(), w, h, frames, med, double(r["frame_ms_p95"]), med <= target ? "met" : "missed", fc,
+                  fc >= 0 && fc <= 1.0 ? "met" : "missed", 100.0 * double(r["cache_hit_rate"]), double(r["mb_streamed"]),
                   double(r["stream_mb_per_s"]), double(r["cold_start_mb"]), double(r["cold_start_mb_per_s"]), double(r["read_mb_per_s"]));
+      if (r.contains("adaptive"))
+        std::printf("|   adaptive sampling (%s, %s) | tolerance %g (--adaptive %s), %.1f%% of the pixels traced |\n", s.name.c_str(), method.c_str(),
+                    double(r["adaptive"]["tolerance"]), std::string(r["adaptive"]["option"]).c_str(),
+                    100.0 * double(r["adaptive"]["traced_fraction_mean"]));
       if (r.contains("rms_vs_first_method"))
         std::printf("|   last frame vs %s's (%s, %s) | RMS %.4g (%.2f%% of the covered pixels' mean RGB) |\n", shadowMethods.front().c_str(),
                     s.name.c_str(), method.c_str(), double(r["rms_vs_first_method"]), 100.0 * double(r["rms_vs_first_method_relative"]));

@@ -282,7 +282,7 @@ TEST(PlayCuda, cuda_AdaptiveFrameMatchesTheFullTraceBlockByBlock) {
     o.warpTileWidth = tileW;
     std::vector<float> full, c, g, gb;
     pl::play(o, cuda(), &full);
-    o.adaptive = 0.02f;
+    o.adaptive = "0.02";
     const nlohmann::json rc = pl::play(o, canopy::Device{}, &c);
     const nlohmann::json rg = pl::play(o, cuda(), &g);
     const double fc = rc["adaptive"]["traced_fraction_mean"], fg = rg["adaptive"]["traced_fraction_mean"];

@@ -814,9 +814,9 @@ TEST(Render, AdaptiveSamplingFillsOrTracesEachBlockAsItsTestSays) {
     o.warpTileWidth = tileW;
     std::vector<float> full, loose, tight, bands;
     pl::play(o, Device{}, &full);
-    o.adaptive = 0.02f;
+    o.adaptive = "0.02";
     const nlohmann::json r = pl::play(o, Device{}, &loose);
-    o.adaptive = 1e-4f;
+    o.adaptive = "1e-4";
     const nlohmann::json rt = pl::play(o, Device{}, &tight);
     const double f = r["adaptive"]["traced_fraction_mean"], ft = rt["adaptive"]["traced_fraction_mean"];
     const double e = pt::imageRms(loose, full), et = pt::imageRms(tight, full);
@@ -835,7 +835,7 @@ TEST(Render, AdaptiveSamplingFillsOrTracesEachBlockAsItsTestSays) {
     EXPECT_DOUBLE_EQ(f, 1.0 - double(filled) / (double(w) * h));
     // bands give the same image (each band traces the lattice rows of its blocks): three on block
     // rows, and 40 on single rows (40 x tileH > h), which cut blocks
-    o.adaptive = 0.02f;
+    o.adaptive = "0.02";
     for (const int tiles : {3, 40}) {
       o.tiles = tiles;
       const nlohmann::json rb = pl::play(o, Device{}, &bands);
@@ -848,12 +848,54 @@ TEST(Render, AdaptiveSamplingFillsOrTracesEachBlockAsItsTestSays) {
   }
   // one eye only, and a tolerance >= 0
   pl::PlayOptions o = groveView(32, 18);
-  o.adaptive = 0.02f;
+  o.adaptive = "0.02";
   o.stereoIpd = 0.1f;
   EXPECT_THROW(pl::play(o, Device{}), canopy::Error);
   o.stereoIpd = 0.0f;
-  o.adaptive = -0.1f;
+  o.adaptive = "-0.1";
   EXPECT_THROW(pl::play(o, Device{}), canopy::Error);
-  o.adaptive = std::nanf("");
+  o.adaptive = "nan";
   EXPECT_THROW(pl::play(o, Device{}), canopy::Error);
+  o.adaptive = "0.02x";
+  EXPECT_THROW(pl::play(o, Device{}), canopy::Error);
+}
+
+// --adaptive auto (the default): kAdaptiveAutoTolerance from 3840x2160's pixel count on, one eye,
+// without --converge; off below, with --stereo and with --converge. An explicit tolerance is taken as
+// given at any size, and refused with --stereo.
+TEST(Render, AdaptiveAutoSamplesAdaptivelyFrom3840x2160On) {
+  pl::PlayOptions o;
+  EXPECT_EQ(o.adaptive, "auto");
+  o.width = 3840, o.height = 2160;
+  EXPECT_EQ(pl::adaptiveTolerance(o), pl::kAdaptiveAutoTolerance);
+  EXPECT_EQ(pl::kAdaptiveAutoTolerance, 0.08f);
+  o.width = 4096;  // more pixels
+  EXPECT_EQ(pl::adaptiveTolerance(o), pl::kAdaptiveAutoTolerance);
+  o.width = 3839;  // one column fewer than 3840x2160
+  EXPECT_EQ(pl::adaptiveTolerance(o), 0.0f);
+  o.width = 1920, o.height = 1080;
+  EXPECT_EQ(pl::adaptiveTolerance(o), 0.0f);
+  o.width = 2160, o.height = 3840;  // portrait
+  EXPECT_EQ(pl::adaptiveTolerance(o), pl::kAdaptiveAutoTolerance);
+  o.converge = true;
+  EXPECT_EQ(pl::adaptiveTolerance(o), 0.0f);
+  o.converge = false;
+  o.stereoIpd = 0.064f;
+  EXPECT_EQ(pl::adaptiveTolerance(o), 0.0f);
+  o.adaptive = "0.04";
+  EXPECT_THROW(pl::adaptiveTolerance(o), canopy::Error);
+  o.stereoIpd = 0.0f;
+  EXPECT_EQ(pl::adaptiveTolerance(o), 0.04f);
+  o.width = 16, o.height = 9;
+  EXPECT_EQ(pl::adaptiveTolerance(o), 0.04f);
+  for (const char* off : {"off", "0", "0.0"}) {
+    o.adaptive = off;
+    EXPECT_EQ(pl::adaptiveTolerance(o), 0.0f) << off;
+  }
+  o.width = 3840, o.height = 2160, o.adaptive = "off";
+  EXPECT_EQ(pl::adaptiveTolerance(o), 0.0f);
+  for (const char* bad : {"", "Auto", "on", "-1", "1001", "inf", "0.08 "}) {
+    o.adaptive = bad;
+    EXPECT_THROW(pl::adaptiveTolerance(o), canopy::Error) << "'" << bad << "'";
+  }
 }
