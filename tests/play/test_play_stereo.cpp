@@ -899,3 +899,29 @@ TEST(Render, AdaptiveAutoSamplesAdaptivelyFrom3840x2160On) {
     EXPECT_THROW(pl::adaptiveTolerance(o), canopy::Error) << "'" << bad << "'";
   }
 }
+
+// The default reaches the renderer: a 3840x2160 frame of the grove (without --converge) is sampled
+// adaptively at kAdaptiveAutoTolerance, the report says so, and "off" traces every pixel. The camera
+// is far away and the ground off, so that most rays miss the scene (a cheap 4K frame on the CPU):
+// its blocks pass (a quarter of the pixels traced and a few more) and the pixels of the grove match.
+TEST(Render, AdaptiveAutoSamplesA3840x2160FrameAdaptively) {
+  pl::PlayOptions o = groveView(3840, 2160);
+  o.converge = false;
+  o.camera = "orbit:elevation=8,distance=150,fov=60";
+  o.ground = "none";
+  std::vector<float> adaptive, full;
+  const nlohmann::json r = pl::play(o, Device{}, &adaptive);
+  ASSERT_TRUE(r.contains("adaptive"));
+  EXPECT_EQ(double(r["adaptive"]["tolerance"]), double(pl::kAdaptiveAutoTolerance));
+  EXPECT_EQ(r["adaptive"]["option"], "auto");
+  const double f = r["adaptive"]["traced_fraction_mean"];
+  std::printf("auto at 3840x2160: %.4f of the pixels traced\n", f);
+  EXPECT_GE(f, 0.25);
+  EXPECT_LT(f, 0.3);
+  o.adaptive = "off";
+  const nlohmann::json rf = pl::play(o, Device{}, &full);
+  EXPECT_FALSE(rf.contains("adaptive"));
+  ASSERT_EQ(adaptive.size(), full.size());
+  EXPECT_GT(pt::imageRms(adaptive, full), 0.0);  // some block was filled where the grove is
+  EXPECT_LT(pt::imageRms(adaptive, full), 1e-3);
+}
