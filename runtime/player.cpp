@@ -306,13 +306,19 @@ std::vector<FrameSetup> framePlan(const PlayOptions& o, const HostScene& scene) 
   return plan;
 }
 
+// Whether spec is one number and nothing after it (the numeric spelling of --far-field, --adaptive
+// and --ground); the number in v (NaN for "nan", which the callers' ranges refuse).
+static bool parseNumber(const std::string& spec, double& v) {
+  char tail;
+  return std::sscanf(spec.c_str(), "%lf%c", &v, &tail) == 1;
+}
+
 // --far-field: -1 off, 0 auto, > 0 the distance (ShadeParams::farStart).
 static float parseFarField(const std::string& spec) {
   if (spec == "off") return -1.0f;
   if (spec == "auto") return 0.0f;
   double v = 0;
-  char tail;
-  if (std::sscanf(spec.c_str(), "%lf%c", &v, &tail) != 1 || !(v > 0.0 && v <= double(kMaxWorldCoordinate)))
+  if (!parseNumber(spec, v) || !(v > 0.0 && v <= double(kMaxWorldCoordinate)))
     throw usageError("--far-field '" + spec + "': expected auto, off or a distance D (scene units, 0 < D <= 1e9)");
   return float(v);
 }
@@ -322,8 +328,7 @@ float adaptiveTolerance(const PlayOptions& o) {
     return o.stereoIpd == 0.0f && !o.converge && uint64_t(o.width) * uint64_t(o.height) >= kAdaptiveAutoPixels ? kAdaptiveAutoTolerance : 0.0f;
   if (o.adaptive == "off") return 0.0f;
   double v = 0;
-  char tail;
-  if (std::sscanf(o.adaptive.c_str(), "%lf%c", &v, &tail) != 1 || !(v >= 0.0 && v <= 1.0e3))
+  if (!parseNumber(o.adaptive, v) || !(v >= 0.0 && v <= 1.0e3))
     throw usageError("--adaptive '" + o.adaptive + "': expected auto, off or a tolerance in [0, 1000] (0: off)");
   if (v > 0.0 && o.stereoIpd > 0.0f) throw usageError("--adaptive is for one eye: not with --stereo");
   return float(v);
@@ -361,8 +366,7 @@ static int parseGround(const std::string& spec, float& y) {
   if (spec == "none") return 0;
   if (spec == "auto") return 1;
   double v = 0;
-  char tail;
-  if (std::sscanf(spec.c_str(), "%lf%c", &v, &tail) != 1 || !(std::fabs(v) <= double(kMaxWorldCoordinate)))
+  if (!parseNumber(spec, v) || !(std::fabs(v) <= double(kMaxWorldCoordinate)))
     throw usageError("--ground '" + spec + "': expected none, auto or a height (world units, |Y| <= 1e9)");
   y = float(v);
   return 2;
